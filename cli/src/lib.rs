@@ -1,0 +1,74 @@
+//! The `trisplat` command line: argument parsing, progress and reporting over the libraries.
+//!
+//! Exit codes follow the CLI contract: 0 on success, 2 on bad usage (clap), 1 on bad input or
+//! failure with one line on stderr that names the file and the problem.
+
+mod commands;
+mod progress;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Gaussian avatars on the explicit triangle mesh: conversion, metrics, smoothing, sampling.
+#[derive(Debug, Parser)]
+#[command(name = "trisplat", version, about, long_about = None)]
+pub struct Cli {
+    /// Options shared by every command.
+    #[command(flatten)]
+    pub global: GlobalArgs,
+    /// The command to run.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Options shared by every command.
+#[derive(Debug, clap::Args)]
+pub struct GlobalArgs {
+    /// No progress bars.
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Compare a prediction with a ground truth (Chamfer, normal consistency, F-score).
+    Eval(commands::eval::EvalArgs),
+    /// Convert between PLY, OBJ, glTF and GLB.
+    Convert(commands::convert::ConvertArgs),
+    /// Sample points on a mesh surface.
+    Sample(commands::sample::SampleArgs),
+    /// Smooth a mesh (Laplacian, Taubin, uniform, cotangent).
+    Smooth(commands::smooth::SmoothArgs),
+}
+
+/// Runs the command line and maps errors to the exit codes of the CLI contract.
+#[must_use]
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line: the chain of causes joined by ": ".
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Runs one parsed command line.
+///
+/// # Errors
+/// Whatever the command reports: bad input files or failed writes.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    let ctx = commands::Context {
+        progress: progress::Progress::new(cli.global.quiet),
+    };
+    match cli.command {
+        Command::Eval(args) => commands::eval::run(args, &ctx),
+        Command::Convert(args) => commands::convert::run(args, &ctx),
+        Command::Sample(args) => commands::sample::run(args, &ctx),
+        Command::Smooth(args) => commands::smooth::run(args, &ctx),
+    }
+}

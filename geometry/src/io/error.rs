@@ -1,0 +1,64 @@
+//! The error type of every reader and writer.
+
+use std::path::PathBuf;
+
+/// A failed read or write. Every variant names the file; parse errors also name the element.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum IoError {
+    /// The operating system refused (missing file, permissions, disk full).
+    #[error("{path}: {source}")]
+    Os {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The extension names no format we read or write.
+    #[error("{path}: unknown file format (expected .ply, .obj, .gltf or .glb)")]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The file is malformed: `element` says where (e.g. `face 12`, `header line 3`).
+    #[error("{path}: {element}: {message}")]
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// Where in the file: element name and index, header line, accessor, ...
+        element: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The file is well formed but uses something we do not support.
+    #[error("{path}: unsupported: {what}")]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What is not supported.
+        what: String,
+    },
+}
+
+impl IoError {
+    /// A [`IoError::Malformed`] for `path` at `element`.
+    pub fn malformed(
+        path: impl Into<PathBuf>,
+        element: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Self::Malformed {
+            path: path.into(),
+            element: element.into(),
+            message: message.into(),
+        }
+    }
+
+    /// An [`IoError::Os`] for `path`.
+    pub fn os(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Os {
+            path: path.into(),
+            source,
+        }
+    }
+}

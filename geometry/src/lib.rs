@@ -1,0 +1,23 @@
+//! Geometry core of trisplat: indexed triangle meshes and point clouds, their validation and
+//! clean-up, mesh I/O (PLY, OBJ, glTF/GLB), spatial indexes (k-d tree, triangle BVH), metrics
+//! with trimesh/Open3D definitions, smoothing and sampling.
+//!
+//! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
+
+pub mod cleanup;
+pub mod ids;
+pub mod io;
+pub mod mesh;
+pub mod metrics;
+pub mod points;
+pub mod rng;
+pub mod sampling;
+pub mod smoothing;
+pub mod spatial;
+pub mod topology;
+pub mod validation;
+
+pub use ids::{TriId, VertexId};
+pub use mesh::{Aabb, MeshError, Rgba, TriMesh};
+pub use points::PointCloud;
+pub use validation::MeshReport;

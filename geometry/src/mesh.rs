@@ -1,0 +1,369 @@
+//! The indexed triangle mesh: f32 positions, u32 triangles, optional per-vertex attributes.
+
+use glam::{DVec3, Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::validation::MeshReport;
+
+/// Per-vertex RGBA colour in linear `[0, 1]` floats.
+pub type Rgba = [f32; 4];
+
+/// Axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Minimum corner.
+    pub min: Vec3,
+    /// Maximum corner.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// Bounds of `points`, or `None` when there are none (or none finite).
+    #[must_use]
+    pub fn from_points(points: &[Vec3]) -> Option<Self> {
+        let mut iter = points.iter().filter(|p| p.is_finite());
+        let first = *iter.next()?;
+        let (min, max) = iter.fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        Some(Self { min, max })
+    }
+
+    /// Length of the diagonal: the scene scale that relative tolerances refer to.
+    #[must_use]
+    pub fn diagonal(&self) -> f32 {
+        (self.max - self.min).length()
+    }
+
+    /// Centre of the box.
+    #[must_use]
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+}
+
+/// Errors from building a [`TriMesh`] out of raw arrays.
+#[derive(Debug, thiserror::Error, PartialEq)]
+#[non_exhaustive]
+pub enum MeshError {
+    /// A triangle refers to a vertex that does not exist.
+    #[error(
+        "triangle {triangle} refers to vertex {vertex}, but the mesh has {vertex_count} vertices"
+    )]
+    IndexOutOfRange {
+        /// Triangle index.
+        triangle: usize,
+        /// The offending vertex index.
+        vertex: u32,
+        /// Number of vertices.
+        vertex_count: usize,
+    },
+    /// A vertex position is NaN or infinite.
+    #[error("vertex {vertex} has a non-finite position")]
+    NonFinitePosition {
+        /// Vertex index.
+        vertex: usize,
+    },
+    /// An attribute array does not have one entry per vertex.
+    #[error("{attribute} has {len} entries, but the mesh has {vertex_count} vertices")]
+    AttributeLength {
+        /// `"normals"`, `"uvs"` or `"colors"`.
+        attribute: &'static str,
+        /// Entries found.
+        len: usize,
+        /// Number of vertices.
+        vertex_count: usize,
+    },
+    /// More vertices than a `u32` index can address.
+    #[error("{count} vertices do not fit in u32 indices")]
+    TooManyVertices {
+        /// Number of vertices.
+        count: usize,
+    },
+}
+
+/// An indexed triangle mesh.
+///
+/// Invariants (checked by [`TriMesh::try_new`]): every triangle index is `< vertex_count`, every
+/// position is finite, and optional attributes have one entry per vertex. Triangles may still be
+/// degenerate (zero area, repeated indices) or non-manifold: [`TriMesh::report`] lists those, and
+/// [`crate::cleanup`] removes them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriMesh {
+    positions: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    normals: Option<Vec<Vec3>>,
+    uvs: Option<Vec<Vec2>>,
+    colors: Option<Vec<Rgba>>,
+}
+
+impl TriMesh {
+    /// Builds a mesh from positions and triangles, checking indices and finiteness.
+    ///
+    /// # Errors
+    /// [`MeshError`] naming the first offending vertex or triangle.
+    pub fn try_new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Result<Self, MeshError> {
+        if u32::try_from(positions.len()).is_err() {
+            return Err(MeshError::TooManyVertices {
+                count: positions.len(),
+            });
+        }
+        if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFinitePosition { vertex });
+        }
+        let n = positions.len();
+        for (t, tri) in triangles.iter().enumerate() {
+            if let Some(&v) = tri.iter().find(|&&v| v as usize >= n) {
+                return Err(MeshError::IndexOutOfRange {
+                    triangle: t,
+                    vertex: v,
+                    vertex_count: n,
+                });
+            }
+        }
+        Ok(Self::new_unchecked(positions, triangles))
+    }
+
+    /// Like [`TriMesh::try_new`].
+    ///
+    /// # Panics
+    /// When `try_new` would return an error.
+    #[must_use]
+    pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+        match Self::try_new(positions, triangles) {
+            Ok(mesh) => mesh,
+            Err(e) => panic!("invalid mesh: {e}"),
+        }
+    }
+
+    /// Builds a mesh without checks, for trusted hot paths (e.g. output of our own algorithms).
+    /// Indices must be in range and positions finite; other code relies on it.
+    #[must_use]
+    pub fn new_unchecked(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+        Self {
+            positions,
+            triangles,
+            normals: None,
+            uvs: None,
+            colors: None,
+        }
+    }
+
+    /// Attaches per-vertex normals.
+    ///
+    /// # Errors
+    /// [`MeshError::AttributeLength`] when there is not one normal per vertex.
+    pub fn with_normals(mut self, normals: Vec<Vec3>) -> Result<Self, MeshError> {
+        self.check_len("normals", normals.len())?;
+        self.normals = Some(normals);
+        Ok(self)
+    }
+
+    /// Attaches per-vertex texture coordinates.
+    ///
+    /// # Errors
+    /// [`MeshError::AttributeLength`] when there is not one uv per vertex.
+    pub fn with_uvs(mut self, uvs: Vec<Vec2>) -> Result<Self, MeshError> {
+        self.check_len("uvs", uvs.len())?;
+        self.uvs = Some(uvs);
+        Ok(self)
+    }
+
+    /// Attaches per-vertex colours.
+    ///
+    /// # Errors
+    /// [`MeshError::AttributeLength`] when there is not one colour per vertex.
+    pub fn with_colors(mut self, colors: Vec<Rgba>) -> Result<Self, MeshError> {
+        self.check_len("colors", colors.len())?;
+        self.colors = Some(colors);
+        Ok(self)
+    }
+
+    fn check_len(&self, attribute: &'static str, len: usize) -> Result<(), MeshError> {
+        if len == self.positions.len() {
+            Ok(())
+        } else {
+            Err(MeshError::AttributeLength {
+                attribute,
+                len,
+                vertex_count: self.positions.len(),
+            })
+        }
+    }
+
+    /// Vertex positions.
+    #[must_use]
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// Triangles as vertex index triples (counter-clockwise = front).
+    #[must_use]
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// Per-vertex normals, if present.
+    #[must_use]
+    pub fn normals(&self) -> Option<&[Vec3]> {
+        self.normals.as_deref()
+    }
+
+    /// Per-vertex texture coordinates, if present.
+    #[must_use]
+    pub fn uvs(&self) -> Option<&[Vec2]> {
+        self.uvs.as_deref()
+    }
+
+    /// Per-vertex colours, if present.
+    #[must_use]
+    pub fn colors(&self) -> Option<&[Rgba]> {
+        self.colors.as_deref()
+    }
+
+    /// Number of vertices.
+    #[must_use]
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Number of triangles.
+    #[must_use]
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Replaces the positions, keeping topology and attributes (e.g. after smoothing or
+    /// deformation).
+    ///
+    /// # Errors
+    /// [`MeshError::AttributeLength`] when the count changes, [`MeshError::NonFinitePosition`]
+    /// when a position is not finite.
+    pub fn set_positions(&mut self, positions: Vec<Vec3>) -> Result<(), MeshError> {
+        if positions.len() != self.positions.len() {
+            return Err(MeshError::AttributeLength {
+                attribute: "positions",
+                len: positions.len(),
+                vertex_count: self.positions.len(),
+            });
+        }
+        if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFinitePosition { vertex });
+        }
+        self.positions = positions;
+        Ok(())
+    }
+
+    /// Drops stored vertex normals (they go stale when positions change).
+    pub fn clear_normals(&mut self) {
+        self.normals = None;
+    }
+
+    /// Splits the mesh into its raw arrays: positions, triangles, normals, uvs, colours.
+    #[must_use]
+    #[expect(
+        clippy::type_complexity,
+        reason = "a plain destructuring of the fields"
+    )]
+    pub fn into_parts(
+        self,
+    ) -> (
+        Vec<Vec3>,
+        Vec<[u32; 3]>,
+        Option<Vec<Vec3>>,
+        Option<Vec<Vec2>>,
+        Option<Vec<Rgba>>,
+    ) {
+        (
+            self.positions,
+            self.triangles,
+            self.normals,
+            self.uvs,
+            self.colors,
+        )
+    }
+
+    /// The three corner positions of triangle `t`.
+    #[inline]
+    #[must_use]
+    pub fn corners(&self, t: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.triangles[t];
+        [
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        ]
+    }
+
+    /// Cross product `(b - a) x (c - a)` of triangle `t` in f64: twice the area times the normal.
+    #[inline]
+    #[must_use]
+    pub fn triangle_cross(&self, t: usize) -> DVec3 {
+        let [a, b, c] = self.corners(t).map(Vec3::as_dvec3);
+        (b - a).cross(c - a)
+    }
+
+    /// Area of every triangle (computed in f64).
+    #[must_use]
+    pub fn triangle_areas(&self) -> Vec<f64> {
+        (0..self.triangles.len())
+            .into_par_iter()
+            .map(|t| 0.5 * self.triangle_cross(t).length())
+            .collect()
+    }
+
+    /// Total surface area.
+    #[must_use]
+    pub fn area(&self) -> f64 {
+        self.triangle_areas().iter().sum()
+    }
+
+    /// Unit face normals; zero for degenerate triangles.
+    #[must_use]
+    pub fn face_normals(&self) -> Vec<Vec3> {
+        (0..self.triangles.len())
+            .into_par_iter()
+            .map(|t| self.triangle_cross(t).normalize_or_zero().as_vec3())
+            .collect()
+    }
+
+    /// Area-weighted unit vertex normals (sum of un-normalised face cross products, as Open3D's
+    /// `compute_vertex_normals` and trimesh's default). Vertices with no non-degenerate triangle
+    /// get zero.
+    #[must_use]
+    pub fn vertex_normals(&self) -> Vec<Vec3> {
+        let mut sums = vec![DVec3::ZERO; self.positions.len()];
+        for t in 0..self.triangles.len() {
+            let n = self.triangle_cross(t);
+            for &v in &self.triangles[t] {
+                sums[v as usize] += n;
+            }
+        }
+        sums.into_iter()
+            .map(|n| n.normalize_or_zero().as_vec3())
+            .collect()
+    }
+
+    /// Axis-aligned bounds of the vertices, `None` for an empty mesh.
+    #[must_use]
+    pub fn bounds(&self) -> Option<Aabb> {
+        Aabb::from_points(&self.positions)
+    }
+
+    /// Signed volume enclosed by the mesh (positive for closed, outward-oriented meshes).
+    #[must_use]
+    pub fn signed_volume(&self) -> f64 {
+        let origin = self.bounds().map_or(DVec3::ZERO, |b| b.center().as_dvec3());
+        (0..self.triangles.len())
+            .map(|t| {
+                let [a, b, c] = self.corners(t).map(|p| p.as_dvec3() - origin);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
+    /// Full validation: non-finite positions, out-of-range or repeated indices, zero-area
+    /// triangles, non-manifold edges. See [`MeshReport`].
+    #[must_use]
+    pub fn report(&self) -> MeshReport {
+        MeshReport::of_raw(&self.positions, &self.triangles)
+    }
+}

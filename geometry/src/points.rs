@@ -1,0 +1,108 @@
+//! Point sets with optional per-point normals and colours.
+
+use glam::Vec3;
+
+use crate::mesh::{Aabb, MeshError, Rgba};
+
+/// A point cloud: positions with optional normals and colours (one per point).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCloud {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    colors: Option<Vec<Rgba>>,
+}
+
+impl PointCloud {
+    /// Builds a point cloud, checking that every position is finite.
+    ///
+    /// # Errors
+    /// [`MeshError::NonFinitePosition`] naming the first bad point.
+    pub fn try_new(positions: Vec<Vec3>) -> Result<Self, MeshError> {
+        if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFinitePosition { vertex });
+        }
+        Ok(Self {
+            positions,
+            normals: None,
+            colors: None,
+        })
+    }
+
+    /// Builds a point cloud from trusted, finite positions.
+    #[must_use]
+    pub fn new_unchecked(positions: Vec<Vec3>) -> Self {
+        Self {
+            positions,
+            normals: None,
+            colors: None,
+        }
+    }
+
+    /// Attaches normals.
+    ///
+    /// # Errors
+    /// [`MeshError::AttributeLength`] when there is not one normal per point.
+    pub fn with_normals(mut self, normals: Vec<Vec3>) -> Result<Self, MeshError> {
+        if normals.len() != self.positions.len() {
+            return Err(MeshError::AttributeLength {
+                attribute: "normals",
+                len: normals.len(),
+                vertex_count: self.positions.len(),
+            });
+        }
+        self.normals = Some(normals);
+        Ok(self)
+    }
+
+    /// Attaches colours.
+    ///
+    /// # Errors
+    /// [`MeshError::AttributeLength`] when there is not one colour per point.
+    pub fn with_colors(mut self, colors: Vec<Rgba>) -> Result<Self, MeshError> {
+        if colors.len() != self.positions.len() {
+            return Err(MeshError::AttributeLength {
+                attribute: "colors",
+                len: colors.len(),
+                vertex_count: self.positions.len(),
+            });
+        }
+        self.colors = Some(colors);
+        Ok(self)
+    }
+
+    /// Point positions.
+    #[must_use]
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// Per-point normals, if present.
+    #[must_use]
+    pub fn normals(&self) -> Option<&[Vec3]> {
+        self.normals.as_deref()
+    }
+
+    /// Per-point colours, if present.
+    #[must_use]
+    pub fn colors(&self) -> Option<&[Rgba]> {
+        self.colors.as_deref()
+    }
+
+    /// Number of points.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when there are no points.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Bounds of the points, `None` when empty.
+    #[must_use]
+    pub fn bounds(&self) -> Option<Aabb> {
+        Aabb::from_points(&self.positions)
+    }
+}

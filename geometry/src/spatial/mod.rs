@@ -1,0 +1,1 @@
+//! Spatial indexes (in progress).

@@ -1,0 +1,253 @@
+//! Connectivity of a triangle mesh: unique edges, edge-to-triangle incidence, 1-ring vertex
+//! adjacency, boundary edges and edge-connected triangle clusters.
+
+use std::collections::HashMap;
+
+/// An undirected edge as a sorted vertex pair `(low, high)`.
+pub type Edge = (u32, u32);
+
+/// Sorted key of the edge between `a` and `b`.
+#[inline]
+#[must_use]
+pub fn edge_key(a: u32, b: u32) -> Edge {
+    if a < b { (a, b) } else { (b, a) }
+}
+
+/// The three undirected edges of a triangle, skipping edges whose ends coincide.
+pub fn triangle_edges(tri: [u32; 3]) -> impl Iterator<Item = Edge> {
+    let [a, b, c] = tri;
+    [(a, b), (b, c), (c, a)]
+        .into_iter()
+        .filter(|(x, y)| x != y)
+        .map(|(x, y)| edge_key(x, y))
+}
+
+/// For each undirected edge, the triangles that use it (in triangle order).
+#[must_use]
+pub fn edge_triangles(triangles: &[[u32; 3]]) -> HashMap<Edge, Vec<u32>> {
+    let mut map: HashMap<Edge, Vec<u32>> = HashMap::with_capacity(triangles.len() * 3 / 2);
+    for (t, &tri) in triangles.iter().enumerate() {
+        for e in triangle_edges(tri) {
+            let list = map.entry(e).or_default();
+            // A triangle with a repeated edge (a, a, b style) must not count twice.
+            if list.last() != Some(&(t as u32)) {
+                list.push(t as u32);
+            }
+        }
+    }
+    map
+}
+
+/// Unique undirected edges, sorted.
+#[must_use]
+pub fn unique_edges(triangles: &[[u32; 3]]) -> Vec<Edge> {
+    let mut edges: Vec<Edge> = triangles.iter().flat_map(|&t| triangle_edges(t)).collect();
+    edges.sort_unstable();
+    edges.dedup();
+    edges
+}
+
+/// Edges used by exactly one triangle, sorted.
+#[must_use]
+pub fn boundary_edges(triangles: &[[u32; 3]]) -> Vec<Edge> {
+    let mut edges: Vec<Edge> = edge_triangles(triangles)
+        .into_iter()
+        .filter(|(_, tris)| tris.len() == 1)
+        .map(|(e, _)| e)
+        .collect();
+    edges.sort_unstable();
+    edges
+}
+
+/// Edges used by more than two triangles, sorted.
+#[must_use]
+pub fn non_manifold_edges(triangles: &[[u32; 3]]) -> Vec<Edge> {
+    let mut edges: Vec<Edge> = edge_triangles(triangles)
+        .into_iter()
+        .filter(|(_, tris)| tris.len() > 2)
+        .map(|(e, _)| e)
+        .collect();
+    edges.sort_unstable();
+    edges
+}
+
+/// 1-ring vertex adjacency in compressed sparse row form: the neighbours of vertex `v` are
+/// `neighbors[offsets[v]..offsets[v + 1]]`, sorted and unique.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct VertexAdjacency {
+    offsets: Vec<u32>,
+    neighbors: Vec<u32>,
+}
+
+impl VertexAdjacency {
+    /// Builds the adjacency of `vertex_count` vertices from the triangles' edges.
+    ///
+    /// # Panics
+    /// If a triangle index is `>= vertex_count` (a [`crate::TriMesh`] never has one).
+    #[must_use]
+    pub fn new(vertex_count: usize, triangles: &[[u32; 3]]) -> Self {
+        let edges = unique_edges(triangles);
+        let mut degree = vec![0u32; vertex_count + 1];
+        for &(a, b) in &edges {
+            degree[a as usize + 1] += 1;
+            degree[b as usize + 1] += 1;
+        }
+        let mut offsets = degree;
+        for i in 1..offsets.len() {
+            offsets[i] += offsets[i - 1];
+        }
+        let mut fill = offsets.clone();
+        let mut neighbors = vec![0u32; edges.len() * 2];
+        for &(a, b) in &edges {
+            neighbors[fill[a as usize] as usize] = b;
+            fill[a as usize] += 1;
+            neighbors[fill[b as usize] as usize] = a;
+            fill[b as usize] += 1;
+        }
+        for v in 0..vertex_count {
+            neighbors[offsets[v] as usize..offsets[v + 1] as usize].sort_unstable();
+        }
+        Self { offsets, neighbors }
+    }
+
+    /// Neighbours of vertex `v`, sorted.
+    #[inline]
+    #[must_use]
+    pub fn neighbors(&self, v: usize) -> &[u32] {
+        &self.neighbors[self.offsets[v] as usize..self.offsets[v + 1] as usize]
+    }
+
+    /// Number of vertices.
+    #[must_use]
+    pub fn vertex_count(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+}
+
+/// Edge-connected triangle clusters, as Open3D's `cluster_connected_triangles`: two triangles
+/// are in one cluster when they share an edge (sharing only a vertex does not connect them).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriangleClusters {
+    /// Cluster index of every triangle. Clusters are numbered by their first triangle.
+    pub cluster_of: Vec<u32>,
+    /// Number of triangles in each cluster.
+    pub sizes: Vec<usize>,
+    /// Surface area of each cluster (f64 sum).
+    pub areas: Vec<f64>,
+}
+
+impl TriangleClusters {
+    /// Labels the edge-connected clusters of `mesh`.
+    #[must_use]
+    pub fn of(mesh: &crate::TriMesh) -> Self {
+        let triangles = mesh.triangles();
+        let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
+        for tris in edge_triangles(triangles).values() {
+            for w in tris.windows(2) {
+                union(&mut parent, w[0], w[1]);
+            }
+        }
+        let mut label = vec![u32::MAX; triangles.len()];
+        let mut cluster_of = Vec::with_capacity(triangles.len());
+        let mut sizes = Vec::new();
+        let mut areas = Vec::new();
+        let tri_areas = mesh.triangle_areas();
+        for t in 0..triangles.len() {
+            let root = find(&mut parent, t as u32) as usize;
+            if label[root] == u32::MAX {
+                label[root] = sizes.len() as u32;
+                sizes.push(0);
+                areas.push(0.0);
+            }
+            let c = label[root];
+            cluster_of.push(c);
+            sizes[c as usize] += 1;
+            areas[c as usize] += tri_areas[t];
+        }
+        Self {
+            cluster_of,
+            sizes,
+            areas,
+        }
+    }
+
+    /// Number of clusters.
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.sizes.len()
+    }
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let grand = parent[parent[x as usize] as usize];
+        parent[x as usize] = grand;
+        x = grand;
+    }
+    x
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+        parent[hi as usize] = lo;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::TriMesh;
+    use glam::Vec3;
+
+    fn two_squares() -> TriMesh {
+        // Two unit squares sharing only vertex 2 (so two edge-clusters).
+        let p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(2.0, 1.0, 0.0),
+            Vec3::new(2.0, 2.0, 0.0),
+            Vec3::new(1.0, 2.0, 0.0),
+        ];
+        TriMesh::new(p, vec![[0, 1, 2], [0, 2, 3], [2, 4, 5], [2, 5, 6]])
+    }
+
+    #[test]
+    fn edges_boundary_and_adjacency() {
+        let m = two_squares();
+        assert_eq!(unique_edges(m.triangles()).len(), 10);
+        assert_eq!(boundary_edges(m.triangles()).len(), 8);
+        assert!(non_manifold_edges(m.triangles()).is_empty());
+        let adj = VertexAdjacency::new(m.vertex_count(), m.triangles());
+        assert_eq!(adj.neighbors(2), &[0, 1, 3, 4, 5, 6]);
+        assert_eq!(adj.neighbors(1), &[0, 2]);
+    }
+
+    #[test]
+    fn vertex_touching_squares_are_two_clusters() {
+        let c = TriangleClusters::of(&two_squares());
+        assert_eq!(c.count(), 2);
+        assert_eq!(c.cluster_of, vec![0, 0, 1, 1]);
+        assert_eq!(c.sizes, vec![2, 2]);
+        assert!((c.areas[0] - 1.0).abs() < 1e-12 && (c.areas[1] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn non_manifold_edge_is_found() {
+        let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::NEG_Y];
+        let tris = vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]];
+        assert_eq!(non_manifold_edges(&tris), vec![(0, 1)]);
+        let m = TriMesh::new(p, tris);
+        assert_eq!(TriangleClusters::of(&m).count(), 1);
+    }
+
+    #[test]
+    fn empty_mesh() {
+        let m = TriMesh::default();
+        assert_eq!(TriangleClusters::of(&m).count(), 0);
+        assert_eq!(VertexAdjacency::new(0, &[]).vertex_count(), 0);
+    }
+}
