@@ -1,0 +1,41 @@
+//! `cargo run --release -p trisplat-bench -- <benchmark>`: times trisplat and, side by side on
+//! the same input files, the Python tool a user would otherwise pick (scipy, Open3D, trimesh),
+//! and prints the ratio. Timing never decides a test; these numbers go in the docs.
+//!
+//! The Python side needs a virtualenv with the pinned packages of
+//! `tests/reference/requirements.txt`; pass its interpreter with `--python` (default: the
+//! `TRISPLAT_PYTHON` environment variable, else `python3`). Without one, only trisplat's
+//! timings are printed.
+
+mod harness;
+
+use clap::{Parser, Subcommand};
+
+/// Benchmarks against the reference tools.
+#[derive(Debug, Parser)]
+struct Args {
+    /// Python interpreter with numpy/scipy/open3d/trimesh installed.
+    #[arg(
+        long,
+        env = "TRISPLAT_PYTHON",
+        default_value = "python3",
+        global = true
+    )]
+    python: String,
+    /// Skip the Python side.
+    #[arg(long, global = true)]
+    no_python: bool,
+    /// Which benchmark.
+    #[command(subcommand)]
+    bench: Bench,
+}
+
+#[derive(Debug, Subcommand)]
+enum Bench {}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let python = (!args.no_python).then_some(args.python.as_str());
+    let _ = python;
+    match args.bench {}
+}
