@@ -367,3 +367,84 @@ impl TriMesh {
         MeshReport::of_raw(&self.positions, &self.triangles)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Unit cube corners with outward-facing triangles.
+    fn cube() -> TriMesh {
+        let p: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+            .collect();
+        let t = vec![
+            [0, 2, 1],
+            [1, 2, 3], // z = 0
+            [4, 5, 6],
+            [5, 7, 6], // z = 1
+            [0, 1, 4],
+            [1, 5, 4], // y = 0
+            [2, 6, 3],
+            [3, 6, 7], // y = 1
+            [0, 4, 2],
+            [2, 4, 6], // x = 0
+            [1, 3, 5],
+            [3, 7, 5], // x = 1
+        ];
+        TriMesh::new(p, t)
+    }
+
+    #[test]
+    fn cube_area_volume_normals_bounds() {
+        let m = cube();
+        assert!((m.area() - 6.0).abs() < 1e-12);
+        assert!((m.signed_volume() - 1.0).abs() < 1e-12);
+        let b = m.bounds().unwrap();
+        assert_eq!((b.min, b.max), (Vec3::ZERO, Vec3::ONE));
+        assert!((b.diagonal() - 3f32.sqrt()).abs() < 1e-6);
+        assert_eq!(m.face_normals()[0], Vec3::NEG_Z);
+        // Corner 7 touches +x, +y, +z faces with equal area: normal along (1,1,1).
+        let n7 = m.vertex_normals()[7];
+        assert!((n7 - Vec3::ONE.normalize()).length() < 1e-6, "{n7}");
+        assert!(m.report().is_clean());
+    }
+
+    #[test]
+    fn try_new_rejects_bad_input() {
+        assert_eq!(
+            TriMesh::try_new(vec![Vec3::ZERO], vec![[0, 0, 1]]),
+            Err(MeshError::IndexOutOfRange {
+                triangle: 0,
+                vertex: 1,
+                vertex_count: 1
+            })
+        );
+        assert_eq!(
+            TriMesh::try_new(vec![Vec3::ZERO, Vec3::splat(f32::INFINITY)], vec![]),
+            Err(MeshError::NonFinitePosition { vertex: 1 })
+        );
+        let m = TriMesh::new(vec![Vec3::ZERO], vec![]);
+        assert!(matches!(
+            m.clone().with_normals(vec![]),
+            Err(MeshError::AttributeLength {
+                attribute: "normals",
+                ..
+            })
+        ));
+        let mut m2 = m;
+        assert!(m2.set_positions(vec![Vec3::NAN]).is_err());
+        assert!(m2.set_positions(vec![Vec3::ONE]).is_ok());
+    }
+
+    #[test]
+    fn degenerate_triangles_have_zero_normals_not_nan() {
+        let m = TriMesh::new(
+            vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0],
+            vec![[0, 1, 2], [0, 0, 1]],
+        );
+        assert!(m.face_normals().iter().all(|n| *n == Vec3::ZERO));
+        assert!(m.vertex_normals().iter().all(|n| *n == Vec3::ZERO));
+        assert_eq!(m.area(), 0.0);
+        assert!(TriMesh::default().bounds().is_none());
+    }
+}
