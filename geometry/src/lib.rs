@@ -4,6 +4,7 @@
 //!
 //! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
 
+pub mod animation;
 pub mod cleanup;
 pub mod ids;
 pub mod io;

@@ -1,0 +1,1 @@
+//! Animated templates (in progress).
