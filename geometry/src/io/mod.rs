@@ -4,14 +4,21 @@
 //! against the bytes present, indices in range, finite coordinates) and reports the file and
 //! the element at fault; every writer writes to a temporary file in the destination folder and
 //! renames it into place, so a failed write never leaves a partial file.
+//!
+//! Per format, see [`ply`] (what PLY elements and properties become, what is kept for writing
+//! back), [`obj`] (vertex order and uv seams) and [`gltf`] (scene graph, primitives, rest state).
 
 mod atomic;
 mod error;
+pub mod obj;
+pub mod ply;
 
 use std::path::Path;
 
 pub use atomic::write_atomically;
 pub use error::IoError;
+pub use obj::ObjVertices;
+pub use ply::{PlyEncoding, PlyExtras};
 
 use crate::{PointCloud, TriMesh};
 
@@ -58,28 +65,68 @@ pub struct WriteOptions {
     pub ascii: bool,
 }
 
+impl WriteOptions {
+    fn ply_encoding(self) -> PlyEncoding {
+        if self.ascii {
+            PlyEncoding::Ascii
+        } else {
+            PlyEncoding::BinaryLittleEndian
+        }
+    }
+}
+
+/// Options for reading meshes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// How OBJ corners become vertices: the file's own vertex order (default) or trimesh's
+    /// split-at-seams layout. See [`obj`].
+    pub obj_vertices: ObjVertices,
+}
+
 /// Reads a triangle mesh (PLY, OBJ, glTF/GLB in its rest state), chosen by extension.
+///
+/// OBJ files keep their vertex order ([`ObjVertices::Positions`]); use [`read_mesh_with`] for
+/// trimesh's layout.
 ///
 /// # Errors
 /// [`IoError`] naming the file and the element at fault.
 pub fn read_mesh(path: &Path) -> Result<TriMesh, IoError> {
-    let _ = Format::from_path(path)?;
-    Err(IoError::Unsupported {
-        path: path.to_path_buf(),
-        what: "reading (not yet implemented)".into(),
-    })
+    read_mesh_with(path, ReadOptions::default())
+}
+
+/// Reads a triangle mesh with explicit [`ReadOptions`].
+///
+/// # Errors
+/// [`IoError`] naming the file and the element at fault.
+pub fn read_mesh_with(path: &Path, options: ReadOptions) -> Result<TriMesh, IoError> {
+    match Format::from_path(path)? {
+        Format::Ply => ply::read_ply_mesh(path).map(|(mesh, _)| mesh),
+        Format::Obj => obj::read_obj(path, options.obj_vertices),
+        Format::Gltf | Format::Glb => Err(IoError::Unsupported {
+            path: path.to_path_buf(),
+            what: "glTF reading lands in the next commit".into(),
+        }),
+    }
 }
 
 /// Writes a triangle mesh atomically, format by extension.
 ///
+/// PLY: binary little-endian unless `options.ascii`, `face` as `list uchar int vertex_indices`,
+/// normals, uvs (`s t`) and colours (`red green blue alpha` uchar) when present.
+///
 /// # Errors
 /// [`IoError`] when the file cannot be written.
 pub fn write_mesh(path: &Path, mesh: &TriMesh, options: WriteOptions) -> Result<(), IoError> {
-    let _ = (Format::from_path(path)?, mesh, options);
-    Err(IoError::Unsupported {
-        path: path.to_path_buf(),
-        what: "writing (not yet implemented)".into(),
-    })
+    match Format::from_path(path)? {
+        Format::Ply => {
+            ply::write_ply_mesh(path, mesh, &PlyExtras::default(), options.ply_encoding())
+        }
+        Format::Obj => write_atomically(path, |w| obj::write_obj_to(path, w, mesh)),
+        Format::Gltf | Format::Glb => Err(IoError::Unsupported {
+            path: path.to_path_buf(),
+            what: "glTF writing lands in the next commit".into(),
+        }),
+    }
 }
 
 /// Reads a point cloud: a PLY `vertex` element with optional normals and colours, or the
@@ -88,25 +135,52 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, options: WriteOptions) -> Result<
 /// # Errors
 /// [`IoError`] naming the file and the element at fault.
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
-    let _ = Format::from_path(path)?;
-    Err(IoError::Unsupported {
-        path: path.to_path_buf(),
-        what: "reading (not yet implemented)".into(),
-    })
+    if Format::from_path(path)? == Format::Ply {
+        let doc = ply::read_ply_document(path)?;
+        let has_faces = doc.element("face").is_some_and(|f| f.count > 0)
+            || doc.element("tristrips").is_some_and(|f| f.count > 0);
+        let (cloud, _) = ply::ply_to_points(path, &doc)?;
+        if cloud.normals().is_some() || !has_faces {
+            return Ok(cloud);
+        }
+        let (mesh, _) = ply::ply_to_mesh(path, &doc)?;
+        return mesh_points(path, mesh);
+    }
+    mesh_points(path, read_mesh(path)?)
+}
+
+/// The vertices of `mesh` as points, with its normals (area-weighted ones when it has none).
+fn mesh_points(path: &Path, mesh: TriMesh) -> Result<PointCloud, IoError> {
+    let normals = match mesh.normals() {
+        Some(n) => n.to_vec(),
+        None => mesh.vertex_normals(),
+    };
+    let (positions, _, _, _, colors) = mesh.into_parts();
+    let bad = |e: crate::MeshError| IoError::malformed(path, "vertices", e.to_string());
+    let mut cloud = PointCloud::try_new(positions)
+        .map_err(bad)?
+        .with_normals(normals)
+        .map_err(bad)?;
+    if let Some(c) = colors {
+        cloud = cloud.with_colors(c).map_err(bad)?;
+    }
+    Ok(cloud)
 }
 
 /// Writes a point cloud as PLY (binary unless `options.ascii`), atomically.
 ///
 /// # Errors
-/// [`IoError`] when the file cannot be written.
+/// [`IoError`] when the file cannot be written, [`IoError::Unsupported`] for a non-PLY path.
 pub fn write_points(
     path: &Path,
     points: &PointCloud,
     options: WriteOptions,
 ) -> Result<(), IoError> {
-    let _ = (points, options);
-    Err(IoError::Unsupported {
-        path: path.to_path_buf(),
-        what: "writing (not yet implemented)".into(),
-    })
+    if Format::from_path(path)? != Format::Ply {
+        return Err(IoError::Unsupported {
+            path: path.to_path_buf(),
+            what: "point clouds are written as .ply only".into(),
+        });
+    }
+    ply::write_ply_points(path, points, &PlyExtras::default(), options.ply_encoding())
 }

@@ -1,0 +1,1414 @@
+//! Stanford PLY: a general reader and writer (ascii, binary little- and big-endian) and the
+//! mapping between PLY elements and [`TriMesh`] / [`PointCloud`].
+//!
+//! The reader is hand-written rather than built on `ply-rs-bw` so that every failure names the
+//! element and row at fault and so that no allocation is ever sized from a header count alone:
+//! before an element is read, its count is checked against the bytes left in the file (each row
+//! needs at least its fixed-size part in binary, at least two bytes per property in ascii).
+//!
+//! What becomes mesh data:
+//! - `vertex`: `x y z` (any numeric type; NaN or infinite is an error naming the vertex),
+//!   normals `nx ny nz`, colours `red green blue [alpha]` (integers are divided by the type's
+//!   maximum, so `uchar` 255 is 1.0; floats are taken as they are), texture coordinates as
+//!   `texture_u texture_v`, `u v`, `s t` or `texture_s texture_t` (the names trimesh tries).
+//! - `face`: a list property `vertex_indices` or `vertex_index` of any integer types; polygons
+//!   are fan-triangulated (`0 1 2`, `0 2 3`, ...), faces with fewer than three corners are
+//!   skipped. An index out of range is an error naming the face.
+//! - `tristrips`: a list `vertex_indices` where `-1` restarts the strip; triangle `k` of a strip
+//!   is `(s[k], s[k+1], s[k+2])` for even `k` and `(s[k+1], s[k], s[k+2])` for odd `k`, and
+//!   triangles with a repeated index (strip-joining degenerates) are dropped.
+//!
+//! Everything else is kept in [`PlyExtras`] and written back by [`write_ply_mesh`]: extra vertex
+//! properties (one value per vertex), extra face properties when every face was a triangle
+//! (so faces map one to one; after fan triangulation they are dropped), and whole other
+//! elements verbatim. Comments and `obj_info` lines are kept too.
+
+use std::fmt;
+use std::io::Write;
+use std::path::Path;
+
+use glam::{Vec2, Vec3};
+
+use super::IoError;
+use crate::mesh::Rgba;
+use crate::{PointCloud, TriMesh};
+
+/// How a PLY body is encoded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PlyEncoding {
+    /// `format ascii 1.0`.
+    Ascii,
+    /// `format binary_little_endian 1.0` (the default for writing).
+    #[default]
+    BinaryLittleEndian,
+    /// `format binary_big_endian 1.0`.
+    BinaryBigEndian,
+}
+
+impl PlyEncoding {
+    fn header_name(self) -> &'static str {
+        match self {
+            Self::Ascii => "ascii",
+            Self::BinaryLittleEndian => "binary_little_endian",
+            Self::BinaryBigEndian => "binary_big_endian",
+        }
+    }
+}
+
+/// A PLY scalar type.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScalarType {
+    /// `char` / `int8`.
+    I8,
+    /// `uchar` / `uint8`.
+    U8,
+    /// `short` / `int16`.
+    I16,
+    /// `ushort` / `uint16`.
+    U16,
+    /// `int` / `int32`.
+    I32,
+    /// `uint` / `uint32`.
+    U32,
+    /// `float` / `float32`.
+    F32,
+    /// `double` / `float64`.
+    F64,
+}
+
+impl ScalarType {
+    /// Size in bytes in a binary file.
+    #[must_use]
+    pub fn size(self) -> usize {
+        match self {
+            Self::I8 | Self::U8 => 1,
+            Self::I16 | Self::U16 => 2,
+            Self::I32 | Self::U32 | Self::F32 => 4,
+            Self::F64 => 8,
+        }
+    }
+
+    fn parse(name: &str) -> Option<Self> {
+        Some(match name {
+            "char" | "int8" => Self::I8,
+            "uchar" | "uint8" => Self::U8,
+            "short" | "int16" => Self::I16,
+            "ushort" | "uint16" => Self::U16,
+            "int" | "int32" => Self::I32,
+            "uint" | "uint32" => Self::U32,
+            "float" | "float32" => Self::F32,
+            "double" | "float64" => Self::F64,
+            _ => return None,
+        })
+    }
+
+    /// The name written in headers (`uchar`, `int`, `float`, ...).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::I8 => "char",
+            Self::U8 => "uchar",
+            Self::I16 => "short",
+            Self::U16 => "ushort",
+            Self::I32 => "int",
+            Self::U32 => "uint",
+            Self::F32 => "float",
+            Self::F64 => "double",
+        }
+    }
+
+    fn is_float(self) -> bool {
+        matches!(self, Self::F32 | Self::F64)
+    }
+}
+
+/// Values of one scalar property (or the flattened items of a list property), typed as stored.
+#[derive(Clone, Debug, PartialEq)]
+#[expect(
+    missing_docs,
+    reason = "one variant per scalar type, named like the type"
+)]
+pub enum ScalarColumn {
+    I8(Vec<i8>),
+    U8(Vec<u8>),
+    I16(Vec<i16>),
+    U16(Vec<u16>),
+    I32(Vec<i32>),
+    U32(Vec<u32>),
+    F32(Vec<f32>),
+    F64(Vec<f64>),
+}
+
+macro_rules! each_column {
+    ($self:expr, $v:ident => $body:expr) => {
+        match $self {
+            ScalarColumn::I8($v) => $body,
+            ScalarColumn::U8($v) => $body,
+            ScalarColumn::I16($v) => $body,
+            ScalarColumn::U16($v) => $body,
+            ScalarColumn::I32($v) => $body,
+            ScalarColumn::U32($v) => $body,
+            ScalarColumn::F32($v) => $body,
+            ScalarColumn::F64($v) => $body,
+        }
+    };
+}
+
+impl ScalarColumn {
+    /// An empty column of type `ty` with room for `capacity` values.
+    #[must_use]
+    pub fn with_capacity(ty: ScalarType, capacity: usize) -> Self {
+        match ty {
+            ScalarType::I8 => Self::I8(Vec::with_capacity(capacity)),
+            ScalarType::U8 => Self::U8(Vec::with_capacity(capacity)),
+            ScalarType::I16 => Self::I16(Vec::with_capacity(capacity)),
+            ScalarType::U16 => Self::U16(Vec::with_capacity(capacity)),
+            ScalarType::I32 => Self::I32(Vec::with_capacity(capacity)),
+            ScalarType::U32 => Self::U32(Vec::with_capacity(capacity)),
+            ScalarType::F32 => Self::F32(Vec::with_capacity(capacity)),
+            ScalarType::F64 => Self::F64(Vec::with_capacity(capacity)),
+        }
+    }
+
+    /// The stored type.
+    #[must_use]
+    pub fn scalar_type(&self) -> ScalarType {
+        match self {
+            Self::I8(_) => ScalarType::I8,
+            Self::U8(_) => ScalarType::U8,
+            Self::I16(_) => ScalarType::I16,
+            Self::U16(_) => ScalarType::U16,
+            Self::I32(_) => ScalarType::I32,
+            Self::U32(_) => ScalarType::U32,
+            Self::F32(_) => ScalarType::F32,
+            Self::F64(_) => ScalarType::F64,
+        }
+    }
+
+    /// Number of values.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        each_column!(self, v => v.len())
+    }
+
+    /// True when there are no values.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Value `i` as f64 (exact for every PLY type), `None` when out of range.
+    #[must_use]
+    pub fn get_f64(&self, i: usize) -> Option<f64> {
+        match self {
+            Self::I8(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::U8(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::I16(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::U16(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::I32(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::U32(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::F32(v) => v.get(i).map(|&x| f64::from(x)),
+            Self::F64(v) => v.get(i).copied(),
+        }
+    }
+
+    /// Value `i` as i64 when it is an integer type or a float with an integral value.
+    fn get_i64(&self, i: usize) -> Option<i64> {
+        match self {
+            Self::F32(v) => v.get(i).and_then(|&x| float_to_i64(f64::from(x))),
+            Self::F64(v) => v.get(i).and_then(|&x| float_to_i64(x)),
+            Self::I8(v) => v.get(i).map(|&x| i64::from(x)),
+            Self::U8(v) => v.get(i).map(|&x| i64::from(x)),
+            Self::I16(v) => v.get(i).map(|&x| i64::from(x)),
+            Self::U16(v) => v.get(i).map(|&x| i64::from(x)),
+            Self::I32(v) => v.get(i).map(|&x| i64::from(x)),
+            Self::U32(v) => v.get(i).map(|&x| i64::from(x)),
+        }
+    }
+
+    /// All values converted to f32 (rounding f64 and large integers).
+    #[must_use]
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_precision_loss,
+        reason = "f32 storage is the documented precision of meshes"
+    )]
+    pub fn to_f32(&self) -> Vec<f32> {
+        match self {
+            Self::F32(v) => v.clone(),
+            Self::F64(v) => v.iter().map(|&x| x as f32).collect(),
+            Self::I32(v) => v.iter().map(|&x| x as f32).collect(),
+            Self::U32(v) => v.iter().map(|&x| x as f32).collect(),
+            other => (0..other.len())
+                .map(|i| other.get_f64(i).unwrap_or(0.0) as f32)
+                .collect(),
+        }
+    }
+
+    /// Values scaled to `[0, 1]` colour floats: integers divided by their type's maximum.
+    #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
+    fn to_unit_color(&self) -> Vec<f32> {
+        let max = match self.scalar_type() {
+            ScalarType::U8 => 255.0,
+            ScalarType::I8 => 127.0,
+            ScalarType::U16 => 65535.0,
+            ScalarType::I16 => 32767.0,
+            ScalarType::U32 => f64::from(u32::MAX),
+            ScalarType::I32 => f64::from(i32::MAX),
+            ScalarType::F32 | ScalarType::F64 => 1.0,
+        };
+        (0..self.len())
+            .map(|i| (self.get_f64(i).unwrap_or(0.0) / max) as f32)
+            .collect()
+    }
+
+    fn push_binary(&mut self, bytes: &[u8], big_endian: bool) {
+        macro_rules! push {
+            ($v:ident, $t:ty) => {{
+                let mut a = [0u8; std::mem::size_of::<$t>()];
+                a.copy_from_slice(&bytes[..std::mem::size_of::<$t>()]);
+                $v.push(if big_endian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                });
+            }};
+        }
+        match self {
+            Self::I8(v) => push!(v, i8),
+            Self::U8(v) => push!(v, u8),
+            Self::I16(v) => push!(v, i16),
+            Self::U16(v) => push!(v, u16),
+            Self::I32(v) => push!(v, i32),
+            Self::U32(v) => push!(v, u32),
+            Self::F32(v) => push!(v, f32),
+            Self::F64(v) => push!(v, f64),
+        }
+    }
+
+    /// Parses an ascii token into this column; `false` when it is not a valid value of the type.
+    fn push_token(&mut self, token: &str) -> bool {
+        fn int<T: TryFrom<i64>>(token: &str) -> Option<T> {
+            let x: i64 = match token.parse() {
+                Ok(x) => x,
+                Err(_) => float_to_i64(token.parse::<f64>().ok()?)?,
+            };
+            T::try_from(x).ok()
+        }
+        match self {
+            Self::I8(v) => int(token).map(|x| v.push(x)).is_some(),
+            Self::U8(v) => int(token).map(|x| v.push(x)).is_some(),
+            Self::I16(v) => int(token).map(|x| v.push(x)).is_some(),
+            Self::U16(v) => int(token).map(|x| v.push(x)).is_some(),
+            Self::I32(v) => int(token).map(|x| v.push(x)).is_some(),
+            Self::U32(v) => int(token).map(|x| v.push(x)).is_some(),
+            Self::F32(v) => token.parse().map(|x| v.push(x)).is_ok(),
+            Self::F64(v) => token.parse().map(|x| v.push(x)).is_ok(),
+        }
+    }
+
+    fn write_binary(&self, i: usize, out: &mut Vec<u8>, big_endian: bool) {
+        each_column!(self, v => {
+            let x = v[i];
+            if big_endian {
+                out.extend_from_slice(&x.to_be_bytes());
+            } else {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+        });
+    }
+
+    fn write_ascii(&self, i: usize, out: &mut Vec<u8>) {
+        // `Display` of Rust floats is the shortest string that round-trips.
+        each_column!(self, v => {
+            let _ = write!(out, "{}", v[i]);
+        });
+    }
+}
+
+#[expect(
+    clippy::cast_possible_truncation,
+    reason = "checked to be integral and in range"
+)]
+fn float_to_i64(x: f64) -> Option<i64> {
+    (x.is_finite() && x.fract() == 0.0 && x.abs() < 9.0e15).then_some(x as i64)
+}
+
+/// The data of one property of an element.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PropertyData {
+    /// One value per row.
+    Scalar(ScalarColumn),
+    /// A variable-length list per row: row `i` holds `values[offsets[i]..offsets[i + 1]]`.
+    List {
+        /// Type of the per-row count.
+        count_type: ScalarType,
+        /// `rows + 1` offsets into `values`.
+        offsets: Vec<usize>,
+        /// All items, row after row.
+        values: ScalarColumn,
+    },
+}
+
+impl PropertyData {
+    fn rows(&self) -> usize {
+        match self {
+            Self::Scalar(c) => c.len(),
+            Self::List { offsets, .. } => offsets.len().saturating_sub(1),
+        }
+    }
+}
+
+/// One named property with its data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlyProperty {
+    /// Property name.
+    pub name: String,
+    /// Its values.
+    pub data: PropertyData,
+}
+
+/// One element (`vertex`, `face`, ...) with its rows stored column by column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlyElement {
+    /// Element name.
+    pub name: String,
+    /// Number of rows.
+    pub count: usize,
+    /// Properties in file order.
+    pub properties: Vec<PlyProperty>,
+}
+
+impl PlyElement {
+    /// The property called `name`.
+    #[must_use]
+    pub fn property(&self, name: &str) -> Option<&PropertyData> {
+        self.properties
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| &p.data)
+    }
+
+    fn scalar(&self, name: &str) -> Option<&ScalarColumn> {
+        match self.property(name) {
+            Some(PropertyData::Scalar(c)) => Some(c),
+            _ => None,
+        }
+    }
+}
+
+/// A whole PLY file: encoding, comments and elements.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlyDocument {
+    /// Encoding read (or to write).
+    pub encoding: PlyEncoding,
+    /// `comment` lines, without the keyword.
+    pub comments: Vec<String>,
+    /// `obj_info` lines, without the keyword.
+    pub obj_info: Vec<String>,
+    /// Elements in file order.
+    pub elements: Vec<PlyElement>,
+}
+
+impl PlyDocument {
+    /// The element called `name`.
+    #[must_use]
+    pub fn element(&self, name: &str) -> Option<&PlyElement> {
+        self.elements.iter().find(|e| e.name == name)
+    }
+}
+
+/// What a PLY file held besides the mesh or point data: written back by [`write_ply_mesh`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlyExtras {
+    /// Comments of the source file.
+    pub comments: Vec<String>,
+    /// `obj_info` lines of the source file.
+    pub obj_info: Vec<String>,
+    /// Vertex properties that are not positions, normals, colours or uvs (one value per vertex).
+    pub vertex_properties: Vec<PlyProperty>,
+    /// Face properties other than the index list, kept only when every face was a triangle.
+    pub face_properties: Vec<PlyProperty>,
+    /// Elements other than `vertex`, `face` and `tristrips`, verbatim.
+    pub other_elements: Vec<PlyElement>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Header
+
+#[derive(Clone, Debug)]
+enum PropKind {
+    Scalar(ScalarType),
+    List { count: ScalarType, item: ScalarType },
+}
+
+#[derive(Clone, Debug)]
+struct PropDef {
+    name: String,
+    kind: PropKind,
+}
+
+#[derive(Clone, Debug)]
+struct ElementDef {
+    name: String,
+    count: usize,
+    props: Vec<PropDef>,
+}
+
+struct Header {
+    encoding: PlyEncoding,
+    comments: Vec<String>,
+    obj_info: Vec<String>,
+    elements: Vec<ElementDef>,
+    body_start: usize,
+}
+
+/// Longest header we accept (real headers are a few kilobytes at most).
+const MAX_HEADER_BYTES: usize = 1 << 20;
+
+fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, IoError> {
+    let bad =
+        |line: usize, msg: String| IoError::malformed(path, format!("header line {line}"), msg);
+    if !bytes.starts_with(b"ply") {
+        return Err(IoError::malformed(
+            path,
+            "header line 1",
+            "not a PLY file (it does not start with `ply`)",
+        ));
+    }
+    let mut pos = 0;
+    let mut line_no = 0;
+    let mut encoding = None;
+    let mut comments = Vec::new();
+    let mut obj_info = Vec::new();
+    let mut elements: Vec<ElementDef> = Vec::new();
+    loop {
+        if pos >= bytes.len() || pos > MAX_HEADER_BYTES {
+            return Err(bad(
+                line_no + 1,
+                "the header has no `end_header` line (truncated file?)".into(),
+            ));
+        }
+        let end = bytes[pos..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(bytes.len(), |i| pos + i);
+        let raw = &bytes[pos..end];
+        pos = (end + 1).min(bytes.len() + 1);
+        line_no += 1;
+        let line = std::str::from_utf8(raw)
+            .map_err(|_| bad(line_no, "header is not ASCII text".into()))?
+            .trim_end_matches('\r');
+        let mut words = line.split_ascii_whitespace();
+        let Some(keyword) = words.next() else {
+            continue;
+        };
+        match keyword {
+            "ply" if line_no == 1 => {}
+            "format" => {
+                let enc = match words.next() {
+                    Some("ascii") => PlyEncoding::Ascii,
+                    Some("binary_little_endian") => PlyEncoding::BinaryLittleEndian,
+                    Some("binary_big_endian") => PlyEncoding::BinaryBigEndian,
+                    other => {
+                        return Err(bad(
+                            line_no,
+                            format!("unknown format {:?}", other.unwrap_or("")),
+                        ));
+                    }
+                };
+                encoding = Some(enc);
+            }
+            "comment" => comments.push(rest_of(line, "comment")),
+            "obj_info" => obj_info.push(rest_of(line, "obj_info")),
+            "element" => {
+                let name = words
+                    .next()
+                    .ok_or_else(|| bad(line_no, "element without a name".into()))?;
+                let count = words
+                    .next()
+                    .and_then(|c| c.parse::<usize>().ok())
+                    .ok_or_else(|| {
+                        bad(
+                            line_no,
+                            format!("element `{name}` needs a non-negative count"),
+                        )
+                    })?;
+                elements.push(ElementDef {
+                    name: name.to_owned(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            "property" => {
+                let element = elements
+                    .last_mut()
+                    .ok_or_else(|| bad(line_no, "property before any element".into()))?;
+                let ty = words.next().unwrap_or("");
+                let kind = if ty == "list" {
+                    let count = words.next().and_then(ScalarType::parse);
+                    let item = words.next().and_then(ScalarType::parse);
+                    match (count, item) {
+                        (Some(count), Some(item)) if !count.is_float() => {
+                            PropKind::List { count, item }
+                        }
+                        _ => {
+                            return Err(bad(line_no, format!("bad list property `{line}`")));
+                        }
+                    }
+                } else {
+                    PropKind::Scalar(
+                        ScalarType::parse(ty)
+                            .ok_or_else(|| bad(line_no, format!("unknown property type `{ty}`")))?,
+                    )
+                };
+                let name = words
+                    .next()
+                    .ok_or_else(|| bad(line_no, "property without a name".into()))?;
+                element.props.push(PropDef {
+                    name: name.to_owned(),
+                    kind,
+                });
+            }
+            "end_header" => break,
+            other => {
+                return Err(bad(line_no, format!("unknown header keyword `{other}`")));
+            }
+        }
+    }
+    let encoding =
+        encoding.ok_or_else(|| bad(line_no, "the header has no `format` line".into()))?;
+    Ok(Header {
+        encoding,
+        comments,
+        obj_info,
+        elements,
+        body_start: pos.min(bytes.len()),
+    })
+}
+
+fn rest_of(line: &str, keyword: &str) -> String {
+    line.trim_start()
+        .strip_prefix(keyword)
+        .unwrap_or("")
+        .strip_prefix(' ')
+        .unwrap_or("")
+        .to_owned()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Body
+
+fn new_data(def: &PropDef, capacity: usize) -> PropertyData {
+    match def.kind {
+        PropKind::Scalar(t) => PropertyData::Scalar(ScalarColumn::with_capacity(t, capacity)),
+        PropKind::List { count, item } => {
+            let mut offsets = Vec::with_capacity(capacity + 1);
+            offsets.push(0);
+            PropertyData::List {
+                count_type: count,
+                offsets,
+                values: ScalarColumn::with_capacity(item, capacity.saturating_mul(3)),
+            }
+        }
+    }
+}
+
+fn count_limit_error(path: &Path, def: &ElementDef, possible: usize) -> IoError {
+    IoError::malformed(
+        path,
+        format!("element {}", def.name),
+        format!(
+            "the header declares {} rows but the rest of the file can hold at most {possible} \
+             (truncated file or wrong count)",
+            def.count
+        ),
+    )
+}
+
+fn read_binary_body(
+    path: &Path,
+    header: &Header,
+    body: &[u8],
+    big_endian: bool,
+) -> Result<Vec<PlyElement>, IoError> {
+    let mut pos = 0usize;
+    let mut elements = Vec::with_capacity(header.elements.len());
+    for def in &header.elements {
+        let min_row: usize = def
+            .props
+            .iter()
+            .map(|p| match p.kind {
+                PropKind::Scalar(t) => t.size(),
+                PropKind::List { count, .. } => count.size(),
+            })
+            .sum();
+        let left = body.len() - pos;
+        if min_row > 0 && def.count > left / min_row {
+            return Err(count_limit_error(path, def, left / min_row));
+        }
+        let capacity = if min_row == 0 { 0 } else { def.count };
+        let mut data: Vec<PropertyData> = def.props.iter().map(|p| new_data(p, capacity)).collect();
+        let truncated = |row: usize| {
+            IoError::malformed(
+                path,
+                format!("{} {row}", def.name),
+                "file ends early (truncated)",
+            )
+        };
+        for row in 0..def.count {
+            for (prop, column) in def.props.iter().zip(&mut data) {
+                match column {
+                    PropertyData::Scalar(c) => {
+                        let size = c.scalar_type().size();
+                        let bytes = body.get(pos..pos + size).ok_or_else(|| truncated(row))?;
+                        c.push_binary(bytes, big_endian);
+                        pos += size;
+                    }
+                    PropertyData::List {
+                        count_type,
+                        offsets,
+                        values,
+                    } => {
+                        let size = count_type.size();
+                        let bytes = body.get(pos..pos + size).ok_or_else(|| truncated(row))?;
+                        let mut n = ScalarColumn::with_capacity(*count_type, 1);
+                        n.push_binary(bytes, big_endian);
+                        pos += size;
+                        let n = n.get_i64(0).unwrap_or(-1);
+                        let n = usize::try_from(n).map_err(|_| {
+                            IoError::malformed(
+                                path,
+                                format!("{} {row}", def.name),
+                                format!("negative list length {n} in `{}`", prop.name),
+                            )
+                        })?;
+                        let item = values.scalar_type().size();
+                        let len = n.saturating_mul(item);
+                        if len > body.len() - pos {
+                            return Err(truncated(row));
+                        }
+                        for chunk in body[pos..pos + len].chunks_exact(item) {
+                            values.push_binary(chunk, big_endian);
+                        }
+                        pos += len;
+                        offsets.push(values.len());
+                    }
+                }
+            }
+        }
+        elements.push(finish_element(def, data));
+    }
+    Ok(elements)
+}
+
+fn finish_element(def: &ElementDef, data: Vec<PropertyData>) -> PlyElement {
+    PlyElement {
+        name: def.name.clone(),
+        count: def.count,
+        properties: def
+            .props
+            .iter()
+            .zip(data)
+            .map(|(p, data)| PlyProperty {
+                name: p.name.clone(),
+                data,
+            })
+            .collect(),
+    }
+}
+
+fn read_ascii_body(path: &Path, header: &Header, body: &[u8]) -> Result<Vec<PlyElement>, IoError> {
+    let mut tokens = AsciiTokens { body, pos: 0 };
+    let mut elements = Vec::with_capacity(header.elements.len());
+    for def in &header.elements {
+        // Each scalar needs at least one character and one separator.
+        let min_row = def.props.len() * 2;
+        let left = body.len() - tokens.pos;
+        if min_row > 0 && def.count > left / min_row + 1 {
+            return Err(count_limit_error(path, def, left / min_row + 1));
+        }
+        let capacity = if min_row == 0 { 0 } else { def.count };
+        let mut data: Vec<PropertyData> = def.props.iter().map(|p| new_data(p, capacity)).collect();
+        for row in 0..def.count {
+            let at = |msg: String| IoError::malformed(path, format!("{} {row}", def.name), msg);
+            for (prop, column) in def.props.iter().zip(&mut data) {
+                let mut next = || -> Result<&str, IoError> {
+                    match tokens.next() {
+                        Some(Ok(t)) => Ok(t),
+                        Some(Err(())) => Err(at("the body is not ASCII text".into())),
+                        None => Err(at("file ends early (truncated)".into())),
+                    }
+                };
+                match column {
+                    PropertyData::Scalar(c) => {
+                        let token = next()?;
+                        if !c.push_token(token) {
+                            return Err(at(format!(
+                                "`{token}` is not a valid {} for `{}`",
+                                c.scalar_type(),
+                                prop.name
+                            )));
+                        }
+                    }
+                    PropertyData::List {
+                        offsets, values, ..
+                    } => {
+                        let token = next()?;
+                        let n: usize = token.parse().map_err(|_| {
+                            at(format!(
+                                "`{token}` is not a list length for `{}`",
+                                prop.name
+                            ))
+                        })?;
+                        for _ in 0..n {
+                            let token = next()?;
+                            if !values.push_token(token) {
+                                return Err(at(format!(
+                                    "`{token}` is not a valid {} in `{}`",
+                                    values.scalar_type(),
+                                    prop.name
+                                )));
+                            }
+                        }
+                        offsets.push(values.len());
+                    }
+                }
+            }
+        }
+        elements.push(finish_element(def, data));
+    }
+    Ok(elements)
+}
+
+struct AsciiTokens<'a> {
+    body: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> AsciiTokens<'a> {
+    fn next(&mut self) -> Option<Result<&'a str, ()>> {
+        let b = self.body;
+        while self.pos < b.len() && b[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        if self.pos >= b.len() {
+            return None;
+        }
+        let start = self.pos;
+        while self.pos < b.len() && !b[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        Some(std::str::from_utf8(&b[start..self.pos]).map_err(|_| ()))
+    }
+}
+
+/// Parses a whole PLY file already in memory.
+///
+/// # Errors
+/// [`IoError::Malformed`] naming the header line or the element row at fault.
+pub fn parse_ply(path: &Path, bytes: &[u8]) -> Result<PlyDocument, IoError> {
+    let header = parse_header(path, bytes)?;
+    let body = &bytes[header.body_start..];
+    let elements = match header.encoding {
+        PlyEncoding::Ascii => read_ascii_body(path, &header, body)?,
+        PlyEncoding::BinaryLittleEndian => read_binary_body(path, &header, body, false)?,
+        PlyEncoding::BinaryBigEndian => read_binary_body(path, &header, body, true)?,
+    };
+    Ok(PlyDocument {
+        encoding: header.encoding,
+        comments: header.comments,
+        obj_info: header.obj_info,
+        elements,
+    })
+}
+
+/// Reads a whole PLY file into a [`PlyDocument`].
+///
+/// # Errors
+/// [`IoError::Os`] when the file cannot be read, [`IoError::Malformed`] naming the header line
+/// or element row at fault.
+pub fn read_ply_document(path: &Path) -> Result<PlyDocument, IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::os(path, e))?;
+    parse_ply(path, &bytes)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writing
+
+impl fmt::Display for ScalarType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Writes `doc` with `encoding` (the document's own encoding is ignored).
+///
+/// # Errors
+/// [`IoError::Malformed`] when a property does not have one row per element row,
+/// [`IoError::Os`] when writing fails.
+pub fn write_ply_document(
+    path: &Path,
+    out: &mut dyn Write,
+    doc: &PlyDocument,
+    encoding: PlyEncoding,
+) -> Result<(), IoError> {
+    let os = |e| IoError::os(path, e);
+    let mut head = String::new();
+    head.push_str("ply\n");
+    head.push_str(&format!("format {} 1.0\n", encoding.header_name()));
+    for c in &doc.comments {
+        head.push_str(&format!("comment {}\n", c.replace('\n', " ")));
+    }
+    for c in &doc.obj_info {
+        head.push_str(&format!("obj_info {}\n", c.replace('\n', " ")));
+    }
+    for e in &doc.elements {
+        head.push_str(&format!("element {} {}\n", e.name, e.count));
+        for p in &e.properties {
+            if p.data.rows() != e.count {
+                return Err(IoError::malformed(
+                    path,
+                    format!("element {}", e.name),
+                    format!(
+                        "property `{}` has {} rows, the element {}",
+                        p.name,
+                        p.data.rows(),
+                        e.count
+                    ),
+                ));
+            }
+            match &p.data {
+                PropertyData::Scalar(c) => {
+                    head.push_str(&format!("property {} {}\n", c.scalar_type(), p.name));
+                }
+                PropertyData::List {
+                    count_type, values, ..
+                } => head.push_str(&format!(
+                    "property list {} {} {}\n",
+                    count_type,
+                    values.scalar_type(),
+                    p.name
+                )),
+            }
+        }
+    }
+    head.push_str("end_header\n");
+    out.write_all(head.as_bytes()).map_err(os)?;
+
+    let big = encoding == PlyEncoding::BinaryBigEndian;
+    let ascii = encoding == PlyEncoding::Ascii;
+    let mut buf = Vec::with_capacity(1 << 16);
+    for e in &doc.elements {
+        for row in 0..e.count {
+            for (k, p) in e.properties.iter().enumerate() {
+                if ascii && k > 0 {
+                    buf.push(b' ');
+                }
+                match &p.data {
+                    PropertyData::Scalar(c) => {
+                        if ascii {
+                            c.write_ascii(row, &mut buf);
+                        } else {
+                            c.write_binary(row, &mut buf, big);
+                        }
+                    }
+                    PropertyData::List {
+                        count_type,
+                        offsets,
+                        values,
+                    } => {
+                        let (a, b) = (offsets[row], offsets[row + 1]);
+                        let n = b - a;
+                        write_count(path, *count_type, n, ascii, big, &mut buf, &e.name, row)?;
+                        for i in a..b {
+                            if ascii {
+                                buf.push(b' ');
+                                values.write_ascii(i, &mut buf);
+                            } else {
+                                values.write_binary(i, &mut buf, big);
+                            }
+                        }
+                    }
+                }
+            }
+            if ascii {
+                buf.push(b'\n');
+            }
+            if buf.len() >= 1 << 16 {
+                out.write_all(&buf).map_err(os)?;
+                buf.clear();
+            }
+        }
+    }
+    out.write_all(&buf).map_err(os)?;
+    Ok(())
+}
+
+#[expect(clippy::too_many_arguments, reason = "a private helper of one loop")]
+fn write_count(
+    path: &Path,
+    ty: ScalarType,
+    n: usize,
+    ascii: bool,
+    big: bool,
+    buf: &mut Vec<u8>,
+    element: &str,
+    row: usize,
+) -> Result<(), IoError> {
+    let too_long = || {
+        IoError::malformed(
+            path,
+            format!("{element} {row}"),
+            format!("list of {n} items does not fit a {ty} count"),
+        )
+    };
+    let column = match ty {
+        ScalarType::U8 => ScalarColumn::U8(vec![u8::try_from(n).map_err(|_| too_long())?]),
+        ScalarType::I8 => ScalarColumn::I8(vec![i8::try_from(n).map_err(|_| too_long())?]),
+        ScalarType::U16 => ScalarColumn::U16(vec![u16::try_from(n).map_err(|_| too_long())?]),
+        ScalarType::I16 => ScalarColumn::I16(vec![i16::try_from(n).map_err(|_| too_long())?]),
+        ScalarType::U32 => ScalarColumn::U32(vec![u32::try_from(n).map_err(|_| too_long())?]),
+        ScalarType::I32 | ScalarType::F32 | ScalarType::F64 => {
+            ScalarColumn::I32(vec![i32::try_from(n).map_err(|_| too_long())?])
+        }
+    };
+    if ascii {
+        column.write_ascii(0, buf);
+    } else {
+        column.write_binary(0, buf, big);
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mesh and point mapping
+
+const UV_NAMES: [(&str, &str); 4] = [
+    ("texture_u", "texture_v"),
+    ("u", "v"),
+    ("s", "t"),
+    ("texture_s", "texture_t"),
+];
+const FACE_INDEX_NAMES: [&str; 2] = ["vertex_indices", "vertex_index"];
+
+/// Vertex data decoded from a `vertex` element.
+struct VertexData {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    colors: Option<Vec<Rgba>>,
+    uvs: Option<Vec<Vec2>>,
+    used: Vec<&'static str>,
+}
+
+fn triple<'a>(e: &'a PlyElement, names: [&str; 3]) -> Option<[&'a ScalarColumn; 3]> {
+    Some([
+        e.scalar(names[0])?,
+        e.scalar(names[1])?,
+        e.scalar(names[2])?,
+    ])
+}
+
+fn zip3(c: [&ScalarColumn; 3]) -> Vec<Vec3> {
+    let [x, y, z] = c.map(ScalarColumn::to_f32);
+    x.iter()
+        .zip(&y)
+        .zip(&z)
+        .map(|((&x, &y), &z)| Vec3::new(x, y, z))
+        .collect()
+}
+
+fn decode_vertices(path: &Path, doc: &PlyDocument) -> Result<VertexData, IoError> {
+    let Some(v) = doc.element("vertex") else {
+        return Err(IoError::malformed(path, "header", "no `vertex` element"));
+    };
+    let xyz = triple(v, ["x", "y", "z"]).ok_or_else(|| {
+        IoError::malformed(
+            path,
+            "element vertex",
+            "needs scalar properties `x`, `y` and `z`",
+        )
+    })?;
+    let positions = zip3(xyz);
+    if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+        let p = positions[i];
+        return Err(IoError::malformed(
+            path,
+            format!("vertex {i}"),
+            format!("non-finite coordinate ({}, {}, {})", p.x, p.y, p.z),
+        ));
+    }
+    let mut used = vec!["x", "y", "z"];
+    let normals = triple(v, ["nx", "ny", "nz"]).map(|c| {
+        used.extend(["nx", "ny", "nz"]);
+        zip3(c)
+    });
+    let colors = triple(v, ["red", "green", "blue"]).map(|[r, g, b]| {
+        used.extend(["red", "green", "blue"]);
+        let (r, g, b) = (r.to_unit_color(), g.to_unit_color(), b.to_unit_color());
+        let a = v.scalar("alpha").map(|a| {
+            used.push("alpha");
+            a.to_unit_color()
+        });
+        (0..r.len())
+            .map(|i| [r[i], g[i], b[i], a.as_ref().map_or(1.0, |a| a[i])])
+            .collect()
+    });
+    let mut uvs = None;
+    for (un, vn) in UV_NAMES {
+        if let (Some(u), Some(w)) = (v.scalar(un), v.scalar(vn)) {
+            let (u, w) = (u.to_f32(), w.to_f32());
+            uvs = Some(u.iter().zip(&w).map(|(&u, &w)| Vec2::new(u, w)).collect());
+            used.extend([un, vn]);
+            break;
+        }
+    }
+    Ok(VertexData {
+        positions,
+        normals,
+        colors,
+        uvs,
+        used,
+    })
+}
+
+fn index_list(e: &PlyElement) -> Option<(&str, &[usize], &ScalarColumn)> {
+    FACE_INDEX_NAMES
+        .iter()
+        .find_map(|&name| match e.property(name) {
+            Some(PropertyData::List {
+                offsets, values, ..
+            }) => Some((name, offsets.as_slice(), values)),
+            _ => None,
+        })
+}
+
+fn checked_index(
+    path: &Path,
+    what: &str,
+    row: usize,
+    values: &ScalarColumn,
+    i: usize,
+    n: usize,
+) -> Result<u32, IoError> {
+    let raw = values.get_i64(i).unwrap_or(-1);
+    match u32::try_from(raw) {
+        Ok(v) if (v as usize) < n => Ok(v),
+        _ => Err(IoError::malformed(
+            path,
+            format!("{what} {row}"),
+            format!("vertex index {raw} is out of range (the file has {n} vertices)"),
+        )),
+    }
+}
+
+/// Triangles of the `face` and `tristrips` elements; also whether every face was a triangle.
+fn decode_triangles(
+    path: &Path,
+    doc: &PlyDocument,
+    n: usize,
+) -> Result<(Vec<[u32; 3]>, bool), IoError> {
+    let mut triangles = Vec::new();
+    let mut all_triangles = true;
+    if let Some(face) = doc.element("face") {
+        let (_, offsets, values) = index_list(face).ok_or_else(|| {
+            IoError::malformed(
+                path,
+                "element face",
+                "needs a list property `vertex_indices` or `vertex_index`",
+            )
+        })?;
+        triangles.reserve(face.count);
+        for row in 0..face.count {
+            let (a, b) = (offsets[row], offsets[row + 1]);
+            if b - a != 3 {
+                all_triangles = false;
+            }
+            if b - a < 3 {
+                continue;
+            }
+            let first = checked_index(path, "face", row, values, a, n)?;
+            let mut prev = checked_index(path, "face", row, values, a + 1, n)?;
+            for i in a + 2..b {
+                let cur = checked_index(path, "face", row, values, i, n)?;
+                triangles.push([first, prev, cur]);
+                prev = cur;
+            }
+        }
+    }
+    if let Some(strips) = doc.element("tristrips") {
+        all_triangles = false;
+        let (_, offsets, values) = index_list(strips).ok_or_else(|| {
+            IoError::malformed(
+                path,
+                "element tristrips",
+                "needs a list property `vertex_indices`",
+            )
+        })?;
+        for row in 0..strips.count {
+            let mut strip: Vec<u32> = Vec::new();
+            let flush = |strip: &mut Vec<u32>, out: &mut Vec<[u32; 3]>| {
+                for k in 0..strip.len().saturating_sub(2) {
+                    let (a, b, c) = (strip[k], strip[k + 1], strip[k + 2]);
+                    if a == b || b == c || a == c {
+                        continue;
+                    }
+                    out.push(if k % 2 == 0 { [a, b, c] } else { [b, a, c] });
+                }
+                strip.clear();
+            };
+            for i in offsets[row]..offsets[row + 1] {
+                if values.get_i64(i) == Some(-1) {
+                    flush(&mut strip, &mut triangles);
+                } else {
+                    strip.push(checked_index(path, "tristrips", row, values, i, n)?);
+                }
+            }
+            flush(&mut strip, &mut triangles);
+        }
+    }
+    Ok((triangles, all_triangles))
+}
+
+fn extras_of(doc: &PlyDocument, used_vertex: &[&str], keep_face: bool) -> PlyExtras {
+    let mut extras = PlyExtras {
+        comments: doc.comments.clone(),
+        obj_info: doc.obj_info.clone(),
+        ..PlyExtras::default()
+    };
+    for e in &doc.elements {
+        match e.name.as_str() {
+            "vertex" => {
+                extras.vertex_properties = e
+                    .properties
+                    .iter()
+                    .filter(|p| !used_vertex.contains(&p.name.as_str()))
+                    .cloned()
+                    .collect();
+            }
+            "face" => {
+                if keep_face {
+                    let index_name = index_list(e).map(|(n, _, _)| n);
+                    extras.face_properties = e
+                        .properties
+                        .iter()
+                        .filter(|p| Some(p.name.as_str()) != index_name)
+                        .cloned()
+                        .collect();
+                }
+            }
+            "tristrips" => {}
+            _ => extras.other_elements.push(e.clone()),
+        }
+    }
+    extras
+}
+
+/// Builds a mesh (and the rest of the file) from a parsed PLY document.
+///
+/// # Errors
+/// [`IoError::Malformed`] for a missing `vertex` element or coordinates, a non-finite position
+/// (naming the vertex) or an index out of range (naming the face).
+pub fn ply_to_mesh(path: &Path, doc: &PlyDocument) -> Result<(TriMesh, PlyExtras), IoError> {
+    let v = decode_vertices(path, doc)?;
+    let (triangles, all_triangles) = decode_triangles(path, doc, v.positions.len())?;
+    let extras = extras_of(doc, &v.used, all_triangles);
+    let bad_len = |e: crate::MeshError| IoError::malformed(path, "element vertex", e.to_string());
+    let mut mesh = TriMesh::try_new(v.positions, triangles).map_err(bad_len)?;
+    if let Some(n) = v.normals {
+        mesh = mesh.with_normals(n).map_err(bad_len)?;
+    }
+    if let Some(c) = v.colors {
+        mesh = mesh.with_colors(c).map_err(bad_len)?;
+    }
+    if let Some(uv) = v.uvs {
+        mesh = mesh.with_uvs(uv).map_err(bad_len)?;
+    }
+    Ok((mesh, extras))
+}
+
+/// Builds a point cloud from the `vertex` element of a parsed PLY document (faces ignored).
+///
+/// # Errors
+/// [`IoError::Malformed`] for a missing `vertex` element or a non-finite position.
+pub fn ply_to_points(path: &Path, doc: &PlyDocument) -> Result<(PointCloud, PlyExtras), IoError> {
+    let v = decode_vertices(path, doc)?;
+    let extras = extras_of(doc, &v.used, false);
+    let bad = |e: crate::MeshError| IoError::malformed(path, "element vertex", e.to_string());
+    let mut cloud = PointCloud::try_new(v.positions).map_err(bad)?;
+    if let Some(n) = v.normals {
+        cloud = cloud.with_normals(n).map_err(bad)?;
+    }
+    if let Some(c) = v.colors {
+        cloud = cloud.with_colors(c).map_err(bad)?;
+    }
+    Ok((cloud, extras))
+}
+
+/// Reads a PLY mesh and everything else it holds.
+///
+/// # Errors
+/// See [`read_ply_document`] and [`ply_to_mesh`].
+pub fn read_ply_mesh(path: &Path) -> Result<(TriMesh, PlyExtras), IoError> {
+    ply_to_mesh(path, &read_ply_document(path)?)
+}
+
+/// Reads the `vertex` element of a PLY file as a point cloud, with everything else it holds.
+///
+/// # Errors
+/// See [`read_ply_document`] and [`ply_to_points`].
+pub fn read_ply_points(path: &Path) -> Result<(PointCloud, PlyExtras), IoError> {
+    ply_to_points(path, &read_ply_document(path)?)
+}
+
+fn f32_column(values: impl Iterator<Item = f32>) -> PropertyData {
+    PropertyData::Scalar(ScalarColumn::F32(values.collect()))
+}
+
+#[expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "clamped to [0, 255] first"
+)]
+fn u8_color(x: f32) -> u8 {
+    (x.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+fn prop(name: &str, data: PropertyData) -> PlyProperty {
+    PlyProperty {
+        name: name.to_owned(),
+        data,
+    }
+}
+
+fn vertex_element(
+    positions: &[Vec3],
+    normals: Option<&[Vec3]>,
+    uvs: Option<&[Vec2]>,
+    colors: Option<&[Rgba]>,
+    extra: &[PlyProperty],
+) -> PlyElement {
+    let mut props = vec![
+        prop("x", f32_column(positions.iter().map(|p| p.x))),
+        prop("y", f32_column(positions.iter().map(|p| p.y))),
+        prop("z", f32_column(positions.iter().map(|p| p.z))),
+    ];
+    if let Some(n) = normals {
+        props.push(prop("nx", f32_column(n.iter().map(|p| p.x))));
+        props.push(prop("ny", f32_column(n.iter().map(|p| p.y))));
+        props.push(prop("nz", f32_column(n.iter().map(|p| p.z))));
+    }
+    if let Some(uv) = uvs {
+        props.push(prop("s", f32_column(uv.iter().map(|p| p.x))));
+        props.push(prop("t", f32_column(uv.iter().map(|p| p.y))));
+    }
+    if let Some(c) = colors {
+        for (k, name) in ["red", "green", "blue", "alpha"].into_iter().enumerate() {
+            let column = ScalarColumn::U8(c.iter().map(|c| u8_color(c[k])).collect());
+            props.push(prop(name, PropertyData::Scalar(column)));
+        }
+    }
+    for p in extra {
+        if p.data.rows() == positions.len() && !props.iter().any(|q| q.name == p.name) {
+            props.push(p.clone());
+        }
+    }
+    PlyElement {
+        name: "vertex".into(),
+        count: positions.len(),
+        properties: props,
+    }
+}
+
+/// The PLY document for `mesh` plus `extras`: `vertex` (`x y z` float, `nx ny nz`, `s t`,
+/// `red green blue alpha` uchar when present, then extra properties), `face` (`list uchar int
+/// vertex_indices`, then extra face properties when their row count matches), other elements.
+/// Extras whose row count does not match the mesh are left out.
+#[must_use]
+pub fn mesh_to_ply(mesh: &TriMesh, extras: &PlyExtras) -> PlyDocument {
+    let vertex = vertex_element(
+        mesh.positions(),
+        mesh.normals(),
+        mesh.uvs(),
+        mesh.colors(),
+        &extras.vertex_properties,
+    );
+    let tris = mesh.triangles();
+    #[expect(clippy::cast_possible_wrap, reason = "vertex counts fit i32 in PLY")]
+    let indices = ScalarColumn::I32(tris.iter().flatten().map(|&i| i as i32).collect());
+    let mut face_props = vec![prop(
+        "vertex_indices",
+        PropertyData::List {
+            count_type: ScalarType::U8,
+            offsets: (0..=tris.len()).map(|i| 3 * i).collect(),
+            values: indices,
+        },
+    )];
+    for p in &extras.face_properties {
+        if p.data.rows() == tris.len() && p.name != "vertex_indices" {
+            face_props.push(p.clone());
+        }
+    }
+    let mut elements = vec![
+        vertex,
+        PlyElement {
+            name: "face".into(),
+            count: tris.len(),
+            properties: face_props,
+        },
+    ];
+    elements.extend(extras.other_elements.iter().cloned());
+    PlyDocument {
+        encoding: PlyEncoding::default(),
+        comments: extras.comments.clone(),
+        obj_info: extras.obj_info.clone(),
+        elements,
+    }
+}
+
+/// The PLY document for a point cloud: one `vertex` element (see [`mesh_to_ply`]).
+#[must_use]
+pub fn points_to_ply(points: &PointCloud, extras: &PlyExtras) -> PlyDocument {
+    let mut elements = vec![vertex_element(
+        points.positions(),
+        points.normals(),
+        None,
+        points.colors(),
+        &extras.vertex_properties,
+    )];
+    elements.extend(extras.other_elements.iter().cloned());
+    PlyDocument {
+        encoding: PlyEncoding::default(),
+        comments: extras.comments.clone(),
+        obj_info: extras.obj_info.clone(),
+        elements,
+    }
+}
+
+/// Writes a mesh with the extras of the file it came from, atomically.
+///
+/// # Errors
+/// [`IoError::Os`] when the file cannot be written.
+pub fn write_ply_mesh(
+    path: &Path,
+    mesh: &TriMesh,
+    extras: &PlyExtras,
+    encoding: PlyEncoding,
+) -> Result<(), IoError> {
+    let doc = mesh_to_ply(mesh, extras);
+    super::write_atomically(path, |w| write_ply_document(path, w, &doc, encoding))
+}
+
+/// Writes a point cloud with the extras of the file it came from, atomically.
+///
+/// # Errors
+/// [`IoError::Os`] when the file cannot be written.
+pub fn write_ply_points(
+    path: &Path,
+    points: &PointCloud,
+    extras: &PlyExtras,
+    encoding: PlyEncoding,
+) -> Result<(), IoError> {
+    let doc = points_to_ply(points, extras);
+    super::write_atomically(path, |w| write_ply_document(path, w, &doc, encoding))
+}
