@@ -15,6 +15,7 @@ pub mod rng;
 pub mod sampling;
 pub mod smoothing;
 pub mod spatial;
+pub mod subdivide;
 pub mod topology;
 pub mod validation;
 
