@@ -1,1 +1,69 @@
-//! Animated templates (in progress).
+//! Animated templates: "a template that can give you frame i".
+//!
+//! Every source of a moving template mesh implements [`AnimatedTemplate`], so later stages
+//! (binding, deformation, extraction) do not care where frames come from:
+//!
+//! - [`GltfTemplate`]: a glTF/GLB scene with skins, morph targets and one animation clip,
+//!   evaluated at any time ([`GltfTemplate::evaluate_at`]) and sampled at a fixed rate;
+//! - [`MeshSequence`]: OBJ/PLY files of fixed topology, one per frame (a directory or a
+//!   pattern);
+//! - [`BlendshapeAnimation`]: a [`BlendshapeSet`] (neutral + targets, e.g. ICT FaceKit OBJs)
+//!   or [`GltfMorphAnimation`]: glTF morph targets by name, both driven by a
+//!   [`WeightsTrack`] (the LAM/ARKit JSON layout).
+//!
+//! Evaluation runs in f64; positions are stored as f32. Frames always have the topology of
+//! [`AnimatedTemplate::rest`].
+
+mod accessor;
+mod blendshape;
+mod error;
+mod gltf;
+mod sampler;
+mod sequence;
+
+use glam::Vec3;
+
+pub use self::blendshape::{
+    BlendshapeAnimation, BlendshapeSet, GltfMorphAnimation, WeightsTrack, canonical_target_name,
+};
+pub use self::error::AnimationError;
+pub use self::gltf::{Clip, GltfTemplate};
+pub use self::sampler::Interpolation;
+pub use self::sequence::{MeshSequence, natural_cmp};
+use crate::TriMesh;
+
+/// Frame rate used when a source has no timing of its own (the LAM/ARKit tracks are 30 fps).
+pub const DEFAULT_FPS: f64 = 30.0;
+
+/// A triangle mesh whose vertices move over a sequence of frames with fixed topology.
+pub trait AnimatedTemplate: Send + Sync {
+    /// Number of frames.
+    fn frame_count(&self) -> usize;
+
+    /// Time of `frame` in seconds, `None` past the last frame.
+    fn frame_time(&self, frame: usize) -> Option<f64>;
+
+    /// The triangles shared by every frame (those of [`Self::rest`]).
+    fn topology(&self) -> &[[u32; 3]];
+
+    /// The rest (neutral, bind or first-frame) mesh.
+    fn rest(&self) -> &TriMesh;
+
+    /// World-space vertex positions of `frame`, one per vertex of [`Self::rest`].
+    ///
+    /// # Errors
+    /// [`AnimationError::FrameOutOfRange`] past the last frame; source errors (an unreadable
+    /// or mismatched frame file) naming the file.
+    fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError>;
+
+    /// `frame` as a mesh with the template's topology.
+    ///
+    /// # Errors
+    /// As [`Self::frame`], and [`AnimationError::Invalid`] for non-finite positions.
+    fn frame_mesh(&self, frame: usize) -> Result<TriMesh, AnimationError> {
+        Ok(TriMesh::try_new(
+            self.frame(frame)?,
+            self.topology().to_vec(),
+        )?)
+    }
+}
