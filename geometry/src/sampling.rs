@@ -8,6 +8,23 @@
 //! `(1 - sqrt r1, sqrt r1 (1 - r2), sqrt r1 r2)` for uniform `r1, r2` in `[0, 1)`, which is
 //! uniform over the triangle. Each point carries its triangle's unit face normal.
 //!
+//! # Poisson disk
+//! [`sample_poisson_disk`] is Yuksel's weighted sample elimination (Eurographics 2015), as Open3D's
+//! `sample_points_poisson_disk` with `init_factor` 5: draw `5 N` area-uniform candidates, give
+//! each the weight `Σ_j (1 − max(d_ij, d_min) / d_max)^α` over the other candidates within
+//! `d_max`, and repeatedly remove the heaviest candidate (subtracting its contribution from its
+//! neighbours) until `N` remain. `d_max = 2 sqrt(A / (2 sqrt 3 N))` is twice the largest disk
+//! radius `N` points can have on area `A` (hexagonal packing) and
+//! `d_min = d_max β (1 − (N / M)^γ)` for `M` candidates. Constants from the paper: α = 8,
+//! β = 0.65, γ = 1.5 (Open3D 0.20 uses β = 0.5). Distances are Euclidean in 3D, as in Open3D.
+//!
+//! # Curvature-weighted sampling
+//! [`sample_curvature`] draws triangles with probability proportional to
+//! `A_t (1 + c |H_t| / H̄)`, where `|H_t|` is the mean of the absolute discrete mean curvature
+//! of the triangle's corners ([`vertex_mean_curvature`]), `H̄` its area-weighted mean over the
+//! mesh (so `c` is dimensionless and the density does not depend on the mesh's scale), and `c`
+//! the strength (0 gives area-uniform sampling).
+//!
 //! # Seeds and threads
 //! Samples are produced in fixed chunks of [`SAMPLE_CHUNK`] points; chunk `i` draws from
 //! [`Rng::stream`]`(seed, i)`. The output therefore depends only on the mesh, `n` and the seed,
@@ -19,6 +36,7 @@
 //! points (the CLI) check [`SurfaceSamples::is_empty`] and report an error.
 
 use glam::{DVec3, Vec3};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 use crate::TriId;
@@ -29,6 +47,56 @@ use crate::rng::Rng;
 /// Number of samples drawn from one random stream. Fixed so that the output does not depend on
 /// the thread count.
 pub const SAMPLE_CHUNK: usize = 4096;
+
+/// Yuksel's weight exponent α.
+pub const POISSON_ALPHA: f64 = 8.0;
+/// Yuksel's β: the weight is flat below `d_min = d_max β (1 − (N/M)^γ)`.
+pub const POISSON_BETA: f64 = 0.65;
+/// Yuksel's γ.
+pub const POISSON_GAMMA: f64 = 1.5;
+/// Candidates per output point (Open3D's `init_factor` default).
+pub const POISSON_INIT_FACTOR: usize = 5;
+/// Default strength `c` of curvature-weighted sampling.
+pub const DEFAULT_CURVATURE_STRENGTH: f64 = 1.0;
+
+/// How to place points on a surface.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum SampleMethod {
+    /// Area-uniform random points (Open3D `sample_points_uniformly`).
+    #[default]
+    Uniform,
+    /// Poisson disk by weighted sample elimination (Open3D `sample_points_poisson_disk`).
+    Poisson,
+    /// Density `area x (1 + c |H| / mean |H|)`: more points where the surface bends.
+    Curvature,
+}
+
+/// Options of [`sample`].
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct SampleOptions {
+    /// Sampling method: uniform (area-uniform), poisson (Yuksel sample elimination from 5N
+    /// uniform candidates) or curvature (density grows with |mean curvature|).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = SampleMethod::Uniform))]
+    pub method: SampleMethod,
+    /// Random seed: the same seed gives the same points on any number of threads.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 0))]
+    pub seed: u64,
+    /// Strength c of curvature weighting (dimensionless; 0 = uniform).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DEFAULT_CURVATURE_STRENGTH))]
+    pub curvature_strength: f64,
+}
+
+impl Default for SampleOptions {
+    fn default() -> Self {
+        Self {
+            method: SampleMethod::Uniform,
+            seed: 0,
+            curvature_strength: DEFAULT_CURVATURE_STRENGTH,
+        }
+    }
+}
 
 /// Errors of weighted sampling.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -49,6 +117,22 @@ pub enum SamplingError {
         triangle: usize,
         /// The offending weight.
         weight: f64,
+    },
+    /// A parameter is out of its range.
+    #[error("{name} = {value} is out of range ({expected})")]
+    BadParameter {
+        /// Parameter name.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is accepted.
+        expected: &'static str,
+    },
+    /// The candidate set could not be indexed (coordinates too large for the k-d tree).
+    #[error("cannot index the candidate points: {message}")]
+    Index {
+        /// kiddo's message.
+        message: String,
     },
 }
 
@@ -189,6 +273,300 @@ pub fn sample_uniform(mesh: &TriMesh, n: usize, seed: u64) -> PointCloud {
     sample_uniform_with_triangles(mesh, n, seed).points
 }
 
+/// `n` points on `mesh` by the method of `options` (see the module docs). Empty for a zero-area
+/// mesh or `n` = 0.
+///
+/// # Errors
+/// [`SamplingError`] for a negative or non-finite curvature strength, or when the candidates
+/// cannot be indexed.
+pub fn sample(
+    mesh: &TriMesh,
+    n: usize,
+    options: &SampleOptions,
+) -> Result<SurfaceSamples, SamplingError> {
+    match options.method {
+        SampleMethod::Uniform => Ok(sample_uniform_with_triangles(mesh, n, options.seed)),
+        SampleMethod::Poisson => sample_poisson_disk(mesh, n, options.seed),
+        SampleMethod::Curvature => {
+            sample_curvature(mesh, n, options.seed, options.curvature_strength)
+        }
+    }
+}
+
+/// Poisson-disk samples by Yuksel's weighted sample elimination from
+/// [`POISSON_INIT_FACTOR`]` * n` area-uniform candidates (see the module docs). Returns exactly
+/// `n` points (a subset of the candidates, in candidate order), or none for a zero-area mesh.
+///
+/// # Errors
+/// [`SamplingError::Index`] when the candidates cannot be put in a k-d tree (coordinates beyond
+/// what kiddo's f32 tree accepts).
+pub fn sample_poisson_disk(
+    mesh: &TriMesh,
+    n: usize,
+    seed: u64,
+) -> Result<SurfaceSamples, SamplingError> {
+    let Some(m) = n.checked_mul(POISSON_INIT_FACTOR) else {
+        return Err(SamplingError::BadParameter {
+            name: "n",
+            value: n as f64,
+            expected: "small enough that 5 n candidates fit in memory",
+        });
+    };
+    let candidates = sample_uniform_with_triangles(mesh, m, seed);
+    if n == 0 || candidates.len() <= n {
+        return Ok(candidates);
+    }
+    let keep = eliminate(candidates.points.positions(), n, mesh.area())?;
+    let normals = candidates.points.normals().unwrap_or_default();
+    let mut positions = Vec::with_capacity(n);
+    let mut kept_normals = Vec::with_capacity(n);
+    let mut triangles = Vec::with_capacity(n);
+    for (i, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
+        positions.push(candidates.points.positions()[i]);
+        kept_normals.push(normals.get(i).copied().unwrap_or(Vec3::ZERO));
+        triangles.push(candidates.triangles[i]);
+    }
+    let points = PointCloud::new_unchecked(positions)
+        .with_normals(kept_normals)
+        .expect("one normal per kept point by construction");
+    Ok(SurfaceSamples { points, triangles })
+}
+
+/// Weighted sample elimination: which of `points` to keep so that `n` remain.
+fn eliminate(points: &[Vec3], n: usize, area: f64) -> Result<Vec<bool>, SamplingError> {
+    let m = points.len();
+    let d_max = 2.0 * (area / (2.0 * 3f64.sqrt() * n as f64)).sqrt();
+    let d_min = d_max * POISSON_BETA * (1.0 - (n as f64 / m as f64).powf(POISSON_GAMMA));
+    let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+    let tree =
+        ImmutableKdTree::<f32, 3>::new_from_slice(&coords).map_err(|e| SamplingError::Index {
+            message: e.to_string(),
+        })?;
+    // kiddo's SquaredEuclidean radius is a squared distance.
+    let radius_sq = (d_max * d_max) as f32;
+    // Each candidate's neighbours within d_max and their weights, sorted by index so sums do
+    // not depend on the tree's visiting order.
+    let lists: Vec<Vec<(u32, f32)>> = (0..m)
+        .into_par_iter()
+        .map(|i| {
+            let p = points[i];
+            let mut list = Vec::new();
+            tree.query(&coords[i])
+                .within::<SquaredEuclidean<f32>>(radius_sq)
+                .unsorted()
+                .visit(|r| {
+                    let j = r.item as usize;
+                    if j == i {
+                        return;
+                    }
+                    let d = (p.as_dvec3() - points[j].as_dvec3()).length();
+                    if d < d_max {
+                        let w = (1.0 - d.max(d_min) / d_max).powf(POISSON_ALPHA);
+                        list.push((r.item, w as f32));
+                    }
+                });
+            list.sort_unstable_by_key(|&(j, _)| j);
+            list
+        })
+        .collect();
+    let mut offsets = Vec::with_capacity(m + 1);
+    offsets.push(0usize);
+    for l in &lists {
+        offsets.push(offsets.last().copied().unwrap_or(0) + l.len());
+    }
+    let weights: Vec<f64> = lists
+        .iter()
+        .map(|l| l.iter().map(|&(_, w)| f64::from(w)).sum())
+        .collect();
+    let neighbors: Vec<(u32, f32)> = lists.into_iter().flatten().collect();
+
+    let mut heap = IndexedMaxHeap::new(weights);
+    let mut keep = vec![true; m];
+    let mut remaining = m;
+    while remaining > n {
+        let Some(i) = heap.pop() else { break };
+        keep[i] = false;
+        remaining -= 1;
+        for &(j, w) in &neighbors[offsets[i]..offsets[i + 1]] {
+            let j = j as usize;
+            if keep[j] {
+                heap.decrease(j, f64::from(w));
+            }
+        }
+    }
+    Ok(keep)
+}
+
+/// A binary max-heap over item weights with in-place decrease-key; ties go to the larger index
+/// (any fixed rule keeps the result deterministic).
+struct IndexedMaxHeap {
+    weights: Vec<f64>,
+    heap: Vec<u32>,
+    /// Position of each item in `heap`, `u32::MAX` once popped.
+    pos: Vec<u32>,
+}
+
+impl IndexedMaxHeap {
+    fn new(weights: Vec<f64>) -> Self {
+        let n = weights.len();
+        let mut h = Self {
+            weights,
+            heap: (0..n as u32).collect(),
+            pos: (0..n as u32).collect(),
+        };
+        for i in (0..n / 2).rev() {
+            h.sift_down(i);
+        }
+        h
+    }
+
+    #[inline]
+    fn above(&self, a: u32, b: u32) -> bool {
+        let (wa, wb) = (self.weights[a as usize], self.weights[b as usize]);
+        wa > wb || (wa == wb && a > b)
+    }
+
+    fn swap(&mut self, i: usize, j: usize) {
+        self.heap.swap(i, j);
+        self.pos[self.heap[i] as usize] = i as u32;
+        self.pos[self.heap[j] as usize] = j as u32;
+    }
+
+    fn sift_down(&mut self, mut i: usize) {
+        let n = self.heap.len();
+        loop {
+            let (l, r) = (2 * i + 1, 2 * i + 2);
+            let mut top = i;
+            if l < n && self.above(self.heap[l], self.heap[top]) {
+                top = l;
+            }
+            if r < n && self.above(self.heap[r], self.heap[top]) {
+                top = r;
+            }
+            if top == i {
+                return;
+            }
+            self.swap(i, top);
+            i = top;
+        }
+    }
+
+    fn pop(&mut self) -> Option<usize> {
+        let last = self.heap.len().checked_sub(1)?;
+        self.swap(0, last);
+        let item = self.heap.pop()? as usize;
+        self.pos[item] = u32::MAX;
+        if !self.heap.is_empty() {
+            self.sift_down(0);
+        }
+        Some(item)
+    }
+
+    /// Lowers item's weight by `amount` (>= 0) if it is still in the heap.
+    fn decrease(&mut self, item: usize, amount: f64) {
+        let p = self.pos[item];
+        if p == u32::MAX {
+            return;
+        }
+        self.weights[item] -= amount;
+        self.sift_down(p as usize);
+    }
+}
+
+/// Absolute discrete mean curvature `|H_v|` of every vertex.
+///
+/// With the cotangent Laplace-Beltrami operator (Meyer, Desbrun, Schröder and Barr 2003, with
+/// barycentric vertex areas), `Δx_v = 1 / (2 A_v) Σ_j (cot α_ij + cot β_ij) (x_j − x_v)`, where
+/// `α_ij, β_ij` are the angles opposite edge `ij` and `A_v` is a third of the area of the
+/// triangles around `v`; then `|H_v| = ‖Δx_v‖ / 2` (1/R on a sphere of radius R). Vertices on a
+/// boundary edge, isolated vertices and vertices with zero area get 0, as do non-finite results
+/// (degenerate triangles contribute nothing).
+#[must_use]
+pub fn vertex_mean_curvature(mesh: &TriMesh) -> Vec<f64> {
+    let nv = mesh.vertex_count();
+    let mut laplace = vec![DVec3::ZERO; nv];
+    let mut area = vec![0.0f64; nv];
+    for t in 0..mesh.triangle_count() {
+        let tri = mesh.triangles()[t];
+        let [a, b, c] = tri;
+        if a == b || b == c || a == c {
+            continue;
+        }
+        let x = mesh.corners(t).map(Vec3::as_dvec3);
+        let twice_area = (x[1] - x[0]).cross(x[2] - x[0]).length();
+        if twice_area <= 0.0 {
+            continue;
+        }
+        for k in 0..3 {
+            let (i, j, o) = (k, (k + 1) % 3, (k + 2) % 3);
+            // Angle at corner o is opposite edge (i, j).
+            let (u, w) = (x[i] - x[o], x[j] - x[o]);
+            let cot = u.dot(w) / u.cross(w).length();
+            laplace[tri[i] as usize] += cot * (x[j] - x[i]);
+            laplace[tri[j] as usize] += cot * (x[i] - x[j]);
+            area[tri[k] as usize] += twice_area / 6.0;
+        }
+    }
+    let mut on_boundary = vec![false; nv];
+    for (p, q) in crate::topology::boundary_edges(mesh.triangles()) {
+        on_boundary[p as usize] = true;
+        on_boundary[q as usize] = true;
+    }
+    (0..nv)
+        .map(|v| {
+            if on_boundary[v] || area[v] <= 0.0 {
+                return 0.0;
+            }
+            let h = (laplace[v] / (2.0 * area[v])).length() / 2.0;
+            if h.is_finite() { h } else { 0.0 }
+        })
+        .collect()
+}
+
+/// Samples with density `A_t (1 + strength |H_t| / H̄)` (see the module docs). Empty for a
+/// zero-area mesh.
+///
+/// # Errors
+/// [`SamplingError::BadParameter`] when `strength` is negative or not finite.
+pub fn sample_curvature(
+    mesh: &TriMesh,
+    n: usize,
+    seed: u64,
+    strength: f64,
+) -> Result<SurfaceSamples, SamplingError> {
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(SamplingError::BadParameter {
+            name: "curvature strength",
+            value: strength,
+            expected: "finite and >= 0",
+        });
+    }
+    let curvature = vertex_mean_curvature(mesh);
+    let areas = mesh.triangle_areas();
+    let per_triangle: Vec<f64> = mesh
+        .triangles()
+        .iter()
+        .map(|t| t.iter().map(|&v| curvature[v as usize]).sum::<f64>() / 3.0)
+        .collect();
+    let total_area: f64 = areas.iter().sum();
+    let mean = areas
+        .iter()
+        .zip(&per_triangle)
+        .map(|(a, h)| a * h)
+        .sum::<f64>()
+        / total_area;
+    let weights: Vec<f64> = if mean > 0.0 && mean.is_finite() {
+        areas
+            .iter()
+            .zip(&per_triangle)
+            .map(|(a, h)| a * (1.0 + strength * h / mean))
+            .collect()
+    } else {
+        areas
+    };
+    sample_weighted(mesh, &weights, n, seed)
+}
+
 /// Draws `n` samples from `dist` in parallel, one random stream per [`SAMPLE_CHUNK`].
 fn sample_distribution(
     mesh: &TriMesh,
@@ -301,5 +679,73 @@ mod tests {
         assert_eq!(d.pick(0.999_999_999), 1);
         assert_eq!(d.pick(1.0), 1);
         assert!(TriangleDistribution::new(&[0.0, 0.0]).unwrap().is_none());
+    }
+
+    fn sphere(radius: f32, levels: usize) -> TriMesh {
+        let octa = TriMesh::new(
+            vec![Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z],
+            vec![
+                [0, 2, 4],
+                [2, 1, 4],
+                [1, 3, 4],
+                [3, 0, 4],
+                [2, 0, 5],
+                [1, 2, 5],
+                [3, 1, 5],
+                [0, 3, 5],
+            ],
+        );
+        let fine = crate::subdivide::midpoint(&octa, levels).unwrap();
+        let positions = fine
+            .positions()
+            .iter()
+            .map(|p| p.normalize() * radius)
+            .collect();
+        TriMesh::new(positions, fine.triangles().to_vec())
+    }
+
+    #[test]
+    fn mean_curvature_of_a_sphere_is_one_over_radius() {
+        let m = sphere(2.0, 4);
+        let h = vertex_mean_curvature(&m);
+        let mean = h.iter().sum::<f64>() / h.len() as f64;
+        assert!((mean - 0.5).abs() < 0.01, "{mean}");
+        // An open patch: boundary vertices get zero.
+        let open = TriMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
+        assert_eq!(vertex_mean_curvature(&open), vec![0.0; 3]);
+    }
+
+    #[test]
+    fn heap_pops_in_weight_order_with_decrease() {
+        let mut h = IndexedMaxHeap::new(vec![3.0, 1.0, 4.0, 1.0, 5.0]);
+        h.decrease(4, 4.5); // 0.5
+        let order: Vec<usize> = std::iter::from_fn(|| h.pop()).collect();
+        assert_eq!(order, vec![2, 0, 3, 1, 4]);
+    }
+
+    #[test]
+    fn poisson_returns_n_spread_points() {
+        let m = sphere(1.0, 3);
+        let s = sample_poisson_disk(&m, 300, 9).unwrap();
+        assert_eq!(s.len(), 300);
+        let p = s.points.positions();
+        let mut min_d = f64::INFINITY;
+        for i in 0..p.len() {
+            for j in 0..i {
+                min_d = min_d.min((p[i].as_dvec3() - p[j].as_dvec3()).length());
+            }
+        }
+        let d_max = 2.0 * (m.area() / (2.0 * 3f64.sqrt() * 300.0)).sqrt();
+        assert!(min_d > 0.5 * d_max, "{min_d} vs d_max {d_max}");
+        assert!(sample_poisson_disk(&m, 0, 1).unwrap().is_empty());
+    }
+
+    #[test]
+    fn curvature_sampling_prefers_curved_parts_and_checks_strength() {
+        let m = square();
+        assert!(sample_curvature(&m, 10, 0, -1.0).is_err());
+        assert!(sample_curvature(&m, 10, 0, f64::NAN).is_err());
+        // A flat mesh has no curvature: uniform.
+        assert_eq!(sample_curvature(&m, 10, 0, 3.0).unwrap().len(), 10);
     }
 }
