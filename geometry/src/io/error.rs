@@ -30,6 +30,16 @@ pub enum IoError {
         /// What is wrong.
         message: String,
     },
+    /// The file refers to another file (an external glTF buffer) that cannot be read.
+    #[error("{path}: refers to {reference}, which cannot be read: {source}")]
+    MissingReference {
+        /// The file holding the reference.
+        path: PathBuf,
+        /// The referenced file, resolved against the folder of `path`.
+        reference: PathBuf,
+        /// Why it cannot be read.
+        source: std::io::Error,
+    },
     /// The file is well formed but uses something we do not support.
     #[error("{path}: unsupported: {what}")]
     Unsupported {

@@ -10,6 +10,7 @@
 
 mod atomic;
 mod error;
+pub mod gltf;
 pub mod obj;
 pub mod ply;
 
@@ -102,10 +103,7 @@ pub fn read_mesh_with(path: &Path, options: ReadOptions) -> Result<TriMesh, IoEr
     match Format::from_path(path)? {
         Format::Ply => ply::read_ply_mesh(path).map(|(mesh, _)| mesh),
         Format::Obj => obj::read_obj(path, options.obj_vertices),
-        Format::Gltf | Format::Glb => Err(IoError::Unsupported {
-            path: path.to_path_buf(),
-            what: "glTF reading lands in the next commit".into(),
-        }),
+        Format::Gltf | Format::Glb => gltf::read_gltf(path),
     }
 }
 
@@ -122,10 +120,19 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, options: WriteOptions) -> Result<
             ply::write_ply_mesh(path, mesh, &PlyExtras::default(), options.ply_encoding())
         }
         Format::Obj => write_atomically(path, |w| obj::write_obj_to(path, w, mesh)),
-        Format::Gltf | Format::Glb => Err(IoError::Unsupported {
-            path: path.to_path_buf(),
-            what: "glTF writing lands in the next commit".into(),
-        }),
+        Format::Gltf => {
+            let text = gltf::gltf_text(mesh);
+            write_atomically(path, |w| {
+                w.write_all(text.as_bytes())
+                    .map_err(|e| IoError::os(path, e))
+            })
+        }
+        Format::Glb => {
+            let bytes = gltf::glb_bytes(path, mesh)?;
+            write_atomically(path, |w| {
+                w.write_all(&bytes).map_err(|e| IoError::os(path, e))
+            })
+        }
     }
 }
 

@@ -17,6 +17,7 @@
 //!   grouped by `usemtl` name, and within each group every distinct `(v, vt, vn)` corner becomes
 //!   its own vertex (first-use order); unreferenced vertices disappear. Keeps uvs and normals and
 //!   gives the vertex counts trimesh reports.
+//! - [`ObjVertices::Auto`]: `Positions` when nothing would be dropped, else `SplitSeams`.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -38,6 +39,9 @@ pub enum ObjVertices {
     /// One vertex per distinct `(v, vt, vn)` corner within each material group (trimesh's
     /// layout): keeps uv seams and hard normals.
     SplitSeams,
+    /// `Positions` when that loses nothing (every vertex has a single uv and normal, or the
+    /// file has none), else `SplitSeams`. What `trisplat convert` uses.
+    Auto,
 }
 
 /// "No index" marker for a corner without `vt` or `vn`.
@@ -216,6 +220,21 @@ fn per_vertex<T: Copy + PartialEq + Default>(
 
 fn build(path: &Path, d: ObjData, mode: ObjVertices) -> Result<TriMesh, IoError> {
     let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
+    let mode = match mode {
+        ObjVertices::Auto => {
+            let n = d.positions.len();
+            let lossless = (d.texcoords.is_empty()
+                || per_vertex(n, &d.triangles, &d.texcoords, |c| c.vt).is_some())
+                && (d.normals.is_empty()
+                    || per_vertex(n, &d.triangles, &d.normals, |c| c.vn).is_some());
+            if lossless {
+                ObjVertices::Positions
+            } else {
+                ObjVertices::SplitSeams
+            }
+        }
+        other => other,
+    };
     match mode {
         ObjVertices::Positions => {
             let n = d.positions.len();
@@ -234,7 +253,7 @@ fn build(path: &Path, d: ObjData, mode: ObjVertices) -> Result<TriMesh, IoError>
             }
             Ok(mesh)
         }
-        ObjVertices::SplitSeams => {
+        ObjVertices::SplitSeams | ObjVertices::Auto => {
             // Group order: by first appearance of the group, as trimesh concatenates them.
             let mut order: Vec<u32> = Vec::new();
             for &g in &d.groups {

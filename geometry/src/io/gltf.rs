@@ -1,0 +1,737 @@
+//! glTF 2.0 (`.gltf` with data-URI or external buffers, `.glb`): static meshes.
+//!
+//! Reading (the rest state, as `trimesh.load(path, force="mesh", process=False)` gives it):
+//! - the node tree of the document's `scene`, or of scene 0 when it names none (as trimesh), or
+//!   of every root node when the file has no scenes; each node's local transform (matrix or
+//!   TRS) is composed from the root down and applied to its mesh (positions; normals by the
+//!   inverse transpose; winding reversed when the transform mirrors);
+//! - every primitive of every mesh instance becomes its own block of vertices (a mesh used by two
+//!   nodes appears twice, primitives never share vertices), in depth-first node order;
+//! - modes TRIANGLES, TRIANGLE_STRIP (odd triangles re-ordered to keep the winding) and
+//!   TRIANGLE_FAN; indexed and non-indexed; POINTS and LINES primitives are skipped;
+//! - `NORMAL`, `TEXCOORD_0` and `COLOR_0` are kept when every primitive has them;
+//! - skins and morph targets are ignored: a skinned mesh comes out in its bind pose with its
+//!   node's transform applied, morph targets at weight zero (trimesh does the same).
+//!
+//! Accessors are decoded here rather than with the crate's readers so that every offset,
+//! stride and count is checked against the bytes present (sparse accessors included) and a
+//! bad file gives an error naming the accessor instead of a panic.
+//!
+//! Writing: one scene, one node, one mesh with one TRIANGLES primitive: `POSITION` (with `min`
+//! and `max`), `NORMAL`, `TEXCOORD_0` and `COLOR_0` (float RGBA) when present, `u32` indices.
+//! `.glb` holds the buffer in its binary chunk; `.gltf` embeds it as a base64 data URI, so the
+//! output is one self-contained file that can be written atomically.
+
+use std::path::{Path, PathBuf};
+
+use base64::Engine as _;
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::{Mode, Semantic};
+use serde_json::json;
+
+use super::IoError;
+use crate::TriMesh;
+use crate::mesh::Rgba;
+
+/// Accessors may describe at most this many times the bytes of all buffers (plus a MiB): an
+/// accessor without a buffer view is zeros and is not backed by data, so its count needs a cap.
+const UNBACKED_ACCESSOR_FACTOR: usize = 4;
+
+/// Loads the document and its buffers.
+fn load(path: &Path) -> Result<(gltf::Document, Vec<Vec<u8>>), IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::os(path, e))?;
+    let gltf = gltf::Gltf::from_slice(&bytes)
+        .map_err(|e| IoError::malformed(path, "document", e.to_string()))?;
+    let gltf::Gltf { document, mut blob } = gltf;
+    let base = path.parent().unwrap_or_else(|| Path::new("."));
+    let mut buffers = Vec::new();
+    for buffer in document.buffers() {
+        let element = format!("buffer {}", buffer.index());
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
+                IoError::malformed(
+                    path,
+                    &element,
+                    "refers to a GLB binary chunk that is missing",
+                )
+            })?,
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                let (_, payload) = uri
+                    .split_once(";base64,")
+                    .ok_or_else(|| IoError::malformed(path, &element, "data URI is not base64"))?;
+                base64::engine::general_purpose::STANDARD
+                    .decode(payload)
+                    .map_err(|e| {
+                        IoError::malformed(path, &element, format!("bad base64 data URI: {e}"))
+                    })?
+            }
+            gltf::buffer::Source::Uri(uri) => {
+                let file = base.join(percent_decode(uri));
+                std::fs::read(&file).map_err(|source| IoError::MissingReference {
+                    path: path.to_path_buf(),
+                    reference: file.clone(),
+                    source,
+                })?
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(IoError::malformed(
+                path,
+                element,
+                format!(
+                    "declares {} bytes but holds {} (truncated?)",
+                    buffer.length(),
+                    data.len()
+                ),
+            ));
+        }
+        buffers.push(data);
+    }
+    Ok((document, buffers))
+}
+
+/// Decodes `%xx` escapes of a relative URI.
+fn percent_decode(uri: &str) -> PathBuf {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%'
+            && let Some(h) = bytes
+                .get(i + 1..i + 3)
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+        {
+            out.push(h);
+            i += 3;
+            continue;
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    PathBuf::from(String::from_utf8_lossy(&out).into_owned())
+}
+
+/// Where one buffer view's bytes are.
+fn view_bytes<'a>(
+    path: &Path,
+    element: &str,
+    view: &gltf::buffer::View<'_>,
+    buffers: &'a [Vec<u8>],
+) -> Result<&'a [u8], IoError> {
+    let buffer = buffers
+        .get(view.buffer().index())
+        .ok_or_else(|| IoError::malformed(path, element, "buffer view refers to no buffer"))?;
+    view.offset()
+        .checked_add(view.length())
+        .and_then(|end| buffer.get(view.offset()..end))
+        .ok_or_else(|| {
+            IoError::malformed(
+                path,
+                element,
+                format!(
+                    "buffer view {} reaches past the end of its buffer",
+                    view.index()
+                ),
+            )
+        })
+}
+
+fn component(data: &[u8], ty: DataType, normalized: bool) -> f64 {
+    let b = |n: usize| {
+        let mut a = [0u8; 4];
+        a[..n].copy_from_slice(&data[..n]);
+        a
+    };
+    let raw = match ty {
+        DataType::I8 => f64::from(i8::from_le_bytes([data[0]])),
+        DataType::U8 => f64::from(data[0]),
+        DataType::I16 => f64::from(i16::from_le_bytes([data[0], data[1]])),
+        DataType::U16 => f64::from(u16::from_le_bytes([data[0], data[1]])),
+        DataType::U32 => f64::from(u32::from_le_bytes(b(4))),
+        DataType::F32 => f64::from(f32::from_le_bytes(b(4))),
+    };
+    if !normalized {
+        return raw;
+    }
+    match ty {
+        DataType::I8 => (raw / 127.0).max(-1.0),
+        DataType::U8 => raw / 255.0,
+        DataType::I16 => (raw / 32767.0).max(-1.0),
+        DataType::U16 => raw / 65535.0,
+        DataType::U32 => raw / f64::from(u32::MAX),
+        DataType::F32 => raw,
+    }
+}
+
+/// Byte offset of component `c` inside one element (matrix columns are padded to 4 bytes).
+fn component_offset(dims: Dimensions, size: usize, c: usize) -> usize {
+    let rows = match dims {
+        Dimensions::Mat2 => 2,
+        Dimensions::Mat3 => 3,
+        Dimensions::Mat4 => 4,
+        _ => return c * size,
+    };
+    let column_stride = (rows * size).div_ceil(4) * 4;
+    (c / rows) * column_stride + (c % rows) * size
+}
+
+fn element_size(dims: Dimensions, size: usize) -> usize {
+    let n = dims.multiplicity();
+    component_offset(dims, size, n - 1) + size
+}
+
+/// Reads `count` elements of `n` components from `view` at `offset` with the view's stride.
+#[expect(clippy::too_many_arguments, reason = "the fields of an accessor")]
+fn read_strided(
+    path: &Path,
+    element: &str,
+    bytes: &[u8],
+    offset: usize,
+    stride: Option<usize>,
+    count: usize,
+    dims: Dimensions,
+    ty: DataType,
+    normalized: bool,
+) -> Result<Vec<f64>, IoError> {
+    let size = ty.size();
+    let elem = element_size(dims, size);
+    let stride = stride.unwrap_or(elem).max(elem);
+    let needed = if count == 0 {
+        Some(0)
+    } else {
+        (count - 1)
+            .checked_mul(stride)
+            .and_then(|x| x.checked_add(elem))
+            .and_then(|x| x.checked_add(offset))
+    };
+    match needed {
+        Some(n) if n <= bytes.len() => {}
+        _ => {
+            return Err(IoError::malformed(
+                path,
+                element,
+                format!(
+                    "{count} elements do not fit in the {} bytes of its buffer view",
+                    bytes.len()
+                ),
+            ));
+        }
+    }
+    let n = dims.multiplicity();
+    let mut out = Vec::with_capacity(count * n);
+    for i in 0..count {
+        let base = offset + i * stride;
+        for c in 0..n {
+            let at = base + component_offset(dims, size, c);
+            out.push(component(&bytes[at..at + size], ty, normalized));
+        }
+    }
+    Ok(out)
+}
+
+/// Decodes an accessor into `count * components` f64 values (normalised integers scaled,
+/// sparse substitutions applied).
+fn read_accessor(
+    path: &Path,
+    accessor: &gltf::Accessor<'_>,
+    buffers: &[Vec<u8>],
+) -> Result<Vec<f64>, IoError> {
+    let element = format!("accessor {}", accessor.index());
+    let dims = accessor.dimensions();
+    let n = dims.multiplicity();
+    let count = accessor.count();
+    let mut values = match accessor.view() {
+        Some(view) => read_strided(
+            path,
+            &element,
+            view_bytes(path, &element, &view, buffers)?,
+            accessor.offset(),
+            view.stride(),
+            count,
+            dims,
+            accessor.data_type(),
+            accessor.normalized(),
+        )?,
+        None => {
+            let total: usize = buffers.iter().map(Vec::len).sum();
+            let cap = total.saturating_mul(UNBACKED_ACCESSOR_FACTOR) + (1 << 20);
+            if count
+                .saturating_mul(n)
+                .saturating_mul(accessor.data_type().size())
+                > cap
+            {
+                return Err(IoError::malformed(
+                    path,
+                    element,
+                    format!("count {count} is far larger than the file's data"),
+                ));
+            }
+            vec![0.0; count * n]
+        }
+    };
+    if let Some(sparse) = accessor.sparse() {
+        let k = sparse.count();
+        let indices = sparse.indices();
+        let index_type = match indices.index_type() {
+            gltf::accessor::sparse::IndexType::U8 => DataType::U8,
+            gltf::accessor::sparse::IndexType::U16 => DataType::U16,
+            gltf::accessor::sparse::IndexType::U32 => DataType::U32,
+        };
+        let ib = view_bytes(path, &element, &indices.view(), buffers)?;
+        let idx = read_strided(
+            path,
+            &element,
+            ib,
+            indices.offset(),
+            None,
+            k,
+            Dimensions::Scalar,
+            index_type,
+            false,
+        )?;
+        let sv = sparse.values();
+        let vb = view_bytes(path, &element, &sv.view(), buffers)?;
+        let vals = read_strided(
+            path,
+            &element,
+            vb,
+            sv.offset(),
+            None,
+            k,
+            dims,
+            accessor.data_type(),
+            accessor.normalized(),
+        )?;
+        for (j, &i) in idx.iter().enumerate() {
+            #[expect(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "unsigned integer indices read exactly into f64"
+            )]
+            let i = i as usize;
+            if i >= count {
+                return Err(IoError::malformed(
+                    path,
+                    element,
+                    format!("sparse index {i} is out of range (count {count})"),
+                ));
+            }
+            values[i * n..(i + 1) * n].copy_from_slice(&vals[j * n..(j + 1) * n]);
+        }
+    }
+    Ok(values)
+}
+
+fn read_vec<const N: usize>(
+    path: &Path,
+    accessor: &gltf::Accessor<'_>,
+    buffers: &[Vec<u8>],
+    what: &str,
+) -> Result<Vec<[f64; N]>, IoError> {
+    let n = accessor.dimensions().multiplicity();
+    if n < N
+        || matches!(
+            accessor.dimensions(),
+            Dimensions::Mat2 | Dimensions::Mat3 | Dimensions::Mat4
+        )
+    {
+        return Err(IoError::malformed(
+            path,
+            format!("accessor {}", accessor.index()),
+            format!("{what} needs {N} components, it has {n}"),
+        ));
+    }
+    let values = read_accessor(path, accessor, buffers)?;
+    Ok(values
+        .chunks_exact(n)
+        .map(|c| {
+            let mut a = [0.0; N];
+            a.copy_from_slice(&c[..N]);
+            a
+        })
+        .collect())
+}
+
+/// The vertex and triangle blocks gathered so far.
+#[derive(Default)]
+struct Gathered {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    uvs: Vec<Vec2>,
+    colors: Vec<Rgba>,
+    triangles: Vec<[u32; 3]>,
+    all_normals: bool,
+    all_uvs: bool,
+    all_colors: bool,
+    primitives: usize,
+}
+
+#[expect(
+    clippy::cast_possible_truncation,
+    reason = "f32 storage is the documented precision of meshes"
+)]
+fn add_primitive(
+    path: &Path,
+    out: &mut Gathered,
+    mesh: &gltf::Mesh<'_>,
+    prim: &gltf::Primitive<'_>,
+    world: &DMat4,
+    buffers: &[Vec<u8>],
+) -> Result<(), IoError> {
+    let element = format!("mesh {} primitive {}", mesh.index(), prim.index());
+    let mode = prim.mode();
+    if !matches!(
+        mode,
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    ) {
+        return Ok(());
+    }
+    let Some(pos) = prim.get(&Semantic::Positions) else {
+        return Ok(());
+    };
+    let positions = read_vec::<3>(path, &pos, buffers, "POSITION")?;
+    let n = positions.len();
+    let base = out.positions.len();
+    let too_many = || IoError::malformed(path, &element, "more vertices than u32 indices hold");
+    let base_u32 = u32::try_from(base).map_err(|_| too_many())?;
+    u32::try_from(base + n).map_err(|_| too_many())?;
+    for (i, p) in positions.iter().enumerate() {
+        let w = world.transform_point3(DVec3::from(*p)).as_vec3();
+        if !w.is_finite() {
+            return Err(IoError::malformed(
+                path,
+                format!("{element} vertex {i}"),
+                format!("non-finite position ({}, {}, {})", p[0], p[1], p[2]),
+            ));
+        }
+        out.positions.push(w);
+    }
+    let normal_matrix = DMat3::from_mat4(*world).inverse().transpose();
+    match prim.get(&Semantic::Normals) {
+        Some(acc) if acc.count() == n && out.all_normals => {
+            for v in read_vec::<3>(path, &acc, buffers, "NORMAL")? {
+                let m = (normal_matrix * DVec3::from(v)).normalize_or_zero();
+                out.normals.push(m.as_vec3());
+            }
+        }
+        _ => out.all_normals = false,
+    }
+    match prim.get(&Semantic::TexCoords(0)) {
+        Some(acc) if acc.count() == n && out.all_uvs => {
+            for v in read_vec::<2>(path, &acc, buffers, "TEXCOORD_0")? {
+                out.uvs.push(Vec2::new(v[0] as f32, v[1] as f32));
+            }
+        }
+        _ => out.all_uvs = false,
+    }
+    match prim.get(&Semantic::Colors(0)) {
+        Some(acc) if acc.count() == n && out.all_colors => {
+            let comps = acc.dimensions().multiplicity();
+            if !matches!(acc.dimensions(), Dimensions::Vec3 | Dimensions::Vec4) {
+                return Err(IoError::malformed(
+                    path,
+                    format!("accessor {}", acc.index()),
+                    "COLOR_0 must be VEC3 or VEC4",
+                ));
+            }
+            for c in read_accessor(path, &acc, buffers)?.chunks_exact(comps) {
+                let alpha = if comps == 4 { c[3] as f32 } else { 1.0 };
+                out.colors
+                    .push([c[0] as f32, c[1] as f32, c[2] as f32, alpha]);
+            }
+        }
+        _ => out.all_colors = false,
+    }
+    let indices: Vec<u32> = match prim.indices() {
+        Some(acc) => {
+            let values = read_accessor(path, &acc, buffers)?;
+            let mut idx = Vec::with_capacity(values.len());
+            for (k, &v) in values.iter().enumerate() {
+                #[expect(clippy::cast_sign_loss, reason = "checked in range first")]
+                if v.fract() != 0.0 || v < 0.0 || v >= n as f64 {
+                    return Err(IoError::malformed(
+                        path,
+                        format!("{element} index {k}"),
+                        format!("vertex index {v} is out of range ({n} vertices)"),
+                    ));
+                } else {
+                    idx.push(v as u32);
+                }
+            }
+            idx
+        }
+        None => (0..u32::try_from(n).map_err(|_| too_many())?).collect(),
+    };
+    let tri = |a: u32, b: u32, c: u32| [base_u32 + a, base_u32 + b, base_u32 + c];
+    let mut triangles: Vec<[u32; 3]> = match mode {
+        Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
+            .map(|i| {
+                let (a, b, c) = (indices[i], indices[i + 1], indices[i + 2]);
+                if i % 2 == 0 {
+                    tri(a, b, c)
+                } else {
+                    tri(b, a, c)
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..indices.len().saturating_sub(1))
+            .map(|i| tri(indices[i], indices[i + 1], indices[0]))
+            .collect(),
+        _ => indices
+            .chunks_exact(3)
+            .map(|c| tri(c[0], c[1], c[2]))
+            .collect(),
+    };
+    if world.determinant() < 0.0 {
+        for t in &mut triangles {
+            t.swap(1, 2);
+        }
+    }
+    out.triangles.extend(triangles);
+    out.primitives += 1;
+    Ok(())
+}
+
+fn visit(
+    path: &Path,
+    out: &mut Gathered,
+    node: &gltf::Node<'_>,
+    parent: &DMat4,
+    buffers: &[Vec<u8>],
+    depth: usize,
+    max_depth: usize,
+) -> Result<(), IoError> {
+    if depth > max_depth {
+        return Err(IoError::malformed(
+            path,
+            format!("node {}", node.index()),
+            "the node hierarchy has a cycle",
+        ));
+    }
+    let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+    let world = *parent * local;
+    if let Some(mesh) = node.mesh() {
+        for prim in mesh.primitives() {
+            add_primitive(path, out, &mesh, &prim, &world, buffers)?;
+        }
+    }
+    for child in node.children() {
+        visit(path, out, &child, &world, buffers, depth + 1, max_depth)?;
+    }
+    Ok(())
+}
+
+/// Reads the static (rest-state) mesh of a glTF or GLB file; see the module docs.
+///
+/// # Errors
+/// [`IoError::Os`] when the file cannot be read, [`IoError::MissingReference`] when an external
+/// buffer is missing, [`IoError::Malformed`] naming the accessor, primitive or node at fault.
+pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
+    let (doc, buffers) = load(path)?;
+    let mut out = Gathered {
+        all_normals: true,
+        all_uvs: true,
+        all_colors: true,
+        ..Gathered::default()
+    };
+    let roots: Vec<gltf::Node<'_>> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().collect(),
+        None => {
+            let mut is_child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    if let Some(flag) = is_child.get_mut(c.index()) {
+                        *flag = true;
+                    }
+                }
+            }
+            doc.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    let max_depth = doc.nodes().len();
+    for root in &roots {
+        visit(
+            path,
+            &mut out,
+            root,
+            &DMat4::IDENTITY,
+            &buffers,
+            0,
+            max_depth,
+        )?;
+    }
+    let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
+    let has = out.primitives > 0;
+    let mut mesh = TriMesh::try_new(out.positions, out.triangles).map_err(bad)?;
+    if has && out.all_normals {
+        mesh = mesh.with_normals(out.normals).map_err(bad)?;
+    }
+    if has && out.all_uvs {
+        mesh = mesh.with_uvs(out.uvs).map_err(bad)?;
+    }
+    if has && out.all_colors {
+        mesh = mesh.with_colors(out.colors).map_err(bad)?;
+    }
+    Ok(mesh)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writing
+
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+const FLOAT: u32 = 5126;
+const UNSIGNED_INT: u32 = 5125;
+
+/// Builds the JSON document and the single binary buffer for `mesh`.
+fn build(mesh: &TriMesh) -> (serde_json::Value, Vec<u8>) {
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut attributes = serde_json::Map::new();
+    let n = mesh.vertex_count();
+    let mut add = |bin: &mut Vec<u8>,
+                   data: Vec<f32>,
+                   kind: &str,
+                   target: u32,
+                   extra: Option<(Vec<f32>, Vec<f32>)>|
+     -> usize {
+        let offset = bin.len();
+        for x in &data {
+            bin.extend_from_slice(&x.to_le_bytes());
+        }
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len() * 4, "target": target}));
+        let mut acc = json!({
+            "bufferView": views.len() - 1, "componentType": FLOAT, "count": n, "type": kind,
+        });
+        if let Some((min, max)) = extra {
+            acc["min"] = json!(min);
+            acc["max"] = json!(max);
+        }
+        accessors.push(acc);
+        accessors.len() - 1
+    };
+    if n > 0 {
+        let p = mesh.positions();
+        let (lo, hi) = p.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), &q| (lo.min(q), hi.max(q)),
+        );
+        let flat = p.iter().flat_map(|v| v.to_array()).collect();
+        let i = add(
+            &mut bin,
+            flat,
+            "VEC3",
+            ARRAY_BUFFER,
+            Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
+        );
+        attributes.insert("POSITION".into(), json!(i));
+        if let Some(normals) = mesh.normals() {
+            // glTF wants unit normals: zero ones (degenerate) become +z.
+            let flat = normals
+                .iter()
+                .flat_map(|v| v.try_normalize().unwrap_or(Vec3::Z).to_array())
+                .collect();
+            let i = add(&mut bin, flat, "VEC3", ARRAY_BUFFER, None);
+            attributes.insert("NORMAL".into(), json!(i));
+        }
+        if let Some(uvs) = mesh.uvs() {
+            let flat = uvs.iter().flat_map(|v| v.to_array()).collect();
+            let i = add(&mut bin, flat, "VEC2", ARRAY_BUFFER, None);
+            attributes.insert("TEXCOORD_0".into(), json!(i));
+        }
+        if let Some(colors) = mesh.colors() {
+            let flat = colors
+                .iter()
+                .flat_map(|c| c.map(|x| x.clamp(0.0, 1.0)))
+                .collect();
+            let i = add(&mut bin, flat, "VEC4", ARRAY_BUFFER, None);
+            attributes.insert("COLOR_0".into(), json!(i));
+        }
+    }
+    let mut primitive = json!({"attributes": attributes});
+    if mesh.triangle_count() > 0 {
+        let offset = bin.len();
+        for i in mesh.triangles().iter().flatten() {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        views.push(json!({"buffer": 0, "byteOffset": offset,
+            "byteLength": bin.len() - offset, "target": ELEMENT_ARRAY_BUFFER}));
+        accessors.push(
+            json!({"bufferView": views.len() - 1, "componentType": UNSIGNED_INT,
+            "count": mesh.triangle_count() * 3, "type": "SCALAR"}),
+        );
+        primitive["indices"] = json!(accessors.len() - 1);
+        primitive["mode"] = json!(4);
+    } else {
+        primitive["mode"] = json!(0);
+    }
+    let mut doc = json!({
+        "asset": {"version": "2.0", "generator": "trisplat"},
+        "scene": 0,
+    });
+    if n == 0 {
+        doc["scenes"] = json!([{"nodes": []}]);
+    } else {
+        doc["scenes"] = json!([{"nodes": [0]}]);
+        doc["nodes"] = json!([{"mesh": 0}]);
+        doc["meshes"] = json!([{"primitives": [primitive]}]);
+        doc["accessors"] = json!(accessors);
+        doc["bufferViews"] = json!(views);
+        doc["buffers"] = json!([{"byteLength": bin.len()}]);
+    }
+    (doc, bin)
+}
+
+/// Writes `mesh` as `.glb` bytes.
+///
+/// # Errors
+/// [`IoError::Unsupported`] when the buffer exceeds the 4 GiB a GLB can hold.
+pub fn glb_bytes(path: &Path, mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
+    let (doc, mut bin) = build(mesh);
+    let mut json = doc.to_string().into_bytes();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let has_bin = !bin.is_empty();
+    let total = 12 + 8 + json.len() + if has_bin { 8 + bin.len() } else { 0 };
+    let too_big = || IoError::Unsupported {
+        path: path.to_path_buf(),
+        what: format!("a {total}-byte GLB (the format holds at most 4 GiB)"),
+    };
+    let total32 = u32::try_from(total).map_err(|_| too_big())?;
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total32.to_le_bytes());
+    let json_len = u32::try_from(json.len()).map_err(|_| too_big())?;
+    out.extend_from_slice(&json_len.to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    if has_bin {
+        let bin_len = u32::try_from(bin.len()).map_err(|_| too_big())?;
+        out.extend_from_slice(&bin_len.to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&bin);
+    }
+    Ok(out)
+}
+
+/// Writes `mesh` as `.gltf` JSON text with the buffer embedded as a base64 data URI.
+#[must_use]
+pub fn gltf_text(mesh: &TriMesh) -> String {
+    let (mut doc, bin) = build(mesh);
+    if doc.get("buffers").is_some() {
+        let uri = format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&bin)
+        );
+        doc["buffers"] = json!([{"byteLength": bin.len(), "uri": uri}]);
+    }
+    doc.to_string()
+}
