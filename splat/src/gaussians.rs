@@ -399,6 +399,10 @@ pub struct GaussianParts {
     pub space: ParameterSpace,
     /// Extra per-Gaussian properties, in file order.
     pub extras: Vec<ExtraProperty>,
+    /// The vertex property names of the file this set was read from, in file order. Writers
+    /// keep this order for the properties they write and append the others; `None` writes the
+    /// INRIA order.
+    pub property_order: Option<Vec<String>>,
 }
 
 /// Gaussians as a structure of arrays (see the module documentation for conventions).
@@ -542,6 +546,45 @@ impl GaussianSet {
         }
     }
 
+    /// The Gaussians at `indices`, in that order (repeats allowed), with every property, the
+    /// binding and the property order carried along.
+    ///
+    /// # Panics
+    /// If an index is `>= self.len()`.
+    #[must_use]
+    pub fn select(&self, indices: &[usize]) -> Self {
+        let p = &self.parts;
+        let stride = 3 * sh_coeffs_per_channel(p.sh_degree);
+        let pick = |v: &[f32]| indices.iter().map(|&i| v[i]).collect::<Vec<f32>>();
+        let parts = GaussianParts {
+            means: indices.iter().map(|&i| p.means[i]).collect(),
+            log_scales: indices.iter().map(|&i| p.log_scales[i]).collect(),
+            scale_dims: p.scale_dims,
+            rotations: indices.iter().map(|&i| p.rotations[i]).collect(),
+            opacity_logits: pick(&p.opacity_logits),
+            sh_degree: p.sh_degree,
+            sh: indices
+                .iter()
+                .flat_map(|&i| p.sh[i * stride..(i + 1) * stride].iter().copied())
+                .collect(),
+            binding: p.binding.as_ref().map(|b| Binding {
+                triangles: indices.iter().map(|&i| b.triangles[i]).collect(),
+                encoding: b.encoding,
+            }),
+            space: p.space,
+            extras: p
+                .extras
+                .iter()
+                .map(|e| ExtraProperty {
+                    name: e.name.clone(),
+                    values: e.values.gather(indices),
+                })
+                .collect(),
+            property_order: p.property_order.clone(),
+        };
+        Self { parts }
+    }
+
     /// Number of Gaussians.
     #[must_use]
     pub fn len(&self) -> usize {
@@ -622,6 +665,13 @@ impl GaussianSet {
     #[must_use]
     pub fn extras(&self) -> &[ExtraProperty] {
         &self.parts.extras
+    }
+
+    /// The property order of the file this set was read from (see
+    /// [`GaussianParts::property_order`]).
+    #[must_use]
+    pub fn property_order(&self) -> Option<&[String]> {
+        self.parts.property_order.as_deref()
     }
 
     /// The extra property called `name`.
