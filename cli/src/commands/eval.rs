@@ -16,7 +16,7 @@ pub const DEFAULT_SAMPLES: usize = 100_000;
 
 /// Arguments of `trisplat eval`.
 #[derive(Debug, clap::Args)]
-#[command(long_about = "\
+#[command(after_long_help = "\
 Compare a prediction P with a ground truth G: Chamfer distances, normal consistency and \
 F-score.
 
