@@ -8,6 +8,10 @@
 //! every parentless node when the file has no scene), children in file order; within a node the
 //! primitives in file order. Each primitive contributes its full vertex array (not welded) and
 //! its triangles, offset by the vertices before it. A mesh used by two nodes appears twice.
+//! Strips give `(a, b, c)` for even and `(b, a, c)` for odd triangles, fans `(vᵢ, vᵢ₊₁, v₀)`;
+//! a node whose stored world transform mirrors (negative determinant) has its triangles'
+//! winding reversed. This is exactly the order of [`crate::io::read_mesh`] on the same file,
+//! so a template's vertex `i` is the static mesh's vertex `i`.
 //!
 //! # Evaluation
 //! All transforms are composed in f64; positions are stored as f32. A skinned vertex is
@@ -181,11 +185,27 @@ fn triangulate(mode: gltf::mesh::Mode, idx: &[u32]) -> Option<Vec<[u32; 3]>> {
             })
             .collect(),
         Mode::TriangleFan => (1..idx.len().saturating_sub(1))
-            .map(|i| [idx[0], idx[i], idx[i + 1]])
+            .map(|i| [idx[i], idx[i + 1], idx[0]])
             .collect(),
         _ => return None,
     };
     Some(tris)
+}
+
+/// World matrices of every node from local transforms, `order` listing parents first.
+fn world_matrices(locals: &[Local], order: &[usize], parents: &[Option<usize>]) -> Vec<DMat4> {
+    let mut world = vec![DMat4::IDENTITY; locals.len()];
+    for &i in order {
+        let local = match locals[i] {
+            Local::Trs(trs) => trs.matrix(),
+            Local::Matrix(m) => m,
+        };
+        world[i] = match parents[i] {
+            Some(p) => world[p] * local,
+            None => local,
+        };
+    }
+    world
 }
 
 fn to_vec3s(v: &[f64]) -> Vec<DVec3> {
@@ -390,6 +410,8 @@ impl GltfTemplate {
             });
         }
         // Instances and topology; influences must address the instance's skin.
+        let locals: Vec<Local> = nodes.iter().map(|n| n.local).collect();
+        let rest_world = world_matrices(&locals, &order, &parents);
         let mut instances = Vec::new();
         let mut triangles = Vec::new();
         let mut vertex_count = 0usize;
@@ -415,7 +437,13 @@ impl GltfTemplate {
                     u32::try_from(vertex_count).map_err(|_| AnimationError::NoTriangles {
                         path: path.to_path_buf(),
                     })?;
-                triangles.extend(prim.triangles.iter().map(|t| t.map(|v| v + base)));
+                // As the static reader: a mirroring node transform (in the stored scene)
+                // reverses the winding, skinned or not.
+                let mirrored = rest_world[i].determinant() < 0.0;
+                triangles.extend(prim.triangles.iter().map(|t| {
+                    let t = t.map(|v| v + base);
+                    if mirrored { [t[0], t[2], t[1]] } else { t }
+                }));
                 vertex_count += prim.positions.len();
             }
         }
@@ -465,7 +493,7 @@ impl GltfTemplate {
                 message,
             };
             let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
-                return Err(err("has no POSITION attribute".into()));
+                continue; // nothing to draw (the static reader skips it too)
             };
             let positions = to_vec3s(&buffers.read_dims(&pos, 3)?);
             let n = positions.len();
@@ -801,17 +829,7 @@ impl GltfTemplate {
                 locals[ch.node] = Local::Trs(trs);
             }
         }
-        let mut world = vec![DMat4::IDENTITY; self.nodes.len()];
-        for &i in &self.order {
-            let local = match locals[i] {
-                Local::Trs(trs) => trs.matrix(),
-                Local::Matrix(m) => m,
-            };
-            world[i] = match self.parents[i] {
-                Some(p) => world[p] * local,
-                None => local,
-            };
-        }
+        let world = world_matrices(&locals, &self.order, &self.parents);
         let mut out = Vec::with_capacity(self.rest.vertex_count());
         for &(node, _) in &self.instances {
             let data = &self.nodes[node];
