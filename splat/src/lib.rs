@@ -1,10 +1,14 @@
 //! Triangle-bound Gaussians for trisplat: Gaussian sets in the INRIA 3DGS layout
 //! ([`GaussianSet`]), spherical-harmonics colour ([`sh`]), PLY reading and writing ([`ply`]),
 //! triangle frames for the GaussianAvatars and SurFhead conventions ([`frames`]) and deformation
-//! of bound Gaussians with a moving template (`deform`).
+//! of bound Gaussians with a moving template ([`deform`]).
 //!
 //! Conventions follow `SPEC.md` §3 (files) and §4 (binding).
 
+/// The math types of this crate's API (glam 0.34), re-exported so callers use the same version.
+pub use glam;
+
+pub mod deform;
 pub mod frames;
 pub mod gaussians;
 pub mod ply;

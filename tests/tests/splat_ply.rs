@@ -3,9 +3,9 @@
 
 use std::path::Path;
 
-use glam::Vec3;
 use trisplat_geometry::TriId;
 use trisplat_geometry::rng::Rng;
+use trisplat_splat::glam::Vec3;
 use trisplat_splat::ply::{
     PlyEncoding, PlyError, PlyWriteOptions, read_gaussians, read_gaussians_from_bytes,
     write_gaussians, write_gaussians_to,

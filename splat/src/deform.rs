@@ -1,0 +1,475 @@
+//! Deformation of triangle-bound Gaussians by a moving template (SPEC §4), to world space.
+//!
+//! Input: a [`GaussianSet`] with a [`crate::Binding`] and parameters in local triangle frames
+//! ([`ParameterSpace::Local`]), the template's triangles (fixed topology) and the deformed vertex
+//! positions of one frame. Output: a world-space set with normalised rotations (`w ≥ 0`),
+//! log-scales and no binding, readable by any 3DGS viewer.
+//!
+//! - [`DeformMode::Binding`] (GaussianAvatars), frame from the posed triangle:
+//!   `mu = k R_f mu_local + c_f`, `R = R_f R_local`, `s = k exp(log_s)` (so the output log-scale
+//!   is `log_s + ln k`, no `exp` round trip).
+//! - [`DeformMode::Jacobian`] (SurFhead/TGA): canonical frame `(R_c, k_c)` from the template's
+//!   rest triangle, `J = E(deformed) E(canonical)⁻¹`; `mu = J (k_c R_c mu_local) + c_f(deformed)`,
+//!   covariance axes `L = J R_c R_local k_c diag(exp(log_s))`, so `Σ' = L Lᵀ`. The output rotation
+//!   and scales come from the SVD `L = U Σ Vᵀ` in `f64` (`R = U` with `det U = +1`, `s = σ`), so
+//!   the file means exactly `Σ'`. A singular value of 0 (a collapsed triangle, or the flat axis
+//!   of a 2DGS surfel) is stored as [`MIN_OUTPUT_SCALE`] so the log-scale stays finite.
+//!
+//! SH coefficients, opacities and extra properties are copied unchanged (view-dependent colour is
+//! evaluated with world directions, as GaussianAvatars does). Work is split over Gaussians with
+//! rayon; every Gaussian is computed independently, so results do not depend on the thread count.
+
+use glam::{DMat3, DVec3, Mat3A, Quat, Vec3, Vec3A};
+use nalgebra::Matrix3;
+use rayon::prelude::*;
+use trisplat_geometry::{TriId, TriMesh};
+
+use crate::frames::{CanonicalTriangle, FrameOptions, corners_of, gaussian_avatars_frame};
+use crate::gaussians::{
+    GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
+    to_wxyz,
+};
+
+/// Smallest output scale (a collapsed axis): `f32::MIN_POSITIVE`, whose log (≈ −87.3) is finite
+/// and whose `exp` in `f32` is still positive.
+pub const MIN_OUTPUT_SCALE: f64 = f32::MIN_POSITIVE as f64;
+
+/// Gaussians per rayon task.
+const CHUNK: usize = 2048;
+
+/// Deformation modes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum DeformMode {
+    /// GaussianAvatars: rigid frame plus uniform scale per posed triangle.
+    #[default]
+    Binding,
+    /// SurFhead/TGA: per-triangle deformation gradient (anisotropic stretch).
+    Jacobian,
+}
+
+/// Errors of deformation.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DeformError {
+    /// The set has no binding.
+    #[error("the Gaussians are not bound to triangles")]
+    NotBound,
+    /// The set is bound but its parameters are in world space.
+    #[error("the Gaussians' parameters are in world space, not local triangle frames")]
+    NotLocal,
+    /// A binding names a triangle the template does not have.
+    #[error(
+        "Gaussian {index}: bound to triangle {triangle}, but the template has {triangle_count}"
+    )]
+    BindingOutOfRange {
+        /// Gaussian index.
+        index: usize,
+        /// Its triangle.
+        triangle: TriId,
+        /// Triangles of the template.
+        triangle_count: usize,
+    },
+    /// The frame's vertex count differs from the template's.
+    #[error("the frame has {got} vertices, the template {expected}")]
+    VertexCount {
+        /// Template vertices.
+        expected: usize,
+        /// Frame vertices.
+        got: usize,
+    },
+    /// A deformed vertex is NaN or infinite.
+    #[error("deformed vertex {index} is not finite")]
+    NonFiniteVertex {
+        /// Vertex index.
+        index: usize,
+    },
+}
+
+/// World-space geometry of deformed Gaussians (reusable buffers, see
+/// [`Deformer::deform_geometry`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WorldGeometry {
+    /// Centres.
+    pub means: Vec<Vec3>,
+    /// Unit quaternions `[w, x, y, z]`, `w ≥ 0`.
+    pub rotations: Vec<[f32; 4]>,
+    /// Log-scales (third component 0 for surfels in binding mode).
+    pub log_scales: Vec<Vec3>,
+}
+
+/// Per-triangle data of the binding mode, in `f32` for the per-Gaussian loop.
+#[derive(Clone, Copy)]
+struct BindingTri {
+    linear: Mat3A,
+    rotation: Quat,
+    origin: Vec3A,
+    ln_k: f32,
+}
+
+/// Per-triangle data of the Jacobian mode: `M = J k_c R_c` and the deformed centroid.
+#[derive(Clone, Copy)]
+struct JacobianTri {
+    m: DMat3,
+    origin: DVec3,
+}
+
+/// Deforms bound Gaussians frame after frame for one template.
+#[derive(Clone, Debug)]
+pub struct Deformer {
+    mode: DeformMode,
+    options: FrameOptions,
+    triangles: Vec<[u32; 3]>,
+    vertex_count: usize,
+    canonical: Vec<CanonicalTriangle>,
+}
+
+impl Deformer {
+    /// A deformer for `template` (its positions are the canonical/rest shape used by
+    /// [`DeformMode::Jacobian`]), with frame options scaled to the template.
+    #[must_use]
+    pub fn new(template: &TriMesh, mode: DeformMode) -> Self {
+        Self::with_options(
+            template,
+            mode,
+            FrameOptions::for_positions(template.positions()),
+        )
+    }
+
+    /// As [`Deformer::new`] with explicit frame options.
+    #[must_use]
+    pub fn with_options(template: &TriMesh, mode: DeformMode, options: FrameOptions) -> Self {
+        let positions = template.positions();
+        let canonical = match mode {
+            DeformMode::Binding => Vec::new(),
+            DeformMode::Jacobian => template
+                .triangles()
+                .par_iter()
+                .map(|t| CanonicalTriangle::new(corners_of(positions, *t), &options))
+                .collect(),
+        };
+        Self {
+            mode,
+            options,
+            triangles: template.triangles().to_vec(),
+            vertex_count: positions.len(),
+            canonical,
+        }
+    }
+
+    /// The mode.
+    #[must_use]
+    pub fn mode(&self) -> DeformMode {
+        self.mode
+    }
+
+    /// Number of template triangles.
+    #[must_use]
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Checks that `set` can be deformed with this template.
+    ///
+    /// # Errors
+    /// [`DeformError::NotBound`], [`DeformError::NotLocal`], [`DeformError::BindingOutOfRange`].
+    pub fn check(&self, set: &GaussianSet) -> Result<(), DeformError> {
+        let binding = set.binding().ok_or(DeformError::NotBound)?;
+        if set.space() != ParameterSpace::Local {
+            return Err(DeformError::NotLocal);
+        }
+        let count = self.triangles.len();
+        match binding.triangles.iter().position(|t| t.index() >= count) {
+            Some(index) => Err(DeformError::BindingOutOfRange {
+                index,
+                triangle: binding.triangles[index],
+                triangle_count: count,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn check_positions(&self, positions: &[Vec3]) -> Result<(), DeformError> {
+        if positions.len() != self.vertex_count {
+            return Err(DeformError::VertexCount {
+                expected: self.vertex_count,
+                got: positions.len(),
+            });
+        }
+        match positions.par_iter().position_first(|p| !p.is_finite()) {
+            Some(index) => Err(DeformError::NonFiniteVertex { index }),
+            None => Ok(()),
+        }
+    }
+
+    /// Deforms `set` to the frame `positions` and returns a world-space, viewer-ready set
+    /// (SH, opacities and extras copied; no binding).
+    ///
+    /// # Errors
+    /// As [`Deformer::check`], plus [`DeformError::VertexCount`] and
+    /// [`DeformError::NonFiniteVertex`].
+    pub fn deform(
+        &self,
+        set: &GaussianSet,
+        positions: &[Vec3],
+    ) -> Result<GaussianSet, DeformError> {
+        let mut geometry = WorldGeometry::default();
+        self.deform_geometry(set, positions, &mut geometry)?;
+        let parts = GaussianParts {
+            means: geometry.means,
+            log_scales: geometry.log_scales,
+            scale_dims: set.scale_dims(),
+            rotations: geometry.rotations,
+            opacity_logits: set.opacity_logits().to_vec(),
+            sh_degree: set.sh_degree(),
+            sh: set.sh().to_vec(),
+            binding: None,
+            space: ParameterSpace::World,
+            extras: set.extras().to_vec(),
+            property_order: set.property_order().map(<[String]>::to_vec),
+        };
+        // Every output is finite by construction (finite frames, floored scales); the set is
+        // built unchecked to avoid a second pass over the data.
+        Ok(GaussianSet::new_unchecked(parts))
+    }
+
+    /// Deforms only the geometry (means, rotations, log-scales) into reusable buffers: the
+    /// per-frame hot path.
+    ///
+    /// # Errors
+    /// As [`Deformer::deform`].
+    pub fn deform_geometry(
+        &self,
+        set: &GaussianSet,
+        positions: &[Vec3],
+        out: &mut WorldGeometry,
+    ) -> Result<(), DeformError> {
+        self.check(set)?;
+        self.check_positions(positions)?;
+        let n = set.len();
+        out.means.resize(n, Vec3::ZERO);
+        out.rotations.resize(n, [1.0, 0.0, 0.0, 0.0]);
+        out.log_scales.resize(n, Vec3::ZERO);
+        // `check` guarantees a binding; an empty slice would only mean no Gaussians.
+        let binding = set.binding().map_or(&[][..], |b| b.triangles.as_slice());
+        match self.mode {
+            DeformMode::Binding => {
+                let tris = self.binding_triangles(positions);
+                run_chunks(out, |start, means, rots, scales| {
+                    for j in 0..means.len() {
+                        let i = start + j;
+                        let t = &tris[binding[i].index()];
+                        let local = Vec3A::from(set.means()[i]);
+                        means[j] = Vec3::from(t.linear * local + t.origin);
+                        let q_local = local_quat(set.rotations()[i]);
+                        let q = (t.rotation * q_local).normalize();
+                        let q = if q.w < 0.0 { -q } else { q };
+                        rots[j] = [q.w, q.x, q.y, q.z];
+                        let ls = set.log_scales()[i] + Vec3::splat(t.ln_k);
+                        scales[j] = match set.scale_dims() {
+                            ScaleDims::Three => ls,
+                            ScaleDims::Two => Vec3::new(ls.x, ls.y, 0.0),
+                        };
+                    }
+                });
+            }
+            DeformMode::Jacobian => {
+                let tris = self.jacobian_triangles(positions);
+                let dims = set.scale_dims();
+                run_chunks(out, |start, means, rots, scales| {
+                    for j in 0..means.len() {
+                        let i = start + j;
+                        let t = &tris[binding[i].index()];
+                        let mean = t.m * set.means()[i].as_dvec3() + t.origin;
+                        means[j] = mean.as_vec3();
+                        let r_local = normalize_wxyz(set.rotations()[i])
+                            .map_or(DMat3::IDENTITY, DMat3::from_quat);
+                        let s = set.scale(i).as_dvec3();
+                        let a = t.m * r_local;
+                        let l = DMat3::from_cols(a.x_axis * s.x, a.y_axis * s.y, a.z_axis * s.z);
+                        let (rot, sigma) = rotation_and_scales(l);
+                        rots[j] = to_wxyz(quat_from_rotation(rot));
+                        let ln = |v: f64| v.max(MIN_OUTPUT_SCALE).ln() as f32;
+                        scales[j] = match dims {
+                            ScaleDims::Three => Vec3::new(ln(sigma.x), ln(sigma.y), ln(sigma.z)),
+                            ScaleDims::Two => Vec3::new(ln(sigma.x), ln(sigma.y), 0.0),
+                        };
+                    }
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn binding_triangles(&self, positions: &[Vec3]) -> Vec<BindingTri> {
+        self.triangles
+            .par_iter()
+            .with_min_len(1024)
+            .map(|t| {
+                let f = gaussian_avatars_frame(corners_of(positions, *t), &self.options);
+                let q = quat_from_rotation(f.rotation);
+                BindingTri {
+                    linear: Mat3A::from_cols(
+                        (f.rotation.x_axis * f.scale).as_vec3().into(),
+                        (f.rotation.y_axis * f.scale).as_vec3().into(),
+                        (f.rotation.z_axis * f.scale).as_vec3().into(),
+                    ),
+                    rotation: q.as_quat(),
+                    origin: f.origin.as_vec3().into(),
+                    ln_k: f.scale.ln() as f32,
+                }
+            })
+            .collect()
+    }
+
+    fn jacobian_triangles(&self, positions: &[Vec3]) -> Vec<JacobianTri> {
+        self.triangles
+            .par_iter()
+            .zip(self.canonical.par_iter())
+            .with_min_len(1024)
+            .map(|(t, c)| {
+                let v = corners_of(positions, *t);
+                let j = c.gradient(v, &self.options);
+                JacobianTri {
+                    m: j * c.frame.rotation * c.frame.scale,
+                    origin: (v[0] + v[1] + v[2]) / 3.0,
+                }
+            })
+            .collect()
+    }
+}
+
+/// A local quaternion `[w, x, y, z]` as a normalised glam `Quat` (identity for zero, which a
+/// checked set cannot hold).
+fn local_quat(q: [f32; 4]) -> Quat {
+    let [w, x, y, z] = q;
+    let q = Quat::from_xyzw(x, y, z, w);
+    let len_sq = q.length_squared();
+    if len_sq > 0.0 && len_sq.is_finite() {
+        q * len_sq.sqrt().recip()
+    } else {
+        // Tiny or huge quaternions: normalise in f64.
+        normalize_wxyz([w, x, y, z]).map_or(Quat::IDENTITY, |d| d.as_quat())
+    }
+}
+
+/// Runs `f(start, means, rotations, log_scales)` over chunks of the output in parallel.
+fn run_chunks<F>(out: &mut WorldGeometry, f: F)
+where
+    F: Fn(usize, &mut [Vec3], &mut [[f32; 4]], &mut [Vec3]) + Sync,
+{
+    out.means
+        .par_chunks_mut(CHUNK)
+        .zip(out.rotations.par_chunks_mut(CHUNK))
+        .zip(out.log_scales.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(c, ((m, r), s))| f(c * CHUNK, m, r, s));
+}
+
+/// Rotation `U` (`det U = +1`) and singular values (descending) of `l`, by nalgebra's SVD in
+/// `f64`, so that `U diag(σ)² Uᵀ = l lᵀ`.
+#[must_use]
+pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
+    let m = Matrix3::from_column_slice(&l.to_cols_array());
+    let svd = m.svd(true, false);
+    let (Some(u), sigma) = (svd.u, svd.singular_values) else {
+        return (DMat3::IDENTITY, DVec3::splat(MIN_OUTPUT_SCALE));
+    };
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| sigma[b].total_cmp(&sigma[a]));
+    let col = |k: usize| DVec3::new(u[(0, k)], u[(1, k)], u[(2, k)]);
+    let (c0, c1, mut c2) = (col(order[0]), col(order[1]), col(order[2]));
+    if c0.cross(c1).dot(c2) < 0.0 {
+        c2 = -c2;
+    }
+    let rot = DMat3::from_cols(c0, c1, c2);
+    let s = DVec3::new(sigma[order[0]], sigma[order[1]], sigma[order[2]]);
+    if rot.is_finite() && s.is_finite() {
+        (rot, s)
+    } else {
+        (DMat3::IDENTITY, DVec3::splat(MIN_OUTPUT_SCALE))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gaussians::{Binding, BindingEncoding};
+    use trisplat_geometry::rng::Rng;
+
+    /// A bumpy grid with `side²` vertices and random bound Gaussians.
+    fn scene(side: u32, per_tri: usize) -> (TriMesh, GaussianSet, Vec<Vec3>) {
+        let mut rng = Rng::new(11);
+        let mut positions = Vec::new();
+        for y in 0..side {
+            for x in 0..side {
+                let z = rng.uniform_f32() * 0.1;
+                positions.push(Vec3::new(x as f32, y as f32, z) / side as f32);
+            }
+        }
+        let mut triangles = Vec::new();
+        for y in 0..side - 1 {
+            for x in 0..side - 1 {
+                let a = y * side + x;
+                triangles.push([a, a + 1, a + side + 1]);
+                triangles.push([a, a + side + 1, a + side]);
+            }
+        }
+        let n = triangles.len() * per_tri;
+        let mut u = || rng.uniform_f32() - 0.5;
+        let set = GaussianSet::try_new(GaussianParts {
+            means: (0..n).map(|_| Vec3::new(u(), u(), u())).collect(),
+            log_scales: (0..n).map(|_| Vec3::new(u(), u(), u()) * 4.0).collect(),
+            rotations: (0..n).map(|_| [u() + 1.0, u(), u(), u()]).collect(),
+            opacity_logits: vec![0.0; n],
+            sh: vec![0.0; 3 * n],
+            binding: Some(Binding {
+                triangles: (0..n).map(|i| TriId((i / per_tri) as u32)).collect(),
+                encoding: BindingEncoding::Float,
+            }),
+            space: ParameterSpace::Local,
+            ..GaussianParts::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        let moved = positions
+            .iter()
+            .map(|p| Vec3::new(p.x * 1.5 + p.y * 0.2, p.y, p.z + (p.x * 5.0).sin() * 0.1))
+            .collect();
+        (TriMesh::new(positions, triangles), set, moved)
+    }
+
+    #[test]
+    fn results_do_not_depend_on_thread_count() {
+        let (mesh, set, moved) = scene(40, 3);
+        for mode in [DeformMode::Binding, DeformMode::Jacobian] {
+            let deformer = Deformer::new(&mesh, mode);
+            let run = |threads| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .map(|pool| pool.install(|| deformer.deform(&set, &moved)))
+            };
+            let one = run(1).unwrap().unwrap();
+            let four = run(4).unwrap().unwrap();
+            assert_eq!(one, four, "{mode:?}");
+        }
+    }
+
+    #[test]
+    fn rotation_and_scales_reconstructs() {
+        let mut rng = Rng::new(5);
+        for _ in 0..1000 {
+            let l = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5));
+            let (u, s) = rotation_and_scales(l);
+            assert!((u.determinant() - 1.0).abs() < 1e-12);
+            assert!(s.x >= s.y && s.y >= s.z && s.z >= 0.0);
+            let sig = DMat3::from_diagonal(s * s);
+            let back = u * sig * u.transpose();
+            let want = l * l.transpose();
+            let err = (back - want)
+                .to_cols_array()
+                .iter()
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(err < 1e-12, "{err}");
+        }
+    }
+}
