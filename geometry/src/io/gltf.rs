@@ -41,8 +41,29 @@ const UNBACKED_ACCESSOR_FACTOR: usize = 4;
 /// Loads the document and its buffers.
 fn load(path: &Path) -> Result<(gltf::Document, Vec<Vec<u8>>), IoError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::os(path, e))?;
-    let gltf = gltf::Gltf::from_slice(&bytes)
-        .map_err(|e| IoError::malformed(path, "document", e.to_string()))?;
+    let bad_doc = |e: gltf::Error| IoError::malformed(path, "document", e.to_string());
+    // gltf-json 1.4's validation indexes the accessor array with a primitive's POSITION index
+    // unchecked (a panic on a bad index): check those indices before validating.
+    let unchecked = gltf::Gltf::from_slice_without_validation(&bytes).map_err(bad_doc)?;
+    let json = unchecked.document.as_json();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (k, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= json.accessors.len() {
+                    return Err(IoError::malformed(
+                        path,
+                        format!("mesh {m} primitive {k}"),
+                        format!(
+                            "attribute {semantic:?} refers to accessor {}, which does not exist",
+                            index.value()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    drop(unchecked);
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(bad_doc)?;
     let gltf::Gltf { document, mut blob } = gltf;
     let base = path.parent().unwrap_or_else(|| Path::new("."));
     let mut buffers = Vec::new();

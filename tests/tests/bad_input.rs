@@ -1,0 +1,425 @@
+//! Bad input at the library level: each case returns the right `IoError` naming the file and the
+//! element at fault, never a panic; plus seeded byte-mutation fuzzing of every reader.
+
+use std::path::{Path, PathBuf};
+
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::io::{self, IoError, ObjVertices, PlyEncoding, PlyExtras, gltf, obj, ply};
+use trisplat_geometry::rng::Rng;
+
+fn write(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.path().join(name);
+    std::fs::write(&p, bytes).expect("write test input");
+    p
+}
+
+/// The element and message of a `Malformed` error for `path`; fails the test otherwise.
+fn malformed(result: Result<TriMesh, IoError>, path: &Path) -> (String, String) {
+    match result {
+        Err(IoError::Malformed {
+            path: p,
+            element,
+            message,
+        }) => {
+            assert_eq!(p, path, "the error names the file");
+            (element, message)
+        }
+        other => panic!("expected Malformed for {}, got {other:?}", path.display()),
+    }
+}
+
+/// A binary little-endian PLY of a small mesh (the Spot fixture).
+fn spot_ply_bytes(dir: &tempfile::TempDir) -> Vec<u8> {
+    let mesh = trisplat_fixtures::spot().expect("spot");
+    let p = dir.path().join("spot_source.ply");
+    ply::write_ply_mesh(
+        &p,
+        &mesh,
+        &PlyExtras::default(),
+        PlyEncoding::BinaryLittleEndian,
+    )
+    .expect("write");
+    std::fs::read(&p).expect("read back")
+}
+
+const ASCII_HEADER: &str = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n\
+    property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+    end_header\n";
+
+#[test]
+fn truncated_binary_ply() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bytes = spot_ply_bytes(&dir);
+    let p = write(&dir, "cut.ply", &bytes[..bytes.len() - 1000]);
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert!(element.starts_with("face"), "{element}");
+    assert!(message.contains("truncated"), "{message}");
+}
+
+#[test]
+fn truncated_ascii_ply() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "cut.ply",
+        format!("{ASCII_HEADER}0 0 0\n1 0 0\n").as_bytes(),
+    );
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "vertex 2");
+    assert!(message.contains("truncated"), "{message}");
+}
+
+#[test]
+fn truncated_header() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "cut.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 3\n",
+    );
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert!(element.starts_with("header line"), "{element}");
+    assert!(message.contains("end_header"), "{message}");
+}
+
+#[test]
+fn count_larger_than_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bytes = spot_ply_bytes(&dir);
+    let text = String::from_utf8_lossy(&bytes[..200]).into_owned();
+    let declared = text
+        .lines()
+        .find(|l| l.starts_with("element vertex"))
+        .expect("vertex line")
+        .to_owned();
+    let huge = "element vertex 4000000000";
+    let mut patched = Vec::new();
+    let at = text.find(&declared).expect("found");
+    patched.extend_from_slice(&bytes[..at]);
+    patched.extend_from_slice(huge.as_bytes());
+    patched.extend_from_slice(&bytes[at + declared.len()..]);
+    let p = write(&dir, "huge.ply", &patched);
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "element vertex");
+    assert!(message.contains("4000000000"), "{message}");
+    assert!(message.contains("at most"), "{message}");
+}
+
+#[test]
+fn count_larger_than_ascii_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = ASCII_HEADER.replace("element vertex 3", "element vertex 999999999999");
+    let p = write(&dir, "huge.ply", format!("{text}0 0 0\n").as_bytes());
+    let (element, _) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "element vertex");
+}
+
+#[test]
+fn huge_list_length_is_truncation_not_allocation() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
+        property float y\nproperty float z\nelement face 1\nproperty list uint int vertex_indices\n\
+        end_header\n"
+        .to_vec();
+    b.extend_from_slice(&[0; 12]);
+    b.extend_from_slice(&u32::MAX.to_le_bytes());
+    let p = write(&dir, "list.ply", &b);
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "face 0");
+    assert!(message.contains("truncated"), "{message}");
+}
+
+#[test]
+fn nan_coordinate_in_ply() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "nan.ply",
+        format!("{ASCII_HEADER}0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n").as_bytes(),
+    );
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "vertex 1");
+    assert!(message.contains("non-finite"), "{message}");
+    // Point clouds are checked too.
+    assert!(matches!(
+        io::read_points(&p),
+        Err(IoError::Malformed { element, .. }) if element == "vertex 1"
+    ));
+}
+
+#[test]
+fn nan_coordinate_in_binary_ply() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut b = ASCII_HEADER
+        .replace("ascii", "binary_big_endian")
+        .into_bytes();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY] {
+        b.extend_from_slice(&v.to_be_bytes());
+    }
+    b.push(3);
+    for i in [0i32, 1, 2] {
+        b.extend_from_slice(&i.to_be_bytes());
+    }
+    let p = write(&dir, "inf.ply", &b);
+    let (element, _) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "vertex 2");
+}
+
+#[test]
+fn out_of_range_index_in_ply() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "range.ply",
+        format!("{ASCII_HEADER}0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").as_bytes(),
+    );
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "face 0");
+    assert!(message.contains("vertex index 7"), "{message}");
+    assert!(message.contains("out of range"), "{message}");
+}
+
+#[test]
+fn negative_index_in_ply() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "neg.ply",
+        format!("{ASCII_HEADER}0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n").as_bytes(),
+    );
+    let (element, _) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "face 0");
+}
+
+#[test]
+fn non_utf8_obj() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "latin1.obj",
+        b"v 0 0 0\nv 1 0 0\n# caf\xe9\nv 0 1 0\nf 1 2 3\n",
+    );
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "line 3");
+    assert!(message.contains("UTF-8"), "{message}");
+}
+
+#[test]
+fn nan_coordinate_in_obj() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(&dir, "nan.obj", b"v 0 0 0\nv NaN 0 0\nv 0 1 0\nf 1 2 3\n");
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "vertex 1 (line 2)");
+    assert!(message.contains("non-finite"), "{message}");
+}
+
+#[test]
+fn out_of_range_index_in_obj() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "range.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n",
+    );
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "face 1 (line 5)");
+    assert!(message.contains("does not exist"), "{message}");
+}
+
+#[test]
+fn missing_mtl_is_not_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "mtl.obj",
+        b"mtllib nowhere.mtl\nusemtl skin\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    assert_eq!(io::read_mesh(&p).expect("reads").triangle_count(), 1);
+}
+
+fn gltf_with_buffer(uri: &str) -> String {
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
+          "min":[0,0,0],"max":[1,1,0]}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "buffers":[{{"byteLength":36,"uri":"{uri}"}}]}}"#
+    )
+}
+
+#[test]
+fn missing_external_bin() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        &dir,
+        "lonely.gltf",
+        gltf_with_buffer("missing.bin").as_bytes(),
+    );
+    match io::read_mesh(&p) {
+        Err(IoError::MissingReference {
+            path, reference, ..
+        }) => {
+            assert_eq!(path, p);
+            assert_eq!(reference, dir.path().join("missing.bin"));
+        }
+        other => panic!("expected MissingReference, got {other:?}"),
+    }
+}
+
+#[test]
+fn external_bin_too_short() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(&dir, "short.bin", &[0; 20]);
+    let p = write(&dir, "short.gltf", gltf_with_buffer("short.bin").as_bytes());
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "buffer 0");
+    assert!(message.contains("36"), "{message}");
+}
+
+#[test]
+fn gltf_index_out_of_range() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in [0u32, 1, 5] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    write(&dir, "mesh.bin", &bin);
+    let text = r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],
+        "meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],
+        "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
+          "min":[0,0,0],"max":[1,1,0]},
+          {"bufferView":1,"componentType":5125,"count":3,"type":"SCALAR"}],
+        "bufferViews":[{"buffer":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":12}],
+        "buffers":[{"byteLength":48,"uri":"mesh.bin"}]}"#;
+    let p = write(&dir, "range.gltf", text.as_bytes());
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "mesh 0 primitive 0 index 2");
+    assert!(message.contains("out of range"), "{message}");
+}
+
+#[test]
+fn gltf_accessor_past_its_view() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(&dir, "mesh.bin", &[0; 36]);
+    let text = gltf_with_buffer("mesh.bin").replace(r#""count":3"#, r#""count":4"#);
+    let p = write(&dir, "past.gltf", text.as_bytes());
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "accessor 0");
+    assert!(message.contains("do not fit"), "{message}");
+}
+
+#[test]
+fn unknown_extension() {
+    let p = Path::new("mesh.stl");
+    assert!(matches!(
+        io::read_mesh(p),
+        Err(IoError::UnknownFormat { .. })
+    ));
+}
+
+/// Flips, replaces, inserts and deletes a few bytes.
+fn mutate(rng: &mut Rng, bytes: &[u8]) -> Vec<u8> {
+    let mut b = bytes.to_vec();
+    let edits = 1 + rng.below(4);
+    for _ in 0..edits {
+        if b.is_empty() {
+            b.push(0);
+        }
+        let len = u32::try_from(b.len()).unwrap_or(u32::MAX);
+        let at = rng.below(len) as usize;
+        match rng.below(5) {
+            0 => b[at] ^= 1 << rng.below(8),
+            1 => b[at] = u8::try_from(rng.below(256)).unwrap_or(0),
+            2 => b.insert(at, b"0123456789 -\n"[rng.below(13) as usize]),
+            3 => {
+                b.remove(at);
+            }
+            _ => b.truncate(at),
+        }
+    }
+    b
+}
+
+/// Runs `read` on `cases` mutations of `valid`; every outcome must be Ok or Err, never a panic.
+fn fuzz(valid: &[u8], seed: u64, cases: usize, read: impl Fn(&[u8]) -> bool) -> usize {
+    let mut rng = Rng::new(seed);
+    let mut errors = 0;
+    for _ in 0..cases {
+        let input = mutate(&mut rng, valid);
+        if !read(&input) {
+            errors += 1;
+        }
+    }
+    errors
+}
+
+const FUZZ_CASES: usize = 3000;
+
+#[test]
+fn fuzz_binary_ply_never_panics() {
+    let valid = std::fs::read(trisplat_fixtures::path("io/quad_int_int_le.ply")).expect("fixture");
+    let p = Path::new("fuzz.ply");
+    let errors = fuzz(&valid, 1, FUZZ_CASES, |b| {
+        ply::parse_ply(p, b)
+            .and_then(|doc| ply::ply_to_mesh(p, &doc))
+            .is_ok()
+    });
+    // The mutations must actually reach the error paths.
+    assert!(errors > FUZZ_CASES / 10, "{errors} errors");
+}
+
+#[test]
+fn fuzz_big_endian_and_ascii_ply_never_panics() {
+    let p = Path::new("fuzz.ply");
+    for (seed, name) in [
+        (2, "io/quad_uchar_uint_be.ply"),
+        (3, "io/unknown_props.ply"),
+        (4, "io/tristrips.ply"),
+    ] {
+        let valid = std::fs::read(trisplat_fixtures::path(name)).expect("fixture");
+        let errors = fuzz(&valid, seed, FUZZ_CASES / 3, |b| {
+            ply::parse_ply(p, b)
+                .and_then(|doc| ply::ply_to_mesh(p, &doc))
+                .is_ok()
+        });
+        assert!(errors > 0, "{name}");
+    }
+}
+
+#[test]
+fn fuzz_obj_never_panics() {
+    let valid = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n\
+        usemtl a\nf 1/1/1 2/2/1 3/3/1 4/1/1\nf -1 -2 -3\n";
+    let p = Path::new("fuzz.obj");
+    for mode in [ObjVertices::Positions, ObjVertices::SplitSeams] {
+        let errors = fuzz(valid, 5, FUZZ_CASES / 2, |b| {
+            obj::parse_obj(p, b, mode).is_ok()
+        });
+        assert!(errors > 0);
+    }
+}
+
+#[test]
+fn fuzz_glb_never_panics() {
+    let mesh = trisplat_fixtures::spot().expect("spot");
+    let small = TriMesh::try_new(
+        mesh.positions()[..50].to_vec(),
+        mesh.triangles()
+            .iter()
+            .filter(|t| t.iter().all(|&v| v < 50))
+            .copied()
+            .collect(),
+    )
+    .expect("sub-mesh");
+    let valid = gltf::glb_bytes(Path::new("x.glb"), &small).expect("glb");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("fuzz.glb");
+    let errors = fuzz(&valid, 6, FUZZ_CASES / 3, |b| {
+        std::fs::write(&p, b).is_ok() && io::read_mesh(&p).is_ok()
+    });
+    assert!(errors > 0);
+}
