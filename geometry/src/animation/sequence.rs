@@ -76,7 +76,12 @@ fn printf_parts(pattern: &str) -> Option<(&str, usize, &str)> {
     if !spec.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    let width = spec.trim_start_matches('0').parse().unwrap_or(0);
+    // Only a zero-padded conversion fixes the digit count; `%d` and `%4d` take any digits.
+    let width = if spec.starts_with('0') {
+        spec.trim_start_matches('0').parse().unwrap_or(0)
+    } else {
+        0
+    };
     Some((&pattern[..start], width, &rest[d + 1..]))
 }
 
@@ -134,8 +139,8 @@ impl MeshSequence {
     }
 
     /// Files matching `pattern`: a printf integer conversion in the file name
-    /// (`out/frame_%04d.ply`, ordered by the number; `%04d` needs exactly 4 digits when the
-    /// number is shorter, `%d` any digits) or a glob with `*`/`?` in the file name (natural
+    /// (`out/frame_%04d.ply`, ordered by the number; `%04d` takes 4 digits, or more without a
+    /// leading zero; `%d` any digits) or a glob with `*`/`?` in the file name (natural
     /// order). A pattern naming a directory lists that directory.
     ///
     /// # Errors
@@ -167,10 +172,11 @@ impl MeshSequence {
                     continue;
                 };
                 let digits_ok = !mid.is_empty() && mid.bytes().all(|b| b.is_ascii_digit());
-                // printf pads to at least `width` digits: shorter is not ours, longer only
-                // without a leading zero.
-                let width_ok = mid.len() >= width
-                    && (mid.len() == width || !mid.starts_with('0') || mid.len() == 1);
+                // `%0Nd` pads to N digits: shorter is not ours, longer only without a
+                // leading zero.
+                let width_ok = width == 0
+                    || mid.len() == width
+                    || (mid.len() > width && !mid.starts_with('0'));
                 if digits_ok
                     && width_ok
                     && let Ok(n) = mid.parse::<u64>()
@@ -334,6 +340,7 @@ mod tests {
         assert!(!glob_match(&p, &"g_12.ply".chars().collect::<Vec<_>>()));
         assert_eq!(printf_parts("f_%04d.ply"), Some(("f_", 4, ".ply")));
         assert_eq!(printf_parts("f_%d.ply"), Some(("f_", 0, ".ply")));
+        assert_eq!(printf_parts("f_%4d.ply"), Some(("f_", 0, ".ply")));
         assert_eq!(printf_parts("f_%s.ply"), None);
     }
 }
