@@ -7,7 +7,9 @@
 //! `TRISPLAT_PYTHON` environment variable, else `python3`). Without one, only trisplat's
 //! timings are printed.
 
+mod eval;
 mod harness;
+mod smooth;
 
 use clap::{Parser, Subcommand};
 
@@ -31,11 +33,18 @@ struct Args {
 }
 
 #[derive(Debug, Subcommand)]
-enum Bench {}
+enum Bench {
+    /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
+    Eval(eval::EvalBenchArgs),
+    /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
+    Smooth,
+}
 
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let python = (!args.no_python).then_some(args.python.as_str());
-    let _ = python;
-    match args.bench {}
+    match args.bench {
+        Bench::Eval(a) => eval::run(&a, python),
+        Bench::Smooth => smooth::run(python),
+    }
 }

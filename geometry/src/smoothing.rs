@@ -37,7 +37,6 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::mesh::TriMesh;
-use crate::topology::VertexAdjacency;
 
 /// Default number of iterations (trimesh's default; Open3D's is 1).
 pub const DEFAULT_ITERATIONS: usize = 10;
@@ -176,7 +175,7 @@ pub fn smooth_positions(
     let lambda = options.lambda;
     match options.method {
         SmoothMethod::Laplacian | SmoothMethod::Taubin => {
-            let adjacency = VertexAdjacency::new(mesh.vertex_count(), mesh.triangles());
+            let adjacency = OneRing::new(mesh.vertex_count(), mesh.triangles());
             let steps: &[f64] = if options.method == SmoothMethod::Taubin {
                 &[lambda, options.mu]
             } else {
@@ -262,7 +261,7 @@ fn relax(x: DVec3, weighted_sum: DVec3, weight_total: f64, step: f64) -> DVec3 {
 /// Open3D's inverse-distance Laplacian update of vertex `v`.
 #[inline]
 fn inverse_distance_update(
-    adjacency: &VertexAdjacency,
+    adjacency: &OneRing,
     v: usize,
     x: DVec3,
     prev: &[DVec3],
@@ -277,6 +276,76 @@ fn inverse_distance_update(
         sum += w * xj;
     }
     relax(x, sum, total, step)
+}
+
+/// The 1-ring of every vertex (sorted, unique, no self-loops): the same lists as
+/// [`crate::topology::VertexAdjacency`], built with a counting pass and parallel per-vertex
+/// sorts instead of one global edge sort.
+struct OneRing {
+    offsets: Vec<usize>,
+    neighbors: Vec<u32>,
+}
+
+impl OneRing {
+    fn new(vertex_count: usize, triangles: &[[u32; 3]]) -> Self {
+        let edges =
+            |&[a, b, c]: &[u32; 3]| [(a, b), (b, c), (c, a)].into_iter().filter(|(p, q)| p != q);
+        let mut raw_offsets = vec![0usize; vertex_count + 1];
+        for tri in triangles {
+            for (p, q) in edges(tri) {
+                raw_offsets[p as usize + 1] += 1;
+                raw_offsets[q as usize + 1] += 1;
+            }
+        }
+        for i in 1..raw_offsets.len() {
+            raw_offsets[i] += raw_offsets[i - 1];
+        }
+        let mut fill = raw_offsets.clone();
+        let mut raw = vec![0u32; raw_offsets[vertex_count]];
+        for tri in triangles {
+            for (p, q) in edges(tri) {
+                raw[fill[p as usize]] = q;
+                fill[p as usize] += 1;
+                raw[fill[q as usize]] = p;
+                fill[q as usize] += 1;
+            }
+        }
+        // Split into one slice per vertex, sort and dedup each in parallel.
+        let mut slices: Vec<&mut [u32]> = Vec::with_capacity(vertex_count);
+        let mut rest = raw.as_mut_slice();
+        for v in 0..vertex_count {
+            let (head, tail) = rest.split_at_mut(raw_offsets[v + 1] - raw_offsets[v]);
+            slices.push(head);
+            rest = tail;
+        }
+        let unique: Vec<usize> = slices
+            .into_par_iter()
+            .map(|list| {
+                list.sort_unstable();
+                let mut n = 0;
+                for i in 0..list.len() {
+                    if n == 0 || list[i] != list[n - 1] {
+                        list[n] = list[i];
+                        n += 1;
+                    }
+                }
+                n
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(vertex_count + 1);
+        offsets.push(0usize);
+        let mut neighbors = Vec::with_capacity(unique.iter().sum());
+        for (v, &n) in unique.iter().enumerate() {
+            neighbors.extend_from_slice(&raw[raw_offsets[v]..raw_offsets[v] + n]);
+            offsets.push(neighbors.len());
+        }
+        Self { offsets, neighbors }
+    }
+
+    #[inline]
+    fn neighbors(&self, v: usize) -> &[u32] {
+        &self.neighbors[self.offsets[v]..self.offsets[v + 1]]
+    }
 }
 
 /// trimesh's uniform operator: distinct directed-edge neighbours, divisor = edge count.
@@ -445,6 +514,18 @@ mod tests {
             [0, 3, 5],
         ];
         TriMesh::new(p, t)
+    }
+
+    #[test]
+    fn one_ring_equals_vertex_adjacency() {
+        let mut t = octahedron().triangles().to_vec();
+        t.push([0, 0, 1]); // repeated index
+        t.push([0, 2, 4]); // duplicate triangle
+        let fast = OneRing::new(8, &t);
+        let slow = crate::topology::VertexAdjacency::new(8, &t);
+        for v in 0..8 {
+            assert_eq!(fast.neighbors(v), slow.neighbors(v), "vertex {v}");
+        }
     }
 
     #[test]
