@@ -43,7 +43,8 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
         );
     }
     let mesh = read_mesh(&args.mesh)?;
-    if args.n > 0 && !(mesh.area() > 0.0) {
+    let area = mesh.area();
+    if args.n > 0 && (area <= 0.0 || area.is_nan()) {
         bail!(
             "{}: the mesh has no surface to sample ({} triangles, total area 0)",
             args.mesh.display(),
