@@ -16,7 +16,7 @@
 //! neighbours) until `N` remain. `d_max = 2 sqrt(A / (2 sqrt 3 N))` is twice the largest disk
 //! radius `N` points can have on area `A` (hexagonal packing) and
 //! `d_min = d_max β (1 − (N / M)^γ)` for `M` candidates. Constants from the paper: α = 8,
-//! β = 0.65, γ = 1.5 (Open3D 0.20 uses β = 0.5). Distances are Euclidean in 3D, as in Open3D.
+//! β = 0.65, γ = 1.5 (Open3D's source uses β = 0.5). Distances are Euclidean in 3D, as in Open3D.
 //!
 //! # Curvature-weighted sampling
 //! [`sample_curvature`] draws triangles with probability proportional to
