@@ -436,3 +436,66 @@ fn broken_references_give_errors_not_panics() {
         Err(AnimationError::Os { .. })
     ));
 }
+
+#[test]
+fn mutated_accessors_and_nodes_never_panic() {
+    // Every accessor's count and offset, every node's children and every sampler's
+    // interpolation pushed to odd values: each open must return (Ok or a clear Err), not panic.
+    let dir = tempfile::tempdir().expect("tmp");
+    let base = synthetic_json();
+    let accessors = base["accessors"].as_array().expect("a").len();
+    let mut cases: Vec<Value> = Vec::new();
+    for a in 0..accessors {
+        for count in [0u64, 1, 2, 7, 1 << 20, u64::from(u32::MAX)] {
+            let mut doc = base.clone();
+            doc["accessors"][a]["count"] = json!(count);
+            cases.push(doc);
+        }
+        for offset in [1u64, 3, 4096, u64::from(u32::MAX)] {
+            let mut doc = base.clone();
+            doc["accessors"][a]["byteOffset"] = json!(offset);
+            cases.push(doc);
+        }
+        let mut doc = base.clone();
+        doc["accessors"][a]["normalized"] = json!(true);
+        doc["accessors"][a]["componentType"] = json!(5121);
+        cases.push(doc);
+    }
+    for n in 0..6 {
+        let mut doc = base.clone();
+        doc["nodes"][n]["children"] = json!([0]);
+        cases.push(doc);
+        let mut doc = base.clone();
+        doc["nodes"][n]["weights"] = json!([1.0]);
+        cases.push(doc);
+    }
+    for s in 0..7 {
+        for interp in ["STEP", "CUBICSPLINE", "LINEAR"] {
+            let mut doc = base.clone();
+            doc["animations"][0]["samplers"][s]["interpolation"] = json!(interp);
+            cases.push(doc);
+        }
+    }
+    let mut errors = 0;
+    for (k, doc) in cases.iter().enumerate() {
+        let p = write_json(dir.path(), &format!("m{k}.gltf"), doc);
+        for clip in [Clip::None, Clip::Index(0), Clip::Index(1)] {
+            match GltfTemplate::open(&p, &clip) {
+                Ok(t) => {
+                    for i in 0..t.frame_count().min(3) {
+                        let _ = t.frame(i);
+                    }
+                    let _ = t.evaluate_at(0.7);
+                }
+                Err(e) => {
+                    assert!(!e.to_string().is_empty());
+                    errors += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        errors > cases.len(),
+        "most mutations must be refused: {errors}"
+    );
+}
