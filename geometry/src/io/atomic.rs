@@ -24,6 +24,7 @@ where
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(|e| IoError::os(path, e))?;
+    set_output_permissions(path, tmp.as_file()).map_err(|e| IoError::os(path, e))?;
     let mut writer = BufWriter::with_capacity(1 << 20, tmp);
     write(&mut writer)?;
     let tmp = writer
@@ -33,6 +34,25 @@ where
         .sync_data()
         .map_err(|e| IoError::os(path, e))?;
     tmp.persist(path).map_err(|e| IoError::os(path, e.error))?;
+    Ok(())
+}
+
+/// Temporary files are created owner-only (0600); the output gets the permissions of the file
+/// it replaces, or 0644 (read for everyone, as a plain create under the usual umask) when new.
+#[cfg(unix)]
+fn set_output_permissions(path: &Path, file: &std::fs::File) -> std::io::Result<()> {
+    use std::os::unix::fs::PermissionsExt as _;
+    const NEW_FILE_MODE: u32 = 0o644;
+    let permissions = match std::fs::metadata(path) {
+        Ok(existing) => existing.permissions(),
+        Err(_) => std::fs::Permissions::from_mode(NEW_FILE_MODE),
+    };
+    file.set_permissions(permissions)
+}
+
+/// Elsewhere the temporary file's default permissions are kept.
+#[cfg(not(unix))]
+fn set_output_permissions(_path: &Path, _file: &std::fs::File) -> std::io::Result<()> {
     Ok(())
 }
 
@@ -51,6 +71,20 @@ mod tests {
         assert!(err.is_err());
         assert!(!target.exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn new_files_are_readable_by_everyone() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("new.txt");
+        write_atomically(&target, |w| {
+            w.write_all(b"x").map_err(|e| IoError::os("x", e))
+        })
+        .unwrap();
+        let mode = std::fs::metadata(&target).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o644);
     }
 
     #[test]
