@@ -13,6 +13,7 @@ pub mod frames;
 pub mod gaussians;
 pub mod ply;
 pub mod sh;
+pub mod wasserstein;
 
 pub use gaussians::{
     Binding, BindingEncoding, ExtraProperty, GaussianError, GaussianParts, GaussianReport,
