@@ -7,12 +7,15 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum IoError {
     /// The operating system refused (missing file, permissions, disk full).
-    #[error("{path}: {source}")]
+    ///
+    /// The OS error is part of the message and deliberately not exposed as
+    /// [`std::error::Error::source`], so a reporter that prints the cause chain prints it once.
+    #[error("{path}: {error}")]
     Os {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The extension names no format we read or write.
     #[error("{path}: unknown file format (expected .ply, .obj, .gltf or .glb)")]
@@ -31,14 +34,14 @@ pub enum IoError {
         message: String,
     },
     /// The file refers to another file (an external glTF buffer) that cannot be read.
-    #[error("{path}: refers to {reference}, which cannot be read: {source}")]
+    #[error("{path}: refers to {reference}, which cannot be read: {error}")]
     MissingReference {
         /// The file holding the reference.
         path: PathBuf,
         /// The referenced file, resolved against the folder of `path`.
         reference: PathBuf,
-        /// Why it cannot be read.
-        source: std::io::Error,
+        /// Why it cannot be read (in the message, not a `source`: see [`IoError::Os`]).
+        error: std::io::Error,
     },
     /// The file is well formed but uses something we do not support.
     #[error("{path}: unsupported: {what}")]
@@ -65,10 +68,10 @@ impl IoError {
     }
 
     /// An [`IoError::Os`] for `path`.
-    pub fn os(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn os(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         Self::Os {
             path: path.into(),
-            source,
+            error,
         }
     }
 }

@@ -89,10 +89,10 @@ fn load(path: &Path) -> Result<(gltf::Document, Vec<Vec<u8>>), IoError> {
             }
             gltf::buffer::Source::Uri(uri) => {
                 let file = base.join(percent_decode(uri));
-                std::fs::read(&file).map_err(|source| IoError::MissingReference {
+                std::fs::read(&file).map_err(|error| IoError::MissingReference {
                     path: path.to_path_buf(),
                     reference: file.clone(),
-                    source,
+                    error,
                 })?
             }
         };
