@@ -7,6 +7,7 @@
 //! `TRISPLAT_PYTHON` environment variable, else `python3`). Without one, only trisplat's
 //! timings are printed.
 
+mod eval;
 mod harness;
 mod smooth;
 

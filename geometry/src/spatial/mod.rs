@@ -5,8 +5,8 @@
 //! Coordinates must be finite and at most [`MAX_COORDINATE`] in magnitude (f32 squared distances
 //! overflow beyond that); both constructors check it and return a [`SpatialError`].
 
-mod bvh;
-mod kdtree;
+pub mod bvh;
+pub mod kdtree;
 
 pub use bvh::{ClosestPoint, RayHit, TriangleBvh, closest_point_on_triangle};
 pub use kdtree::{Nearest, PointIndex, distance_f64};
