@@ -34,6 +34,8 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Bench {
+    /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
+    Eval(eval::EvalBenchArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
     Smooth,
 }
@@ -42,6 +44,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let python = (!args.no_python).then_some(args.python.as_str());
     match args.bench {
+        Bench::Eval(a) => eval::run(&a, python),
         Bench::Smooth => smooth::run(python),
     }
 }
