@@ -2,9 +2,9 @@
 
 use std::io::IsTerminal;
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 
-/// Factory for progress bars that respects `--quiet` and non-terminal stderr.
+/// Factory for progress spinners that respects `--quiet` and non-terminal stderr.
 #[derive(Clone, Copy, Debug)]
 pub struct Progress {
     enabled: bool,
@@ -16,20 +16,6 @@ impl Progress {
         Self {
             enabled: !quiet && std::io::stderr().is_terminal(),
         }
-    }
-
-    /// A bar of `len` steps labelled `message` (hidden when disabled).
-    pub fn bar(self, len: u64, message: &str) -> ProgressBar {
-        if !self.enabled {
-            return ProgressBar::hidden();
-        }
-        let bar = ProgressBar::new(len).with_message(message.to_owned());
-        if let Ok(style) =
-            ProgressStyle::with_template("{msg} [{elapsed_precise}] {wide_bar} {pos}/{len}")
-        {
-            bar.set_style(style);
-        }
-        bar
     }
 
     /// A spinner labelled `message` for work of unknown length (hidden when disabled).

@@ -1,11 +1,11 @@
 //! `trisplat convert`: PLY, OBJ, glTF and GLB meshes from one format to another.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::bail;
 use trisplat_geometry::io::{self, Format, ObjVertices, PlyEncoding, ReadOptions, WriteOptions};
 
-use super::Context;
+use super::{Context, refuse_to_overwrite};
 
 /// Arguments of `trisplat convert`.
 #[derive(Debug, clap::Args)]
@@ -33,18 +33,6 @@ pub struct ConvertArgs {
     pub time: Option<f64>,
 }
 
-/// The absolute, symlink-free form of `path`, also when the file does not exist yet.
-fn canonical(path: &Path) -> Option<PathBuf> {
-    if let Ok(p) = path.canonicalize() {
-        return Some(p);
-    }
-    let parent = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    Some(parent.canonicalize().ok()?.join(path.file_name()?))
-}
-
 /// Runs `trisplat convert`.
 ///
 /// # Errors
@@ -66,16 +54,7 @@ pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     }
     let in_format = Format::from_path(&args.input)?;
     let out_format = Format::from_path(&args.output)?;
-    let same = match (args.input.canonicalize(), canonical(&args.output)) {
-        (Ok(a), Some(b)) => a == b,
-        _ => false,
-    };
-    if same {
-        bail!(
-            "{}: refusing to overwrite the input file",
-            args.output.display()
-        );
-    }
+    refuse_to_overwrite(&args.input, &args.output)?;
     let options = WriteOptions { ascii: args.ascii };
     let spinner = ctx
         .progress

@@ -5,6 +5,10 @@ pub mod eval;
 pub mod sample;
 pub mod smooth;
 
+use std::path::{Path, PathBuf};
+
+use anyhow::bail;
+
 use crate::progress::Progress;
 
 /// What every command gets besides its arguments.
@@ -12,4 +16,34 @@ use crate::progress::Progress;
 pub struct Context {
     /// Progress bar factory.
     pub progress: Progress,
+}
+
+/// Refuses an output path that names the input file (also through links or `..`).
+///
+/// # Errors
+/// When `output` and `input` are the same file.
+pub fn refuse_to_overwrite(input: &Path, output: &Path) -> anyhow::Result<()> {
+    let same = match (input.canonicalize(), canonical(output)) {
+        (Ok(a), Some(b)) => a == b,
+        _ => input == output,
+    };
+    if same {
+        bail!(
+            "{}: refusing to overwrite the input file; choose another output path",
+            output.display()
+        );
+    }
+    Ok(())
+}
+
+/// The absolute, symlink-free form of `path`, also when the file does not exist yet.
+fn canonical(path: &Path) -> Option<PathBuf> {
+    if let Ok(p) = path.canonicalize() {
+        return Some(p);
+    }
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    Some(parent.canonicalize().ok()?.join(path.file_name()?))
 }

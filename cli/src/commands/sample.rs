@@ -1,12 +1,12 @@
 //! `trisplat sample MESH -n N [--method uniform|poisson|curvature] [--seed S] -o POINTS.ply`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_points};
 use trisplat_geometry::sampling::{SampleOptions, sample};
 
-use super::Context;
+use super::{Context, refuse_to_overwrite};
 
 /// Arguments of `trisplat sample`.
 #[derive(Debug, clap::Args)]
@@ -56,23 +56,5 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
         .with_context(|| format!("{}: sampling failed", args.mesh.display()))?;
     spinner.finish_and_clear();
     write_points(&args.output, &samples.points, WriteOptions::default())?;
-    Ok(())
-}
-
-/// Refuses an output path that names the input file (also through links or `..`).
-///
-/// # Errors
-/// When `output` and `input` are the same file.
-pub(crate) fn refuse_to_overwrite(input: &Path, output: &Path) -> anyhow::Result<()> {
-    let same = match (input.canonicalize(), output.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => input == output,
-    };
-    if same {
-        bail!(
-            "{}: refusing to overwrite the input; choose another output path",
-            output.display()
-        );
-    }
     Ok(())
 }

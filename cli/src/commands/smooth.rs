@@ -7,8 +7,7 @@ use anyhow::Context as _;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_geometry::smoothing::{SmoothOptions, smooth};
 
-use super::Context;
-use super::sample::refuse_to_overwrite;
+use super::{Context, refuse_to_overwrite};
 
 /// Arguments of `trisplat smooth`.
 #[derive(Debug, clap::Args)]
