@@ -1,0 +1,143 @@
+//! `trisplat sample`, `smooth` and common contract checks through the real binary: success
+//! paths produce readable files, usage errors exit 2, refused outputs leave inputs untouched.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use trisplat_geometry::io::{read_mesh, read_points};
+
+const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("run trisplat")
+}
+
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("cli_commands_{}_{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create test folder");
+    dir
+}
+
+fn spot() -> String {
+    trisplat_fixtures::path("spot_triangulated.obj")
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn one_error_line(out: &Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
+    assert!(stderr.starts_with("error: "), "{stderr}");
+    stderr
+}
+
+#[test]
+fn smooth_keeps_topology_and_moves_vertices() {
+    let dir = fresh_dir("smooth");
+    let out_path = dir.join("spot_smooth.ply");
+    let out = run(&[
+        "smooth",
+        &spot(),
+        "-o",
+        out_path.to_str().expect("utf-8"),
+        "--method",
+        "taubin",
+        "--iterations",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let original = read_mesh(Path::new(&spot())).expect("read spot");
+    let smoothed = read_mesh(&out_path).expect("read output");
+    assert_eq!(smoothed.triangles(), original.triangles());
+    let moved = original
+        .positions()
+        .iter()
+        .zip(smoothed.positions())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        moved > original.vertex_count() / 2,
+        "only {moved} vertices moved"
+    );
+}
+
+#[test]
+fn sample_writes_n_points_reproducibly() {
+    let dir = fresh_dir("sample");
+    let a = dir.join("a.ply");
+    let b = dir.join("b.ply");
+    for path in [&a, &b] {
+        let out = run(&[
+            "sample",
+            &spot(),
+            "-n",
+            "1000",
+            "--seed",
+            "7",
+            "-o",
+            path.to_str().expect("utf-8"),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let points = read_points(&a).expect("read samples");
+    assert_eq!(points.len(), 1000);
+    assert!(points.normals().is_some(), "samples carry face normals");
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
+
+#[test]
+fn output_equal_to_input_is_refused_and_input_kept() {
+    let dir = fresh_dir("overwrite");
+    let input = dir.join("mesh.obj");
+    std::fs::copy(spot(), &input).expect("copy fixture");
+    let before = std::fs::read(&input).unwrap();
+    let input = input.to_str().expect("utf-8");
+    for args in [
+        vec!["smooth", input, "-o", input],
+        vec!["sample", input, "-n", "10", "-o", input],
+        vec!["convert", input, input],
+    ] {
+        let stderr = one_error_line(&run(&args));
+        assert!(stderr.contains("overwrite"), "{stderr}");
+    }
+    assert_eq!(std::fs::read(input).unwrap(), before);
+}
+
+#[test]
+fn missing_input_names_the_file() {
+    let dir = fresh_dir("missing");
+    let missing = dir.join("nope.ply");
+    let missing = missing.to_str().expect("utf-8");
+    let target = dir.join("out.ply");
+    for args in [
+        vec!["smooth", missing, "-o", target.to_str().unwrap()],
+        vec!["sample", missing, "-n", "5", "-o", target.to_str().unwrap()],
+        vec!["eval", missing, missing],
+    ] {
+        let stderr = one_error_line(&run(&args));
+        assert!(stderr.contains("nope.ply"), "{stderr}");
+        assert!(!target.exists());
+    }
+}
+
+#[test]
+fn bad_usage_exits_2() {
+    for args in [
+        vec!["smooth"],
+        vec!["sample", "x.ply", "-o", "y.ply", "-n", "many"],
+        vec!["no-such-command"],
+    ] {
+        assert_eq!(run(&args).status.code(), Some(2), "{args:?}");
+    }
+}
