@@ -152,7 +152,7 @@ impl TriangleClusters {
         let mut sizes = Vec::new();
         let mut areas = Vec::new();
         let tri_areas = mesh.triangle_areas();
-        for t in 0..triangles.len() {
+        for (t, &area) in tri_areas.iter().enumerate() {
             let root = find(&mut parent, t as u32) as usize;
             if label[root] == u32::MAX {
                 label[root] = sizes.len() as u32;
@@ -162,7 +162,7 @@ impl TriangleClusters {
             let c = label[root];
             cluster_of.push(c);
             sizes[c as usize] += 1;
-            areas[c as usize] += tri_areas[t];
+            areas[c as usize] += area;
         }
         Self {
             cluster_of,
