@@ -9,6 +9,7 @@
 pub use glam;
 
 pub mod deform;
+pub mod densify;
 pub mod frames;
 pub mod gaussians;
 pub mod ply;
