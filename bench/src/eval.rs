@@ -1,10 +1,9 @@
 //! `eval`: point-set metrics (SPEC §8) between two N-point sets against scipy's cKDTree, and
 //! exact point-to-surface distances against trimesh.
 //!
-//! Inputs: N area-uniform samples (with face normals) of the FLAME registered scan (P) and of
-//! the FLAME template (G) from `/work/shared/data/faces/flame/` (not redistributed; the
-//! benchmark only reads them), or of any mesh given with `--mesh` (sampled twice with
-//! different seeds). Both sets are written as binary PLY and read back, so both tools see the
+//! Inputs: two independent N-point area-uniform samplings (seeds 1 and 2, with face normals) of
+//! the FLAME registered head scan in `../shared/data/faces/flame/` (not redistributed; the
+//! benchmark only reads it), or of any mesh given with `--mesh`. Both sets are written as binary PLY and read back, so both tools see the
 //! same float32 values. Timed on our side: both k-d tree builds, both query sweeps and the
 //! sums (file loading excluded, as on the Python side).
 
@@ -22,9 +21,11 @@ use crate::harness::{python_script, report, run_python, time_best};
 const REPEATS: usize = 3;
 /// Largest relative difference of the two tools' chamfer_l1 accepted as "agree".
 const AGREE_REL: f64 = 1e-9;
-/// Default FLAME files (prediction: the registered scan, ground truth: the template).
-const FLAME_SCAN: &str = "/work/shared/data/faces/flame/flame_registered_scan.ply";
-const FLAME_TEMPLATE: &str = "/work/shared/data/faces/flame/flame_template.ply";
+/// The default mesh: the FLAME registered head scan beside the repository checkout.
+const FLAME_SCAN: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/data/faces/flame/flame_registered_scan.ply"
+);
 
 /// Options of the `eval` benchmark.
 #[derive(Debug, clap::Args)]
@@ -32,7 +33,7 @@ pub struct EvalBenchArgs {
     /// Points per set.
     #[arg(long, default_value_t = 1_000_000)]
     points: usize,
-    /// Sample this mesh twice instead of the FLAME scan vs template (e.g. the Spot fixture).
+    /// Sample this mesh instead of the FLAME head scan (e.g. the Spot fixture).
     #[arg(long)]
     mesh: Option<PathBuf>,
     /// Points for the surface-distance row (trimesh is slow; keep it moderate).
@@ -46,28 +47,19 @@ pub struct EvalBenchArgs {
 /// When the meshes cannot be read, the temporary files cannot be written, the Python side
 /// fails, or the two tools disagree.
 pub fn run(args: &EvalBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
-    let (pred_mesh, gt_mesh, label) = match &args.mesh {
-        Some(path) => {
-            let m = read_mesh(path)?;
-            (m.clone(), m, path.display().to_string())
-        }
-        None => {
-            let fallback = trisplat_fixtures::path("spot_triangulated.obj");
-            match (
-                read_mesh(FLAME_SCAN.as_ref()),
-                read_mesh(FLAME_TEMPLATE.as_ref()),
-            ) {
-                (Ok(s), Ok(t)) => (s, t, "FLAME registered scan vs template".to_owned()),
-                _ => {
-                    println!("FLAME files not found; using {}", fallback.display());
-                    let m = read_mesh(&fallback)?;
-                    (m.clone(), m, "Spot vs Spot".to_owned())
-                }
+    let (gt_mesh, label) = match &args.mesh {
+        Some(path) => (read_mesh(path)?, path.display().to_string()),
+        None => match read_mesh(FLAME_SCAN.as_ref()) {
+            Ok(scan) => (scan, "FLAME registered scan, two samplings".to_owned()),
+            Err(e) => {
+                let fallback = trisplat_fixtures::path("spot_triangulated.obj");
+                println!("{e}; using {}", fallback.display());
+                (read_mesh(&fallback)?, "Spot, two samplings".to_owned())
             }
-        }
+        },
     };
     let n = args.points;
-    let pred = sample_uniform(&pred_mesh, n, 1);
+    let pred = sample_uniform(&gt_mesh, n, 1);
     let gt = sample_uniform(&gt_mesh, n, 2);
     if pred.is_empty() || gt.is_empty() {
         bail!("a mesh has zero area");
