@@ -8,6 +8,7 @@
 /// The math types of this crate's API (glam 0.34), re-exported so callers use the same version.
 pub use glam;
 
+pub mod bind;
 pub mod deform;
 pub mod densify;
 pub mod frames;
