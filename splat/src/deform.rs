@@ -371,6 +371,10 @@ where
 /// product (a bound at the noise level makes the iteration chase rounding for every sweep).
 pub const JACOBI_TOL: f64 = 1e-14;
 
+/// A sweep whose rotations all have `|tan θ|` below this ends the iteration (the next sweep
+/// would find off-diagonal terms of order `θ²`, below [`JACOBI_TOL`]).
+pub const JACOBI_SMALL_ROTATION: f64 = 1e-8;
+
 /// Sweep limit of one-sided Jacobi; quadratic convergence needs ~3-6 sweeps for any 3×3 matrix,
 /// 1-2 when the columns start nearly orthogonal (mild deformations).
 pub const JACOBI_MAX_SWEEPS: usize = 24;
@@ -389,7 +393,7 @@ pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
     for _sweep in 0..JACOBI_MAX_SWEEPS {
         #[cfg(test)]
         SWEEPS.with(|s| s.set(s.get() + 1));
-        let mut rotated = false;
+        let mut largest_t = 0.0f64;
         for (p, q) in [(0, 1), (0, 2), (1, 2)] {
             let a = c[p].length_squared();
             let b = c[q].length_squared();
@@ -397,20 +401,22 @@ pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
             if g * g <= JACOBI_TOL * JACOBI_TOL * a * b {
                 continue;
             }
-            rotated = true;
             let zeta = (b - a) / (2.0 * g);
             let t = if zeta.abs() > 1e100 {
                 0.5 / zeta
             } else {
                 zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt())
             };
+            largest_t = largest_t.max(t.abs());
             let cs = 1.0 / (1.0 + t * t).sqrt();
             let sn = cs * t;
             let (cp, cq) = (c[p], c[q]);
             c[p] = cp * cs - cq * sn;
             c[q] = cp * sn + cq * cs;
         }
-        if !rotated {
+        // Rotations this small leave off-diagonal terms of order t² (below JACOBI_TOL): the
+        // columns are orthogonal without another checking sweep.
+        if largest_t < JACOBI_SMALL_ROTATION {
             break;
         }
     }
