@@ -325,6 +325,18 @@ struct Layout {
     extras: Vec<usize>,
 }
 
+impl Layout {
+    /// Property indices of the standard (non-extra, non-binding) parameters.
+    fn standard_columns(&self) -> Vec<usize> {
+        let mut v: Vec<usize> = self.mean.to_vec();
+        v.extend(&self.scale);
+        v.extend(self.rot);
+        v.push(self.opacity);
+        v.extend(&self.sh);
+        v
+    }
+}
+
 fn find_layout(props: &[Prop], path: &Path) -> Result<Layout, PlyError> {
     let bad = |name: &str, message: &str| PlyError::BadProperty {
         path: path.to_path_buf(),
@@ -445,18 +457,45 @@ pub fn read_gaussians_from_bytes(bytes: &[u8], path: &Path) -> Result<GaussianSe
     let vertex = &header.elements[vertex_at];
     let layout = find_layout(&vertex.props, path)?;
     let body = &bytes[header.body_start..];
-    let columns = match header.encoding {
-        PlyEncoding::Ascii => read_ascii(body, &header.elements[..=vertex_at], path)?,
+    let standard_cols = layout.standard_columns();
+    let (columns, standard) = match header.encoding {
+        PlyEncoding::Ascii => {
+            let columns = read_ascii(body, &header.elements[..=vertex_at], path)?;
+            let standard = standard_from_columns(&columns, &layout, vertex.count);
+            (columns, standard)
+        }
         enc => {
             let big = enc == PlyEncoding::BinaryBigEndian;
             let mut pos = 0;
             for e in &header.elements[..vertex_at] {
                 pos = skip_binary(body, pos, e, big, path)?;
             }
-            read_binary(&body[pos..], vertex, big, path)?
+            let all_f32 = standard_cols
+                .iter()
+                .all(|&i| matches!(vertex.props[i].kind, PropKind::Scalar(ScalarType::F32)));
+            if all_f32 {
+                // Fast path: one pass over the rows for the standard properties, columns only
+                // for the binding and the extras.
+                let mut skip = vec![false; vertex.props.len()];
+                for &i in &standard_cols {
+                    skip[i] = true;
+                }
+                let body = &body[pos..];
+                let columns = read_binary(body, vertex, big, path, &skip)?;
+                let standard = if big {
+                    standard_from_rows::<true>(body, vertex, &layout)
+                } else {
+                    standard_from_rows::<false>(body, vertex, &layout)
+                };
+                (columns, standard)
+            } else {
+                let columns = read_binary(&body[pos..], vertex, big, path, &[])?;
+                let standard = standard_from_columns(&columns, &layout, vertex.count);
+                (columns, standard)
+            }
         }
     };
-    assemble(columns, vertex, &layout, path)
+    assemble(columns, standard, vertex, &layout, path)
 }
 
 /// One decoded column per vertex property, in the stored type.
@@ -556,7 +595,14 @@ fn skip_binary(
     Ok(pos)
 }
 
-fn read_binary(body: &[u8], vertex: &Element, big: bool, path: &Path) -> Result<Columns, PlyError> {
+/// Decodes every vertex column except those flagged in `skip` (left empty).
+fn read_binary(
+    body: &[u8],
+    vertex: &Element,
+    big: bool,
+    path: &Path,
+    skip: &[bool],
+) -> Result<Columns, PlyError> {
     let stride: usize = vertex.props.iter().map(|p| scalar_size(&p.kind)).sum();
     let available = body.len() / stride.max(1);
     if available < vertex.count {
@@ -575,7 +621,12 @@ fn read_binary(body: &[u8], vertex: &Element, big: bool, path: &Path) -> Result<
             // Refused by `find_layout` before we get here.
             continue;
         };
-        columns.push(decode_column(body, offset, stride, n, ty, big));
+        let j = columns.len();
+        if skip.get(j).copied().unwrap_or(false) {
+            columns.push(PropertyValues::with_capacity(ty, 0));
+        } else {
+            columns.push(decode_column(body, offset, stride, n, ty, big));
+        }
         offset += ty.size();
     }
     Ok(columns)
@@ -716,13 +767,16 @@ fn column_f32(col: &PropertyValues) -> Cow<'_, [f32]> {
     }
 }
 
-fn assemble(
-    mut columns: Columns,
-    vertex: &Element,
-    layout: &Layout,
-    path: &Path,
-) -> Result<GaussianSet, PlyError> {
-    let n = vertex.count;
+/// The standard parameters of every Gaussian.
+struct Standard {
+    means: Vec<Vec3>,
+    log_scales: Vec<Vec3>,
+    rotations: Vec<[f32; 4]>,
+    opacity_logits: Vec<f32>,
+    sh: Vec<f32>,
+}
+
+fn standard_from_columns(columns: &Columns, layout: &Layout, n: usize) -> Standard {
     let col = |i: usize| column_f32(&columns[i]);
     let (x, y, z) = (
         col(layout.mean[0]),
@@ -731,11 +785,6 @@ fn assemble(
     );
     let means: Vec<Vec3> = (0..n).map(|i| Vec3::new(x[i], y[i], z[i])).collect();
     let s: Vec<Cow<'_, [f32]>> = layout.scale.iter().map(|&i| col(i)).collect();
-    let scale_dims = if s.len() == 3 {
-        ScaleDims::Three
-    } else {
-        ScaleDims::Two
-    };
     let log_scales: Vec<Vec3> = (0..n)
         .map(|i| Vec3::new(s[0][i], s[1][i], s.get(2).map_or(0.0, |c| c[i])))
         .collect();
@@ -745,12 +794,92 @@ fn assemble(
         .collect();
     let opacity_logits = col(layout.opacity).into_owned();
     let sh_cols: Vec<Cow<'_, [f32]>> = layout.sh.iter().map(|&i| col(i)).collect();
-    let stride = sh_cols.len();
-    let mut sh = Vec::with_capacity(n * stride);
+    let mut sh = Vec::with_capacity(n * sh_cols.len());
     for i in 0..n {
         sh.extend(sh_cols.iter().map(|c| c[i]));
     }
-    debug_assert_eq!(stride, 3 * sh_coeffs_per_channel(layout.sh_degree));
+    Standard {
+        means,
+        log_scales,
+        rotations,
+        opacity_logits,
+        sh,
+    }
+}
+
+/// Reads the standard parameters row by row from a binary body whose standard properties are
+/// all `float` (the caller checked that `count × stride` bytes are present).
+fn standard_from_rows<const BIG: bool>(body: &[u8], vertex: &Element, layout: &Layout) -> Standard {
+    let mut offsets = Vec::with_capacity(vertex.props.len());
+    let mut stride = 0;
+    for p in &vertex.props {
+        offsets.push(stride);
+        stride += scalar_size(&p.kind);
+    }
+    let n = vertex.count;
+    let at = |k: usize| offsets[k];
+    let mean = layout.mean.map(at);
+    let scale: Vec<usize> = layout.scale.iter().map(|&k| at(k)).collect();
+    let rot = layout.rot.map(at);
+    let opacity = at(layout.opacity);
+    let sh_off: Vec<usize> = layout.sh.iter().map(|&k| at(k)).collect();
+    let read = |row: &[u8], off: usize| -> f32 {
+        let mut a = [0u8; 4];
+        a.copy_from_slice(&row[off..off + 4]);
+        if BIG {
+            f32::from_be_bytes(a)
+        } else {
+            f32::from_le_bytes(a)
+        }
+    };
+    let mut out = Standard {
+        means: Vec::with_capacity(n),
+        log_scales: Vec::with_capacity(n),
+        rotations: Vec::with_capacity(n),
+        opacity_logits: Vec::with_capacity(n),
+        sh: Vec::with_capacity(n * sh_off.len()),
+    };
+    if stride == 0 {
+        return out;
+    }
+    for row in body[..n * stride].chunks_exact(stride) {
+        out.means.push(Vec3::new(
+            read(row, mean[0]),
+            read(row, mean[1]),
+            read(row, mean[2]),
+        ));
+        out.log_scales.push(Vec3::new(
+            read(row, scale[0]),
+            read(row, scale[1]),
+            scale.get(2).map_or(0.0, |&o| read(row, o)),
+        ));
+        out.rotations.push(rot.map(|o| read(row, o)));
+        out.opacity_logits.push(read(row, opacity));
+        out.sh.extend(sh_off.iter().map(|&o| read(row, o)));
+    }
+    out
+}
+
+fn assemble(
+    mut columns: Columns,
+    standard: Standard,
+    vertex: &Element,
+    layout: &Layout,
+    path: &Path,
+) -> Result<GaussianSet, PlyError> {
+    let n = vertex.count;
+    let scale_dims = if layout.scale.len() == 3 {
+        ScaleDims::Three
+    } else {
+        ScaleDims::Two
+    };
+    let Standard {
+        means,
+        log_scales,
+        rotations,
+        opacity_logits,
+        sh,
+    } = standard;
     let binding = match layout.binding {
         None => None,
         Some((b, encoding)) => {
@@ -774,7 +903,6 @@ fn assemble(
             })
         }
     };
-    drop((x, y, z, s, r, sh_cols));
     let extras = layout
         .extras
         .iter()

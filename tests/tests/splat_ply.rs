@@ -479,3 +479,30 @@ mod fuzz {
         }
     }
 }
+
+#[test]
+fn standard_properties_in_other_types_are_converted() {
+    // x, y, z as double and opacity as uchar (a file from another tool): the general
+    // column path, big-endian.
+    let head = "ply\nformat binary_big_endian 1.0\nelement vertex 2\n\
+        property double x\nproperty double y\nproperty double z\nproperty uchar opacity\n\
+        property float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\n\
+        property float scale_0\nproperty float scale_1\nproperty float scale_2\n\
+        property float rot_0\nproperty float rot_1\nproperty float rot_2\nproperty float rot_3\n\
+        end_header\n";
+    let mut bytes = head.as_bytes().to_vec();
+    for g in 0..2u8 {
+        for v in [0.1f64, -2.5, 1e10] {
+            bytes.extend((v * f64::from(g + 1)).to_be_bytes());
+        }
+        bytes.push(200 + g);
+        for v in [0.5f32, 0.25, 0.125, -1.0, -2.0, -3.0, 1.0, 0.0, 0.0, 0.0] {
+            bytes.extend(v.to_be_bytes());
+        }
+    }
+    let set = read(&bytes).unwrap();
+    assert_eq!(set.means()[1], Vec3::new(0.2, -5.0, 2e10));
+    assert_eq!(set.opacity_logits(), &[200.0, 201.0]);
+    assert_eq!(set.log_scales()[0], Vec3::new(-1.0, -2.0, -3.0));
+    assert_eq!(set.sh_coeffs(1), &[0.5, 0.25, 0.125]);
+}
