@@ -77,6 +77,13 @@ pub enum DeformError {
         /// Frame vertices.
         got: usize,
     },
+    /// A result overflowed `f32` (local parameters or positions so large that the world
+    /// values are not representable).
+    #[error("Gaussian {index}: deformed parameters overflow f32")]
+    NonFiniteOutput {
+        /// Gaussian index.
+        index: usize,
+    },
     /// A deformed vertex is NaN or infinite.
     #[error("deformed vertex {index} is not finite")]
     NonFiniteVertex {
@@ -227,8 +234,8 @@ impl Deformer {
             extras: set.extras().to_vec(),
             property_order: set.property_order().map(<[String]>::to_vec),
         };
-        // Every output is finite by construction (finite frames, floored scales); the set is
-        // built unchecked to avoid a second pass over the data.
+        // `deform_geometry` checked every output is finite; the other arrays are copies of a
+        // valid set, so the set is built unchecked to avoid another pass over the data.
         Ok(GaussianSet::new_unchecked(parts))
     }
 
@@ -296,7 +303,20 @@ impl Deformer {
                 });
             }
         }
-        Ok(())
+        // NaN firewall: finite inputs overflow only at extreme magnitudes; say so instead of
+        // handing NaN or infinity to a file or a renderer.
+        let bad = (0..n)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .position_first(|i| {
+                !(out.means[i].is_finite()
+                    && out.log_scales[i].is_finite()
+                    && out.rotations[i].iter().all(|v| v.is_finite()))
+            });
+        match bad {
+            Some(index) => Err(DeformError::NonFiniteOutput { index }),
+            None => Ok(()),
+        }
     }
 
     fn binding_triangles(&self, positions: &[Vec3]) -> Vec<BindingTri> {

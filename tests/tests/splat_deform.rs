@@ -349,3 +349,24 @@ fn bad_input_is_refused() {
         DeformError::NotBound
     );
 }
+
+#[test]
+fn overflowing_results_are_errors_not_infinities() {
+    let positions = vec![
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(3e38, 0.0, 0.0),
+        Vec3::new(0.0, 3e38, 0.0),
+    ];
+    let mesh = TriMesh::new(positions.clone(), vec![[0, 1, 2]]);
+    let mut parts = bound_set(1, 1, 9, ScaleDims::Three).into_parts();
+    parts.means[0] = Vec3::new(1e3, 1e3, 1e3);
+    let set = GaussianSet::try_new(parts).unwrap();
+    for mode in [DeformMode::Binding, DeformMode::Jacobian] {
+        let err = Deformer::new(&mesh, mode).deform(&set, &positions);
+        assert_eq!(
+            err.unwrap_err(),
+            DeformError::NonFiniteOutput { index: 0 },
+            "{mode:?}"
+        );
+    }
+}
