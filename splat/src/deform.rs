@@ -258,7 +258,7 @@ impl Deformer {
         out.log_scales.resize(n, Vec3::ZERO);
         // `check` guarantees a binding; an empty slice would only mean no Gaussians.
         let binding = set.binding().map_or(&[][..], |b| b.triangles.as_slice());
-        match self.mode {
+        let bad = match self.mode {
             DeformMode::Binding => {
                 let tris = self.binding_triangles(positions);
                 run_chunks(out, |start, means, rots, scales| {
@@ -276,7 +276,7 @@ impl Deformer {
                             ScaleDims::Two => Vec3::new(ls.x, ls.y, 0.0),
                         };
                     }
-                });
+                })
             }
             DeformMode::Jacobian => {
                 let tris = self.jacobian_triangles(positions);
@@ -300,19 +300,11 @@ impl Deformer {
                             ScaleDims::Two => Vec3::new(ln(sigma.x), ln(sigma.y), 0.0),
                         };
                     }
-                });
+                })
             }
-        }
+        };
         // NaN firewall: finite inputs overflow only at extreme magnitudes; say so instead of
-        // handing NaN or infinity to a file or a renderer.
-        let bad = (0..n)
-            .into_par_iter()
-            .with_min_len(CHUNK)
-            .position_first(|i| {
-                !(out.means[i].is_finite()
-                    && out.log_scales[i].is_finite()
-                    && out.rotations[i].iter().all(|v| v.is_finite()))
-            });
+        // handing NaN or infinity to a file or a renderer (checked per chunk, in cache).
         match bad {
             Some(index) => Err(DeformError::NonFiniteOutput { index }),
             None => Ok(()),
@@ -373,8 +365,10 @@ fn normalized_product(q_f: Quat, local: [f32; 4]) -> Quat {
     if q.w < 0.0 { -q } else { q }
 }
 
-/// Runs `f(start, means, rotations, log_scales)` over chunks of the output in parallel.
-fn run_chunks<F>(out: &mut WorldGeometry, f: F)
+/// Runs `f(start, means, rotations, log_scales)` over chunks of the output in parallel and
+/// checks each chunk while it is in cache; returns the first Gaussian whose output is not
+/// finite.
+fn run_chunks<F>(out: &mut WorldGeometry, f: F) -> Option<usize>
 where
     F: Fn(usize, &mut [Vec3], &mut [[f32; 4]], &mut [Vec3]) + Sync,
 {
@@ -383,7 +377,15 @@ where
         .zip(out.rotations.par_chunks_mut(CHUNK))
         .zip(out.log_scales.par_chunks_mut(CHUNK))
         .enumerate()
-        .for_each(|(c, ((m, r), s))| f(c * CHUNK, m, r, s));
+        .filter_map(|(c, ((m, r), s))| {
+            f(c * CHUNK, m, r, s);
+            (0..m.len())
+                .find(|&j| {
+                    !(m[j].is_finite() && s[j].is_finite() && r[j].iter().all(|v| v.is_finite()))
+                })
+                .map(|j| c * CHUNK + j)
+        })
+        .min()
 }
 
 /// Relative orthogonality at which one-sided Jacobi stops rotating a column pair
