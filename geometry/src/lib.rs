@@ -5,6 +5,7 @@
 //! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
 
 pub mod animation;
+pub mod camera;
 pub mod cleanup;
 pub mod ids;
 pub mod io;
@@ -19,6 +20,7 @@ pub mod subdivide;
 pub mod topology;
 pub mod validation;
 
+pub use camera::Camera;
 pub use ids::{TriId, VertexId};
 pub use mesh::{Aabb, MeshError, Rgba, TriMesh};
 pub use points::PointCloud;

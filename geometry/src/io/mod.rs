@@ -10,6 +10,7 @@
 
 mod atomic;
 mod error;
+mod npy;
 pub mod gltf;
 pub mod obj;
 pub mod ply;
@@ -18,6 +19,7 @@ use std::path::Path;
 
 pub use atomic::write_atomically;
 pub use error::IoError;
+pub use npy::{NpyArray, read_npy, write_npy};
 pub use obj::ObjVertices;
 pub use ply::{PlyEncoding, PlyExtras};
 
