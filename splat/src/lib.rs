@@ -14,6 +14,7 @@ pub mod densify;
 pub mod frames;
 pub mod gaussians;
 pub mod ply;
+pub mod render;
 pub mod sh;
 pub mod wasserstein;
 

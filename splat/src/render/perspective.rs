@@ -1,0 +1,1 @@
+//! Perspective-aware (TGA) evaluation of Gaussians along pixel rays (in progress).

@@ -1,0 +1,1 @@
+//! 2DGS surfel rasterization after hbb1's diff-surfel-rasterization (in progress).
