@@ -41,6 +41,8 @@ pub enum Command {
     Sample(commands::sample::SampleArgs),
     /// Smooth a mesh (Laplacian, Taubin, uniform, cotangent).
     Smooth(commands::smooth::SmoothArgs),
+    /// Bind Gaussians to the triangles of a template mesh (new ones, or attach a 3DGS PLY).
+    Bind(commands::bind::BindArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -70,5 +72,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Convert(args) => commands::convert::run(args, &ctx),
         Command::Sample(args) => commands::sample::run(args, &ctx),
         Command::Smooth(args) => commands::smooth::run(args, &ctx),
+        Command::Bind(args) => commands::bind::run(args, &ctx),
     }
 }

@@ -1,5 +1,6 @@
 //! One module per `trisplat` command: its arguments and its `run`.
 
+pub mod bind;
 pub mod convert;
 pub mod eval;
 pub mod sample;
