@@ -10,6 +10,7 @@ pub mod cleanup;
 pub mod ids;
 pub mod io;
 pub mod mesh;
+pub mod mesh_render;
 pub mod metrics;
 pub mod points;
 pub mod rng;
