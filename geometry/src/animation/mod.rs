@@ -27,7 +27,7 @@ pub use self::blendshape::{
     BlendshapeAnimation, BlendshapeSet, GltfMorphAnimation, WeightsTrack, canonical_target_name,
 };
 pub use self::error::AnimationError;
-pub use self::gltf::{Clip, GltfTemplate};
+pub use self::gltf::{Clip, GltfTemplate, VertexSkinning};
 pub use self::sampler::Interpolation;
 pub use self::sequence::{MeshSequence, natural_cmp};
 use crate::TriMesh;
