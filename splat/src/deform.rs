@@ -128,6 +128,8 @@ pub struct Deformer {
     triangles: Vec<[u32; 3]>,
     vertex_count: usize,
     canonical: Vec<CanonicalTriangle>,
+    /// Adaptive scale (binding mode): per triangle `(ln k_rest, rest area)`; empty when off.
+    adaptive: Vec<(f64, f64)>,
 }
 
 impl Deformer {
@@ -160,7 +162,37 @@ impl Deformer {
             triangles: template.triangles().to_vec(),
             vertex_count: positions.len(),
             canonical,
+            adaptive: Vec::new(),
         }
+    }
+
+    /// Turns on the adaptive scale of 3DFilmPCA in [`DeformMode::Binding`]: the Gaussians'
+    /// scale factor becomes `k_rest √(area / area_rest)` (the rest frame scale times the square
+    /// root of the triangle's area ratio to the template's rest shape) instead of the posed
+    /// `k`. Means and rotations are unchanged. For a uniform scaling of a triangle both factors
+    /// agree; under anisotropic stretch or shear the adaptive one follows the area (GaussianAvatars'
+    /// `k` follows the mean of an edge and a height). A triangle with zero rest area keeps the
+    /// posed `k`. Off by default. No effect in [`DeformMode::Jacobian`], whose `J` already
+    /// carries the area change.
+    #[must_use]
+    pub fn with_adaptive_scale(mut self, template: &TriMesh) -> Self {
+        let positions = template.positions();
+        self.adaptive = template
+            .triangles()
+            .par_iter()
+            .map(|t| {
+                let v = corners_of(positions, *t);
+                let f = gaussian_avatars_frame(v, &self.options);
+                (f.scale.ln(), triangle_area(v))
+            })
+            .collect();
+        self
+    }
+
+    /// Whether the adaptive scale is on.
+    #[must_use]
+    pub fn adaptive_scale(&self) -> bool {
+        !self.adaptive.is_empty()
     }
 
     /// The mode.
@@ -314,10 +346,19 @@ impl Deformer {
     fn binding_triangles(&self, positions: &[Vec3]) -> Vec<BindingTri> {
         self.triangles
             .par_iter()
+            .enumerate()
             .with_min_len(1024)
-            .map(|t| {
-                let f = gaussian_avatars_frame(corners_of(positions, *t), &self.options);
+            .map(|(i, t)| {
+                let v = corners_of(positions, *t);
+                let f = gaussian_avatars_frame(v, &self.options);
                 let q = quat_from_rotation(f.rotation);
+                let ln_k = match self.adaptive.get(i) {
+                    Some(&(ln_k_rest, area_rest)) if area_rest > 0.0 => {
+                        let ratio = triangle_area(v) / area_rest;
+                        ln_k_rest + 0.5 * ratio.max(f64::MIN_POSITIVE).ln()
+                    }
+                    _ => f.scale.ln(),
+                };
                 BindingTri {
                     linear: Mat3A::from_cols(
                         (f.rotation.x_axis * f.scale).as_vec3().into(),
@@ -326,7 +367,7 @@ impl Deformer {
                     ),
                     rotation: q.as_quat(),
                     origin: f.origin.as_vec3().into(),
-                    ln_k: f.scale.ln() as f32,
+                    ln_k: ln_k as f32,
                 }
             })
             .collect()
@@ -347,6 +388,11 @@ impl Deformer {
             })
             .collect()
     }
+}
+
+/// Area of the triangle `v`.
+fn triangle_area(v: [DVec3; 3]) -> f64 {
+    0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length()
 }
 
 /// `normalize(q_f ⊗ q_local)` with `w ≥ 0`, for a unit `q_f` and a raw `[w, x, y, z]` local
@@ -563,6 +609,46 @@ mod tests {
             let four = run(4).unwrap().unwrap();
             assert_eq!(one, four, "{mode:?}");
         }
+    }
+
+    #[test]
+    fn adaptive_scale_follows_the_area_ratio() {
+        let (bumpy, set, _) = scene(6, 2);
+        // Flat, so that stretching x by 4 multiplies every area by exactly 4.
+        let flat = bumpy
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(p.x, p.y, 0.0))
+            .collect();
+        let mesh = TriMesh::new(flat, bumpy.triangles().to_vec());
+        let plain = Deformer::new(&mesh, DeformMode::Binding);
+        let adaptive = Deformer::new(&mesh, DeformMode::Binding).with_adaptive_scale(&mesh);
+        assert!(adaptive.adaptive_scale() && !plain.adaptive_scale());
+        // At rest and under a uniform scaling the two agree (k scales like √area).
+        for factor in [1.0f32, 2.0] {
+            let moved: Vec<Vec3> = mesh.positions().iter().map(|p| *p * factor).collect();
+            let a = adaptive.deform(&set, &moved).unwrap();
+            let b = plain.deform(&set, &moved).unwrap();
+            for (x, y) in a.log_scales().iter().zip(b.log_scales()) {
+                assert!((*x - *y).abs().max_element() < 1e-5, "{x} {y}");
+            }
+        }
+        // Stretching x by 4 multiplies every area by 4: scales are the rest ones times 2.
+        let stretched: Vec<Vec3> = mesh
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(4.0 * p.x, p.y, p.z))
+            .collect();
+        let rest = plain.deform(&set, mesh.positions()).unwrap();
+        let a = adaptive.deform(&set, &stretched).unwrap();
+        for (x, y) in a.log_scales().iter().zip(rest.log_scales()) {
+            let d = *x - *y - Vec3::splat(2f32.ln());
+            assert!(d.abs().max_element() < 1e-5, "{x} {y}");
+        }
+        // Means and rotations do not change with the option.
+        let b = plain.deform(&set, &stretched).unwrap();
+        assert_eq!(a.means(), b.means());
+        assert_eq!(a.rotations(), b.rotations());
     }
 
     #[test]
