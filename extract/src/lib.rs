@@ -1,3 +1,4 @@
 //! x
 
 pub mod delaunay3d;
+pub mod incremental_delaunay;

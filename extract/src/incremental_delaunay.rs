@@ -1,0 +1,1 @@
+//! Incremental Delaunay meshing of triangle-bound Gaussians (SPEC §6).
