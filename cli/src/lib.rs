@@ -43,6 +43,8 @@ pub enum Command {
     Smooth(commands::smooth::SmoothArgs),
     /// Bind Gaussians to the triangles of a template mesh (new ones, or attach a 3DGS PLY).
     Bind(commands::bind::BindArgs),
+    /// Deform bound Gaussians with an animated template: one world-space PLY per frame.
+    Deform(commands::deform::DeformArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -73,5 +75,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sample(args) => commands::sample::run(args, &ctx),
         Command::Smooth(args) => commands::smooth::run(args, &ctx),
         Command::Bind(args) => commands::bind::run(args, &ctx),
+        Command::Deform(args) => commands::deform::run(args, &ctx),
     }
 }

@@ -27,4 +27,16 @@ impl Progress {
         bar.enable_steady_tick(std::time::Duration::from_millis(120));
         bar
     }
+
+    /// A bar of `len` steps labelled `message` (hidden when disabled).
+    pub fn bar(self, len: u64, message: &str) -> ProgressBar {
+        if !self.enabled {
+            return ProgressBar::hidden();
+        }
+        let style = indicatif::ProgressStyle::with_template("{msg} {wide_bar} {pos}/{len} {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+        ProgressBar::new(len)
+            .with_style(style)
+            .with_message(message.to_owned())
+    }
 }

@@ -2,6 +2,7 @@
 
 pub mod bind;
 pub mod convert;
+pub mod deform;
 pub mod eval;
 pub mod sample;
 pub mod smooth;
