@@ -1,0 +1,313 @@
+//! 3DGS EWA projection (gsplat's `fully_fused_projection`, pinhole camera) and its per-pixel
+//! kernel ([`EwaKernel`]).
+//!
+//! Per Gaussian, in `f64`: camera-space mean `t = Rᵀ(μ − c)`; cull unless `near < t.z < far`;
+//! covariance `Σ = R S Sᵀ Rᵀ` (normalised quaternion, `exp` of the log-scales) to camera space;
+//! Jacobian `J = [[fx/z, 0, −fx x'/z²], [0, fy/z, −fy y'/z²]]` with `x'/z`, `y'/z` clamped to the
+//! view frustum widened by 0.3 tan(fov/2) on each side (gsplat: `[−cx/fx − 0.3 tan, (W − cx)/fx +
+//! 0.3 tan]`, `tan = W / (2 fx)`); `Σ2D = J Σ Jᵀ + 0.3 I`; cull `det ≤ 0`. Then `f32` for the
+//! per-pixel data: mean `(fx x/z + cx, fy y/z + cy)`, conic `Σ2D⁻¹`, opacity
+//! `sigmoid(logit)` (× `sqrt(det(Σ2D − 0.3 I)/det Σ2D)` when antialiased).
+//!
+//! Screen boxes (gsplat's CUDA kernel): Gaussians with opacity below 1/255 are culled (they can
+//! never pass the skip threshold); half sizes `ceil(e sqrt(Σ2D_xx))`, `ceil(e sqrt(Σ2D_yy))` with
+//! `e = min(3.33, sqrt(2 ln(255 opacity)))` — outside that box `alpha < 1/255`, so the images
+//! equal those of gsplat's plain 3.33σ boxes. Boxes entirely off the image are culled. The
+//! original 3DGS rules use one radius `ceil(3 sqrt(λmax))` with `λmax` from
+//! `mid + sqrt(max(0.1, mid² − det))`, symmetric limits `±1.3 tan(fov/2)`, and shift the means by
+//! −0.5 px (its integer pixel centres).
+
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use trisplat_geometry::Camera;
+use trisplat_geometry::mesh_render::NormalFrame;
+
+use super::composite::ALPHA_THRESHOLD;
+use super::options::{RenderOptions, Rules};
+use super::screen::{Sample, ScreenSplats, SplatKernel};
+use crate::GaussianSet;
+use crate::gaussians::sigmoid;
+
+/// gsplat's `eps2d`: the screen-space dilation added to `Σ2D`'s diagonal.
+pub const EPS_2D: f64 = 0.3;
+/// gsplat's box extent in standard deviations.
+pub const GSPLAT_EXTENT: f64 = 3.33;
+/// The original 3DGS radius in standard deviations.
+pub const ORIGINAL_EXTENT: f64 = 3.0;
+/// The frustum margin of the Jacobian clamp, as a fraction of tan(fov/2).
+pub const FRUSTUM_MARGIN: f64 = 0.3;
+/// The original 3DGS floor of `mid² − det` in the eigenvalue formula.
+const ORIGINAL_EIGEN_FLOOR: f64 = 0.1;
+
+/// Per-pixel data of one projected Gaussian, packed for the compositing loop.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
+pub struct EwaSplat {
+    /// Projected mean (pixel coordinates).
+    pub mean: [f32; 2],
+    /// Conic `(a, b, c)`: `Σ2D⁻¹ = [[a, b], [b, c]]`.
+    pub conic: [f32; 3],
+    /// Opacity (× compensation in antialiased mode).
+    pub opacity: f32,
+    /// Camera z of the mean.
+    pub depth: f32,
+    _pad: f32,
+}
+
+/// The 3DGS EWA kernel: `sigma = ½(a dx² + c dy²) + b dx dy` with `d = mean − pixel`,
+/// skipped when `sigma < 0`, `alpha = opacity exp(−sigma)`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EwaKernel {
+    /// One entry per visible splat, indexed like the [`ScreenSplats`].
+    pub splats: Vec<EwaSplat>,
+}
+
+impl SplatKernel for EwaKernel {
+    #[inline(always)]
+    fn sample(&self, i: usize, px: f32, py: f32) -> Option<Sample> {
+        let s = &self.splats[i];
+        let dx = s.mean[0] - px;
+        let dy = s.mean[1] - py;
+        let sigma = 0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) + s.conic[1] * dx * dy;
+        if sigma < 0.0 {
+            return None;
+        }
+        Some(Sample {
+            alpha: s.opacity * (-sigma).exp(),
+            depth: s.depth,
+        })
+    }
+}
+
+/// What a 3DGS projection needs to know of the camera, precomputed once.
+struct View {
+    w2c: DMat3,
+    position: DVec3,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    width: f64,
+    height: f64,
+    lim_x: (f64, f64),
+    lim_y: (f64, f64),
+}
+
+impl View {
+    fn new(camera: &Camera, rules: Rules) -> Self {
+        let (width, height) = (f64::from(camera.width), f64::from(camera.height));
+        let tan_x = 0.5 * width / camera.fx;
+        let tan_y = 0.5 * height / camera.fy;
+        let (lim_x, lim_y) = match rules {
+            Rules::Gsplat => (
+                (
+                    camera.cx / camera.fx + FRUSTUM_MARGIN * tan_x,
+                    (width - camera.cx) / camera.fx + FRUSTUM_MARGIN * tan_x,
+                ),
+                (
+                    camera.cy / camera.fy + FRUSTUM_MARGIN * tan_y,
+                    (height - camera.cy) / camera.fy + FRUSTUM_MARGIN * tan_y,
+                ),
+            ),
+            Rules::Original3dgs => {
+                let (lx, ly) = (
+                    (1.0 + FRUSTUM_MARGIN) * tan_x,
+                    (1.0 + FRUSTUM_MARGIN) * tan_y,
+                );
+                ((lx, lx), (ly, ly))
+            }
+        };
+        Self {
+            w2c: camera.world_to_camera_rotation(),
+            position: camera.position(),
+            fx: camera.fx,
+            fy: camera.fy,
+            cx: camera.cx,
+            cy: camera.cy,
+            width,
+            height,
+            lim_x,
+            lim_y,
+        }
+    }
+}
+
+/// One projected Gaussian before compaction.
+struct Projected {
+    id: u32,
+    center: [f32; 2],
+    radius: [f32; 2],
+    splat: EwaSplat,
+    color: [f32; 3],
+    normal: [f32; 3],
+}
+
+/// Projects the Gaussians of `set` (world space) into `camera` with the 3DGS EWA rules of
+/// `options` (module documentation). Colours are evaluated only when `options.outputs.rgb`,
+/// normals only when `options.outputs.normal`.
+#[must_use]
+pub fn project_ewa(
+    set: &GaussianSet,
+    camera: &Camera,
+    options: &RenderOptions,
+) -> (ScreenSplats, EwaKernel) {
+    let view = View::new(camera, options.rules);
+    let n = set.len();
+    const CHUNK: usize = 4096;
+    let chunks: Vec<Vec<Projected>> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
+            range
+                .filter_map(|i| project_one(set, i, &view, options))
+                .collect()
+        })
+        .collect();
+    let visible: usize = chunks.iter().map(Vec::len).sum();
+    let mut screen = ScreenSplats {
+        ids: Vec::with_capacity(visible),
+        centers: Vec::with_capacity(visible),
+        radii: Vec::with_capacity(visible),
+        depths: Vec::with_capacity(visible),
+        colors: Vec::with_capacity(if options.outputs.rgb { visible } else { 0 }),
+        normals: Vec::with_capacity(if options.outputs.normal { visible } else { 0 }),
+    };
+    let mut kernel = EwaKernel {
+        splats: Vec::with_capacity(visible),
+    };
+    for p in chunks.into_iter().flatten() {
+        screen.ids.push(p.id);
+        screen.centers.push(p.center);
+        screen.radii.push(p.radius);
+        screen.depths.push(p.splat.depth);
+        if options.outputs.rgb {
+            screen.colors.push(p.color);
+        }
+        if options.outputs.normal {
+            screen.normals.push(p.normal);
+        }
+        kernel.splats.push(p.splat);
+    }
+    (screen, kernel)
+}
+
+fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Option<Projected> {
+    let mean = set.means()[i].as_dvec3();
+    let t = v.w2c * (mean - v.position);
+    let z = t.z;
+    if !(z > f64::from(o.near) && z < f64::from(o.far)) {
+        return None;
+    }
+    let opacity = f64::from(sigmoid(set.opacity_logits()[i]));
+    if opacity <= 0.0 && o.rules == Rules::Gsplat {
+        return None;
+    }
+    // Camera-space covariance as L Lᵀ with L = W R S (no cancellation for tiny scales).
+    let rot = set.rotation_matrix(i);
+    let s = set.scale(i).as_dvec3();
+    let l = v.w2c * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
+    // Clamped Jacobian rows.
+    let tx = z * (t.x / z).clamp(-v.lim_x.0, v.lim_x.1);
+    let ty = z * (t.y / z).clamp(-v.lim_y.0, v.lim_y.1);
+    let j0 = DVec3::new(v.fx / z, 0.0, -v.fx * tx / (z * z));
+    let j1 = DVec3::new(0.0, v.fy / z, -v.fy * ty / (z * z));
+    // Rows of J L: Σ2D = (J L)(J L)ᵀ.
+    let lt = l.transpose();
+    let a0 = lt * j0;
+    let a1 = lt * j1;
+    let c00 = a0.dot(a0);
+    let c01 = a0.dot(a1);
+    let c11 = a1.dot(a1);
+    let det_orig = c00 * c11 - c01 * c01;
+    let (c00, c11) = (c00 + EPS_2D, c11 + EPS_2D);
+    let det = c00 * c11 - c01 * c01;
+    if det <= 0.0 || !det.is_finite() {
+        return None;
+    }
+    let opacity = if o.antialiased {
+        opacity * (det_orig / det).max(0.0).sqrt()
+    } else {
+        opacity
+    };
+    let mut u = v.fx * t.x / z + v.cx;
+    let mut w = v.fy * t.y / z + v.cy;
+    let radius = match o.rules {
+        Rules::Gsplat => {
+            if opacity < f64::from(ALPHA_THRESHOLD) {
+                return None;
+            }
+            let extent =
+                GSPLAT_EXTENT.min((2.0 * (opacity / f64::from(ALPHA_THRESHOLD)).ln()).sqrt());
+            let rx = (extent * c00.sqrt()).ceil();
+            let ry = (extent * c11.sqrt()).ceil();
+            if rx <= 0.0 && ry <= 0.0 {
+                return None;
+            }
+            [rx, ry]
+        }
+        Rules::Original3dgs => {
+            let mid = 0.5 * (c00 + c11);
+            let root = (mid * mid - det).max(ORIGINAL_EIGEN_FLOOR).sqrt();
+            let lambda = (mid + root).max(mid - root);
+            let r = (ORIGINAL_EXTENT * lambda.sqrt()).ceil();
+            u -= 0.5;
+            w -= 0.5;
+            [r, r]
+        }
+    };
+    if u + radius[0] <= 0.0
+        || u - radius[0] >= v.width
+        || w + radius[1] <= 0.0
+        || w - radius[1] >= v.height
+        || !(u.is_finite() && w.is_finite())
+    {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let color = if o.outputs.rgb {
+        crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - v.position)
+    } else {
+        [0.0; 3]
+    };
+    let normal = if o.outputs.normal {
+        facing_normal(rot, s, mean - v.position, v, o)
+    } else {
+        [0.0; 3]
+    };
+    Some(Projected {
+        id: i as u32,
+        center: [u as f32, w as f32],
+        radius: [radius[0] as f32, radius[1] as f32],
+        splat: EwaSplat {
+            mean: [u as f32, w as f32],
+            conic: [(c11 * inv) as f32, (-c01 * inv) as f32, (c00 * inv) as f32],
+            opacity: opacity as f32,
+            depth: z as f32,
+            _pad: 0.0,
+        },
+        color,
+        normal,
+    })
+}
+
+/// The Gaussian's shortest axis (first of equal ones), turned to face the camera, in the
+/// requested frame.
+fn facing_normal(rot: DMat3, s: DVec3, view_dir: DVec3, v: &View, o: &RenderOptions) -> [f32; 3] {
+    let axis = if s.x <= s.y && s.x <= s.z {
+        rot.x_axis
+    } else if s.y <= s.z {
+        rot.y_axis
+    } else {
+        rot.z_axis
+    };
+    let n = if axis.dot(view_dir) > 0.0 {
+        -axis
+    } else {
+        axis
+    };
+    let n = match o.normal_frame {
+        NormalFrame::World => n,
+        NormalFrame::Camera => v.w2c * n,
+    };
+    n.as_vec3().to_array()
+}
