@@ -45,6 +45,10 @@ pub enum Command {
     Bind(commands::bind::BindArgs),
     /// Deform bound Gaussians with an animated template: one world-space PLY per frame.
     Deform(commands::deform::DeformArgs),
+    /// Clone or split Gaussians (binding inheritance, Wasserstein gate).
+    Densify(commands::densify::DensifyArgs),
+    /// Remove Gaussians by opacity, outlier distance, normal consistency or a mask.
+    Prune(commands::prune::PruneArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -76,5 +80,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Smooth(args) => commands::smooth::run(args, &ctx),
         Command::Bind(args) => commands::bind::run(args, &ctx),
         Command::Deform(args) => commands::deform::run(args, &ctx),
+        Command::Densify(args) => commands::densify::run(args, &ctx),
+        Command::Prune(args) => commands::prune::run(args, &ctx),
     }
 }

@@ -3,7 +3,9 @@
 pub mod bind;
 pub mod convert;
 pub mod deform;
+pub mod densify;
 pub mod eval;
+pub mod prune;
 pub mod sample;
 pub mod smooth;
 

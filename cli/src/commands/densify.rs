@@ -1,0 +1,262 @@
+//! `trisplat densify G.ply -o OUT.ply [--template T] [--convention ...] [--mask FILE]
+//! [--op split|clone] [--split-above S] [--children N] [--shrink F] [--seed S]
+//! [--w2-threshold W]`, and the helpers `prune` shares: reading masks and baking a bound set to
+//! world space at the template's rest.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, bail};
+use trisplat_geometry::io::read_mesh;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::deform::{DeformMode, Deformer};
+use trisplat_splat::densify::{
+    DEFAULT_SPLIT_CHILDREN, DEFAULT_SPLIT_SHRINK, SplitOptions, TriangleCounts, clone_selected,
+    split_selected, w2_gate, w2_to_nearest,
+};
+use trisplat_splat::frames::{FrameOptions, corners_of, frame};
+use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+
+use super::bind::ConventionArg;
+use super::{Context, refuse_to_overwrite};
+
+/// The template options shared by `densify` and `prune`.
+#[derive(Debug, clap::Args)]
+pub struct TemplateArgs {
+    /// Template mesh of a bound set (needed for world-space criteria and triangle counts).
+    #[arg(long, value_name = "T")]
+    pub template: Option<PathBuf>,
+    /// Convention of the bound set's local parameters (how to bake them at the template's
+    /// rest shape).
+    #[arg(long, value_enum, default_value_t = ConventionArg::Gaussianavatars)]
+    pub convention: ConventionArg,
+}
+
+/// A Gaussian set with what the criteria need: the world-space set (baked at rest when bound),
+/// each Gaussian's frame scale `k` (1 when not bound), and the triangle count.
+pub struct Loaded {
+    /// The set as read.
+    pub set: GaussianSet,
+    /// World-space version of the set.
+    pub world: GaussianSet,
+    /// Frame scale of each Gaussian's triangle at rest (1 for unbound sets).
+    pub scale: Vec<f64>,
+    /// Triangles of the template (bound sets).
+    pub triangles: Option<usize>,
+}
+
+/// Reads `path` and, for a bound set, bakes it with the template at rest.
+///
+/// # Errors
+/// Unreadable files, a bound set without `--template`, bindings past the template.
+pub fn load(path: &Path, template: &TemplateArgs) -> anyhow::Result<Loaded> {
+    let set = read_gaussians(path)?;
+    let name = path.display().to_string();
+    let Some(binding) = set.binding() else {
+        return Ok(Loaded {
+            world: set.clone(),
+            scale: vec![1.0; set.len()],
+            set,
+            triangles: None,
+        });
+    };
+    let Some(t_path) = &template.template else {
+        bail!("{name}: the Gaussians are bound to triangles: give --template T");
+    };
+    let mesh = read_mesh(t_path)?;
+    let mode = match template.convention {
+        ConventionArg::Gaussianavatars => DeformMode::Binding,
+        ConventionArg::Surfhead => DeformMode::Jacobian,
+    };
+    let deformer = Deformer::new(&mesh, mode);
+    let world = deformer
+        .deform(&set, mesh.positions())
+        .with_context(|| format!("{name} (template {})", t_path.display()))?;
+    let fo = FrameOptions::for_positions(mesh.positions());
+    let scales: Vec<f64> = mesh
+        .triangles()
+        .iter()
+        .map(|t| {
+            frame(
+                template.convention.into(),
+                corners_of(mesh.positions(), *t),
+                &fo,
+            )
+            .scale
+        })
+        .collect();
+    let scale = binding
+        .triangles
+        .iter()
+        .map(|t| scales.get(t.index()).copied().unwrap_or(1.0))
+        .collect();
+    Ok(Loaded {
+        set,
+        world,
+        scale,
+        triangles: Some(mesh.triangle_count()),
+    })
+}
+
+/// Reads a selection mask: one value per Gaussian, whitespace-separated, `1`/`0` or
+/// `true`/`false`.
+///
+/// # Errors
+/// Unreadable file, a token that is not a flag, a count that differs from `n`.
+pub fn read_mask(path: &Path, n: usize) -> anyhow::Result<Vec<bool>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read the mask", path.display()))?;
+    let mut mask = Vec::with_capacity(n.min(text.len()));
+    for (i, token) in text.split_whitespace().enumerate() {
+        mask.push(match token {
+            "1" | "true" => true,
+            "0" | "false" => false,
+            _ => bail!(
+                "{}: entry {i}: `{token}` is not 0/1/true/false",
+                path.display()
+            ),
+        });
+    }
+    if mask.len() != n {
+        bail!(
+            "{}: the mask has {} entries for {n} Gaussians",
+            path.display(),
+            mask.len()
+        );
+    }
+    Ok(mask)
+}
+
+/// Densify operations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OpArg {
+    /// Replace each selected Gaussian by children sampled from it (scales shrunk).
+    Split,
+    /// Add a copy of each selected Gaussian.
+    Clone,
+}
+
+/// Arguments of `trisplat densify`.
+#[derive(Debug, clap::Args)]
+#[command(
+    long_about = "Densify Gaussians: clone or split a selection (3DGS / GaussianAvatars \
+    rules). On a bound set, clones and children keep the parent's triangle (binding \
+    inheritance) and its local frame; the output stays bound (local parameters, binding_0).\n\n\
+    Selection: --mask FILE (one 0/1 per Gaussian; default every Gaussian), narrowed by the \
+    Wasserstein gate --w2-threshold W (GSDHuman: a Gaussian may densify only if the \
+    2-Wasserstein distance to its nearest neighbour exceeds W times its triangle's frame scale \
+    k; for an unbound set W is in scene units). Distances are measured in world space, a bound \
+    set baked at the template's rest (--template, --convention).\n\n\
+    Operation: --op split (default) or clone; or --split-above S: selected Gaussians whose \
+    largest world-space scale exceeds S are split, the others cloned (the 3DGS rule without \
+    gradients). A split makes --children N children (default 2) at positions drawn from the \
+    parent Gaussian (seeded, one stream per parent) with scales divided by shrink × N \
+    (default 0.8 × N).\n\n\
+    Prints one summary line on stdout."
+)]
+pub struct DensifyArgs {
+    /// Input Gaussian PLY.
+    pub gaussians: PathBuf,
+    /// Output Gaussian PLY.
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Template (bound sets).
+    #[command(flatten)]
+    pub template: TemplateArgs,
+    /// Selection mask file (one 0/1 per Gaussian); default: every Gaussian.
+    #[arg(long, value_name = "FILE")]
+    pub mask: Option<PathBuf>,
+    /// Operation on the selection.
+    #[arg(long, value_enum, default_value_t = OpArg::Split, conflicts_with = "split_above")]
+    pub op: OpArg,
+    /// Split selected Gaussians whose largest world scale exceeds S, clone the others.
+    #[arg(long, value_name = "S")]
+    pub split_above: Option<f64>,
+    /// Children per split.
+    #[arg(long, default_value_t = DEFAULT_SPLIT_CHILDREN as u32, value_name = "N",
+        value_parser = clap::value_parser!(u32).range(1..))]
+    pub children: u32,
+    /// Split scale shrink factor (children's scales are divided by shrink × N).
+    #[arg(long, default_value_t = DEFAULT_SPLIT_SHRINK, value_name = "F")]
+    pub shrink: f64,
+    /// Seed of the split sampling.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Wasserstein gate threshold, relative to the triangle scale k (see the help).
+    #[arg(long, value_name = "W")]
+    pub w2_threshold: Option<f64>,
+}
+
+/// Runs `trisplat densify`.
+///
+/// # Errors
+/// Unreadable inputs, bad masks or options, an output equal to an input, a failed write.
+pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
+    refuse_to_overwrite(&args.gaussians, &args.output)?;
+    if let Some(t) = &args.template.template {
+        refuse_to_overwrite(t, &args.output)?;
+    }
+    if !(args.shrink.is_finite() && args.shrink > 0.0) {
+        bail!("--shrink {}: must be a positive number", args.shrink);
+    }
+    for (flag, v) in [
+        ("--split-above", args.split_above),
+        ("--w2-threshold", args.w2_threshold),
+    ] {
+        if v.is_some_and(|v| !v.is_finite() || v < 0.0) {
+            bail!("{flag}: must be a non-negative number");
+        }
+    }
+    let spinner = ctx.progress.spinner("densifying");
+    let loaded = load(&args.gaussians, &args.template)?;
+    let name = args.gaussians.display().to_string();
+    let n = loaded.set.len();
+    let mut selected = match &args.mask {
+        Some(p) => read_mask(p, n)?,
+        None => vec![true; n],
+    };
+    if let Some(w) = args.w2_threshold {
+        let w2 = w2_to_nearest(&loaded.world).with_context(|| name.clone())?;
+        let gate = w2_gate(&w2, &loaded.scale, w).with_context(|| name.clone())?;
+        selected.iter_mut().zip(gate).for_each(|(s, g)| *s &= g);
+    }
+    let (split, clone): (Vec<bool>, Vec<bool>) = match (args.split_above, args.op) {
+        (Some(s), _) => {
+            let big: Vec<bool> = (0..n)
+                .map(|i| f64::from(loaded.world.scale(i).max_element()) > s)
+                .collect();
+            (
+                selected.iter().zip(&big).map(|(a, b)| *a && *b).collect(),
+                selected.iter().zip(&big).map(|(a, b)| *a && !*b).collect(),
+            )
+        }
+        (None, OpArg::Split) => (selected.clone(), vec![false; n]),
+        (None, OpArg::Clone) => (vec![false; n], selected.clone()),
+    };
+    let mut counts = match loaded.triangles {
+        Some(t) => Some(TriangleCounts::from_set(&loaded.set, t).with_context(|| name.clone())?),
+        None => None,
+    };
+    // Clone first (clones go to the end), then split (the mask grows with the clones, which
+    // are not split).
+    let cloned =
+        clone_selected(&loaded.set, &clone, counts.as_mut()).with_context(|| name.clone())?;
+    let mut split_mask = split;
+    split_mask.resize(cloned.set.len(), false);
+    let options = SplitOptions {
+        children: args.children as usize,
+        shrink: args.shrink,
+        seed: args.seed,
+    };
+    let result = split_selected(&cloned.set, &split_mask, &options, counts.as_mut())
+        .with_context(|| name.clone())?;
+    spinner.finish_and_clear();
+    write_gaussians(&args.output, &result.set, &PlyWriteOptions::default())?;
+    let n_split = split_mask.iter().filter(|&&s| s).count();
+    let n_clone = clone.iter().filter(|&&s| s).count();
+    println!(
+        "densify: {n} -> {} Gaussians ({n_clone} cloned, {n_split} split into {} each)",
+        result.set.len(),
+        args.children
+    );
+    Ok(())
+}
