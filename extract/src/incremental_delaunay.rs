@@ -1,1 +1,0 @@
-//! Incremental Delaunay meshing of triangle-bound Gaussians (SPEC §6).
