@@ -35,6 +35,8 @@ pub struct GlobalArgs {
 pub enum Command {
     /// Compare a prediction with a ground truth (Chamfer, normal consistency, F-score).
     Eval(commands::eval::EvalArgs),
+    /// Alpha shape of a point set (Open3D's definition), outward-oriented triangles.
+    AlphaShape(commands::alpha_shape::AlphaShapeArgs),
     /// Convert between PLY, OBJ, glTF and GLB.
     Convert(commands::convert::ConvertArgs),
     /// Sample points on a mesh surface.
@@ -49,6 +51,8 @@ pub enum Command {
     Densify(commands::densify::DensifyArgs),
     /// Remove Gaussians by opacity, outlier distance, normal consistency or a mask.
     Prune(commands::prune::PruneArgs),
+    /// Render Gaussians (3DGS/2DGS/perspective-aware) or a mesh on the CPU: rgb, alpha, depth, normals.
+    Render(commands::render::RenderArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -75,6 +79,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     };
     match cli.command {
         Command::Eval(args) => commands::eval::run(args, &ctx),
+        Command::AlphaShape(args) => commands::alpha_shape::run(args, &ctx),
         Command::Convert(args) => commands::convert::run(args, &ctx),
         Command::Sample(args) => commands::sample::run(args, &ctx),
         Command::Smooth(args) => commands::smooth::run(args, &ctx),
@@ -82,5 +87,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Deform(args) => commands::deform::run(args, &ctx),
         Command::Densify(args) => commands::densify::run(args, &ctx),
         Command::Prune(args) => commands::prune::run(args, &ctx),
+        Command::Render(args) => commands::render::run(args, &ctx),
     }
 }

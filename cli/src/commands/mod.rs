@@ -1,11 +1,13 @@
 //! One module per `trisplat` command: its arguments and its `run`.
 
+pub mod alpha_shape;
 pub mod bind;
 pub mod convert;
 pub mod deform;
 pub mod densify;
 pub mod eval;
 pub mod prune;
+pub mod render;
 pub mod sample;
 pub mod smooth;
 

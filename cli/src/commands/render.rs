@@ -1,0 +1,234 @@
+//! `trisplat render GAUSSIANS.ply --cameras CAMS.json -o DIR [--mode 3dgs|2dgs|perspective]
+//! [--outputs rgb,alpha,depth,median_depth,normal] [--background r,g,b] [--compat-3dgs]
+//! [--antialiased]` and `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, bail};
+use trisplat_geometry::Camera;
+use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
+use trisplat_geometry::io::read_mesh;
+use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame};
+use trisplat_splat::ply::read_gaussians;
+use trisplat_splat::render::{
+    Outputs, RenderImages, RenderMode, RenderOptions, options::DEFAULT_FAR, render,
+};
+
+use super::{Context, refuse_to_overwrite};
+
+/// Splatting models.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModeArg {
+    /// 3DGS EWA splatting with gsplat's rules.
+    #[value(name = "3dgs")]
+    Gaussian3d,
+    /// 2DGS surfels (hbb1's ray-splat intersection).
+    #[value(name = "2dgs")]
+    Surfel2d,
+    /// Perspective-aware evaluation along each pixel ray (TGA).
+    Perspective,
+}
+
+/// Frames of the normal map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FrameArg {
+    /// World coordinates.
+    World,
+    /// Camera coordinates (OpenCV axes).
+    Camera,
+}
+
+/// Arguments of `trisplat render`.
+#[derive(Debug, clap::Args)]
+#[command(
+    long_about = "Render Gaussians (a world-space 3DGS PLY) or a mesh (--mesh) with the cameras \
+    of a 3DGS cameras.json or a NeRF transforms.json, on the CPU.\n\n\
+    Writes DIR/<img_name>_rgb.npy [H,W,3], _alpha.npy, _depth.npy (expected z-depth, 0 where \
+    nothing), _median_depth.npy, _normal.npy [H,W,3] (alpha-composited unit normals facing the \
+    camera) as float32, each with a PNG picture (depths colour-mapped with turbo over each \
+    image's own depth range, near = red; normals as (n+1)/2).\n\n\
+    3dgs mode follows gsplat 1.5.3 (SPEC §5); --compat-3dgs switches to the original 3DGS \
+    rasterizer's rules (alpha clamp 0.99, strict stop test, integer pixel centres, near 0.2, one \
+    3-sigma radius). Bound GaussianAvatars files (local parameters) must be baked to world space \
+    first with `trisplat deform`.\n\n\
+    With --mesh the mesh is ray cast instead: depth, normal and alpha (the hit mask) maps."
+)]
+pub struct RenderArgs {
+    /// Gaussians: a 3DGS PLY in world space.
+    #[arg(required_unless_present = "mesh", conflicts_with = "mesh")]
+    pub gaussians: Option<PathBuf>,
+    /// Render this mesh (.ply, .obj, .gltf, .glb) by ray casting instead of Gaussians.
+    #[arg(long, value_name = "MESH")]
+    pub mesh: Option<PathBuf>,
+    /// Cameras: a 3DGS cameras.json or a NeRF transforms.json.
+    #[arg(long, value_name = "CAMS.json")]
+    pub cameras: PathBuf,
+    /// Output folder (created if missing).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: PathBuf,
+    /// Splatting model.
+    #[arg(long, value_enum, default_value_t = ModeArg::Gaussian3d)]
+    pub mode: ModeArg,
+    /// Images to write: comma-separated rgb, alpha, depth, median_depth, normal (or all).
+    /// Default: rgb,alpha,depth (depth,normal,alpha with --mesh).
+    #[arg(long, value_name = "LIST", value_parser = parse_outputs)]
+    pub outputs: Option<Outputs>,
+    /// Background colour r,g,b in 0..1.
+    #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, default_value = "0,0,0")]
+    pub background: [f32; 3],
+    /// The original 3DGS rasterizer's rules instead of gsplat's.
+    #[arg(long)]
+    pub compat_3dgs: bool,
+    /// gsplat's antialiased mode (opacity times the dilation compensation).
+    #[arg(long)]
+    pub antialiased: bool,
+    /// Near plane (camera z); default 0.01 (0.2 with --compat-3dgs).
+    #[arg(long, value_name = "Z")]
+    pub near: Option<f32>,
+    /// Far plane (camera z).
+    #[arg(long, value_name = "Z", default_value_t = DEFAULT_FAR)]
+    pub far: f32,
+    /// Frame of the normal maps.
+    #[arg(long, value_enum, default_value_t = FrameArg::World)]
+    pub normal_frame: FrameArg,
+    /// Image size WxH for a transforms.json that does not give one.
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub image_size: Option<(u32, u32)>,
+}
+
+fn parse_outputs(s: &str) -> Result<Outputs, String> {
+    let o = Outputs::parse_list(s)?;
+    if o.is_empty() {
+        return Err("no output named".into());
+    }
+    Ok(o)
+}
+
+fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected r,g,b (three numbers), got '{s}'"));
+    }
+    let mut rgb = [0.0f32; 3];
+    for (v, p) in rgb.iter_mut().zip(&parts) {
+        *v = p
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("'{p}' is not a finite number"))?;
+    }
+    Ok(rgb)
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WxH, got '{s}'"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|&v| v > 0);
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("expected positive WxH, got '{s}'")),
+    }
+}
+
+/// Reads a 3DGS cameras.json (a JSON list) or a NeRF transforms.json (an object with `frames`),
+/// told apart by the file's contents.
+fn read_cameras(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result<Vec<Camera>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let cameras = if text.trim_start().starts_with('{') {
+        read_transforms_json(path, size)?
+    } else {
+        read_cameras_json(path)?
+    };
+    if cameras.is_empty() {
+        bail!("{}: no cameras", path.display());
+    }
+    Ok(cameras)
+}
+
+/// Runs `trisplat render`.
+///
+/// # Errors
+/// Unreadable inputs, bound (local) Gaussians, an unavailable mode, bad options, an output
+/// folder equal to an input, a failed write.
+pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
+    let input = args.gaussians.as_deref().or(args.mesh.as_deref());
+    let Some(input) = input else {
+        bail!("give a Gaussian PLY or --mesh MESH");
+    };
+    refuse_to_overwrite(input, &args.output)?;
+    refuse_to_overwrite(&args.cameras, &args.output)?;
+    let cameras = read_cameras(&args.cameras, args.image_size)?;
+    let frame = match args.normal_frame {
+        FrameArg::World => NormalFrame::World,
+        FrameArg::Camera => NormalFrame::Camera,
+    };
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("{}: cannot create the folder", args.output.display()))?;
+    let bar = ctx.progress.bar(cameras.len() as u64, "render");
+    if let Some(mesh_path) = &args.mesh {
+        let outputs = args.outputs.unwrap_or(Outputs {
+            depth: true,
+            normal: true,
+            alpha: true,
+            ..Outputs::NONE
+        });
+        if outputs.rgb || outputs.median_depth {
+            bail!("--mesh renders only depth, normal and alpha (the hit mask)");
+        }
+        let mesh = read_mesh(mesh_path)?;
+        let renderer = MeshRenderer::new(
+            &mesh,
+            MeshRenderOptions {
+                frame,
+                ..MeshRenderOptions::default()
+            },
+        )
+        .with_context(|| format!("{}: cannot build the ray-casting BVH", mesh_path.display()))?;
+        for camera in &cameras {
+            let maps = renderer.render(camera);
+            let mut images = RenderImages::new(camera.width, camera.height, outputs);
+            if outputs.depth {
+                images.depth = Some(maps.depth.clone());
+            }
+            if outputs.alpha {
+                images.alpha = Some(maps.mask.clone());
+            }
+            if outputs.normal {
+                images.normal = Some(maps.normal_flat());
+            }
+            images.write(&args.output, &camera.name)?;
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        return Ok(());
+    }
+    let set = read_gaussians(input)?;
+    let mut options = if args.compat_3dgs {
+        RenderOptions::original_3dgs()
+    } else {
+        RenderOptions::default()
+    };
+    options.mode = match args.mode {
+        ModeArg::Gaussian3d => RenderMode::Gaussian3d,
+        ModeArg::Surfel2d => RenderMode::Surfel2d,
+        ModeArg::Perspective => RenderMode::Perspective,
+    };
+    options.antialiased = args.antialiased;
+    options.outputs = args.outputs.unwrap_or_default();
+    options.background = args.background;
+    if let Some(near) = args.near {
+        options.near = near;
+    }
+    options.far = args.far;
+    options.normal_frame = frame;
+    for camera in &cameras {
+        let out = render(&set, camera, &options)
+            .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
+        out.images.write(&args.output, &camera.name)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
