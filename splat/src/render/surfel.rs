@@ -47,6 +47,10 @@ use crate::gaussians::sigmoid;
 /// variance ½ px² (Botsch et al. 2005's low-pass filter).
 pub const FILTER_INV_SQUARE: f64 = 2.0;
 /// hbb1's `FilterSize` (√2/2 as written in its source): the smallest extent of a screen box.
+#[expect(
+    clippy::approx_constant,
+    reason = "hbb1's literal, which is not exactly 1/sqrt(2)"
+)]
 pub const FILTER_SIZE: f64 = 0.707106;
 /// hbb1's box radius in units of the surfel's scale (`truncated_R` without `TIGHTBBOX`).
 pub const SURFEL_EXTENT: f64 = 3.0;
@@ -117,7 +121,7 @@ impl SurfelSplat {
         } else {
             (rho2d, tw.z)
         };
-        if !(depth >= self.near) || !rho.is_finite() {
+        if depth.is_nan() || depth < self.near || !rho.is_finite() {
             return None;
         }
         Some(SurfelSample {
