@@ -1,0 +1,53 @@
+//! `trisplat alpha-shape POINTS.ply --alpha A -o MESH.ply`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context as _, bail};
+use trisplat_extract::alpha_shape::alpha_shape;
+use trisplat_geometry::io::{WriteOptions, read_points, write_mesh};
+
+use super::{Context, refuse_to_overwrite};
+
+/// Arguments of `trisplat alpha-shape`.
+#[derive(Debug, clap::Args)]
+pub struct AlphaShapeArgs {
+    /// Input points: a PLY point cloud, or the vertices of any mesh (.ply, .obj, .gltf, .glb).
+    pub points: PathBuf,
+    /// Keep the Delaunay tetrahedra with circumradius <= ALPHA (Open3D's definition; same units
+    /// as the points).
+    #[arg(long)]
+    pub alpha: f64,
+    /// Output mesh (.ply, .obj, .gltf, .glb): the boundary triangles, oriented outward.
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+}
+
+/// Runs `trisplat alpha-shape`.
+///
+/// # Errors
+/// Unreadable input, a NaN α, non-finite or huge coordinates, an output that is the input, a
+/// failed write.
+pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
+    refuse_to_overwrite(&args.points, &args.output)?;
+    if args.alpha.is_nan() || args.alpha < 0.0 {
+        bail!("--alpha {}: expected a non-negative radius", args.alpha);
+    }
+    let cloud = read_points(&args.points)?;
+    let spinner = ctx.progress.spinner("tetrahedralising");
+    let shape = alpha_shape(cloud.positions(), args.alpha)
+        .with_context(|| format!("{}: alpha shape failed", args.points.display()))?;
+    spinner.finish_and_clear();
+    let mut mesh = shape.mesh;
+    if let Some(colors) = cloud.colors() {
+        let picked = shape
+            .vertex_ids
+            .iter()
+            .map(|&i| colors[i as usize])
+            .collect();
+        mesh = mesh
+            .with_colors(picked)
+            .context("carrying the point colours")?;
+    }
+    write_mesh(&args.output, &mesh, WriteOptions::default())?;
+    Ok(())
+}
