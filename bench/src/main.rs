@@ -7,6 +7,7 @@
 //! `TRISPLAT_PYTHON` environment variable, else `python3`). Without one, only trisplat's
 //! timings are printed.
 
+mod alpha;
 mod eval;
 mod harness;
 mod smooth;
@@ -34,6 +35,8 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Bench {
+    /// 3D Delaunay + alpha shape of 100k scan samples vs Open3D (Qhull).
+    Alpha(alpha::AlphaBenchArgs),
     /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
     Eval(eval::EvalBenchArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
@@ -44,6 +47,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let python = (!args.no_python).then_some(args.python.as_str());
     match args.bench {
+        Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Smooth => smooth::run(python),
     }
