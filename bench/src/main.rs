@@ -8,6 +8,7 @@
 //! timings are printed.
 
 mod alpha;
+mod deform;
 mod eval;
 mod harness;
 mod smooth;
@@ -35,6 +36,8 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Bench {
+    /// Deforming 100k bound Gaussians per frame (binding and jacobian modes); trisplat only.
+    Deform(deform::DeformBenchArgs),
     /// 3D Delaunay + alpha shape of 100k scan samples vs Open3D (Qhull).
     Alpha(alpha::AlphaBenchArgs),
     /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
@@ -47,6 +50,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let python = (!args.no_python).then_some(args.python.as_str());
     match args.bench {
+        Bench::Deform(a) => deform::run(&a),
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Smooth => smooth::run(python),
