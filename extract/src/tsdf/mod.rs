@@ -1,0 +1,646 @@
+//! TSDF fusion of depth maps into a sparse voxel-block grid (SPEC §6).
+//!
+//! Per-voxel rules are Open3D's legacy integrator
+//! (`UniformTSDFVolume::IntegrateWithDepthToCameraDistanceMultiplier`), in trisplat's pixel
+//! convention (pixel (i, j) centred at (j + ½, i + ½), SPEC §2):
+//! - voxel `g` is centred at `(g + ½) · voxel` (world);
+//! - its camera-space point `q` (skipped when `q.z ≤ 0`) projects to `(u, v) = (fx q.x / q.z +
+//!   cx, fy q.y / q.z + cy)`; voxels with `u` or `v` outside `[1e-4, size − 1e-4)` are skipped
+//!   ([`PIXEL_MARGIN`]); the pixel is the one whose centre is nearest, `(⌊v⌋, ⌊u⌋)` — Open3D's
+//!   `(int)(u + 0.5)` with its pixel centres at integers;
+//! - pixels with no depth (0, invalid, or beyond `depth_trunc`) are skipped;
+//! - `sdf = (d − q.z) · ‖((j + ½ − cx)/fx, (i + ½ − cy)/fy, 1)‖` (the z difference times the
+//!   ray-length factor of the pixel);
+//! - only when `sdf > −trunc`: `tsdf = min(1, sdf / trunc)` and the running average with unit
+//!   weights `value ← (value · w + tsdf) / (w + 1)`, `w ← w + 1` (colour likewise).
+//!
+//! Open3D's dense volume integrates every voxel of a box; here blocks of 8³ voxels are created
+//! only near observed depth: for each valid pixel, every block within `trunc + √3 voxel +
+//! (d + trunc) · ½ √(1/fx² + 1/fy²)` of its back-projected point (see [`TsdfVolume::allocate`]).
+//! That radius covers every voxel with |sdf| < trunc for that pixel and every corner of a cell
+//! that has such a voxel, so the extracted surface is the one the dense volume would give.
+//! Values are stored in f32, computed in f64. Blocks are integrated in parallel, each looping
+//! over the frames in order, so the result does not depend on the thread count.
+
+mod fuse;
+pub mod grid;
+mod image;
+
+use std::path::PathBuf;
+
+use glam::{DMat3, DVec3, IVec3};
+use rayon::prelude::*;
+use trisplat_geometry::io::IoError;
+use trisplat_geometry::{Camera, TriMesh};
+
+pub use self::fuse::{
+    DEFAULT_KEEP_CLUSTERS, DEFAULT_TRUNC_VOXELS, DEFAULT_VOXELS_PER_DEPTH_TRUNC, Fused,
+    TsdfOptions, fuse, post_process, scene_radius,
+};
+pub use self::grid::BlockGrid;
+use self::grid::{BLOCK, BLOCK_VOXELS, KeyMap, local_coords};
+pub use self::image::{
+    ColorImage, DEFAULT_DEPTH_SCALE, DepthImage, find_image, read_color, read_color_dir,
+    read_depth, read_depth_dir,
+};
+use crate::marching_cubes::marching_cubes;
+
+/// Projected coordinates must lie in `[PIXEL_MARGIN, size − PIXEL_MARGIN)` (Open3D's 0.0001).
+pub const PIXEL_MARGIN: f64 = 1e-4;
+
+/// Default cap on the number of 8³ blocks (about 4 KiB each without colour, 10 KiB with):
+/// 2²⁰ blocks are 4 GiB. A voxel too small for the scene is refused instead of exhausting
+/// memory.
+pub const DEFAULT_MAX_BLOCKS: usize = 1 << 20;
+
+/// Voxel indices are kept within ±2³⁰ so that block keys and neighbours never overflow `i32`.
+const MAX_VOXEL_INDEX: f64 = (1u64 << 30) as f64;
+
+/// Side of the square pixel tiles whose largest depth culls blocks behind the surface.
+const TILE: usize = 16;
+
+/// Why fusion failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TsdfError {
+    /// A parameter is not a finite positive number (or not allowed for another reason).
+    #[error("{name} = {value} must be a finite number > 0")]
+    Parameter {
+        /// Parameter name (`voxel`, `trunc`, `depth_trunc`, `depth_scale`).
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// No default scale: the cameras' optical axes do not meet (one camera, or all parallel).
+    #[error(
+        "cannot estimate the scene radius from {cameras} camera(s) whose optical axes do not \
+         meet: give the voxel size (and the depth truncation)"
+    )]
+    NoScale {
+        /// Number of cameras.
+        cameras: usize,
+    },
+    /// A depth or colour image does not have the camera's size.
+    #[error("{what}: image is {found}, but the camera is {}x{}", expected.0, expected.1)]
+    ImageSize {
+        /// The image (file and camera, or in-memory image).
+        what: String,
+        /// The camera's (width, height).
+        expected: (u32, u32),
+        /// What was found.
+        found: String,
+    },
+    /// No depth or colour file for a camera.
+    #[error("{}: no such file (camera {camera}; a .png next to it is also accepted)", path.display())]
+    MissingImage {
+        /// The `.npy` path looked for.
+        path: PathBuf,
+        /// The camera's image name.
+        camera: String,
+    },
+    /// An image file cannot be decoded.
+    #[error("{}: {message}", path.display())]
+    ImageFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A `.npy` file cannot be read.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// The number of depth (or colour) images differs from the number of cameras.
+    #[error("{images} {what} images for {cameras} cameras")]
+    FrameCount {
+        /// `"depth"` or `"colour"`.
+        what: &'static str,
+        /// Number of images.
+        images: usize,
+        /// Number of cameras.
+        cameras: usize,
+    },
+    /// The volume keeps colours but a frame has no colour image.
+    #[error("camera {camera}: the volume is coloured but the frame has no colour image")]
+    NoColor {
+        /// The camera's image name.
+        camera: String,
+    },
+    /// The observed depth needs more blocks than allowed (the voxel is too small for the scene).
+    #[error(
+        "the depth maps need more than {limit} voxel blocks of 8^3 at voxel {voxel}; use a \
+         larger voxel"
+    )]
+    TooManyBlocks {
+        /// The block limit.
+        limit: usize,
+        /// The voxel size.
+        voxel: f64,
+    },
+    /// A back-projected point is too far from the origin for the voxel size (index beyond 2³⁰).
+    #[error("camera {camera}: depth points lie more than 2^30 voxels from the origin")]
+    OutOfRange {
+        /// The camera's image name.
+        camera: String,
+    },
+}
+
+/// Resolved fusion parameters (all finite and positive).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TsdfParams {
+    /// Voxel edge length.
+    pub voxel: f64,
+    /// Truncation distance of the signed distance.
+    pub trunc: f64,
+    /// Depths beyond this are ignored (`f64::INFINITY`: none).
+    pub depth_trunc: f64,
+}
+
+impl TsdfParams {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`TsdfError::Parameter`] naming the first field that is not finite and positive
+    /// (`depth_trunc` may be `+∞`).
+    pub fn validate(&self) -> Result<(), TsdfError> {
+        for (name, value) in [("voxel", self.voxel), ("trunc", self.trunc)] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(TsdfError::Parameter { name, value });
+            }
+        }
+        if self.depth_trunc.is_nan() || self.depth_trunc <= 0.0 {
+            return Err(TsdfError::Parameter {
+                name: "depth_trunc",
+                value: self.depth_trunc,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One view: a camera, its depth map and optionally its colours (same size as the camera).
+#[derive(Clone, Copy, Debug)]
+pub struct Frame<'a> {
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Its depth map.
+    pub depth: &'a DepthImage,
+    /// Its colour image, for coloured volumes.
+    pub color: Option<&'a ColorImage>,
+}
+
+/// Per-frame data prepared once: camera maths, effective depth, culling tiles.
+struct Prepared<'a> {
+    name: &'a str,
+    world_to_camera: DMat3,
+    center: DVec3,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    width: usize,
+    height: usize,
+    /// Depth with invalid values and those beyond `depth_trunc` set to 0.
+    depth: Vec<f32>,
+    /// ((j + ½ − cx)/fx)² per column and ((i + ½ − cy)/fy)² per row.
+    col_sq: Vec<f64>,
+    row_sq: Vec<f64>,
+    /// Largest depth per TILE x TILE tile (0 = no valid pixel).
+    tile_max: Vec<f32>,
+    tiles_x: usize,
+    color: Option<&'a [[f32; 3]]>,
+}
+
+impl<'a> Prepared<'a> {
+    fn new(frame: &Frame<'a>, depth_trunc: f64) -> Result<Self, TsdfError> {
+        let cam = frame.camera;
+        let (width, height) = (cam.width as usize, cam.height as usize);
+        if (frame.depth.width(), frame.depth.height()) != (cam.width, cam.height) {
+            return Err(TsdfError::ImageSize {
+                what: format!("depth map of camera {}", cam.name),
+                expected: (cam.width, cam.height),
+                found: format!("{}x{}", frame.depth.width(), frame.depth.height()),
+            });
+        }
+        if let Some(c) = frame.color
+            && (c.width(), c.height()) != (cam.width, cam.height)
+        {
+            return Err(TsdfError::ImageSize {
+                what: format!("colour image of camera {}", cam.name),
+                expected: (cam.width, cam.height),
+                found: format!("{}x{}", c.width(), c.height()),
+            });
+        }
+        let depth: Vec<f32> = frame
+            .depth
+            .data()
+            .iter()
+            .map(|&d| if f64::from(d) <= depth_trunc { d } else { 0.0 })
+            .collect();
+        let col_sq = (0..width)
+            .map(|j| ((j as f64 + 0.5 - cam.cx) / cam.fx).powi(2))
+            .collect();
+        let row_sq = (0..height)
+            .map(|i| ((i as f64 + 0.5 - cam.cy) / cam.fy).powi(2))
+            .collect();
+        let tiles_x = width.div_ceil(TILE);
+        let tiles_y = height.div_ceil(TILE);
+        let mut tile_max = vec![0.0f32; tiles_x * tiles_y];
+        for (i, row) in depth.chunks_exact(width).enumerate() {
+            for (j, &d) in row.iter().enumerate() {
+                let t = &mut tile_max[(i / TILE) * tiles_x + j / TILE];
+                *t = t.max(d);
+            }
+        }
+        Ok(Self {
+            name: &cam.name,
+            world_to_camera: cam.world_to_camera_rotation(),
+            center: cam.position(),
+            fx: cam.fx,
+            fy: cam.fy,
+            cx: cam.cx,
+            cy: cam.cy,
+            width,
+            height,
+            depth,
+            col_sq,
+            row_sq,
+            tile_max,
+            tiles_x,
+            color: frame.color.map(ColorImage::data),
+        })
+    }
+
+    /// Whether no voxel of the box `[lo, hi]` (world) can be integrated from this frame: the
+    /// box is behind the camera, projects outside the image, or lies more than `trunc`
+    /// behind the farthest depth of the pixels it covers.
+    fn culls(&self, lo: DVec3, hi: DVec3, trunc: f64) -> bool {
+        let mut z_min = f64::INFINITY;
+        let mut z_max = f64::NEG_INFINITY;
+        let (mut u_min, mut u_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut v_min, mut v_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        for c in 0..8 {
+            let p = DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            let q = self.world_to_camera * (p - self.center);
+            z_min = z_min.min(q.z);
+            z_max = z_max.max(q.z);
+            if q.z > 0.0 {
+                let (u, v) = (self.fx * q.x / q.z + self.cx, self.fy * q.y / q.z + self.cy);
+                u_min = u_min.min(u);
+                u_max = u_max.max(u);
+                v_min = v_min.min(v);
+                v_max = v_max.max(v);
+            }
+        }
+        if z_max <= 0.0 {
+            return true;
+        }
+        if z_min <= 0.0 {
+            // Straddles the camera plane: the projection is unbounded, keep it.
+            return false;
+        }
+        let (w, h) = (self.width as f64, self.height as f64);
+        if u_max < PIXEL_MARGIN
+            || v_max < PIXEL_MARGIN
+            || u_min >= w - PIXEL_MARGIN
+            || v_min >= h - PIXEL_MARGIN
+        {
+            return true;
+        }
+        // Largest depth over the tiles the box covers.
+        let col = |u: f64| (u.clamp(0.0, w - 1.0) as usize) / TILE;
+        let row = |v: f64| (v.clamp(0.0, h - 1.0) as usize) / TILE;
+        let mut d_max = 0.0f32;
+        for ty in row(v_min)..=row(v_max) {
+            for tx in col(u_min)..=col(u_max) {
+                d_max = d_max.max(self.tile_max[ty * self.tiles_x + tx]);
+            }
+        }
+        // sdf ≤ (d_max − z_min) · factor and factor ≥ 1: nothing passes sdf > −trunc.
+        d_max == 0.0 || z_min - f64::from(d_max) >= trunc
+    }
+}
+
+/// A sparse TSDF volume (see the module docs).
+#[derive(Clone, Debug)]
+pub struct TsdfVolume {
+    grid: BlockGrid,
+    params: TsdfParams,
+    max_blocks: usize,
+}
+
+impl TsdfVolume {
+    /// An empty volume; `with_color` keeps a colour per voxel (frames must then carry colour
+    /// images).
+    ///
+    /// # Errors
+    /// [`TsdfError::Parameter`] for invalid parameters.
+    pub fn new(params: TsdfParams, with_color: bool) -> Result<Self, TsdfError> {
+        params.validate()?;
+        Ok(Self {
+            grid: BlockGrid::new(params.voxel, DVec3::splat(0.5 * params.voxel), with_color),
+            params,
+            max_blocks: DEFAULT_MAX_BLOCKS,
+        })
+    }
+
+    /// Sets the cap on the number of blocks (default [`DEFAULT_MAX_BLOCKS`]).
+    #[must_use]
+    pub fn with_max_blocks(mut self, max_blocks: usize) -> Self {
+        self.max_blocks = max_blocks;
+        self
+    }
+
+    /// The parameters.
+    #[must_use]
+    pub fn params(&self) -> TsdfParams {
+        self.params
+    }
+
+    /// The voxel blocks (values, weights, colours).
+    #[must_use]
+    pub fn grid(&self) -> &BlockGrid {
+        &self.grid
+    }
+
+    /// Creates the blocks near the observed depth of `frames` (see the module docs), without
+    /// integrating. New blocks are added in sorted key order, so the block order depends only
+    /// on the frames.
+    ///
+    /// # Errors
+    /// [`TsdfError::ImageSize`] for a depth map of the wrong size,
+    /// [`TsdfError::OutOfRange`] for points too far from the origin,
+    /// [`TsdfError::TooManyBlocks`] past the block cap.
+    pub fn allocate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
+        let prepared = self.prepare(frames)?;
+        let limit = self.max_blocks;
+        let params = self.params;
+        let origin = self.grid.origin;
+        let per_frame: Vec<Result<Vec<IVec3>, TsdfError>> = prepared
+            .par_iter()
+            .map(|f| frame_blocks(f, params, origin, limit))
+            .collect();
+        let mut all: Vec<IVec3> = Vec::new();
+        for keys in per_frame {
+            all.extend(keys?);
+        }
+        all.retain(|k| !self.grid.lookup.contains_key(k));
+        all.par_sort_unstable_by_key(|k| (k.z, k.y, k.x));
+        all.dedup();
+        if self.grid.block_count() + all.len() > limit {
+            return Err(TsdfError::TooManyBlocks {
+                limit,
+                voxel: params.voxel,
+            });
+        }
+        for key in all {
+            self.grid.push_block(key);
+        }
+        Ok(())
+    }
+
+    /// Integrates `frames` in order into the existing blocks (see the module docs). Blocks
+    /// are not created: call [`TsdfVolume::allocate`] first with every frame to get the
+    /// result of a dense volume, or use [`TsdfVolume::integrate`].
+    ///
+    /// # Errors
+    /// [`TsdfError::ImageSize`] for an image of the wrong size, [`TsdfError::NoColor`] when
+    /// the volume has colour and a frame has none.
+    pub fn integrate_allocated(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
+        let prepared = self.prepare(frames)?;
+        let params = self.params;
+        let grid = &mut self.grid;
+        let (voxel, origin) = (grid.voxel, grid.origin);
+        let keys = &grid.keys;
+        match &mut grid.color {
+            Some(color) => grid
+                .value
+                .par_chunks_mut(BLOCK_VOXELS)
+                .zip(grid.weight.par_chunks_mut(BLOCK_VOXELS))
+                .zip(color.par_chunks_mut(BLOCK_VOXELS))
+                .zip(keys.par_iter())
+                .for_each(|(((value, weight), color), &key)| {
+                    let block = BlockData {
+                        value,
+                        weight,
+                        color: Some(color),
+                    };
+                    integrate_block(block, key, voxel, origin, &prepared, params);
+                }),
+            None => grid
+                .value
+                .par_chunks_mut(BLOCK_VOXELS)
+                .zip(grid.weight.par_chunks_mut(BLOCK_VOXELS))
+                .zip(keys.par_iter())
+                .for_each(|((value, weight), &key)| {
+                    let block = BlockData {
+                        value,
+                        weight,
+                        color: None,
+                    };
+                    integrate_block(block, key, voxel, origin, &prepared, params);
+                }),
+        }
+        Ok(())
+    }
+
+    /// Allocates the blocks `frames` need, then integrates them: the result equals Open3D's
+    /// dense legacy volume on the same frames (up to f32 rounding). Calling it once per frame
+    /// instead gives Open3D `VoxelBlockGrid` behaviour, where blocks created by a later frame
+    /// lack the earlier frames' free-space observations.
+    ///
+    /// # Errors
+    /// As [`TsdfVolume::allocate`] and [`TsdfVolume::integrate_allocated`].
+    pub fn integrate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
+        self.allocate(frames)?;
+        self.integrate_allocated(frames)
+    }
+
+    /// The zero level set by marching cubes (welded, faces toward free space, cells with an
+    /// unobserved corner skipped), with vertex colours when the volume has them. Not cleaned:
+    /// see [`post_process`].
+    #[must_use]
+    pub fn extract_mesh(&self) -> TriMesh {
+        marching_cubes(&self.grid)
+    }
+
+    fn prepare<'a>(&self, frames: &[Frame<'a>]) -> Result<Vec<Prepared<'a>>, TsdfError> {
+        let with_color = self.grid.has_color();
+        let prepared: Vec<Result<Prepared<'a>, TsdfError>> = frames
+            .par_iter()
+            .map(|f| {
+                if with_color && f.color.is_none() {
+                    return Err(TsdfError::NoColor {
+                        camera: f.camera.name.clone(),
+                    });
+                }
+                Prepared::new(f, self.params.depth_trunc)
+            })
+            .collect();
+        prepared.into_iter().collect()
+    }
+}
+
+/// The keys of the blocks near the valid depth of one frame.
+fn frame_blocks(
+    f: &Prepared<'_>,
+    params: TsdfParams,
+    origin: DVec3,
+    limit: usize,
+) -> Result<Vec<IVec3>, TsdfError> {
+    let camera_to_world = f.world_to_camera.transpose();
+    let lateral = 0.5 * (1.0 / (f.fx * f.fx) + 1.0 / (f.fy * f.fy)).sqrt();
+    let fixed = params.trunc + 3f64.sqrt() * params.voxel;
+    let inv_voxel = 1.0 / params.voxel;
+    let block = f64::from(BLOCK);
+    let rows: Vec<Result<Vec<IVec3>, TsdfError>> = (0..f.height)
+        .into_par_iter()
+        .with_min_len(8)
+        .map(|i| {
+            let mut keys: std::collections::HashSet<
+                IVec3,
+                std::hash::BuildHasherDefault<grid::KeyHasher>,
+            > = Default::default();
+            let mut last: Option<(IVec3, IVec3)> = None;
+            let yn = (i as f64 + 0.5 - f.cy) / f.fy;
+            for j in 0..f.width {
+                let d = f64::from(f.depth[i * f.width + j]);
+                if d <= 0.0 {
+                    continue;
+                }
+                let xn = (j as f64 + 0.5 - f.cx) / f.fx;
+                let p = camera_to_world * DVec3::new(xn * d, yn * d, d) + f.center;
+                let r = fixed + (d + params.trunc) * lateral;
+                let lo = ((p - r - origin) * inv_voxel).ceil();
+                let hi = ((p + r - origin) * inv_voxel).floor();
+                if lo.abs().max_element() > MAX_VOXEL_INDEX
+                    || hi.abs().max_element() > MAX_VOXEL_INDEX
+                {
+                    return Err(TsdfError::OutOfRange {
+                        camera: f.name.to_owned(),
+                    });
+                }
+                let lo = (lo / block).floor().as_ivec3();
+                let hi = (hi / block).floor().as_ivec3();
+                if last == Some((lo, hi)) {
+                    continue;
+                }
+                last = Some((lo, hi));
+                let span = (hi - lo + 1).max(IVec3::ZERO).as_u64vec3();
+                if span.x * span.y * span.z > limit as u64 {
+                    return Err(TsdfError::TooManyBlocks {
+                        limit,
+                        voxel: params.voxel,
+                    });
+                }
+                for z in lo.z..=hi.z {
+                    for y in lo.y..=hi.y {
+                        for x in lo.x..=hi.x {
+                            keys.insert(IVec3::new(x, y, z));
+                        }
+                    }
+                }
+                if keys.len() > limit {
+                    return Err(TsdfError::TooManyBlocks {
+                        limit,
+                        voxel: params.voxel,
+                    });
+                }
+            }
+            Ok(keys.into_iter().collect())
+        })
+        .collect();
+    let mut set: KeyMap<()> = KeyMap::default();
+    for row in rows {
+        for k in row? {
+            set.insert(k, ());
+        }
+        if set.len() > limit {
+            return Err(TsdfError::TooManyBlocks {
+                limit,
+                voxel: params.voxel,
+            });
+        }
+    }
+    Ok(set.into_keys().collect())
+}
+
+/// Mutable storage of one block.
+struct BlockData<'a> {
+    value: &'a mut [f32],
+    weight: &'a mut [f32],
+    color: Option<&'a mut [[f32; 3]]>,
+}
+
+/// Integrates every frame, in order, into one block.
+fn integrate_block(
+    mut block: BlockData<'_>,
+    key: IVec3,
+    voxel: f64,
+    origin: DVec3,
+    frames: &[Prepared<'_>],
+    params: TsdfParams,
+) {
+    let trunc = params.trunc;
+    let inv_trunc = 1.0 / trunc;
+    let base = key * BLOCK;
+    let lo = origin + base.as_dvec3() * voxel;
+    let hi = lo + DVec3::splat(f64::from(BLOCK - 1) * voxel);
+    for f in frames {
+        if f.culls(lo, hi, trunc) {
+            continue;
+        }
+        let step = f.world_to_camera * DVec3::new(voxel, 0.0, 0.0);
+        let (w, h) = (f.width as f64, f.height as f64);
+        for start in (0..BLOCK_VOXELS).step_by(BLOCK as usize) {
+            let l = local_coords(start);
+            let p = origin + (base + l).as_dvec3() * voxel;
+            let mut q = f.world_to_camera * (p - f.center);
+            for s in start..start + BLOCK as usize {
+                if s > start {
+                    q += step;
+                }
+                if q.z <= 0.0 {
+                    continue;
+                }
+                let u = f.fx * q.x / q.z + f.cx;
+                let v = f.fy * q.y / q.z + f.cy;
+                if !(u >= PIXEL_MARGIN
+                    && u < w - PIXEL_MARGIN
+                    && v >= PIXEL_MARGIN
+                    && v < h - PIXEL_MARGIN)
+                {
+                    continue;
+                }
+                let (j, i) = (u as usize, v as usize);
+                let pixel = i * f.width + j;
+                let d = f.depth[pixel];
+                if d <= 0.0 {
+                    continue;
+                }
+                let dz = f64::from(d) - q.z;
+                let sdf = dz * (1.0 + f.col_sq[j] + f.row_sq[i]).sqrt();
+                if sdf <= -trunc {
+                    continue;
+                }
+                let tsdf = (sdf * inv_trunc).min(1.0);
+                let w0 = f64::from(block.weight[s]);
+                let w1 = w0 + 1.0;
+                block.value[s] = ((f64::from(block.value[s]) * w0 + tsdf) / w1) as f32;
+                block.weight[s] = w1 as f32;
+                if let (Some(color), Some(image)) = (block.color.as_deref_mut(), f.color) {
+                    let c = image[pixel];
+                    let old = color[s];
+                    color[s] =
+                        [0, 1, 2].map(|k| ((f64::from(old[k]) * w0 + f64::from(c[k])) / w1) as f32);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
