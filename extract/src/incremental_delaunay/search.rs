@@ -1,0 +1,191 @@
+//! Closest-triangle search over the deformed template: an obvhs `Bvh2` (PLOC) whose boxes are
+//! refitted every frame, searched depth first with an upper bound.
+//!
+//! `trisplat_geometry::spatial::TriangleBvh` answers unbounded closest-point queries; hop
+//! detection needs a query *seeded* with the Gaussian's current triangle (only boxes nearer than
+//! it are opened, which is what makes a frame update cheap) and a tree that is refitted rather
+//! than rebuilt. The answer is the same as `TriangleBvh`'s: the minimum of
+//! [`closest_point_on_triangle`] over all triangles, ties to the smallest triangle id, because
+//! boxes are padded (see [`BOX_PADDING_REL`]) so pruning never drops a triangle whose computed
+//! distance could tie or beat the bound.
+
+use glam::{DVec3, Vec3, Vec3A};
+use obvhs::aabb::Aabb as BvhAabb;
+use obvhs::bvh2::Bvh2;
+use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
+use obvhs::triangle::Triangle;
+use rayon::prelude::*;
+use trisplat_geometry::spatial::closest_point_on_triangle;
+
+/// Node boxes grow by this fraction of the template's bounding-box diagonal (plus the same
+/// fraction of each coordinate's magnitude), far above the f64 rounding of a point-triangle
+/// distance, so a box is only skipped when every triangle in it is certainly farther than the
+/// bound.
+pub const BOX_PADDING_REL: f32 = 1e-5;
+
+/// A candidate: squared distance and triangle id, ordered lexicographically.
+pub(crate) type Candidate = (f64, u32);
+
+/// The BVH over the deformed triangles.
+pub(crate) struct DeformedBvh {
+    bvh: Bvh2,
+    /// Deformed corners of every triangle (f32, as the mesh stores them).
+    corners: Vec<[Vec3; 3]>,
+    /// Leaf node of each triangle.
+    leaf_of: Vec<u32>,
+}
+
+impl DeformedBvh {
+    /// Builds a tree over the triangles `tris` of `positions` (indices already checked).
+    pub(crate) fn build(positions: &[Vec3], tris: &[[u32; 3]], diagonal: f32) -> Self {
+        let corners = gather_corners(positions, tris);
+        let triangles: Vec<Triangle> = corners
+            .par_iter()
+            .map(|&[a, b, c]| Triangle {
+                v0: a.into(),
+                v1: b.into(),
+                v2: c.into(),
+            })
+            .collect();
+        let n = triangles.len();
+        let bvh = if n == 0 {
+            Bvh2::default()
+        } else {
+            PlocBuilder::with_capacity(n).build(
+                PlocSearchDistance::Medium,
+                &triangles,
+                (0..n as u32).collect(),
+                SortPrecision::U64,
+                3,
+            )
+        };
+        let mut leaf_of = vec![u32::MAX; n];
+        for (index, node) in bvh.nodes.iter().enumerate() {
+            if node.is_leaf() {
+                for slot in node.first_index..node.first_index.saturating_add(node.prim_count) {
+                    if let Some(&t) = bvh.primitive_indices.get(slot as usize)
+                        && let Some(l) = leaf_of.get_mut(t as usize)
+                    {
+                        *l = index as u32;
+                    }
+                }
+            }
+        }
+        let mut out = Self {
+            bvh,
+            corners,
+            leaf_of,
+        };
+        out.set_leaf_boxes(diagonal);
+        out.bvh.refit_all();
+        out
+    }
+
+    /// Moves the triangles to `positions` and refits the boxes (same tree).
+    pub(crate) fn refit(&mut self, positions: &[Vec3], tris: &[[u32; 3]], diagonal: f32) {
+        self.corners = gather_corners(positions, tris);
+        self.set_leaf_boxes(diagonal);
+        self.bvh.refit_all();
+    }
+
+    fn set_leaf_boxes(&mut self, diagonal: f32) {
+        for node in &mut self.bvh.nodes {
+            if node.is_leaf() {
+                node.set_aabb(BvhAabb::empty());
+            }
+        }
+        for (t, c) in self.corners.iter().enumerate() {
+            let Some(node) = self.bvh.nodes.get_mut(self.leaf_of[t] as usize) else {
+                continue;
+            };
+            let lo = c[0].min(c[1]).min(c[2]);
+            let hi = c[0].max(c[1]).max(c[2]);
+            let pad =
+                Vec3::splat(diagonal * BOX_PADDING_REL) + lo.abs().max(hi.abs()) * BOX_PADDING_REL;
+            let b = BvhAabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad));
+            let merged = node.aabb().union(&b);
+            node.set_aabb(merged);
+        }
+    }
+
+    /// Squared distance from `q` to triangle `t` (as [`closest_point_on_triangle`]), and the
+    /// barycentric weights of the closest point.
+    pub(crate) fn distance_sq(&self, q: DVec3, t: u32) -> (f64, [f64; 3]) {
+        match self.corners.get(t as usize) {
+            Some(&[a, b, c]) => {
+                let (p, bary) =
+                    closest_point_on_triangle(q, a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+                ((p - q).length_squared(), bary)
+            }
+            None => (f64::INFINITY, [1.0 / 3.0; 3]),
+        }
+    }
+
+    /// The lexicographically smallest `(squared distance, triangle)` that is smaller than
+    /// `bound`, or `None`. With `bound = (d², t)` for the current triangle `t`, a result means
+    /// that another triangle is strictly nearer (or as near with a smaller id).
+    pub(crate) fn nearest_below(&self, q: DVec3, bound: Candidate) -> Option<Candidate> {
+        let nodes = &self.bvh.nodes;
+        if nodes.is_empty() {
+            return None;
+        }
+        let mut best = bound;
+        let mut found = false;
+        let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
+        stack.push((0, box_distance_sq(nodes[0].aabb(), q)));
+        while let Some((index, lower)) = stack.pop() {
+            if lower > best.0 {
+                continue;
+            }
+            let Some(node) = nodes.get(index as usize) else {
+                continue;
+            };
+            if node.is_leaf() {
+                for slot in node.first_index..node.first_index.saturating_add(node.prim_count) {
+                    let Some(&t) = self.bvh.primitive_indices.get(slot as usize) else {
+                        continue;
+                    };
+                    let (d2, _) = self.distance_sq(q, t);
+                    if (d2, t) < best {
+                        best = (d2, t);
+                        found = true;
+                    }
+                }
+                continue;
+            }
+            let left = node.first_index;
+            let right = left + 1;
+            let (Some(ln), Some(rn)) = (nodes.get(left as usize), nodes.get(right as usize)) else {
+                continue;
+            };
+            let dl = box_distance_sq(ln.aabb(), q);
+            let dr = box_distance_sq(rn.aabb(), q);
+            let (near, dn, far, df) = if dl <= dr {
+                (left, dl, right, dr)
+            } else {
+                (right, dr, left, dl)
+            };
+            if df <= best.0 {
+                stack.push((far, df));
+            }
+            if dn <= best.0 {
+                stack.push((near, dn));
+            }
+        }
+        found.then_some(best)
+    }
+}
+
+fn gather_corners(positions: &[Vec3], tris: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
+    tris.par_iter()
+        .with_min_len(1024)
+        .map(|t| t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO)))
+        .collect()
+}
+
+fn box_distance_sq(aabb: &BvhAabb, q: DVec3) -> f64 {
+    let lo = Vec3::from(aabb.min).as_dvec3();
+    let hi = Vec3::from(aabb.max).as_dvec3();
+    let d = (lo - q).max(q - hi).max(DVec3::ZERO);
+    d.length_squared()
+}

@@ -1,0 +1,466 @@
+//! Incremental Delaunay of bound Gaussians (extract::incremental_delaunay): every frame equals a
+//! from-scratch triangulation, the mesh is watertight on a closed template, hops happen and only
+//! touched charts are redone, Delaunay oracle on a flat chart, degenerate inputs.
+
+use std::collections::HashMap;
+
+use glam::{DVec3, Vec3};
+use trisplat_extract::incremental_delaunay::{
+    DEFAULT_INTERIOR_MARGIN, DelaunayError, DelaunayOptions, IncrementalDelaunay, Lift,
+};
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::rng::Rng;
+use trisplat_geometry::topology::edge_triangles;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::bind::{BindOptions, init_bound};
+use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
+
+/// Frames of the test animation.
+const FRAMES: usize = 10;
+
+/// Triangles as a canonical set: each rotated to start at its smallest id, sorted.
+fn canonical(mut t: Vec<[u32; 3]>) -> Vec<[u32; 3]> {
+    for tri in &mut t {
+        let k = (0..3).min_by_key(|&k| tri[k]).unwrap_or(0);
+        tri.rotate_left(k);
+    }
+    t.sort_unstable();
+    t
+}
+
+/// Closed and consistently oriented: every edge in exactly two triangles, every directed edge
+/// once.
+fn assert_watertight(triangles: &[[u32; 3]], what: &str) {
+    for (edge, tris) in edge_triangles(triangles) {
+        assert_eq!(
+            tris.len(),
+            2,
+            "{what}: edge {edge:?} in {} triangles",
+            tris.len()
+        );
+    }
+    let mut directed = HashMap::new();
+    for t in triangles {
+        for k in 0..3 {
+            let e = (t[k], t[(k + 1) % 3]);
+            assert!(
+                directed.insert(e, ()).is_none(),
+                "{what}: directed edge {e:?} twice"
+            );
+        }
+    }
+}
+
+/// Spot with 2 bound Gaussians per triangle, offsets along the normal and beside the triangle
+/// so that some hop when the surface bends.
+fn spot_with_gaussians() -> (TriMesh, GaussianSet) {
+    let spot = trisplat_fixtures::spot().expect("spot fixture");
+    let set = init_bound(
+        &spot,
+        &BindOptions {
+            per_triangle: 2,
+            ..BindOptions::default()
+        },
+    )
+    .expect("init");
+    let mut parts = set.into_parts();
+    let mut rng = Rng::new(3);
+    for m in &mut parts.means {
+        let mut u = || 2.0 * rng.uniform_f32() - 1.0;
+        *m += Vec3::new(0.4 * u(), 0.2 * u(), 0.4 * u());
+    }
+    (spot, GaussianSet::try_new(parts).expect("valid set"))
+}
+
+/// A bend of the lower half about a horizontal axis plus a twist, growing with the frame.
+fn animate(rest: &TriMesh, f: usize) -> Vec<Vec3> {
+    let b = rest.bounds().expect("bounds");
+    let (lo, hi) = (b.min.as_dvec3(), b.max.as_dvec3());
+    let pivot = DVec3::new(
+        0.5 * (lo.x + hi.x),
+        0.5 * (lo.y + hi.y),
+        0.5 * (lo.z + hi.z),
+    );
+    let h = hi.y - lo.y;
+    let angle = 0.06 * f as f64;
+    rest.positions()
+        .iter()
+        .map(|p| {
+            let p = p.as_dvec3();
+            let w = ((pivot.y - p.y) / (0.3 * h)).clamp(0.0, 1.0);
+            let (s, c) = (angle * w).sin_cos();
+            let d = p - pivot;
+            let q = DVec3::new(d.x, c * d.y - s * d.z, s * d.y + c * d.z);
+            let (st, ct) = (0.5 * angle * d.y / h).sin_cos();
+            (DVec3::new(ct * q.x + st * q.z, q.y, -st * q.x + ct * q.z) + pivot).as_vec3()
+        })
+        .collect()
+}
+
+#[test]
+fn every_frame_equals_a_fresh_triangulation_and_is_watertight() {
+    let (spot, set) = spot_with_gaussians();
+    assert_watertight(spot.triangles(), "template");
+    let deformer = Deformer::new(&spot, DeformMode::Binding);
+    let mut geometry = WorldGeometry::default();
+    let options = DelaunayOptions::default();
+    let mut inc =
+        IncrementalDelaunay::from_bound(&spot, &set, DeformMode::Binding, options).expect("mesher");
+    let (mut hops, mut partial) = (0, 0);
+    for f in 0..FRAMES {
+        let positions = animate(&spot, f);
+        deformer
+            .deform_geometry(&set, &positions, &mut geometry)
+            .expect("deform");
+        let stats = inc.update(&positions, &geometry.means).expect("update");
+        assert_eq!(stats.rebuilt, f == 0);
+        hops += stats.hopped;
+        if f > 0 && stats.charts_redone < inc.chart_count() {
+            partial += 1;
+        }
+        assert!(stats.charts_redone <= 2 * stats.hopped || stats.rebuilt);
+        let got = inc.triangles();
+        let mut fresh = IncrementalDelaunay::from_bound(&spot, &set, DeformMode::Binding, options)
+            .expect("mesher");
+        fresh.update(&positions, &geometry.means).expect("fresh");
+        assert_eq!(
+            inc.assignment(),
+            fresh.assignment(),
+            "frame {f}: assignment"
+        );
+        assert_eq!(
+            canonical(got.clone()),
+            canonical(fresh.triangles()),
+            "frame {f}: incremental != from scratch"
+        );
+        assert_eq!(canonical(got.clone()), canonical(inc.triangulate_all()));
+        assert_watertight(&got, "extracted");
+        // Every Gaussian is a vertex: a chart with k points has 1 + 2k triangles.
+        assert_eq!(stats.unmeshed, 0);
+        assert_eq!(got.len(), spot.triangle_count() + 2 * set.len());
+        assert_eq!(inc.vertices().len(), spot.vertex_count() + set.len());
+        assert_eq!(&inc.vertices()[spot.vertex_count()..], &geometry.means[..]);
+    }
+    assert!(hops > 0, "the animation must make Gaussians hop");
+    assert!(partial > 0, "some frames must redo only some charts");
+}
+
+#[test]
+fn hysteresis_and_rebuild_period_match_scratch_of_current_assignment() {
+    let (spot, set) = spot_with_gaussians();
+    let deformer = Deformer::new(&spot, DeformMode::Binding);
+    let mut geometry = WorldGeometry::default();
+    let mut hops = [0usize; 2];
+    for (k, tau) in [0.0, 0.3].into_iter().enumerate() {
+        let mut inc = IncrementalDelaunay::from_bound(
+            &spot,
+            &set,
+            DeformMode::Binding,
+            DelaunayOptions {
+                hop_threshold: tau,
+                rebuild_every: 4,
+                ..DelaunayOptions::default()
+            },
+        )
+        .expect("mesher");
+        for f in 0..FRAMES {
+            let positions = animate(&spot, f);
+            deformer
+                .deform_geometry(&set, &positions, &mut geometry)
+                .expect("deform");
+            let stats = inc.update(&positions, &geometry.means).expect("update");
+            assert_eq!(stats.rebuilt, f % 4 == 0, "frame {f}");
+            if !stats.rebuilt {
+                hops[k] += stats.hopped;
+            }
+            let got = inc.triangles();
+            assert_eq!(canonical(got.clone()), canonical(inc.triangulate_all()));
+            assert_watertight(&got, "extracted");
+        }
+    }
+    assert!(
+        hops[1] < hops[0],
+        "a hop threshold must reduce hops: {hops:?}"
+    );
+}
+
+/// Circumcircle test in 2D, positive when `d` is strictly inside (a, b, c counter-clockwise).
+fn in_circle(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> f64 {
+    let m = [a - d, b - d, c - d].map(|p| [p.x, p.y, p.x * p.x + p.y * p.y]);
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+}
+
+#[test]
+fn flat_chart_is_delaunay_brute_force() {
+    // One triangle in the z = 0 plane, 300 random points inside; Lift::Surface places them at
+    // their canonical weights; the output must be the Delaunay triangulation of the corners and
+    // the points shrunk toward the centroid by the interior margin.
+    let tri = TriMesh::try_new(
+        vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(2.0, 0.1, 0.0),
+            Vec3::new(0.7, 1.5, 0.0),
+        ],
+        vec![[0, 1, 2]],
+    )
+    .expect("triangle");
+    let mut rng = Rng::new(11);
+    let means: Vec<Vec3> = (0..300)
+        .map(|_| {
+            let (mut u, mut v) = (rng.uniform_f64(), rng.uniform_f64());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let p = tri.positions();
+            (p[0].as_dvec3() + (p[1] - p[0]).as_dvec3() * u + (p[2] - p[0]).as_dvec3() * v)
+                .as_vec3()
+        })
+        .collect();
+    let mut d = IncrementalDelaunay::new(
+        &tri,
+        &means,
+        DelaunayOptions {
+            lift: Lift::Surface,
+            ..DelaunayOptions::default()
+        },
+    )
+    .expect("mesher");
+    d.update(tri.positions(), &means).expect("update");
+    // Gaussian vertices as triangulated: shrunk toward the centroid by the interior margin.
+    let centroid = tri.positions().iter().map(|p| p.as_dvec3()).sum::<DVec3>() / 3.0;
+    let shrink = 1.0 - 3.0 * DEFAULT_INTERIOR_MARGIN;
+    let v: Vec<DVec3> = d
+        .vertices()
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let p = p.as_dvec3();
+            if k < 3 {
+                p
+            } else {
+                centroid + (p - centroid) * shrink
+            }
+        })
+        .collect();
+    let tris = d.triangles();
+    assert_eq!(tris.len(), 1 + 2 * means.len());
+    let scale = 1e-9;
+    for t in &tris {
+        let [a, b, c] = t.map(|k| v[k as usize]);
+        assert!(
+            (b - a).cross(c - a).z > 0.0,
+            "counter-clockwise as the template"
+        );
+        for (k, &p) in v.iter().enumerate() {
+            if t.contains(&(k as u32)) {
+                continue;
+            }
+            assert!(
+                in_circle(a, b, c, p) <= scale,
+                "vertex {k} inside circumcircle of {t:?}"
+            );
+        }
+    }
+}
+
+/// A closed tetrahedron (4 charts) for degenerate-input tests.
+fn tetrahedron() -> TriMesh {
+    TriMesh::try_new(
+        vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 1.0),
+        ],
+        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+    )
+    .expect("tetrahedron")
+}
+
+#[test]
+fn duplicates_edges_and_vertices_stay_watertight() {
+    let tet = tetrahedron();
+    let p = tet.positions();
+    let mut means = vec![
+        // Exactly on template vertices and edge midpoints.
+        p[0],
+        p[1],
+        p[3],
+        (p[0] + p[1]) * 0.5,
+        (p[1] + p[2]) * 0.5,
+        (p[2] + p[3]) * 0.5,
+        // Inside a face, twice (duplicates), and a third copy.
+        Vec3::new(0.2, 0.2, 0.0),
+        Vec3::new(0.2, 0.2, 0.0),
+        Vec3::new(0.2, 0.2, 0.0),
+        Vec3::new(0.3, 0.0, 0.3),
+    ];
+    means.push(Vec3::new(0.25, 0.25, 0.5));
+    let mut d = IncrementalDelaunay::new(&tet, &means, DelaunayOptions::default()).expect("m");
+    let stats = d.update(tet.positions(), &means).expect("update");
+    assert_eq!(stats.unmeshed, 2, "two duplicate copies are merged");
+    let t = d.triangles();
+    assert_watertight(&t, "degenerate points");
+    assert_eq!(t.len(), 4 + 2 * (means.len() - 2));
+    // The same frame again: nothing hops, nothing is redone, same mesh.
+    let stats = d.update(tet.positions(), &means).expect("update");
+    assert_eq!((stats.hopped, stats.charts_redone), (0, 0));
+    assert_eq!(canonical(d.triangles()), canonical(t));
+}
+
+#[test]
+fn zero_area_triangles_and_empty_sets_do_not_panic() {
+    // A closed tetrahedron plus a zero-area triangle (collinear) on its own vertices.
+    let mut positions = tetrahedron().positions().to_vec();
+    positions.push(Vec3::new(0.5, 0.5, 0.0)); // midpoint of edge 1-2
+    let mut triangles = tetrahedron().triangles().to_vec();
+    triangles.push([1, 4, 2]);
+    let mesh = TriMesh::try_new(positions, triangles).expect("mesh");
+    let means = vec![
+        Vec3::new(0.5, 0.5, 0.0),
+        Vec3::new(0.5, 0.5, 0.0),
+        Vec3::new(0.1, 0.1, 0.0),
+    ];
+    let mut d = IncrementalDelaunay::new(&mesh, &means, DelaunayOptions::default()).expect("m");
+    let stats = d.update(mesh.positions(), &means).expect("update");
+    let tris = d.triangles();
+    assert!(
+        tris.contains(&[1, 4, 2]),
+        "the degenerate chart is the template triangle"
+    );
+    assert!(stats.unmeshed <= 2);
+    assert_eq!(tris.len(), 5 + 2 * (means.len() - stats.unmeshed));
+    // No Gaussians: the mesh is the template.
+    let mut empty =
+        IncrementalDelaunay::new(&tetrahedron(), &[], DelaunayOptions::default()).expect("m");
+    empty
+        .update(tetrahedron().positions(), &[])
+        .expect("update");
+    assert_eq!(
+        canonical(empty.triangles()),
+        canonical(tetrahedron().triangles().to_vec())
+    );
+    // Every vertex collapsed to one point in a frame: no panic, still the same topology.
+    let collapsed = vec![Vec3::ONE; mesh.vertex_count()];
+    let stats = d
+        .update(&collapsed, &[Vec3::ONE; 3])
+        .expect("collapsed frame");
+    assert!(stats.hopped <= 3);
+    assert_eq!(canonical(d.triangles()), canonical(d.triangulate_all()));
+}
+
+#[test]
+fn bad_input_is_an_error() {
+    let tet = tetrahedron();
+    let means = vec![Vec3::new(0.2, 0.2, 0.0)];
+    let nan = vec![Vec3::new(f32::NAN, 0.0, 0.0)];
+    assert!(matches!(
+        IncrementalDelaunay::new(&tet, &nan, DelaunayOptions::default()),
+        Err(DelaunayError::BadCoordinate { index: 0, .. })
+    ));
+    let huge = vec![Vec3::splat(1e30)];
+    assert!(matches!(
+        IncrementalDelaunay::new(&tet, &huge, DelaunayOptions::default()),
+        Err(DelaunayError::BadCoordinate { .. })
+    ));
+    for bad in [
+        DelaunayOptions {
+            hop_threshold: f64::NAN,
+            ..DelaunayOptions::default()
+        },
+        DelaunayOptions {
+            hop_threshold: -1.0,
+            ..DelaunayOptions::default()
+        },
+        DelaunayOptions {
+            interior_margin: 0.0,
+            ..DelaunayOptions::default()
+        },
+        DelaunayOptions {
+            interior_margin: 0.5,
+            ..DelaunayOptions::default()
+        },
+        DelaunayOptions {
+            degenerate_tol: f64::INFINITY,
+            ..DelaunayOptions::default()
+        },
+    ] {
+        assert!(matches!(
+            IncrementalDelaunay::new(&tet, &means, bad),
+            Err(DelaunayError::InvalidOption { .. })
+        ));
+    }
+    let empty = TriMesh::try_new(vec![Vec3::ZERO], vec![]).expect("mesh");
+    assert!(matches!(
+        IncrementalDelaunay::new(&empty, &means, DelaunayOptions::default()),
+        Err(DelaunayError::NoTriangles)
+    ));
+    let bad_tri = TriMesh::new_unchecked(vec![Vec3::ZERO; 3], vec![[0, 1, 7]]);
+    assert!(matches!(
+        IncrementalDelaunay::new(&bad_tri, &means, DelaunayOptions::default()),
+        Err(DelaunayError::BadTriangle { vertex: 7, .. })
+    ));
+    let mut d = IncrementalDelaunay::new(&tet, &means, DelaunayOptions::default()).expect("m");
+    assert!(matches!(
+        d.update(&tet.positions()[..3], &means),
+        Err(DelaunayError::Count { .. })
+    ));
+    assert!(matches!(
+        d.update(tet.positions(), &[]),
+        Err(DelaunayError::Count { .. })
+    ));
+    let mut moved = tet.positions().to_vec();
+    moved[2].y = f32::INFINITY;
+    assert!(matches!(
+        d.update(&moved, &means),
+        Err(DelaunayError::BadCoordinate { index: 2, .. })
+    ));
+    assert!(matches!(
+        d.update(tet.positions(), &nan),
+        Err(DelaunayError::BadCoordinate { .. })
+    ));
+    // Still usable after errors.
+    d.update(tet.positions(), &means).expect("update");
+    assert_watertight(&d.triangles(), "after errors");
+}
+
+#[test]
+fn surface_lift_puts_zero_offset_gaussians_on_the_deformed_template() {
+    let (spot, _) = spot_with_gaussians();
+    // Canonical means exactly on the rest surface (centroids).
+    let means: Vec<Vec3> = (0..spot.triangle_count())
+        .map(|t| {
+            let c = spot.corners(t);
+            (c[0] + c[1] + c[2]) / 3.0
+        })
+        .collect();
+    let mut d = IncrementalDelaunay::new(
+        &spot,
+        &means,
+        DelaunayOptions {
+            lift: Lift::Surface,
+            ..DelaunayOptions::default()
+        },
+    )
+    .expect("mesher");
+    let positions = animate(&spot, 7);
+    // Deformed means: the centroids of the deformed triangles.
+    let deformed: Vec<Vec3> = spot
+        .triangles()
+        .iter()
+        .map(|t| {
+            (positions[t[0] as usize] + positions[t[1] as usize] + positions[t[2] as usize]) / 3.0
+        })
+        .collect();
+    d.update(&positions, &deformed).expect("update");
+    let nv = spot.vertex_count();
+    for (i, (got, want)) in d.vertices()[nv..].iter().zip(&deformed).enumerate() {
+        assert!(
+            (*got - *want).length() < 1e-5,
+            "Gaussian {i}: {got} vs {want}"
+        );
+    }
+    assert_watertight(&d.triangles(), "surface lift");
+}
