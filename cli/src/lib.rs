@@ -37,6 +37,8 @@ pub enum Command {
     Eval(commands::eval::EvalArgs),
     /// Alpha shape of a point set (Open3D's definition), outward-oriented triangles.
     AlphaShape(commands::alpha_shape::AlphaShapeArgs),
+    /// Fuse depth maps into a mesh (TSDF on sparse voxel blocks + marching cubes).
+    Tsdf(commands::tsdf::TsdfArgs),
     /// Convert between PLY, OBJ, glTF and GLB.
     Convert(commands::convert::ConvertArgs),
     /// Sample points on a mesh surface.
@@ -80,6 +82,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Eval(args) => commands::eval::run(args, &ctx),
         Command::AlphaShape(args) => commands::alpha_shape::run(args, &ctx),
+        Command::Tsdf(args) => commands::tsdf::run(args, &ctx),
         Command::Convert(args) => commands::convert::run(args, &ctx),
         Command::Sample(args) => commands::sample::run(args, &ctx),
         Command::Smooth(args) => commands::smooth::run(args, &ctx),

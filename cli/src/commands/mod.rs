@@ -10,6 +10,7 @@ pub mod prune;
 pub mod render;
 pub mod sample;
 pub mod smooth;
+pub mod tsdf;
 
 use std::path::{Path, PathBuf};
 
