@@ -265,3 +265,42 @@ fn tiny_and_offset_coordinates_stay_exact() {
         .collect();
     assert_valid(&Delaunay3d::new(&pts).expect("finite"), true);
 }
+
+/// Heavily degenerate random sets: points drawn (with repetition) from small integer grids and
+/// planes, so co-spherical, coplanar, collinear and duplicated points are everywhere. Every
+/// result must be a valid Delaunay tetrahedralisation (brute-force empty spheres) or empty by
+/// design, and never panic.
+#[test]
+fn random_degenerate_sets_are_always_valid() {
+    let mut rng = Rng::new(2024);
+    for trial in 0..300 {
+        let side = 2 + rng.below(3);
+        let n = 4 + rng.below(40) as usize;
+        let flat = trial % 5 == 0;
+        let pts: Vec<Vec3> = (0..n)
+            .map(|_| {
+                let z = if flat { 0 } else { rng.below(side) };
+                Vec3::new(rng.below(side) as f32, rng.below(side) as f32, z as f32)
+            })
+            .collect();
+        let d = Delaunay3d::new(&pts).expect("finite input");
+        let v = d.sanity_check(true);
+        assert!(
+            v.is_empty(),
+            "trial {trial}: {:?} -> {}",
+            pts,
+            v.iter()
+                .take(3)
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+        if d.dimension() == 3 {
+            // Every distinct point is a vertex and the tetrahedra tile the hull: compare the
+            // volume with the box spanned when all eight corners are present.
+            assert!(volume(&d) > 0.0);
+        } else {
+            assert!(d.tetrahedra().is_empty());
+        }
+    }
+}

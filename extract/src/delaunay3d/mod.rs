@@ -548,8 +548,8 @@ impl<'a> Builder<'a> {
         let tet = self.tets[t as usize];
         let p = self.p(v);
         if let Some(k) = tet.iter().position(|&x| x == INF) {
-            let q = tet.map(|x| if x == INF { p } else { self.p(x) });
-            let o = orient3d(q[0], q[1], q[2], q[3]);
+            let q = |i: usize| if tet[i] == INF { p } else { self.p(tet[i]) };
+            let o = orient3d(q(0), q(1), q(2), q(3));
             if o != 0.0 {
                 return o > 0.0;
             }
@@ -564,7 +564,14 @@ impl<'a> Builder<'a> {
     fn finite_conflict(&self, t: u32, v: u32) -> bool {
         let tet = self.tets[t as usize];
         let ids = [tet[0], tet[1], tet[2], tet[3], v];
-        insphere_sos(ids.map(|x| self.p(x)), ids) > 0
+        let pts = [
+            self.p(tet[0]),
+            self.p(tet[1]),
+            self.p(tet[2]),
+            self.p(tet[3]),
+            self.p(v),
+        ];
+        insphere_sos(pts, ids) > 0
     }
 
     /// A tetrahedron in conflict with `v`: the finite one containing it, or an infinite one
@@ -590,8 +597,8 @@ impl<'a> Builder<'a> {
                 if nb == came_from {
                     continue;
                 }
-                let [x, y, z] = FACE_VERTICES[i].map(|k| self.p(tet[k]));
-                if orient3d(x, y, z, p) < 0.0 {
+                let [x, y, z] = FACE_VERTICES[i];
+                if orient3d(self.p(tet[x]), self.p(tet[y]), self.p(tet[z]), p) < 0.0 {
                     came_from = t;
                     t = nb;
                     moved = true;
@@ -638,7 +645,7 @@ impl<'a> Builder<'a> {
         self.stack.push(start);
         while let Some(t) = self.stack.pop() {
             self.cavity.push(t);
-            for i in 0..4 {
+            for (i, &[f0, f1, f2]) in FACE_VERTICES.iter().enumerate() {
                 let nb = self.neighbours[t as usize][i];
                 let m = self.marks[nb as usize];
                 let inside = if m == in_mark {
@@ -660,7 +667,7 @@ impl<'a> Builder<'a> {
                         .position(|&x| x == t)
                         .unwrap_or(0) as u8;
                     self.boundary.push(BoundaryFace {
-                        vertices: FACE_VERTICES[i].map(|k| tet[k]),
+                        vertices: [tet[f0], tet[f1], tet[f2]],
                         outside: nb,
                         outside_face,
                     });

@@ -157,6 +157,7 @@ mod tests {
         }
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn det5(m: [[f64; 5]; 5]) -> f64 {
         // Gaussian elimination with partial pivoting.
         let mut a = m;
