@@ -1,10 +1,14 @@
 //! 3D Delaunay tetrahedralisation: Bowyer-Watson cavity insertion with exact predicates.
 //!
 //! - **Predicates**: exact `orient3d`/`insphere` (Shewchuk's adaptive arithmetic, `robust`
-//!   crate) with symbolic perturbation of the lifting map ("perturb by index", see
-//!   [`predicates`](self) docs in `predicates.rs`): the result is *the* Delaunay tetrahedralisation
-//!   of the perturbed points, so co-spherical inputs (cube corners, grids, points on a sphere)
-//!   get a valid, deterministic tetrahedralisation, never a flat tetrahedron.
+//!   crate) with symbolic perturbation of the lifting map ("perturb by index", as CGAL's and
+//!   geogram's SoS): point `i` is lifted to `|p_i|^2 + eps^(N - i)`, so when five points are
+//!   exactly co-spherical the sign is that of the first non-zero `orient3d` minor in order of
+//!   decreasing point index. Coordinates are not perturbed; a point exactly coplanar with a
+//!   convex-hull face conflicts with the outside iff it conflicts with the tetrahedron behind
+//!   that face. The result is *the* Delaunay tetrahedralisation of the perturbed points, so
+//!   co-spherical inputs (cube corners, grids, points on a sphere) get a valid, deterministic
+//!   tetrahedralisation, never a flat tetrahedron.
 //! - **Infinite vertex**: the convex hull faces are closed by "infinite" tetrahedra sharing a
 //!   vertex at infinity, so no enclosing box and no special cases for points outside the hull.
 //! - **Order**: BRIO rounds in Hilbert order; **point location** by a stochastic visibility walk
@@ -34,6 +38,10 @@ pub const MAX_COORDINATE: f64 = 1e30;
 /// The largest number of input points (indices are `u32`; two values are reserved).
 pub const MAX_POINTS: usize = (u32::MAX >> 1) as usize;
 
+/// The largest number of tetrahedra (finite and infinite) held at once (`u32` indices; a few
+/// values are reserved as markers).
+pub const MAX_TETRAHEDRA: usize = (u32::MAX - 3) as usize;
+
 /// The vertex at infinity (in the internal arrays).
 const INF: u32 = u32::MAX;
 /// Vertex marker of a deleted tetrahedron slot.
@@ -60,6 +68,10 @@ pub enum DelaunayError {
         /// The offending coordinate.
         value: f64,
     },
+    /// The tetrahedralisation would need more than [`MAX_TETRAHEDRA`] tetrahedra (only for
+    /// pathological inputs such as points on two skew lines, whose count grows quadratically).
+    #[error("the tetrahedralisation needs more than {MAX_TETRAHEDRA} tetrahedra")]
+    TooManyTetrahedra,
     /// More than [`MAX_POINTS`] points.
     #[error("{count} points exceed the supported maximum of {MAX_POINTS}")]
     TooManyPoints {
@@ -201,6 +213,9 @@ impl Delaunay3d {
         let order = sort::brio_order(&points, &unique);
         let mut builder = Builder::new(&points);
         let dimension = builder.build(&order);
+        if builder.overflow {
+            return Err(DelaunayError::TooManyTetrahedra);
+        }
         let (tets, neighbours, finite) = builder.compact();
         Ok(Self {
             points,
@@ -428,6 +443,8 @@ struct Builder<'a> {
     edge_stamp: u32,
     last: u32,
     rng: u64,
+    /// Set when the tetrahedra no longer fit `u32` indices (the build stops).
+    overflow: bool,
 }
 
 impl<'a> Builder<'a> {
@@ -448,6 +465,7 @@ impl<'a> Builder<'a> {
             edge_stamp: 0,
             last: 0,
             rng: 0x9E37_79B9_7F4A_7C15,
+            overflow: false,
         }
     }
 
@@ -470,6 +488,9 @@ impl<'a> Builder<'a> {
                 continue;
             }
             self.insert(v);
+            if self.overflow {
+                break;
+            }
         }
         3
     }
@@ -688,6 +709,10 @@ impl<'a> Builder<'a> {
                     self.tets[t as usize] = [x, y, z, v];
                     self.neighbours[t as usize] = [u32::MAX, u32::MAX, u32::MAX, face.outside];
                     t
+                }
+                None if self.tets.len() >= MAX_TETRAHEDRA => {
+                    self.overflow = true;
+                    return;
                 }
                 None => {
                     self.tets.push([x, y, z, v]);
