@@ -153,3 +153,87 @@ fn surfels_match_hbb1_reference() {
         );
     }
 }
+
+#[test]
+fn surfel_extremes_render_finite_images() {
+    // A camera at the origin looking down +z (world = camera axes).
+    let camera = |w: u32, h: u32| {
+        trisplat_geometry::Camera::try_new(
+            0,
+            "c",
+            w,
+            h,
+            (0.6 * f64::from(h), 0.6 * f64::from(h)),
+            (0.5 * f64::from(w), 0.5 * f64::from(h)),
+            glam::DMat3::IDENTITY,
+            glam::DVec3::ZERO,
+        )
+        .expect("camera")
+    };
+    let g = |mean: [f32; 3], rotation: [f32; 4], log_scale: f32, opacity_logit: f32| Surfel {
+        mean,
+        rotation,
+        log_scale: [log_scale, log_scale],
+        opacity_logit,
+        f_dc: [0.5, -0.5, 0.1],
+    };
+    let edge_on = [0.707_106_8, 0.0, 0.707_106_8, 0.0];
+    let surfels = vec![
+        g([0.0, 0.0, -2.0], [1.0, 0.0, 0.0, 0.0], -2.0, 2.0), // behind the camera
+        g([0.0, 0.0, 0.2], [1.0, 0.0, 0.0, 0.0], -2.0, 2.0),  // on the near plane
+        g([0.1, 0.1, 2.0], [1.0, 0.0, 0.0, 0.0], -29.0, 2.0), // sub-pixel
+        g([0.0, 0.0, 3.0], [1.0, 0.0, 0.0, 0.0], 6.9, 0.0),   // scale 1e3: fills the view
+        g([0.0, 0.0, 2.0], [1.0, 0.0, 0.0, 0.0], -1.0, -69.0), // opacity ~1e-30
+        g([0.0, 0.0, 1.5], edge_on, -1.0, 2.0),               // edge-on through the centre
+        g([-0.2, 0.1, 1.0], [0.9, 0.3, -0.2, 0.1], -1.5, 1.0),
+    ];
+    let s = &surfels;
+    let set = GaussianSet::try_new(GaussianParts {
+        means: s.iter().map(|g| Vec3::from_array(g.mean)).collect(),
+        log_scales: s
+            .iter()
+            .map(|g| Vec3::new(g.log_scale[0], g.log_scale[1], 0.0))
+            .collect(),
+        scale_dims: ScaleDims::Two,
+        rotations: s.iter().map(|g| g.rotation).collect(),
+        opacity_logits: s.iter().map(|g| g.opacity_logit).collect(),
+        sh_degree: 0,
+        sh: s.iter().flat_map(|g| g.f_dc).collect(),
+        ..GaussianParts::default()
+    })
+    .expect("valid");
+    let options = RenderOptions {
+        mode: RenderMode::Surfel2d,
+        outputs: Outputs::ALL,
+        near: SURFEL_NEAR,
+        ..RenderOptions::default()
+    };
+    let empty = set.select(&[]);
+    for (w, h) in [(1, 1), (40, 30)] {
+        let cam = camera(w, h);
+        for set in [&set, &empty] {
+            let (screen, kernel) = project_surfels(set, &cam, &options);
+            for n in &screen.normals {
+                assert!((Vec3::from_array(*n).length() - 1.0).abs() < UNIT_TOLERANCE);
+            }
+            let img = rasterize(
+                &screen,
+                &kernel,
+                (w, h),
+                &SURFEL_RULES,
+                options.outputs,
+                options.background,
+                &mut RenderStats::default(),
+            );
+            assert!(img.is_finite());
+            let alpha = img.alpha.expect("alpha");
+            assert!(alpha.iter().all(|a| (0.0..=1.0).contains(a)));
+            if set.is_empty() {
+                assert!(alpha.iter().all(|&a| a == 0.0));
+            } else {
+                // The huge surfel covers every pixel.
+                assert!(alpha.iter().all(|&a| a > 0.4), "{alpha:?}");
+            }
+        }
+    }
+}
