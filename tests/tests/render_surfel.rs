@@ -177,7 +177,8 @@ fn surfel_extremes_render_finite_images() {
         opacity_logit,
         f_dc: [0.5, -0.5, 0.1],
     };
-    let edge_on = [0.707_106_8, 0.0, 0.707_106_8, 0.0];
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let edge_on = [h, 0.0, h, 0.0];
     let surfels = vec![
         g([0.0, 0.0, -2.0], [1.0, 0.0, 0.0, 0.0], -2.0, 2.0), // behind the camera
         g([0.0, 0.0, 0.2], [1.0, 0.0, 0.0, 0.0], -2.0, 2.0),  // on the near plane
