@@ -650,8 +650,8 @@ fn flame_binding_matches_float64_gaussian_avatars() {
     let diag = f64::from(s_mesh.bounds().expect("bounds").diagonal());
     let (mut worst_mean, mut worst_rot, mut worst_scale) = (0.0f64, 0.0f64, 0.0f64);
     let binding = &set.binding().expect("bound").triangles;
-    for i in 0..n {
-        let tri = s_mesh.triangles()[binding[i].index()];
+    for (i, t) in binding.iter().enumerate() {
+        let tri = s_mesh.triangles()[t.index()];
         let v = tri.map(|j| s_mesh.positions()[j as usize].as_dvec3().to_array());
         let (r, c, k) = ga_frame(v);
         let ml = set.means()[i].as_dvec3().to_array();
