@@ -17,6 +17,7 @@ use anyhow::{Context, bail};
 use trisplat_extract::alpha_shape::{alpha_shape_from_delaunay, circumradius};
 use trisplat_extract::delaunay3d::{Delaunay3d, FACE_VERTICES};
 use trisplat_geometry::io::{WriteOptions, read_mesh, read_points, write_points};
+use trisplat_geometry::metrics::point_metrics;
 use trisplat_geometry::sampling::sample_uniform;
 
 use crate::harness::{python_script, report, run_python, time_best};
@@ -46,7 +47,17 @@ pub struct AlphaBenchArgs {
     /// α in absolute units (overrides --alpha-spacings).
     #[arg(long)]
     alpha: Option<f64>,
+    /// Also print the error-vs-time table: for several α (multiples of the spacing), the
+    /// milliseconds of the alpha step on a reused tetrahedralisation and the Chamfer-L1 /
+    /// F-score of the alpha mesh against the scan (ours only).
+    #[arg(long)]
+    sweep: bool,
 }
+
+/// α values of the sweep, in units of the mean sample spacing.
+const SWEEP_SPACINGS: [f64; 7] = [1.0, 1.5, 2.0, 3.0, 5.0, 10.0, 30.0];
+/// Points sampled on each side for the sweep's Chamfer distance.
+const SWEEP_SAMPLES: usize = 200_000;
 
 /// Runs the benchmark; `python` is the interpreter for the Open3D side (None: ours only).
 ///
@@ -99,6 +110,9 @@ pub fn run(args: &AlphaBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
         shape.mesh.signed_volume()
     );
     report("delaunay 3d (ours only)", t_delaunay, None);
+    if args.sweep {
+        sweep(&mesh, &delaunay, spacing)?;
+    }
     let name = format!("delaunay + alpha shape ({n} points)");
     let Some(py) = python else {
         report(&name, t_total, None);
@@ -160,6 +174,42 @@ pub fn run(args: &AlphaBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
     if only_ours + only_theirs > 0 {
         bail!("the boundary triangles differ from Open3D's");
     }
+    Ok(())
+}
+
+/// Error against run time over α: a Markdown table on stdout.
+fn sweep(
+    scan: &trisplat_geometry::TriMesh,
+    delaunay: &Delaunay3d,
+    spacing: f64,
+) -> anyhow::Result<()> {
+    let gt = sample_uniform(scan, SWEEP_SAMPLES, 2);
+    let tau = 2.0 * spacing;
+    println!();
+    println!(
+        "| alpha / spacing | alpha | alpha step ms | kept tetrahedra | triangles | signed volume | Chamfer-L1 | F-score @ {tau:.2e} |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for k in SWEEP_SPACINGS {
+        let alpha = k * spacing;
+        let (seconds, shape) = time_best(REPEATS, || alpha_shape_from_delaunay(delaunay, alpha));
+        let shape = shape?;
+        let samples = sample_uniform(&shape.mesh, SWEEP_SAMPLES, 3);
+        let (chamfer, fscore) = if samples.is_empty() {
+            (f64::NAN, 0.0)
+        } else {
+            let m = point_metrics(&samples, &gt, &[tau])?;
+            (m.chamfer_l1, m.thresholds.first().map_or(0.0, |t| t.fscore))
+        };
+        println!(
+            "| {k} | {alpha:.3e} | {:.1} | {} | {} | {:.3e} | {chamfer:.3e} | {fscore:.4} |",
+            seconds * 1e3,
+            shape.kept_tetrahedra,
+            shape.mesh.triangle_count(),
+            shape.mesh.signed_volume()
+        );
+    }
+    println!();
     Ok(())
 }
 
