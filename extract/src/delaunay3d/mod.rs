@@ -381,12 +381,22 @@ fn validate(points: &[[f64; 3]]) -> Result<(), DelaunayError> {
     Ok(())
 }
 
+/// The bit patterns of a point's coordinates, with -0.0 mapped to +0.0 (`x + 0.0`), so that
+/// equal coordinates have equal bits.
+fn coordinate_bits(p: [f64; 3]) -> [u64; 3] {
+    [
+        (p[0] + 0.0).to_bits(),
+        (p[1] + 0.0).to_bits(),
+        (p[2] + 0.0).to_bits(),
+    ]
+}
+
 /// Distinct points (smallest index of each coordinate triple) and the skipped duplicates.
 fn dedupe(points: &[[f64; 3]]) -> (Vec<u32>, Vec<Duplicate>) {
-    // `+ 0.0` maps -0.0 to +0.0 so that equal coordinates have equal bits.
-    let key = |i: u32| points[i as usize].map(|x| (x + 0.0).to_bits());
-    let mut ids: Vec<u32> = (0..points.len() as u32).collect();
-    ids.sort_unstable_by_key(|&i| (key(i), i));
+    let key = |i: u32| coordinate_bits(points[i as usize]);
+    let mut keyed: Vec<([u64; 3], u32)> = (0..points.len() as u32).map(|i| (key(i), i)).collect();
+    keyed.sort_unstable();
+    let ids: Vec<u32> = keyed.iter().map(|&(_, i)| i).collect();
     let mut unique = Vec::with_capacity(ids.len());
     let mut duplicates = Vec::new();
     let mut kept = None;
@@ -405,6 +415,15 @@ fn dedupe(points: &[[f64; 3]]) -> (Vec<u32>, Vec<Duplicate>) {
     unique.sort_unstable();
     duplicates.sort_unstable_by_key(|d| d.skipped);
     (unique, duplicates)
+}
+
+/// A tetrahedron slot of the builder: vertices and the neighbours across the faces opposite
+/// them.
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct Cell {
+    v: [u32; 4],
+    n: [u32; 4],
 }
 
 /// One slot of the edge table that links the new tetrahedra of a cavity.
@@ -428,8 +447,9 @@ struct BoundaryFace {
 /// The incremental construction state (the buffers are reused across insertions).
 struct Builder<'a> {
     points: &'a [[f64; 3]],
-    tets: Vec<[u32; 4]>,
-    neighbours: Vec<[u32; 4]>,
+    /// Vertices and neighbours of every tetrahedron slot, side by side (one cache line holds
+    /// two).
+    cells: Vec<Cell>,
     /// Per tetrahedron: `2 * stamp` when in the current cavity, `2 * stamp + 1` when tested
     /// and not in conflict (stale values from earlier insertions mean "not tested").
     marks: Vec<u32>,
@@ -452,8 +472,7 @@ impl<'a> Builder<'a> {
         let cap = points.len() * 7;
         Self {
             points,
-            tets: Vec::with_capacity(cap),
-            neighbours: Vec::with_capacity(cap),
+            cells: Vec::with_capacity(cap),
             marks: Vec::with_capacity(cap),
             stamp: 0,
             free: Vec::new(),
@@ -523,29 +542,33 @@ impl<'a> Builder<'a> {
         } else {
             [b, a, c, d]
         };
-        self.tets.push(first);
-        self.neighbours.push([1, 2, 3, 4]);
+        self.cells.push(Cell {
+            v: first,
+            n: [1, 2, 3, 4],
+        });
         self.marks.push(0);
         for (i, face) in FACE_VERTICES.iter().enumerate() {
             // Reversed face + infinity: positive when infinity is replaced by a far point on
             // the outer side of the face.
             let [x, y, z] = face.map(|k| first[k]);
-            self.tets.push([x, z, y, INF]);
-            self.neighbours.push([u32::MAX, u32::MAX, u32::MAX, 0]);
+            self.cells.push(Cell {
+                v: [x, z, y, INF],
+                n: [u32::MAX, u32::MAX, u32::MAX, 0],
+            });
             self.marks.push(0);
-            debug_assert_eq!(self.neighbours[0][i], i as u32 + 1);
+            debug_assert_eq!(self.cells[0].n[i], i as u32 + 1);
         }
         // Link the infinite tetrahedra to each other by their shared faces (brute force).
         for t in 1..5u32 {
             for f in 0..3 {
-                let mine = face_key(self.tets[t as usize], f);
+                let mine = face_key(self.cells[t as usize].v, f);
                 for u in 1..5u32 {
                     if u == t {
                         continue;
                     }
                     for g in 0..4 {
-                        if face_key(self.tets[u as usize], g) == mine {
-                            self.neighbours[t as usize][f] = u;
+                        if face_key(self.cells[u as usize].v, g) == mine {
+                            self.cells[t as usize].n[f] = u;
                         }
                     }
                 }
@@ -566,7 +589,7 @@ impl<'a> Builder<'a> {
     /// Whether the tetrahedron `t` conflicts with point `v` (perturbed predicates).
     #[inline]
     fn in_conflict(&self, t: u32, v: u32) -> bool {
-        let tet = self.tets[t as usize];
+        let tet = self.cells[t as usize].v;
         let p = self.p(v);
         if let Some(k) = tet.iter().position(|&x| x == INF) {
             let q = |i: usize| if tet[i] == INF { p } else { self.p(tet[i]) };
@@ -575,7 +598,7 @@ impl<'a> Builder<'a> {
                 return o > 0.0;
             }
             // Coplanar with the hull face: as the finite tetrahedron behind it.
-            let behind = self.neighbours[t as usize][k];
+            let behind = self.cells[t as usize].n[k];
             return self.finite_conflict(behind, v);
         }
         self.finite_conflict(t, v)
@@ -583,7 +606,7 @@ impl<'a> Builder<'a> {
 
     #[inline]
     fn finite_conflict(&self, t: u32, v: u32) -> bool {
-        let tet = self.tets[t as usize];
+        let tet = self.cells[t as usize].v;
         let ids = [tet[0], tet[1], tet[2], tet[3], v];
         let pts = [
             self.p(tet[0]),
@@ -600,21 +623,21 @@ impl<'a> Builder<'a> {
     fn locate(&mut self, v: u32) -> u32 {
         let p = self.p(v);
         let mut t = self.last;
-        if self.tets[t as usize][0] == DEAD {
+        if self.cells[t as usize].v[0] == DEAD {
             t = self.any_live();
         }
-        if let Some(k) = self.tets[t as usize].iter().position(|&x| x == INF) {
-            t = self.neighbours[t as usize][k];
+        if let Some(k) = self.cells[t as usize].v.iter().position(|&x| x == INF) {
+            t = self.cells[t as usize].n[k];
         }
         let mut came_from = u32::MAX;
-        let limit = self.tets.len() + 16;
+        let limit = self.cells.len() + 16;
         for _ in 0..limit {
-            let tet = self.tets[t as usize];
+            let tet = self.cells[t as usize].v;
             let start = (self.next_random() & 3) as usize;
             let mut moved = false;
             for j in 0..4 {
                 let i = (start + j) & 3;
-                let nb = self.neighbours[t as usize][i];
+                let nb = self.cells[t as usize].n[i];
                 if nb == came_from {
                     continue;
                 }
@@ -626,7 +649,7 @@ impl<'a> Builder<'a> {
                     break;
                 }
             }
-            if !moved || self.tets[t as usize].contains(&INF) {
+            if !moved || self.cells[t as usize].v.contains(&INF) {
                 return t;
             }
         }
@@ -637,15 +660,15 @@ impl<'a> Builder<'a> {
 
     #[cold]
     fn scan_for_conflict(&self, v: u32) -> u32 {
-        (0..self.tets.len() as u32)
-            .find(|&t| self.tets[t as usize][0] != DEAD && self.in_conflict(t, v))
+        (0..self.cells.len() as u32)
+            .find(|&t| self.cells[t as usize].v[0] != DEAD && self.in_conflict(t, v))
             .unwrap_or(0)
     }
 
     #[cold]
     fn any_live(&self) -> u32 {
-        (0..self.tets.len() as u32)
-            .find(|&t| self.tets[t as usize][0] != DEAD)
+        (0..self.cells.len() as u32)
+            .find(|&t| self.cells[t as usize].v[0] != DEAD)
             .unwrap_or(0)
     }
 
@@ -667,7 +690,7 @@ impl<'a> Builder<'a> {
         while let Some(t) = self.stack.pop() {
             self.cavity.push(t);
             for (i, &[f0, f1, f2]) in FACE_VERTICES.iter().enumerate() {
-                let nb = self.neighbours[t as usize][i];
+                let nb = self.cells[t as usize].n[i];
                 let m = self.marks[nb as usize];
                 let inside = if m == in_mark {
                     continue;
@@ -682,8 +705,9 @@ impl<'a> Builder<'a> {
                     false
                 };
                 if !inside {
-                    let tet = self.tets[t as usize];
-                    let outside_face = self.neighbours[nb as usize]
+                    let tet = self.cells[t as usize].v;
+                    let outside_face = self.cells[nb as usize]
+                        .n
                         .iter()
                         .position(|&x| x == t)
                         .unwrap_or(0) as u8;
@@ -697,7 +721,7 @@ impl<'a> Builder<'a> {
         }
         // Free the cavity, then star the boundary from v.
         for &t in &self.cavity {
-            self.tets[t as usize] = [DEAD; 4];
+            self.cells[t as usize].v = [DEAD; 4];
             self.free.push(t);
         }
         self.new_tets.clear();
@@ -706,30 +730,33 @@ impl<'a> Builder<'a> {
             let [x, y, z] = face.vertices;
             let t = match self.free.pop() {
                 Some(t) => {
-                    self.tets[t as usize] = [x, y, z, v];
-                    self.neighbours[t as usize] = [u32::MAX, u32::MAX, u32::MAX, face.outside];
+                    self.cells[t as usize] = Cell {
+                        v: [x, y, z, v],
+                        n: [u32::MAX, u32::MAX, u32::MAX, face.outside],
+                    };
                     t
                 }
-                None if self.tets.len() >= MAX_TETRAHEDRA => {
+                None if self.cells.len() >= MAX_TETRAHEDRA => {
                     self.overflow = true;
                     return;
                 }
                 None => {
-                    self.tets.push([x, y, z, v]);
-                    self.neighbours
-                        .push([u32::MAX, u32::MAX, u32::MAX, face.outside]);
+                    self.cells.push(Cell {
+                        v: [x, y, z, v],
+                        n: [u32::MAX, u32::MAX, u32::MAX, face.outside],
+                    });
                     self.marks.push(0);
-                    (self.tets.len() - 1) as u32
+                    (self.cells.len() - 1) as u32
                 }
             };
-            self.neighbours[face.outside as usize][face.outside_face as usize] = t;
+            self.cells[face.outside as usize].n[face.outside_face as usize] = t;
             self.new_tets.push(t);
         }
         self.link_new_tets();
         if let Some(&t) = self
             .new_tets
             .iter()
-            .find(|&&t| !self.tets[t as usize].contains(&INF))
+            .find(|&&t| !self.cells[t as usize].v.contains(&INF))
             .or(self.new_tets.first())
         {
             self.last = t;
@@ -758,7 +785,7 @@ impl<'a> Builder<'a> {
         let bits = self.edges.len().trailing_zeros();
         for ni in 0..self.new_tets.len() {
             let t = self.new_tets[ni];
-            let tet = self.tets[t as usize];
+            let tet = self.cells[t as usize].v;
             // Face opposite local vertex f (0..3) of [x, y, z, v] is the edge
             // (tet[(f + 1) % 3], tet[(f + 2) % 3]) plus v.
             for f in 0..3 {
@@ -778,8 +805,8 @@ impl<'a> Builder<'a> {
                         break;
                     }
                     if s.key == key {
-                        self.neighbours[t as usize][f] = s.tet;
-                        self.neighbours[s.tet as usize][s.face as usize] = t;
+                        self.cells[t as usize].n[f] = s.tet;
+                        self.cells[s.tet as usize].n[s.face as usize] = t;
                         break;
                     }
                     slot = (slot + 1) & mask;
@@ -790,10 +817,11 @@ impl<'a> Builder<'a> {
 
     /// Final arrays: live tetrahedra, finite first, with remapped neighbours.
     fn compact(self) -> (Vec<[u32; 4]>, Vec<[u32; 4]>, usize) {
-        let mut remap = vec![u32::MAX; self.tets.len()];
+        let mut remap = vec![u32::MAX; self.cells.len()];
         let mut next = 0u32;
         for pass_finite in [true, false] {
-            for (t, tet) in self.tets.iter().enumerate() {
+            for (t, cell) in self.cells.iter().enumerate() {
+                let tet = &cell.v;
                 if tet[0] == DEAD || tet.contains(&INF) == pass_finite {
                     continue;
                 }
@@ -809,13 +837,14 @@ impl<'a> Builder<'a> {
             if r == u32::MAX {
                 continue;
             }
-            let tet = self.tets[t];
+            let tet = self.cells[t].v;
             if !tet.contains(&INF) {
                 finite += 1;
             }
             tets[r as usize] = tet;
-            neighbours[r as usize] =
-                self.neighbours[t].map(|n| remap.get(n as usize).copied().unwrap_or(u32::MAX));
+            neighbours[r as usize] = self.cells[t]
+                .n
+                .map(|n| remap.get(n as usize).copied().unwrap_or(u32::MAX));
         }
         (tets, neighbours, finite)
     }
