@@ -59,6 +59,7 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::spatial::MAX_COORDINATE;
+use trisplat_geometry::topology::{edge_key, edge_triangles};
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
@@ -74,6 +75,11 @@ pub const DEFAULT_HOP_THRESHOLD: f64 = 0.0;
 /// a point on an edge ends up `m` (relative) inside, far above the rounding of the 2D
 /// coordinates (~1e-16) and far below anything visible.
 pub const DEFAULT_INTERIOR_MARGIN: f64 = 1e-3;
+
+/// A candidate triangle is dismissed by a lower bound only when the bound exceeds the needed
+/// distance by this fraction of the template's bounding-box diagonal, far above the f64
+/// rounding of the distances (so the answer is the same as the exact search's).
+pub const FILTER_MARGIN_REL: f64 = 1e-9;
 
 /// Default degeneracy tolerance of rest triangles: degenerate when twice the area is at most
 /// this times the longest edge squared (height below 1e-9 of the longest edge).
@@ -215,6 +221,9 @@ pub struct IncrementalDelaunay {
     canonical: Vec<DVec3>,
     /// Nearest rest triangle of each canonical mean (seeds the rebuild searches).
     rest_nearest: Vec<u32>,
+    /// Per triangle and corner `j`: the one other triangle across the edge opposite corner
+    /// `j` (`u32::MAX` for a boundary or non-manifold edge).
+    across: Vec<[u32; 3]>,
     /// Hop threshold in world units.
     hop_distance: f64,
     /// Bounding-box diagonal of the rest template (BVH padding).
@@ -313,6 +322,21 @@ impl IncrementalDelaunay {
             .sum();
         let mean_edge = edge_sum / (3 * triangles.len()) as f64;
         let diagonal = rest.bounds().map_or(0.0, |b| b.diagonal());
+        let edges = edge_triangles(&triangles);
+        let across = triangles
+            .iter()
+            .enumerate()
+            .map(|(t, tri)| {
+                std::array::from_fn(|j| {
+                    let (p, q) = (tri[(j + 1) % 3], tri[(j + 2) % 3]);
+                    match edges.get(&edge_key(p, q)).map(Vec::as_slice) {
+                        Some([x, y]) if *x as usize == t => *y,
+                        Some([x, y]) if *y as usize == t => *x,
+                        _ => u32::MAX,
+                    }
+                })
+            })
+            .collect();
         let rest_bvh = DeformedBvh::build(positions, &triangles, diagonal);
         let canonical: Vec<DVec3> = canonical_means.iter().map(|p| p.as_dvec3()).collect();
         let rest_nearest = canonical
@@ -333,6 +357,7 @@ impl IncrementalDelaunay {
             frames,
             canonical,
             rest_nearest,
+            across,
             hop_distance: o.hop_threshold * mean_edge,
             diagonal,
             assigned: Vec::new(),
@@ -524,45 +549,29 @@ impl IncrementalDelaunay {
     }
 
     fn step(&mut self, positions: &[Vec3], means: &[Vec3]) -> FrameStats {
-        let Some(bvh) = self.bvh.as_mut() else {
+        let Some(mut bvh) = self.bvh.take() else {
             return self.rebuild_now(positions, means);
         };
         bvh.refit(positions, &self.triangles, self.diagonal);
-        let bvh = &*bvh;
-        let hop = self.hop_distance;
-        let assigned = &self.assigned;
-        // (hop target, whether a search ran) per Gaussian, in index order.
-        let found: Vec<(Option<u32>, bool)> = means
+        let slack = FILTER_MARGIN_REL * f64::from(self.diagonal);
+        // (Gaussian, new chart) and the number of candidate checks, chart by chart.
+        let per_chart: Vec<(Vec<(u32, u32)>, usize)> = self
+            .members
             .par_iter()
-            .zip(assigned.par_iter())
-            .with_min_len(256)
-            .map(|(m, &a)| {
-                let q = m.as_dvec3();
-                let (d2, _) = bvh.distance_sq(q, a);
-                let bound = if hop > 0.0 {
-                    let r = d2.sqrt() - hop;
-                    if r <= 0.0 {
-                        return (None, false);
-                    }
-                    // Strictly nearer than r: (d², t) < (r², 0) means d² < r².
-                    (r * r, 0)
-                } else {
-                    (d2, a)
-                };
-                let target = bvh
-                    .nearest_below(q, bound)
-                    .map(|(_, t)| t)
-                    .filter(|&t| t != a);
-                (target, true)
-            })
+            .enumerate()
+            .with_min_len(64)
+            .map(|(a, list)| self.hops_of_chart(&bvh, a as u32, list, means, slack))
             .collect();
-        let searches = found.iter().filter(|f| f.1).count();
+        self.bvh = Some(bvh);
+        let searches = per_chart.iter().map(|c| c.1).sum();
+        let mut moves: Vec<(u32, u32)> = per_chart.into_iter().flat_map(|c| c.0).collect();
+        moves.sort_unstable();
+        let found = moves;
         let mut dirty: Vec<u32> = Vec::new();
         let mut hopped = 0;
-        for (i, (target, _)) in found.into_iter().enumerate() {
-            let Some(c) = target else { continue };
+        for (g, c) in found {
+            let i = g as usize;
             let a = self.assigned[i];
-            let g = i as u32;
             if let Some(list) = self.members.get_mut(a as usize)
                 && let Ok(k) = list.binary_search(&g)
             {
@@ -594,6 +603,119 @@ impl IncrementalDelaunay {
             searches,
             ..FrameStats::default()
         }
+    }
+
+    /// Hop targets of the Gaussians of chart `a` at this frame, and how many Gaussians needed
+    /// a candidate check. Exactly the answer of a full BVH search per Gaussian (the nearest
+    /// triangle, ties to the smallest id, under the hop threshold), found cheaper: one range
+    /// query per chart collects every triangle that could be nearer than `a` to any of its
+    /// Gaussians, and per Gaussian a candidate is dismissed without an exact distance when its
+    /// box is too far, or, for the triangle across an edge, when the exact distance to that
+    /// triangle's half-plane (a 2D computation in the plane across the edge) already exceeds
+    /// the bound by `slack`.
+    fn hops_of_chart(
+        &self,
+        bvh: &DeformedBvh,
+        a: u32,
+        list: &[u32],
+        means: &[Vec3],
+        slack: f64,
+    ) -> (Vec<(u32, u32)>, usize) {
+        let mut moves = Vec::new();
+        if list.is_empty() {
+            return (moves, 0);
+        }
+        let hop = self.hop_distance;
+        let v = bvh.corners(a);
+        let centre = (v[0] + v[1] + v[2]) / 3.0;
+        // Per Gaussian: (query, squared bound, bound id, closest-point weights, d_a).
+        let mut queries = Vec::with_capacity(list.len());
+        let mut reach = 0.0f64;
+        for &g in list {
+            let q = means[g as usize].as_dvec3();
+            let (d2, bary) = bvh.distance_sq(q, a);
+            let d = d2.sqrt();
+            let bound = if hop > 0.0 {
+                let r = d - hop;
+                if r <= 0.0 {
+                    continue;
+                }
+                // Strictly nearer than r: (d², t) < (r², 0) means d² < r².
+                (r * r, 0u32)
+            } else {
+                (d2, a)
+            };
+            reach = reach.max((q - centre).length() + bound.0.sqrt());
+            queries.push((g, q, bound, bary));
+        }
+        if queries.is_empty() {
+            return (moves, 0);
+        }
+        let mut candidates = Vec::new();
+        bvh.triangles_within(centre, reach * reach * (1.0 + 1e-12), &mut candidates);
+        candidates.retain(|&t| t != a);
+        candidates.sort_unstable();
+        // Edge filters: for the triangle across the edge opposite corner j, the unit vectors
+        // (into a, across to T) in the plane perpendicular to the edge, the normal of a, and the
+        // height of corner j over that edge.
+        let normal = unit_normal(v);
+        let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length();
+        let filters: [Option<(u32, DVec3, DVec3, f64)>; 3] = std::array::from_fn(|j| {
+            let t = self.across.get(a as usize)?[j];
+            if t == u32::MAX || normal == DVec3::ZERO {
+                return None;
+            }
+            let (p, q) = (v[(j + 1) % 3], v[(j + 2) % 3]);
+            let e = (q - p).try_normalize()?;
+            let into = ((v[j] - p) - e * (v[j] - p).dot(e)).try_normalize()?;
+            let w = bvh.corners(t);
+            let far = w.into_iter().find(|x| *x != p && *x != q)?;
+            let across = ((far - p) - e * (far - p).dot(e)).try_normalize()?;
+            let tx = (across.dot(into), across.dot(normal));
+            let height = area2 / (q - p).length();
+            Some((t, DVec3::new(tx.0, tx.1, 0.0), into, height))
+        });
+        let checked = queries.len();
+        for (g, q, bound, bary) in queries {
+            let interior = bary.iter().all(|&b| b > 0.0);
+            let foot = v[0] * bary[0] + v[1] * bary[1] + v[2] * bary[2];
+            let h = (q - foot).dot(normal);
+            let limit = bound.0.sqrt() + slack;
+            let mut best = bound;
+            let mut found = false;
+            for &t in &candidates {
+                if bvh.leaf_box_distance_sq(q, t) > best.0 {
+                    continue;
+                }
+                if interior
+                    && let Some(j) = filters
+                        .iter()
+                        .position(|f| f.is_some_and(|(ft, ..)| ft == t))
+                    && let Some((_, tx, _, height)) = filters[j]
+                {
+                    // Point (r, h) in the cross-section; T's half-plane is the ray along tx.
+                    let (x, y) = (bary[j] * height, h);
+                    let along = x * tx.x + y * tx.y;
+                    let lower = if along <= 0.0 {
+                        x.hypot(y)
+                    } else {
+                        (x * tx.y - y * tx.x).abs()
+                    };
+                    if lower > limit {
+                        continue;
+                    }
+                }
+                let (d2, _) = bvh.distance_sq(q, t);
+                if (d2, t) < best {
+                    best = (d2, t);
+                    found = true;
+                }
+            }
+            if found && best.1 != a {
+                moves.push((g, best.1));
+            }
+        }
+        (moves, checked)
     }
 
     /// Canonical placement of Gaussian `i` in chart `t`: barycentric weights of its canonical

@@ -121,6 +121,51 @@ impl DeformedBvh {
         }
     }
 
+    /// Deformed corners of triangle `t` in f64 (zeros past the end).
+    pub(crate) fn corners(&self, t: u32) -> [DVec3; 3] {
+        self.corners
+            .get(t as usize)
+            .map_or([DVec3::ZERO; 3], |c| c.map(Vec3::as_dvec3))
+    }
+
+    /// Appends to `out` every triangle whose padded leaf box is within squared distance `r2`
+    /// of `q` (a superset of the triangles within distance `√r2`).
+    pub(crate) fn triangles_within(&self, q: DVec3, r2: f64, out: &mut Vec<u32>) {
+        let nodes = &self.bvh.nodes;
+        if nodes.is_empty() {
+            return;
+        }
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        stack.push(0);
+        while let Some(index) = stack.pop() {
+            let Some(node) = nodes.get(index as usize) else {
+                continue;
+            };
+            if box_distance_sq(node.aabb(), q) > r2 {
+                continue;
+            }
+            if node.is_leaf() {
+                for slot in node.first_index..node.first_index.saturating_add(node.prim_count) {
+                    if let Some(&t) = self.bvh.primitive_indices.get(slot as usize) {
+                        out.push(t);
+                    }
+                }
+            } else {
+                stack.push(node.first_index);
+                stack.push(node.first_index.saturating_add(1));
+            }
+        }
+    }
+
+    /// Squared distance from `q` to the padded box of triangle `t`'s leaf (a lower bound of
+    /// its squared distance).
+    pub(crate) fn leaf_box_distance_sq(&self, q: DVec3, t: u32) -> f64 {
+        self.leaf_of
+            .get(t as usize)
+            .and_then(|&l| self.bvh.nodes.get(l as usize))
+            .map_or(0.0, |n| box_distance_sq(n.aabb(), q))
+    }
+
     /// The lexicographically smallest `(squared distance, triangle)` that is smaller than
     /// `bound`, or `None`. With `bound = (d², t)` for the current triangle `t`, a result means
     /// that another triangle is strictly nearer (or as near with a smaller id).
