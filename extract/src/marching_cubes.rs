@@ -31,6 +31,21 @@ pub const VERTEX_EDGE_MARGIN: f64 = 1e-3;
 /// Blocks per parallel work item.
 const BLOCKS_PER_TASK: usize = 4;
 
+/// Position of the centre block in [`Neighborhood::ids`].
+const CENTRE: usize = 13;
+
+/// Storage offsets of the 8 cell corners from the low corner inside one block.
+const CORNER_OFFSETS: [usize; 8] = {
+    let mut out = [0usize; 8];
+    let mut c = 0;
+    while c < 8 {
+        let b = BLOCK as usize;
+        out[c] = (c & 1) + b * ((c >> 1) & 1) + b * b * ((c >> 2) & 1);
+        c += 1;
+    }
+    out
+};
+
 /// The blocks around one block: `ids[(dx + 1) + 3 (dy + 1) + 9 (dz + 1)]` for offsets in
 /// `-1..=1`.
 struct Neighborhood {
@@ -73,6 +88,18 @@ impl Neighborhood {
 #[inline]
 fn cell_values(grid: &BlockGrid, hood: &Neighborhood, l: IVec3) -> Option<[f32; 8]> {
     let mut f = [0.0f32; 8];
+    if l.cmpge(IVec3::ZERO).all() && l.cmplt(IVec3::splat(BLOCK - 1)).all() {
+        // Fast path: the whole cell is inside the centre block.
+        let base = hood.ids[CENTRE]? as usize * BLOCK_VOXELS + local_index(l);
+        for (c, offset) in CORNER_OFFSETS.iter().enumerate() {
+            let s = base + offset;
+            if grid.weight[s] == 0.0 {
+                return None;
+            }
+            f[c] = grid.value[s];
+        }
+        return Some(f);
+    }
     for (c, offset) in CORNERS.iter().enumerate() {
         let s = hood.slot(l + IVec3::from_array(offset.map(i32::from)))?;
         if grid.weight[s] == 0.0 {

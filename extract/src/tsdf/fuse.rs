@@ -160,8 +160,12 @@ pub struct Fused {
     pub blocks: usize,
     /// Triangles before clean-up.
     pub raw_triangles: usize,
-    /// Seconds spent allocating and integrating.
+    /// Seconds spent creating the blocks near the observed depth.
+    pub allocate_seconds: f64,
+    /// Seconds spent integrating.
     pub integrate_seconds: f64,
+    /// Seconds spent in marching cubes.
+    pub marching_cubes_seconds: f64,
     /// Seconds spent in marching cubes and clean-up.
     pub extract_seconds: f64,
 }
@@ -208,17 +212,23 @@ pub fn fuse(
         })
         .collect();
     let mut volume = TsdfVolume::new(params, colors.is_some())?.with_max_blocks(options.max_blocks);
-    volume.integrate(&frames)?;
+    volume.allocate(&frames)?;
+    let allocate_seconds = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    volume.integrate_allocated(&frames)?;
     let integrate_seconds = start.elapsed().as_secs_f64();
     let start = Instant::now();
     let raw = volume.extract_mesh();
+    let mc_seconds = start.elapsed().as_secs_f64();
     let mesh = post_process(&raw, options.keep_clusters);
     Ok(Fused {
         mesh,
         params,
         blocks: volume.grid().block_count(),
         raw_triangles: raw.triangle_count(),
+        allocate_seconds,
         integrate_seconds,
+        marching_cubes_seconds: mc_seconds,
         extract_seconds: start.elapsed().as_secs_f64(),
     })
 }

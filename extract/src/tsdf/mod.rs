@@ -27,6 +27,7 @@ pub mod grid;
 mod image;
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{DMat3, DVec3, IVec3};
 use rayon::prelude::*;
@@ -55,6 +56,10 @@ pub const DEFAULT_MAX_BLOCKS: usize = 1 << 20;
 
 /// Voxel indices are kept within ±2³⁰ so that block keys and neighbours never overflow `i32`.
 const MAX_VOXEL_INDEX: f64 = (1u64 << 30) as f64;
+
+/// Largest box of block keys marked in a dense array during allocation (16 Mi cells, 16 MiB);
+/// larger boxes use a hash set.
+const DENSE_MARK_CELLS: u64 = 1 << 24;
 
 /// Side of the square pixel tiles whose largest depth culls blocks behind the surface.
 const TILE: usize = 16;
@@ -379,17 +384,8 @@ impl TsdfVolume {
         let limit = self.max_blocks;
         let params = self.params;
         let origin = self.grid.origin;
-        let per_frame: Vec<Result<Vec<IVec3>, TsdfError>> = prepared
-            .par_iter()
-            .map(|f| frame_blocks(f, params, origin, limit))
-            .collect();
-        let mut all: Vec<IVec3> = Vec::new();
-        for keys in per_frame {
-            all.extend(keys?);
-        }
+        let mut all = frame_blocks(&prepared, params, origin, limit, DENSE_MARK_CELLS)?;
         all.retain(|k| !self.grid.lookup.contains_key(k));
-        all.par_sort_unstable_by_key(|k| (k.z, k.y, k.x));
-        all.dedup();
         if self.grid.block_count() + all.len() > limit {
             return Err(TsdfError::TooManyBlocks {
                 limit,
@@ -484,88 +480,167 @@ impl TsdfVolume {
     }
 }
 
-/// The keys of the blocks near the valid depth of one frame.
-fn frame_blocks(
+/// Calls `visit(lo, hi)` with the inclusive range of block keys near each valid pixel of row
+/// `i` of frame `f` (see the module docs), skipping repeats of the previous pixel's range.
+fn row_ranges(
     f: &Prepared<'_>,
+    i: usize,
     params: TsdfParams,
     origin: DVec3,
     limit: usize,
-) -> Result<Vec<IVec3>, TsdfError> {
+    mut visit: impl FnMut(IVec3, IVec3),
+) -> Result<(), TsdfError> {
     let camera_to_world = f.world_to_camera.transpose();
     let lateral = 0.5 * (1.0 / (f.fx * f.fx) + 1.0 / (f.fy * f.fy)).sqrt();
     let fixed = params.trunc + 3f64.sqrt() * params.voxel;
     let inv_voxel = 1.0 / params.voxel;
     let block = f64::from(BLOCK);
-    let rows: Vec<Result<Vec<IVec3>, TsdfError>> = (0..f.height)
-        .into_par_iter()
-        .with_min_len(8)
-        .map(|i| {
-            let mut keys: std::collections::HashSet<
-                IVec3,
-                std::hash::BuildHasherDefault<grid::KeyHasher>,
-            > = Default::default();
-            let mut last: Option<(IVec3, IVec3)> = None;
-            let yn = (i as f64 + 0.5 - f.cy) / f.fy;
-            for j in 0..f.width {
-                let d = f64::from(f.depth[i * f.width + j]);
-                if d <= 0.0 {
-                    continue;
-                }
-                let xn = (j as f64 + 0.5 - f.cx) / f.fx;
-                let p = camera_to_world * DVec3::new(xn * d, yn * d, d) + f.center;
-                let r = fixed + (d + params.trunc) * lateral;
-                let lo = ((p - r - origin) * inv_voxel).ceil();
-                let hi = ((p + r - origin) * inv_voxel).floor();
-                if lo.abs().max_element() > MAX_VOXEL_INDEX
-                    || hi.abs().max_element() > MAX_VOXEL_INDEX
-                {
-                    return Err(TsdfError::OutOfRange {
-                        camera: f.name.to_owned(),
-                    });
-                }
-                let lo = (lo / block).floor().as_ivec3();
-                let hi = (hi / block).floor().as_ivec3();
-                if last == Some((lo, hi)) {
-                    continue;
-                }
-                last = Some((lo, hi));
-                let span = (hi - lo + 1).max(IVec3::ZERO).as_u64vec3();
-                if span.x * span.y * span.z > limit as u64 {
-                    return Err(TsdfError::TooManyBlocks {
-                        limit,
-                        voxel: params.voxel,
-                    });
-                }
-                for z in lo.z..=hi.z {
-                    for y in lo.y..=hi.y {
-                        for x in lo.x..=hi.x {
-                            keys.insert(IVec3::new(x, y, z));
-                        }
-                    }
-                }
-                if keys.len() > limit {
-                    return Err(TsdfError::TooManyBlocks {
-                        limit,
-                        voxel: params.voxel,
-                    });
-                }
-            }
-            Ok(keys.into_iter().collect())
-        })
-        .collect();
-    let mut set: KeyMap<()> = KeyMap::default();
-    for row in rows {
-        for k in row? {
-            set.insert(k, ());
+    let yn = (i as f64 + 0.5 - f.cy) / f.fy;
+    let mut last: Option<(IVec3, IVec3)> = None;
+    for j in 0..f.width {
+        let d = f64::from(f.depth[i * f.width + j]);
+        if d <= 0.0 {
+            continue;
         }
-        if set.len() > limit {
+        let xn = (j as f64 + 0.5 - f.cx) / f.fx;
+        let p = camera_to_world * DVec3::new(xn * d, yn * d, d) + f.center;
+        let r = fixed + (d + params.trunc) * lateral;
+        let lo = ((p - r - origin) * inv_voxel).ceil();
+        let hi = ((p + r - origin) * inv_voxel).floor();
+        if lo.abs().max_element() > MAX_VOXEL_INDEX || hi.abs().max_element() > MAX_VOXEL_INDEX {
+            return Err(TsdfError::OutOfRange {
+                camera: f.name.to_owned(),
+            });
+        }
+        let lo = (lo / block).floor().as_ivec3();
+        let hi = (hi / block).floor().as_ivec3();
+        if last == Some((lo, hi)) {
+            continue;
+        }
+        last = Some((lo, hi));
+        let span = (hi - lo + 1).max(IVec3::ZERO).as_u64vec3();
+        if span.x * span.y * span.z > limit as u64 {
             return Err(TsdfError::TooManyBlocks {
                 limit,
                 voxel: params.voxel,
             });
         }
+        visit(lo, hi);
     }
-    Ok(set.into_keys().collect())
+    Ok(())
+}
+
+/// Every row of a frame, as (frame, row index) pairs.
+fn rows<'f, 'a>(
+    f: &'f Prepared<'a>,
+) -> impl ParallelIterator<Item = (&'f Prepared<'a>, usize)> + use<'f, 'a> {
+    (0..f.height).into_par_iter().map(move |i| (f, i))
+}
+
+/// Keys of the blocks near the valid depth of `frames`, sorted by (z, y, x) and unique.
+///
+/// A first pass finds the box of block keys the ranges cover; when it has at most
+/// `dense_cells` cells ([`DENSE_MARK_CELLS`] in [`TsdfVolume::allocate`]), ranges are marked in a dense array (cheap stores), else they go
+/// through a hash set per row.
+fn frame_blocks(
+    frames: &[Prepared<'_>],
+    params: TsdfParams,
+    origin: DVec3,
+    limit: usize,
+    dense_cells: u64,
+) -> Result<Vec<IVec3>, TsdfError> {
+    let bounds = frames
+        .par_iter()
+        .flat_map(rows)
+        .map(|(f, i)| {
+            let mut b: Option<(IVec3, IVec3)> = None;
+            row_ranges(f, i, params, origin, limit, |lo, hi| {
+                b = Some(b.map_or((lo, hi), |(a, z)| (a.min(lo), z.max(hi))));
+            })?;
+            Ok::<_, TsdfError>(b)
+        })
+        .try_reduce(
+            || None,
+            |a, b| {
+                Ok(match (a, b) {
+                    (Some((a0, a1)), Some((b0, b1))) => Some((a0.min(b0), a1.max(b1))),
+                    (x, None) | (None, x) => x,
+                })
+            },
+        )?;
+    let Some((lo, hi)) = bounds else {
+        return Ok(Vec::new());
+    };
+    let dims = (hi - lo + 1).as_u64vec3();
+    let cells = dims.x * dims.y * dims.z;
+    if cells <= dense_cells {
+        let (nx, ny) = (dims.x as usize, dims.y as usize);
+        let marks: Vec<AtomicBool> = (0..cells).map(|_| AtomicBool::new(false)).collect();
+        frames.par_iter().flat_map(rows).try_for_each(|(f, i)| {
+            row_ranges(f, i, params, origin, limit, |a, b| {
+                let (a, b) = ((a - lo).as_uvec3(), (b - lo).as_uvec3());
+                for z in a.z..=b.z {
+                    for y in a.y..=b.y {
+                        let row = (z as usize * ny + y as usize) * nx;
+                        for x in a.x..=b.x {
+                            marks[row + x as usize].store(true, Ordering::Relaxed);
+                        }
+                    }
+                }
+            })
+        })?;
+        let keys: Vec<IVec3> = marks
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.load(Ordering::Relaxed))
+            .map(|(k, _)| {
+                let (x, rest) = (k % nx, k / nx);
+                lo + IVec3::new(x as i32, (rest % ny) as i32, (rest / ny) as i32)
+            })
+            .collect();
+        if keys.len() > limit {
+            return Err(TsdfError::TooManyBlocks {
+                limit,
+                voxel: params.voxel,
+            });
+        }
+        return Ok(keys);
+    }
+    let per_row: Vec<Vec<IVec3>> = frames
+        .par_iter()
+        .flat_map(rows)
+        .map(|(f, i)| {
+            let mut keys: KeyMap<()> = KeyMap::default();
+            let mut too_many = false;
+            row_ranges(f, i, params, origin, limit, |a, b| {
+                for z in a.z..=b.z {
+                    for y in a.y..=b.y {
+                        for x in a.x..=b.x {
+                            keys.insert(IVec3::new(x, y, z), ());
+                        }
+                    }
+                }
+                too_many |= keys.len() > limit;
+            })?;
+            if too_many {
+                return Err(TsdfError::TooManyBlocks {
+                    limit,
+                    voxel: params.voxel,
+                });
+            }
+            Ok(keys.into_keys().collect())
+        })
+        .collect::<Result<_, TsdfError>>()?;
+    let mut all: Vec<IVec3> = per_row.into_iter().flatten().collect();
+    all.par_sort_unstable_by_key(|k| (k.z, k.y, k.x));
+    all.dedup();
+    if all.len() > limit {
+        return Err(TsdfError::TooManyBlocks {
+            limit,
+            voxel: params.voxel,
+        });
+    }
+    Ok(all)
 }
 
 /// Mutable storage of one block.
@@ -606,8 +681,9 @@ fn integrate_block(
                 if q.z <= 0.0 {
                     continue;
                 }
-                let u = f.fx * q.x / q.z + f.cx;
-                let v = f.fy * q.y / q.z + f.cy;
+                let inv_z = 1.0 / q.z;
+                let u = f.fx * q.x * inv_z + f.cx;
+                let v = f.fy * q.y * inv_z + f.cy;
                 if !(u >= PIXEL_MARGIN
                     && u < w - PIXEL_MARGIN
                     && v >= PIXEL_MARGIN
@@ -621,12 +697,21 @@ fn integrate_block(
                 if d <= 0.0 {
                     continue;
                 }
+                // The ray-length factor is ≥ 1: sdf ≥ trunc when dz ≥ trunc (tsdf = 1) and
+                // sdf ≤ −trunc when dz ≤ −trunc, so the square root is only needed between.
                 let dz = f64::from(d) - q.z;
-                let sdf = dz * (1.0 + f.col_sq[j] + f.row_sq[i]).sqrt();
-                if sdf <= -trunc {
+                if dz <= -trunc {
                     continue;
                 }
-                let tsdf = (sdf * inv_trunc).min(1.0);
+                let tsdf = if dz >= trunc {
+                    1.0
+                } else {
+                    let sdf = dz * (1.0 + f.col_sq[j] + f.row_sq[i]).sqrt();
+                    if sdf <= -trunc {
+                        continue;
+                    }
+                    (sdf * inv_trunc).min(1.0)
+                };
                 let w0 = f64::from(block.weight[s]);
                 let w1 = w0 + 1.0;
                 block.value[s] = ((f64::from(block.value[s]) * w0 + tsdf) / w1) as f32;

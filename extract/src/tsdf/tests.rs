@@ -353,3 +353,29 @@ fn degenerate_inputs() {
         Err(TsdfError::OutOfRange { .. })
     ));
 }
+
+#[test]
+fn dense_and_hashed_allocation_agree() {
+    let cams = rig();
+    let depths: Vec<DepthImage> = cams.iter().map(sphere_depth).collect();
+    let frames: Vec<Frame<'_>> = cams
+        .iter()
+        .zip(&depths)
+        .map(|(camera, depth)| Frame {
+            camera,
+            depth,
+            color: None,
+        })
+        .collect();
+    let volume = TsdfVolume::new(params(), false).unwrap();
+    let prepared = volume.prepare(&frames).unwrap();
+    let origin = volume.grid().origin();
+    let dense = frame_blocks(&prepared, params(), origin, 1 << 20, DENSE_MARK_CELLS).unwrap();
+    let hashed = frame_blocks(&prepared, params(), origin, 1 << 20, 0).unwrap();
+    assert!(!dense.is_empty());
+    assert_eq!(dense, hashed);
+    assert!(matches!(
+        frame_blocks(&prepared, params(), origin, 10, 0),
+        Err(TsdfError::TooManyBlocks { .. })
+    ));
+}
