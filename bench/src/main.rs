@@ -12,6 +12,7 @@ mod deform;
 mod eval;
 mod harness;
 mod smooth;
+mod tsdf;
 
 use clap::{Parser, Subcommand};
 
@@ -44,6 +45,8 @@ enum Bench {
     Eval(eval::EvalBenchArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
     Smooth,
+    /// TSDF fusion of 60 depth maps 512x512 of Spot vs Open3D VoxelBlockGrid, error vs time.
+    Tsdf(tsdf::TsdfBenchArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -54,5 +57,6 @@ fn main() -> anyhow::Result<()> {
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Smooth => smooth::run(python),
+        Bench::Tsdf(a) => tsdf::run(&a, python),
     }
 }
