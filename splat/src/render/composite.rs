@@ -6,12 +6,13 @@
 //! gsplat's per-pixel loop, so the result is the same, and it does not depend on the thread
 //! count. Tile rows run in parallel. Per-pixel sums are `f32`, like gsplat's kernel.
 
+use glam::Vec4;
 use rayon::prelude::*;
 
 use super::image::RenderImages;
 use super::options::Outputs;
 use super::screen::{ScreenSplats, SplatKernel};
-use super::tiles::{TILE_SIZE, TileBins, TileRect};
+use super::tiles::{TILE_SIZE, TileBins, TileRect, depth_order};
 
 /// Pixels per tile.
 const TILE_PIXELS: usize = (TILE_SIZE * TILE_SIZE) as usize;
@@ -121,6 +122,20 @@ fn split_bands(buf: &mut Option<Vec<f32>>, chunk: usize, n: usize) -> Vec<Option
     }
 }
 
+/// First local index `>= floor(v − start)`, clamped to `0..=n` (no `floor` call: the baseline
+/// x86-64 target has no rounding instruction; truncation equals floor for the values kept).
+#[inline(always)]
+fn lo(v: f32, start: u32, n: usize) -> usize {
+    ((v - start as f32).max(0.0) as usize).min(n)
+}
+
+/// One past a local index `>= ceil(v − start)` (conservative by at most one), clamped to `0..=n`.
+#[inline(always)]
+fn hi(v: f32, start: u32, n: usize) -> usize {
+    let x = v - start as f32 + 1.0;
+    if x > 0.0 { (x as usize + 1).min(n) } else { 0 }
+}
+
 /// Bins, sorts and composites `screen` (evaluated by `kernel`) into a `width × height` image.
 /// Fills `stats.sort_s`, `stats.composite_s`, `stats.visible` and `stats.intersections`.
 #[must_use]
@@ -134,8 +149,36 @@ pub fn rasterize<K: SplatKernel>(
     stats: &mut RenderStats,
 ) -> RenderImages {
     let start = std::time::Instant::now();
-    let mut bins = TileBins::bin(screen, width, height, rules.tile_rect);
-    bins.sort();
+    // One global depth sort; the per-splat data the tile loop reads is gathered into that
+    // order so each tile walks memory forwards.
+    let order = depth_order(&screen.depths);
+    let centers: Vec<[f32; 2]> = order.iter().map(|&i| screen.centers[i as usize]).collect();
+    let radii: Vec<[f32; 2]> = order.iter().map(|&i| screen.radii[i as usize]).collect();
+    let gather3 = |v: &[[f32; 3]], on: bool| -> Vec<[f32; 3]> {
+        if on {
+            order.iter().map(|&i| v[i as usize]).collect()
+        } else {
+            Vec::new()
+        }
+    };
+    let sorted = SortedSplats {
+        colors: gather3(&screen.colors, outputs.rgb),
+        normals: gather3(&screen.normals, outputs.normal),
+        centers,
+        radii,
+    };
+    let reordered = kernel.reordered(&order);
+    let (kernel, kernel_index) = match &reordered {
+        Some(k) => (k, None),
+        None => (kernel, Some(order.as_slice())),
+    };
+    let bins = TileBins::bin(
+        &sorted.centers,
+        &sorted.radii,
+        width,
+        height,
+        rules.tile_rect,
+    );
     stats.sort_s = start.elapsed().as_secs_f64();
     stats.visible = screen.len();
     stats.intersections = bins.intersections();
@@ -165,8 +208,9 @@ pub fn rasterize<K: SplatKernel>(
         })
         .collect();
     let ctx = TileContext {
-        screen,
+        splats: &sorted,
         kernel,
+        kernel_index,
         rules,
         outputs,
         background,
@@ -192,9 +236,19 @@ pub fn rasterize<K: SplatKernel>(
     images
 }
 
+/// The screen data the tile loop reads, in depth order.
+struct SortedSplats {
+    centers: Vec<[f32; 2]>,
+    radii: Vec<[f32; 2]>,
+    colors: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+}
+
 struct TileContext<'a, K> {
-    screen: &'a ScreenSplats,
+    splats: &'a SortedSplats,
     kernel: &'a K,
+    /// Kernel index of each depth-order position, unless the kernel was reordered.
+    kernel_index: Option<&'a [u32]>,
     rules: &'a CompositeRules,
     outputs: Outputs,
     background: [f32; 3],
@@ -202,33 +256,106 @@ struct TileContext<'a, K> {
     height: u32,
 }
 
-/// Per-pixel accumulators of one tile (reused across the tiles of a band: no allocation).
+/// Per-pixel accumulators of one tile, one array per quantity so the row loop vectorises
+/// (reused across the tiles of a band: no allocation).
 struct TileState {
     transmittance: [f32; TILE_PIXELS],
-    done: [bool; TILE_PIXELS],
-    rgb: [[f32; 3]; TILE_PIXELS],
+    /// 1 while the pixel accepts splats, 0 once it stopped.
+    alive: [f32; TILE_PIXELS],
+    rgb: [[f32; TILE_PIXELS]; 3],
     depth: [f32; TILE_PIXELS],
     median: [f32; TILE_PIXELS],
-    normal: [[f32; 3]; TILE_PIXELS],
+    normal: [[f32; TILE_PIXELS]; 3],
 }
 
 impl Default for TileState {
     fn default() -> Self {
         Self {
             transmittance: [1.0; TILE_PIXELS],
-            done: [false; TILE_PIXELS],
-            rgb: [[0.0; 3]; TILE_PIXELS],
+            alive: [1.0; TILE_PIXELS],
+            rgb: [[0.0; TILE_PIXELS]; 3],
             depth: [0.0; TILE_PIXELS],
             median: [0.0; TILE_PIXELS],
-            normal: [[0.0; 3]; TILE_PIXELS],
+            normal: [[0.0; TILE_PIXELS]; 3],
         }
     }
+}
+
+/// Per-splat constants of the row loop.
+#[derive(Clone, Copy)]
+struct RowSplat {
+    color: [f32; 3],
+    normal: [f32; 3],
+}
+
+/// The rules as the row loop uses them.
+#[derive(Clone, Copy)]
+struct RowRules {
+    max_alpha: f32,
+    min_alpha: f32,
+    /// A pixel stops when `next_T < stop_below` (the `<=` rule uses the next float up).
+    stop_below: f32,
+    median: MedianRule,
+}
+
+/// Pixels evaluated together: rows are processed in aligned groups of this many pixels (the
+/// width of an SSE vector), so the loops compile to fixed-width vector code. Pixels of a group
+/// outside a splat's box are evaluated too — exactly what gsplat does for every pixel of a
+/// tile — and contribute nothing (their alpha is below the skip threshold).
+const CHUNK: usize = 4;
+
+/// Composites one splat over the `CHUNK` pixels of a row starting at tile index `p0`, given the
+/// kernel's `alpha` (0 where it does not contribute) and `depth` per pixel. Branch-free so it
+/// vectorises. Returns how many pixels stopped.
+#[inline(always)]
+fn composite_chunk<const EXTRA: bool>(
+    s: &mut TileState,
+    p0: usize,
+    alpha: Vec4,
+    depth: Vec4,
+    g: RowSplat,
+    r: RowRules,
+) -> usize {
+    let range = p0..p0 + CHUNK;
+    if range.end > TILE_PIXELS {
+        return 0;
+    }
+    let t = Vec4::from_slice(&s.transmittance[range.clone()]);
+    let alive = Vec4::from_slice(&s.alive[range.clone()]);
+    let a = alpha.min(Vec4::splat(r.max_alpha));
+    let valid = alive.cmpgt(Vec4::ZERO) & a.cmpge(Vec4::splat(r.min_alpha));
+    let next_t = t * (Vec4::ONE - a);
+    let stop = valid & next_t.cmplt(Vec4::splat(r.stop_below));
+    let accept = valid & !stop;
+    let w = Vec4::select(accept, a * t, Vec4::ZERO);
+    for c in 0..3 {
+        let acc = &mut s.rgb[c][range.clone()];
+        (Vec4::from_slice(acc) + w * g.color[c]).write_to_slice(acc);
+    }
+    let acc = &mut s.depth[range.clone()];
+    (Vec4::from_slice(acc) + w * depth).write_to_slice(acc);
+    Vec4::select(accept, next_t, t).write_to_slice(&mut s.transmittance[range.clone()]);
+    Vec4::select(stop, Vec4::ZERO, alive).write_to_slice(&mut s.alive[range.clone()]);
+    if EXTRA {
+        let half = Vec4::splat(MEDIAN_TRANSMITTANCE);
+        let take = match r.median {
+            MedianRule::FirstBelowHalf => accept & t.cmpge(half) & next_t.cmplt(half),
+            MedianRule::LastWhileAboveHalf => accept & t.cmpgt(half),
+        };
+        let med = &mut s.median[range.clone()];
+        Vec4::select(take, depth, Vec4::from_slice(med)).write_to_slice(med);
+        for c in 0..3 {
+            let acc = &mut s.normal[c][range.clone()];
+            (Vec4::from_slice(acc) + w * g.normal[c]).write_to_slice(acc);
+        }
+    }
+    stop.bitmask().count_ones() as usize
 }
 
 impl<K: SplatKernel> TileContext<'_, K> {
     fn composite_tile(
         &self,
-        keys: &[u64],
+        entries: &[u32],
         tx: u32,
         ty: u32,
         band: &mut Band<'_>,
@@ -240,116 +367,91 @@ impl<K: SplatKernel> TileContext<'_, K> {
         let tw = (self.width - x_start).min(TILE_SIZE) as usize;
         let th = (self.height - y_start).min(TILE_SIZE) as usize;
         s.transmittance.fill(1.0);
-        s.done.fill(false);
+        // Pixels of a partial tile outside the image never accept splats.
+        for (p, alive) in s.alive.iter_mut().enumerate() {
+            *alive = if p % ts < tw && p / ts < th { 1.0 } else { 0.0 };
+        }
+        for c in &mut s.rgb {
+            c.fill(0.0);
+        }
+        s.depth.fill(0.0);
         let o = self.outputs;
-        if o.rgb {
-            s.rgb.fill([0.0; 3]);
-        }
-        if o.depth {
-            s.depth.fill(0.0);
-        }
-        if o.median_depth {
+        let extra = o.median_depth || o.normal;
+        if extra {
             s.median.fill(0.0);
-        }
-        if o.normal {
-            s.normal.fill([0.0; 3]);
+            for c in &mut s.normal {
+                c.fill(0.0);
+            }
         }
         let r = self.rules;
+        let row_rules = RowRules {
+            max_alpha: r.max_alpha,
+            min_alpha: r.min_alpha,
+            stop_below: if r.stop_inclusive {
+                r.stop_transmittance.next_up()
+            } else {
+                r.stop_transmittance
+            },
+            median: r.median,
+        };
         let mut remaining = tw * th;
         let off = r.pixel_offset;
-        for &key in keys {
+        for &entry in entries {
             if remaining == 0 {
                 break;
             }
-            let g = (key & 0xffff_ffff) as usize;
-            // Local pixel range of this splat in the tile.
+            let g = entry as usize;
+            let kg = self.kernel_index.map_or(g, |m| m[g] as usize);
+            // Local pixel range of this splat in the tile: pixel centres j + off within
+            // [c - r, c + r] (rounded outwards), or the whole tile.
             let (lx0, lx1, ly0, ly1) = if r.clip_to_box {
-                let c = self.screen.centers[g];
-                let rad = self.screen.radii[g];
-                let lo = |v: f32, start: u32, n: usize| {
-                    ((v.floor() - start as f32).max(0.0) as usize).min(n)
-                };
-                let hi = |v: f32, start: u32, n: usize| {
-                    ((v.ceil() - start as f32 + 1.0).max(0.0) as usize).min(n)
-                };
+                let c = self.splats.centers[g];
+                let rad = self.splats.radii[g];
                 (
-                    lo(c[0] - rad[0] - 1.0, x_start, tw),
-                    hi(c[0] + rad[0] + 1.0, x_start, tw),
-                    lo(c[1] - rad[1] - 1.0, y_start, th),
-                    hi(c[1] + rad[1] + 1.0, y_start, th),
+                    lo(c[0] - rad[0] - off, x_start, tw),
+                    hi(c[0] + rad[0] - off, x_start, tw),
+                    lo(c[1] - rad[1] - off, y_start, th),
+                    hi(c[1] + rad[1] - off, y_start, th),
                 )
             } else {
                 (0, tw, 0, th)
             };
-            let color = if o.rgb {
-                self.screen.colors[g]
-            } else {
-                [0.0; 3]
-            };
-            let normal = if o.normal {
-                self.screen.normals[g]
-            } else {
-                [0.0; 3]
+            let splat = RowSplat {
+                color: if o.rgb {
+                    self.splats.colors[g]
+                } else {
+                    [0.0; 3]
+                },
+                normal: if o.normal {
+                    self.splats.normals[g]
+                } else {
+                    [0.0; 3]
+                },
             };
             for ly in ly0..ly1 {
                 let py = (y_start as usize + ly) as f32 + off;
-                for lx in lx0..lx1 {
-                    let p = ly * ts + lx;
-                    if s.done[p] {
-                        continue;
-                    }
-                    let px = (x_start as usize + lx) as f32 + off;
-                    let Some(sample) = self.kernel.sample(g, px, py) else {
-                        continue;
-                    };
-                    let alpha = sample.alpha.min(r.max_alpha);
-                    if alpha < r.min_alpha {
-                        continue;
-                    }
-                    let t = s.transmittance[p];
-                    let next_t = t * (1.0 - alpha);
-                    let stop = if r.stop_inclusive {
-                        next_t <= r.stop_transmittance
-                    } else {
-                        next_t < r.stop_transmittance
-                    };
-                    if stop {
-                        s.done[p] = true;
-                        remaining -= 1;
-                        continue;
-                    }
-                    let w = alpha * t;
-                    if o.rgb {
-                        let acc = &mut s.rgb[p];
-                        acc[0] += w * color[0];
-                        acc[1] += w * color[1];
-                        acc[2] += w * color[2];
-                    }
-                    if o.depth {
-                        s.depth[p] += w * sample.depth;
-                    }
-                    if o.median_depth {
-                        match r.median {
-                            MedianRule::FirstBelowHalf => {
-                                if t >= MEDIAN_TRANSMITTANCE && next_t < MEDIAN_TRANSMITTANCE {
-                                    s.median[p] = sample.depth;
-                                }
-                            }
-                            MedianRule::LastWhileAboveHalf => {
-                                if t > MEDIAN_TRANSMITTANCE {
-                                    s.median[p] = sample.depth;
-                                }
-                            }
-                        }
-                    }
-                    if o.normal {
-                        let acc = &mut s.normal[p];
-                        acc[0] += w * normal[0];
-                        acc[1] += w * normal[1];
-                        acc[2] += w * normal[2];
-                    }
-                    s.transmittance[p] = next_t;
+                let (sx0, sx1) = match self.kernel.row_span(kg, py) {
+                    Some((a, b)) => (
+                        lo(a - off, x_start, tw).max(lx0),
+                        hi(b - off, x_start, tw).min(lx1),
+                    ),
+                    None => (lx0, lx1),
+                };
+                if sx0 >= sx1 {
+                    continue;
                 }
+                let row = ly * ts;
+                let mut stopped = 0;
+                for lx in (sx0 / CHUNK * CHUNK..sx1).step_by(CHUNK) {
+                    let px0 = (x_start as usize + lx) as f32 + off;
+                    let (alpha, depth) = self.kernel.sample4(kg, py, px0);
+                    stopped += if extra {
+                        composite_chunk::<true>(s, row + lx, alpha, depth, splat, row_rules)
+                    } else {
+                        composite_chunk::<false>(s, row + lx, alpha, depth, splat, row_rules)
+                    };
+                }
+                remaining = remaining.saturating_sub(stopped);
             }
         }
         // Write the tile into the band.
@@ -362,7 +464,7 @@ impl<K: SplatKernel> TileContext<'_, K> {
                 let acc = 1.0 - t;
                 if let Some(rgb) = band.rgb.as_deref_mut() {
                     for c in 0..3 {
-                        rgb[3 * q + c] = s.rgb[p][c] + t * self.background[c];
+                        rgb[3 * q + c] = s.rgb[c][p] + t * self.background[c];
                     }
                 }
                 if let Some(alpha) = band.alpha.as_deref_mut() {
@@ -380,7 +482,9 @@ impl<K: SplatKernel> TileContext<'_, K> {
                     median[q] = s.median[p];
                 }
                 if let Some(normal) = band.normal.as_deref_mut() {
-                    normal[3 * q..3 * q + 3].copy_from_slice(&s.normal[p]);
+                    for c in 0..3 {
+                        normal[3 * q + c] = s.normal[c][p];
+                    }
                 }
             }
         }

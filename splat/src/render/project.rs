@@ -17,7 +17,7 @@
 //! `mid + sqrt(max(0.1, mid² − det))`, symmetric limits `±1.3 tan(fov/2)`, and shift the means by
 //! −0.5 px (its integer pixel centres).
 
-use glam::{DMat3, DVec3};
+use glam::{DMat3, DVec3, Vec4};
 use rayon::prelude::*;
 use trisplat_geometry::Camera;
 use trisplat_geometry::mesh_render::NormalFrame;
@@ -51,7 +51,11 @@ pub struct EwaSplat {
     pub opacity: f32,
     /// Camera z of the mean.
     pub depth: f32,
-    _pad: f32,
+    /// Row-span coefficients `(p, q, r)`: on the row at `dy = mean_y − py`, `alpha ≥ 1/255`
+    /// only for `dx = mean_x − px` within `−p dy ± sqrt(q dy² + r)`; from
+    /// `½ a dx² + b dx dy + ½ c dy² ≤ ln(255 opacity)`: `p = b/a`, `q = (b² − a c)/a²`,
+    /// `r = 2 ln(255 opacity)/a`.
+    pub span: [f32; 3],
 }
 
 /// The 3DGS EWA kernel: `sigma = ½(a dx² + c dy²) + b dx dy` with `d = mean − pixel`,
@@ -73,11 +77,155 @@ impl SplatKernel for EwaKernel {
             return None;
         }
         Some(Sample {
-            alpha: s.opacity * (-sigma).exp(),
+            alpha: s.opacity * exp_f32(-sigma),
             depth: s.depth,
         })
     }
+
+    #[inline(always)]
+    fn sample_row(&self, i: usize, py: f32, px0: f32, alpha: &mut [f32], depth: &mut [f32]) {
+        let s = &self.splats[i];
+        let [a, b, c] = s.conic;
+        let dy = s.mean[1] - py;
+        let cdy2 = c * dy * dy;
+        for (k, out) in alpha.iter_mut().enumerate() {
+            let dx = s.mean[0] - (px0 + k as f32);
+            let sigma = 0.5 * (a * dx * dx + cdy2) + b * dx * dy;
+            let value = s.opacity * exp_f32(-sigma);
+            *out = if sigma < 0.0 { 0.0 } else { value };
+        }
+        depth.fill(s.depth);
+    }
+
+    #[inline(always)]
+    fn sample4(&self, i: usize, py: f32, px0: f32) -> (Vec4, Vec4) {
+        let s = &self.splats[i];
+        let [a, b, c] = s.conic;
+        let px = Vec4::splat(px0) + Vec4::new(0.0, 1.0, 2.0, 3.0);
+        let dx = Vec4::splat(s.mean[0]) - px;
+        let dy = s.mean[1] - py;
+        let cdy2 = c * dy * dy;
+        let sigma = 0.5 * (a * dx * dx + Vec4::splat(cdy2)) + b * dx * dy;
+        let alpha = s.opacity * exp_neg4(sigma);
+        (
+            Vec4::select(sigma.cmplt(Vec4::ZERO), Vec4::ZERO, alpha),
+            Vec4::splat(s.depth),
+        )
+    }
+
+    fn reordered(&self, order: &[u32]) -> Option<Self> {
+        let splats = order
+            .iter()
+            .map(|&i| self.splats.get(i as usize).copied())
+            .collect::<Option<Vec<_>>>()?;
+        Some(Self { splats })
+    }
+
+    /// `−p dy ± sqrt(q dy² + r)` around `mean_x` (see [`EwaSplat::span`]), widened by a margin.
+    #[inline(always)]
+    fn row_span(&self, i: usize, py: f32) -> Option<(f32, f32)> {
+        let s = &self.splats[i];
+        let [p, q, r] = s.span;
+        let dy = s.mean[1] - py;
+        let root_sq = q * dy * dy + r;
+        let center = s.mean[0] + p * dy;
+        if root_sq < 0.0 {
+            // Empty up to rounding: keep a margin around the vertex for safety.
+            return Some((center - SPAN_MARGIN, center + SPAN_MARGIN));
+        }
+        let root = root_sq.sqrt();
+        Some((center - root - SPAN_MARGIN, center + root + SPAN_MARGIN))
+    }
 }
+
+/// The row-span coefficients of [`EwaSplat::span`] for conic `(a, b, c)` and `sigma_max`.
+fn row_span_coefficients([a, b, c]: [f64; 3], sigma_max: f64) -> [f32; 3] {
+    if a > 0.0 && a.is_finite() {
+        [
+            (b / a) as f32,
+            ((b * b - a * c) / (a * a)) as f32,
+            (2.0 * sigma_max / a) as f32,
+        ]
+    } else {
+        // Never for a positive definite conic; an infinite span scans the whole box.
+        [0.0, 0.0, f32::INFINITY]
+    }
+}
+
+/// `e^x` in `f32` without a library call, so loops over pixels vectorise: Cody-Waite range
+/// reduction `x = n ln 2 + r` and the Cephes `expf` polynomial on `|r| ≤ ln 2 / 2`
+/// (about 1 ulp from the correctly rounded value; inputs clamped to [−87, 88], so the result is
+/// finite and at least the smallest normal float).
+#[inline(always)]
+#[must_use]
+pub fn exp_f32(x: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    // 1.5 * 2^23: adding and subtracting rounds to the nearest integer.
+    const ROUND: f32 = 12_582_912.0;
+    let x = x.clamp(-87.0, 88.0);
+    let n = (x * LOG2E + ROUND) - ROUND;
+    let r = x - n * LN2_HI - n * LN2_LO;
+    let mut p = 1.987_569_1e-4_f32;
+    p = p * r + 1.398_199_9e-3;
+    p = p * r + 8.333_452e-3;
+    p = p * r + 4.166_579_6e-2;
+    p = p * r + 1.666_666_5e-1;
+    p = p * r + 0.5;
+    let e = p * r * r + r + 1.0;
+    // 2^n from the bits of n + 127 (in 1..=254), read off the mantissa of n + 127 + 2^23
+    // (no float-to-int conversion, so the loop vectorises).
+    let biased = (n + (127.0 + 8_388_608.0)).to_bits() & 0x007f_ffff;
+    let scale = f32::from_bits(biased << 23);
+    e * scale
+}
+
+/// Four lanes of `e^(−sigma)` with the same range reduction and polynomial as [`exp_f32`], in
+/// `glam::Vec4` (SSE2) arithmetic. `sigma` is clamped to `[−88, 30]`: beyond 30 the result
+/// (`≈ 9e-14`) is far below any alpha threshold, and negative inputs are only ever discarded.
+/// The power of two `2^−n`, `n` in `0..=44`, is assembled from the bits of `n` by selects, so
+/// no lane leaves the vector unit.
+#[inline(always)]
+#[must_use]
+pub fn exp_neg4(sigma: Vec4) -> Vec4 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    const ROUND: f32 = 12_582_912.0;
+    let x = -sigma.clamp(Vec4::splat(-88.0), Vec4::splat(30.0));
+    let n = (x * LOG2E + ROUND) - ROUND;
+    let r = x - n * LN2_HI - n * LN2_LO;
+    let mut p = Vec4::splat(1.987_569_1e-4);
+    p = p * r + 1.398_199_9e-3;
+    p = p * r + 8.333_452e-3;
+    p = p * r + 4.166_579_6e-2;
+    p = p * r + 1.666_666_5e-1;
+    p = p * r + 0.5;
+    let e = p * r * r + r + 1.0;
+    // n is an integer in [−44, 127]; positive only for negative sigma (discarded by callers,
+    // kept finite here by the clamp: e^88 < f32::MAX).
+    let mut m = -n;
+    let mut scale = Vec4::ONE;
+    for (bit, factor) in [
+        (32.0, 2.328_306_4e-10),
+        (16.0, 1.525_878_9e-5),
+        (8.0, 3.906_25e-3),
+        (4.0, 0.0625),
+        (2.0, 0.25),
+        (1.0, 0.5),
+    ] {
+        let set = m.cmpge(Vec4::splat(bit));
+        scale = Vec4::select(set, scale * factor, scale);
+        m = Vec4::select(set, m - bit, m);
+    }
+    // Negative sigma (n > 0): the caller discards these lanes; give e^x without the scale
+    // rather than overflow.
+    e * scale
+}
+
+/// Pixels of rounding margin on each side of an analytic row span.
+const SPAN_MARGIN: f32 = 0.5;
 
 /// What a 3DGS projection needs to know of the camera, precomputed once.
 struct View {
@@ -283,7 +431,10 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
             conic: [(c11 * inv) as f32, (-c01 * inv) as f32, (c00 * inv) as f32],
             opacity: opacity as f32,
             depth: z as f32,
-            _pad: 0.0,
+            span: row_span_coefficients(
+                [c11 * inv, -c01 * inv, c00 * inv],
+                (opacity / f64::from(ALPHA_THRESHOLD)).ln().max(0.0),
+            ),
         },
         color,
         normal,

@@ -28,12 +28,67 @@ pub struct Sample {
 
 /// Evaluates visible splat `i` at a pixel centre. Implementations must be cheap, allocation
 /// free and deterministic: the compositor calls [`SplatKernel::sample`] once per (splat, pixel)
-/// pair in the splat's box, from several threads.
+/// pair in the splat's box (through [`SplatKernel::sample_row`]), from several threads.
 pub trait SplatKernel: Sync {
     /// The contribution of splat `i` at pixel centre `(px, py)` (pixel coordinates, the pixel
     /// offset of the rules already added), or `None` where the splat does not contribute
     /// (3DGS: negative exponent; 2DGS: no ray-plane intersection).
     fn sample(&self, i: usize, px: f32, py: f32) -> Option<Sample>;
+
+    /// Evaluates splat `i` at the pixel centres `(px0 + k, py)` for `k < alpha.len()`, writing
+    /// the unclamped alpha (0 where [`SplatKernel::sample`] gives `None`) and the depth. The
+    /// default calls [`SplatKernel::sample`] per pixel; a kernel may override it with a loop
+    /// the compiler can vectorise (it must give the same values).
+    #[inline]
+    fn sample_row(&self, i: usize, py: f32, px0: f32, alpha: &mut [f32], depth: &mut [f32]) {
+        for (k, (a, d)) in alpha.iter_mut().zip(depth.iter_mut()).enumerate() {
+            match self.sample(i, px0 + k as f32, py) {
+                Some(s) => {
+                    *a = s.alpha;
+                    *d = s.depth;
+                }
+                None => {
+                    *a = 0.0;
+                    *d = 0.0;
+                }
+            }
+        }
+    }
+
+    /// Evaluates splat `i` at the four pixel centres `(px0 + k, py)`, `k = 0..4`: unclamped
+    /// alpha and depth as [`SplatKernel::sample_row`] (the default calls it). The compositor
+    /// works in these groups of four; a kernel may override it with SIMD code (`glam::Vec4`
+    /// is SSE2 on x86-64) giving the same values.
+    #[inline]
+    fn sample4(&self, i: usize, py: f32, px0: f32) -> (glam::Vec4, glam::Vec4) {
+        let mut alpha = [0.0f32; 4];
+        let mut depth = [0.0f32; 4];
+        self.sample_row(i, py, px0, &mut alpha, &mut depth);
+        (glam::Vec4::from_array(alpha), glam::Vec4::from_array(depth))
+    }
+
+    /// Optional: a copy whose entry `k` is entry `order[k]` of `self` (`order` is a permutation
+    /// of the entries: the depth order). The compositor then reads the kernel's data in memory
+    /// order, which is faster for large scenes; the default `None` makes it index through
+    /// `order` instead. Either way the images are the same.
+    fn reordered(&self, order: &[u32]) -> Option<Self>
+    where
+        Self: Sized,
+    {
+        let _ = order;
+        None
+    }
+
+    /// Optional tightening: the interval of pixel-centre x coordinates on the row at `py` outside
+    /// of which splat `i` certainly contributes nothing (alpha below the skip threshold), or
+    /// `None` to scan the whole box. Must be conservative (widen by rounding margins): the
+    /// compositor still calls [`SplatKernel::sample`] inside it, so a wider span only costs
+    /// time, a narrower one changes images.
+    #[inline]
+    fn row_span(&self, i: usize, py: f32) -> Option<(f32, f32)> {
+        let _ = (i, py);
+        None
+    }
 }
 
 /// Per-visible-splat screen data, as a structure of arrays (all `Vec`s indexed alike).

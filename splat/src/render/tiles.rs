@@ -1,10 +1,9 @@
-//! Tile binning and per-tile depth sorting (gsplat's `isect_tiles` + `isect_offset_encode`, on
-//! the CPU): every visible splat is listed in each 16×16 tile its screen box touches, and each
-//! tile's list is sorted by camera z.
+//! Depth sorting and tile binning (gsplat's `isect_tiles` + sort + `isect_offset_encode`, on the
+//! CPU): the visible splats are sorted once by camera z, then listed, in that order, in each
+//! 16×16 tile their screen box touches, so every tile's list is front to back (the same lists
+//! as gsplat's per-tile sorted keys).
 
 use rayon::prelude::*;
-
-use super::screen::ScreenSplats;
 
 /// Tile edge in pixels (gsplat's and 3DGS's `tile_size`).
 pub const TILE_SIZE: u32 = 16;
@@ -17,22 +16,6 @@ pub enum TileRect {
     Gsplat,
     /// The original 3DGS `getRect`: `[trunc((c − r)/16), trunc((c + r + 15)/16))`, clamped.
     Original3dgs,
-}
-
-/// Splats per tile, sorted front to back: tile `t` lists `keys[offsets[t]..offsets[t + 1]]`.
-/// A key is `(depth bits << 32) | splat index`, so sorting keys sorts by depth (positive floats
-/// order like their bits) and then by index (ties keep the source order, as gsplat's stable
-/// radix sort does).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct TileBins {
-    /// Tiles per image row.
-    pub tiles_x: u32,
-    /// Tile rows.
-    pub tiles_y: u32,
-    /// `tiles_x × tiles_y + 1` offsets into `keys`.
-    pub offsets: Vec<usize>,
-    /// Sort keys, grouped by tile.
-    pub keys: Vec<u64>,
 }
 
 /// The tile rectangle `[x0, x1) × [y0, y1)` of a box, clamped to the grid.
@@ -79,26 +62,59 @@ pub fn sort_key(depth: f32, index: usize) -> u64 {
     (u64::from(depth.max(0.0).to_bits()) << 32) | (index as u64 & 0xffff_ffff)
 }
 
+/// The front-to-back order of splats at camera z `depths`: sorted by depth, ties by index (as
+/// gsplat's stable radix sort of `(tile, depth)` keys leaves them). Sorts once for the whole
+/// image, in parallel; binning in this order then leaves every tile's list sorted.
+#[must_use]
+pub fn depth_order(depths: &[f32]) -> Vec<u32> {
+    let mut keys: Vec<u64> = depths
+        .par_iter()
+        .enumerate()
+        .map(|(i, &d)| sort_key(d, i))
+        .collect();
+    keys.par_sort_unstable();
+    keys.into_iter().map(|k| (k & 0xffff_ffff) as u32).collect()
+}
+
+/// Splats per tile, front to back: tile `t` lists `entries[offsets[t]..offsets[t + 1]]`, each
+/// entry a position in the depth order the splats were binned in.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TileBins {
+    /// Tiles per image row.
+    pub tiles_x: u32,
+    /// Tile rows.
+    pub tiles_y: u32,
+    /// `tiles_x × tiles_y + 1` offsets into `entries`.
+    pub offsets: Vec<usize>,
+    /// Splat positions, grouped by tile, increasing within a tile.
+    pub entries: Vec<u32>,
+}
+
 impl TileBins {
-    /// Bins the splats of `screen` into the tiles of a `width × height` image (unsorted; call
-    /// [`TileBins::sort`]).
+    /// Bins splats (screen boxes `centers` ± `radii`, already in front-to-back order) into the
+    /// tiles of a `width × height` image; each tile's list comes out in that order.
     #[must_use]
-    pub fn bin(screen: &ScreenSplats, width: u32, height: u32, rect: TileRect) -> Self {
+    pub fn bin(
+        centers: &[[f32; 2]],
+        radii: &[[f32; 2]],
+        width: u32,
+        height: u32,
+        rect: TileRect,
+    ) -> Self {
         let tiles_x = width.div_ceil(TILE_SIZE);
         let tiles_y = height.div_ceil(TILE_SIZE);
         let n_tiles = tiles_x as usize * tiles_y as usize;
-        let ranges: Vec<(u32, u32, u32, u32)> = screen
-            .centers
+        let ranges: Vec<(u32, u32, u32, u32)> = centers
             .par_iter()
-            .zip(screen.radii.par_iter())
+            .zip(radii.par_iter())
             .map(|(&c, &r)| tile_range(rect, c, r, tiles_x, tiles_y))
             .collect();
         let mut counts = vec![0usize; n_tiles + 1];
         for &(x0, x1, y0, y1) in &ranges {
             for ty in y0..y1 {
                 let row = ty as usize * tiles_x as usize;
-                for tx in x0..x1 {
-                    counts[row + tx as usize + 1] += 1;
+                for c in &mut counts[row + x0 as usize + 1..row + x1 as usize + 1] {
+                    *c += 1;
                 }
             }
         }
@@ -107,14 +123,12 @@ impl TileBins {
         }
         let offsets = counts;
         let mut cursor = offsets.clone();
-        let mut keys = vec![0u64; offsets[n_tiles]];
+        let mut entries = vec![0u32; offsets[n_tiles]];
         for (i, &(x0, x1, y0, y1)) in ranges.iter().enumerate() {
-            let key = sort_key(screen.depths[i], i);
             for ty in y0..y1 {
                 let row = ty as usize * tiles_x as usize;
-                for tx in x0..x1 {
-                    let slot = &mut cursor[row + tx as usize];
-                    keys[*slot] = key;
+                for slot in &mut cursor[row + x0 as usize..row + x1 as usize] {
+                    entries[*slot] = i as u32;
                     *slot += 1;
                 }
             }
@@ -123,28 +137,16 @@ impl TileBins {
             tiles_x,
             tiles_y,
             offsets,
-            keys,
+            entries,
         }
     }
 
-    /// Sorts every tile's list front to back (tiles in parallel).
-    pub fn sort(&mut self) {
-        let mut slices = Vec::with_capacity(self.offsets.len().saturating_sub(1));
-        let mut rest: &mut [u64] = &mut self.keys;
-        for w in self.offsets.windows(2) {
-            let (head, tail) = rest.split_at_mut(w[1] - w[0]);
-            slices.push(head);
-            rest = tail;
-        }
-        slices.into_par_iter().for_each(|s| s.sort_unstable());
-    }
-
-    /// The sorted keys of tile `(tx, ty)`.
+    /// The entries of tile `(tx, ty)`, front to back.
     #[must_use]
-    pub fn tile(&self, tx: u32, ty: u32) -> &[u64] {
+    pub fn tile(&self, tx: u32, ty: u32) -> &[u32] {
         let t = ty as usize * self.tiles_x as usize + tx as usize;
         match (self.offsets.get(t), self.offsets.get(t + 1)) {
-            (Some(&a), Some(&b)) => &self.keys[a..b],
+            (Some(&a), Some(&b)) => &self.entries[a..b],
             _ => &[],
         }
     }
@@ -152,7 +154,7 @@ impl TileBins {
     /// Total number of (tile, splat) pairs.
     #[must_use]
     pub fn intersections(&self) -> usize {
-        self.keys.len()
+        self.entries.len()
     }
 }
 
@@ -180,10 +182,17 @@ mod tests {
     }
 
     #[test]
-    fn keys_sort_by_depth_then_index() {
-        let mut keys = [sort_key(2.0, 0), sort_key(1.0, 5), sort_key(1.0, 3)];
-        keys.sort_unstable();
-        let idx: Vec<u64> = keys.iter().map(|k| k & 0xffff_ffff).collect();
-        assert_eq!(idx, [3, 5, 0]);
+    fn order_is_by_depth_then_index() {
+        assert_eq!(depth_order(&[2.0, 1.0, 3.0, 1.0]), [1, 3, 0, 2]);
+        let bins = TileBins::bin(
+            &[[8.0, 8.0], [20.0, 8.0], [16.0, 8.0]],
+            &[[2.0, 2.0], [2.0, 2.0], [2.0, 2.0]],
+            32,
+            16,
+            TileRect::Gsplat,
+        );
+        assert_eq!(bins.tile(0, 0), [0, 2]);
+        assert_eq!(bins.tile(1, 0), [1, 2]);
+        assert_eq!(bins.intersections(), 4);
     }
 }
