@@ -82,7 +82,8 @@ pub struct RenderArgs {
     /// gsplat's antialiased mode (opacity times the dilation compensation).
     #[arg(long)]
     pub antialiased: bool,
-    /// Near plane (camera z); default 0.01 (0.2 with --compat-3dgs).
+    /// Near plane (camera z); default 0.01 (0.2 with --compat-3dgs or --mode 2dgs, as the
+    /// original 3DGS and 2DGS code).
     #[arg(long, value_name = "Z")]
     pub near: Option<f32>,
     /// Far plane (camera z).
@@ -150,7 +151,7 @@ fn read_cameras(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result<Vec<Cam
 /// Runs `trisplat render`.
 ///
 /// # Errors
-/// Unreadable inputs, bound (local) Gaussians, an unavailable mode, bad options, an output
+/// Unreadable inputs, bound (local) Gaussians, bad options, an output
 /// folder equal to an input, a failed write.
 pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
     let input = args.gaussians.as_deref().or(args.mesh.as_deref());
@@ -220,6 +221,8 @@ pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
     options.background = args.background;
     if let Some(near) = args.near {
         options.near = near;
+    } else if options.mode == RenderMode::Surfel2d {
+        options.near = trisplat_splat::render::surfel::SURFEL_NEAR;
     }
     options.far = args.far;
     options.normal_frame = frame;

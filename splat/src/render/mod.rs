@@ -63,9 +63,6 @@ pub enum RenderError {
         /// Height.
         height: u32,
     },
-    /// The splatting mode is not available in this build.
-    #[error("render mode {0:?} is not available yet")]
-    ModeUnavailable(RenderMode),
 }
 
 /// The images of one render and how long its stages took.
@@ -106,11 +103,13 @@ pub fn check_inputs(
     Ok(())
 }
 
-/// Renders `set` (world space) as seen by `camera`.
+/// Renders `set` (world space) as seen by `camera` with the mode of `options` (3DGS EWA
+/// splatting with gsplat's or the original rules, 2DGS surfels with [`surfel::SURFEL_RULES`],
+/// or perspective-aware evaluation with [`perspective::PERSPECTIVE_RULES`]). `options.near` is
+/// used as given in every mode (hbb1's 2DGS code uses [`surfel::SURFEL_NEAR`]).
 ///
 /// # Errors
-/// [`RenderError`] for local (bound, unbaked) Gaussians, bad options, too large images, or a
-/// mode that is not available.
+/// [`RenderError`] for local (bound, unbaked) Gaussians, bad options or too large images.
 pub fn render(
     set: &GaussianSet,
     camera: &Camera,
@@ -118,31 +117,62 @@ pub fn render(
 ) -> Result<RenderOutput, RenderError> {
     check_inputs(set, camera, options)?;
     let size = (camera.width, camera.height);
+    let start = Instant::now();
     match options.mode {
         RenderMode::Gaussian3d => {
-            let start = Instant::now();
             let (screen, kernel) = project::project_ewa(set, camera, options);
-            let mut stats = RenderStats {
-                project_s: start.elapsed().as_secs_f64(),
-                ..RenderStats::default()
-            };
             let rules = match options.rules {
                 Rules::Gsplat => CompositeRules::GSPLAT,
                 Rules::Original3dgs => CompositeRules::ORIGINAL_3DGS,
             };
-            let images = rasterize(
+            Ok(finish(&screen, &kernel, start, size, &rules, options))
+        }
+        RenderMode::Surfel2d => {
+            let (screen, kernel) = surfel::project_surfels(set, camera, options);
+            Ok(finish(
                 &screen,
                 &kernel,
+                start,
                 size,
-                &rules,
-                options.outputs,
-                options.background,
-                &mut stats,
-            );
-            Ok(RenderOutput { images, stats })
+                &surfel::SURFEL_RULES,
+                options,
+            ))
         }
-        mode @ (RenderMode::Surfel2d | RenderMode::Perspective) => {
-            Err(RenderError::ModeUnavailable(mode))
+        RenderMode::Perspective => {
+            let (screen, kernel) = perspective::project_perspective(set, camera, options);
+            Ok(finish(
+                &screen,
+                &kernel,
+                start,
+                size,
+                &perspective::PERSPECTIVE_RULES,
+                options,
+            ))
         }
     }
+}
+
+/// The shared sort and composite stages after a mode's projection (started at `start`).
+fn finish<K: SplatKernel>(
+    screen: &ScreenSplats,
+    kernel: &K,
+    start: Instant,
+    size: (u32, u32),
+    rules: &CompositeRules,
+    options: &RenderOptions,
+) -> RenderOutput {
+    let mut stats = RenderStats {
+        project_s: start.elapsed().as_secs_f64(),
+        ..RenderStats::default()
+    };
+    let images = rasterize(
+        screen,
+        kernel,
+        size,
+        rules,
+        options.outputs,
+        options.background,
+        &mut stats,
+    );
+    RenderOutput { images, stats }
 }
