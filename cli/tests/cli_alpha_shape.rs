@@ -1,0 +1,101 @@
+//! `trisplat alpha-shape` through the real binary: a closed, outward result on real samples,
+//! degenerate inputs that Open3D (Qhull) refuses, and the error contract.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use trisplat_geometry::io::read_mesh;
+use trisplat_geometry::topology::boundary_edges;
+
+const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("run trisplat")
+}
+
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("cli_alpha_{}_{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create test folder");
+    dir
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+#[test]
+fn ball_samples_give_a_closed_outward_mesh() {
+    let dir = fresh_dir("ball");
+    let out = dir.join("ball_alpha.ply");
+    let input = trisplat_fixtures::path("reference/alpha/ball.ply");
+    // A large alpha keeps every tetrahedron: the convex hull, closed and outward.
+    let res = run(&["alpha-shape", s(&input), "--alpha", "1e6", "-o", s(&out)]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let mesh = read_mesh(&out).expect("read output");
+    assert!(mesh.triangle_count() > 0);
+    assert!(
+        boundary_edges(mesh.triangles()).is_empty(),
+        "hull is closed"
+    );
+    assert!(mesh.signed_volume() > 0.0, "faces point outward");
+}
+
+#[test]
+fn cube_corners_work_where_qhull_fails() {
+    let dir = fresh_dir("cube");
+    let input = dir.join("cube.ply");
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n",
+    );
+    for i in 0..8 {
+        text.push_str(&format!("{} {} {}\n", i & 1, (i >> 1) & 1, (i >> 2) & 1));
+    }
+    std::fs::write(&input, text).expect("write cube");
+    let out = dir.join("cube_alpha.obj");
+    let res = run(&["alpha-shape", s(&input), "--alpha", "10", "-o", s(&out)]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let mesh = read_mesh(&out).expect("read output");
+    assert_eq!(mesh.triangle_count(), 12);
+    assert!((mesh.signed_volume() - 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn bad_alpha_and_missing_file_fail_cleanly() {
+    let dir = fresh_dir("bad");
+    let out = dir.join("never.ply");
+    let input = trisplat_fixtures::path("reference/alpha/ball.ply");
+    for args in [
+        vec!["alpha-shape", s(&input), "--alpha", "nan", "-o", s(&out)],
+        vec![
+            "alpha-shape",
+            "/nonexistent/points.ply",
+            "--alpha",
+            "1",
+            "-o",
+            s(&out),
+        ],
+    ] {
+        let res = run(&args);
+        let stderr = String::from_utf8_lossy(&res.stderr);
+        assert_eq!(res.status.code(), Some(1), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
+        assert!(!out.exists());
+    }
+    assert_eq!(
+        run(&["alpha-shape", s(&input), "-o", s(&out)])
+            .status
+            .code(),
+        Some(2)
+    );
+}
