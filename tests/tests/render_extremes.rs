@@ -27,7 +27,10 @@ fn camera(size: (u32, u32), focal: f64) -> Camera {
     .unwrap()
 }
 
-fn gaussians(items: &[(Vec3, Vec3, f32)]) -> GaussianSet {
+/// A Gaussian: mean, log-scales, opacity logit.
+type Item = (Vec3, Vec3, f32);
+
+fn gaussians(items: &[Item]) -> GaussianSet {
     GaussianSet::try_new(GaussianParts {
         means: items.iter().map(|g| g.0).collect(),
         log_scales: items.iter().map(|g| g.1).collect(),
@@ -87,7 +90,7 @@ fn assert_sane(set: &GaussianSet, cam: &Camera, what: &str) {
 fn extreme_gaussians_give_finite_images() {
     let cam = camera((40, 30), 30.0);
     let log = |s: f32| Vec3::splat(s);
-    let cases: Vec<(&str, Vec<(Vec3, Vec3, f32)>)> = vec![
+    let cases: Vec<(&str, Vec<Item>)> = vec![
         ("empty", vec![]),
         ("behind", vec![(Vec3::new(0.0, 0.0, -1.0), log(-1.0), 2.0)]),
         (

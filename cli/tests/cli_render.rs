@@ -1,0 +1,203 @@
+//! `trisplat render` through the real binary: cameras.json and transforms.json, every mode, the
+//! files of SPEC §10, and the refusals (bound Gaussians, bad lists, overwriting an input).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use trisplat_geometry::io::read_npy;
+
+const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("run trisplat")
+}
+
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("cli_render_{}_{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create test folder");
+    dir
+}
+
+fn fixture(name: &str) -> String {
+    trisplat_fixtures::path(name).to_string_lossy().into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn one_error_line(out: &Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
+    assert!(stderr.starts_with("error: "), "{stderr}");
+    stderr
+}
+
+#[test]
+fn renders_every_output_of_every_camera() {
+    let dir = fresh_dir("all");
+    let out = dir.join("out");
+    let o = run(&[
+        "render",
+        &fixture("render/random_deg3.ply"),
+        "--cameras",
+        &fixture("render/random_cameras.json"),
+        "-o",
+        s(&out),
+        "--outputs",
+        "rgb,alpha,depth,median_depth,normal",
+        "--background",
+        "1,1,1",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for cam in ["front", "side", "wide"] {
+        for key in ["rgb", "alpha", "depth", "median_depth", "normal"] {
+            assert!(
+                out.join(format!("{cam}_{key}.png")).exists(),
+                "{cam}_{key}.png"
+            );
+        }
+        let rgb = read_npy(&out.join(format!("{cam}_rgb.npy"))).unwrap();
+        assert_eq!(rgb.shape, vec![48, 64, 3]);
+        let alpha = read_npy(&out.join(format!("{cam}_alpha.npy"))).unwrap();
+        assert_eq!(alpha.shape, vec![48, 64]);
+        // White background: uncovered pixels are white.
+        let i = alpha
+            .data
+            .iter()
+            .position(|&a| a == 0.0)
+            .expect("an empty pixel");
+        assert_eq!(&rgb.data[3 * i..3 * i + 3], &[1.0, 1.0, 1.0]);
+    }
+    // The other modes and the switches run on the same scene.
+    for extra in [
+        &["--mode", "2dgs"][..],
+        &["--mode", "perspective"],
+        &["--compat-3dgs"],
+        &["--antialiased", "--normal-frame", "camera"],
+    ] {
+        let out = dir.join(extra.join("_"));
+        let mut args = vec![
+            "render".to_owned(),
+            fixture("render/random_deg3.ply"),
+            "--cameras".to_owned(),
+            fixture("render/random_cameras.json"),
+            "-o".to_owned(),
+            s(&out).to_owned(),
+            "--outputs".to_owned(),
+            "alpha,depth,normal".to_owned(),
+        ];
+        args.extend(extra.iter().map(|a| (*a).to_owned()));
+        let o = Command::new(BIN).args(&args).output().unwrap();
+        assert!(
+            o.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(out.join("front_depth.npy").exists());
+        assert!(!out.join("front_rgb.npy").exists(), "only what is asked");
+    }
+}
+
+#[test]
+fn accepts_transforms_json_and_meshes() {
+    let dir = fresh_dir("transforms");
+    let transforms = dir.join("transforms.json");
+    std::fs::write(
+        &transforms,
+        r#"{"camera_angle_x": 0.9, "w": 32, "h": 24,
+            "frames": [{"file_path": "./r_0.png",
+            "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let o = run(&[
+        "render",
+        &fixture("render/random_deg3.ply"),
+        "--cameras",
+        s(&transforms),
+        "-o",
+        s(&out),
+        "--outputs",
+        "alpha",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let alpha = read_npy(&out.join("r_0_alpha.npy")).unwrap();
+    assert_eq!(alpha.shape, vec![24, 32]);
+    assert!(alpha.data.iter().any(|&a| a > 0.5));
+    // A mesh: depth, normal and the hit mask as alpha.
+    let mesh_out = dir.join("mesh");
+    let o = run(&[
+        "render",
+        "--mesh",
+        &fixture("spot_triangulated.obj"),
+        "--cameras",
+        s(&transforms),
+        "-o",
+        s(&mesh_out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for key in ["depth", "normal", "alpha"] {
+        assert!(mesh_out.join(format!("r_0_{key}.npy")).exists(), "{key}");
+    }
+}
+
+#[test]
+fn refusals_are_one_line() {
+    let dir = fresh_dir("refuse");
+    // Bound (local) Gaussians must be baked first.
+    let bound = dir.join("bound.ply");
+    let o = run(&["bind", &fixture("spot_triangulated.obj"), "-o", s(&bound)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&[
+        "render",
+        s(&bound),
+        "--cameras",
+        &fixture("render/random_cameras.json"),
+        "-o",
+        s(&dir.join("out")),
+    ]);
+    let err = one_error_line(&o);
+    assert!(err.contains("deform"), "{err}");
+    // Unknown output name and bad background: usage errors.
+    for bad in [&["--outputs", "rgb,colour"][..], &["--background", "1,2"]] {
+        let mut args = vec![
+            "render".to_owned(),
+            fixture("render/random_deg3.ply"),
+            "--cameras".to_owned(),
+            fixture("render/random_cameras.json"),
+            "-o".to_owned(),
+            s(&dir.join("out2")).to_owned(),
+        ];
+        args.extend(bad.iter().map(|a| (*a).to_owned()));
+        let o = Command::new(BIN).args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+    }
+    // The output folder may not be an input file.
+    let copy = dir.join("scene.ply");
+    std::fs::copy(fixture("render/random_deg3.ply"), &copy).unwrap();
+    let before = std::fs::read(&copy).unwrap();
+    let o = run(&[
+        "render",
+        s(&copy),
+        "--cameras",
+        &fixture("render/random_cameras.json"),
+        "-o",
+        s(&copy),
+    ]);
+    one_error_line(&o);
+    assert_eq!(std::fs::read(&copy).unwrap(), before);
+    // Missing cameras file: one line naming it.
+    let o = run(&[
+        "render",
+        s(&copy),
+        "--cameras",
+        s(&dir.join("missing.json")),
+        "-o",
+        s(&dir.join("out3")),
+    ]);
+    assert!(one_error_line(&o).contains("missing.json"));
+}
