@@ -11,6 +11,7 @@ mod alpha;
 mod deform;
 mod eval;
 mod harness;
+mod render;
 mod smooth;
 mod tsdf;
 
@@ -43,6 +44,8 @@ enum Bench {
     Alpha(alpha::AlphaBenchArgs),
     /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
     Eval(eval::EvalBenchArgs),
+    /// 3DGS CPU rendering of a 75k-Gaussian avatar at 512x512 (1 and 2 threads, stage split).
+    Render(render::RenderBenchArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
     Smooth,
     /// TSDF fusion of 60 depth maps 512x512 of Spot vs Open3D VoxelBlockGrid, error vs time.
@@ -56,6 +59,7 @@ fn main() -> anyhow::Result<()> {
         Bench::Deform(a) => deform::run(&a),
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
+        Bench::Render(a) => render::run(&a),
         Bench::Smooth => smooth::run(python),
         Bench::Tsdf(a) => tsdf::run(&a, python),
     }
