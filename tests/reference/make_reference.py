@@ -7,7 +7,13 @@ Usage (from the repository root, in a virtualenv made from requirements.txt):
     venv/bin/python tests/reference/make_reference.py [AREA ...]
 
 Each area lives in its own script `ref_<area>.py` with a `main()`; with no argument every area
-runs. The Rust tests in `tests/tests/` compare trisplat against these files; CI never runs Python.
+runs except those in SEPARATE_ENVIRONMENTS, which need other pinned packages (gsplat + torch:
+`requirements-gsplat.txt`) and are run by hand in their own virtualenv:
+
+    python -m venv venv-gs && venv-gs/bin/pip install -r tests/reference/requirements-gsplat.txt
+    venv-gs/bin/python tests/reference/ref_render_gsplat.py
+
+The Rust tests in `tests/tests/` compare trisplat against these files; CI never runs Python.
 """
 
 import importlib
@@ -17,6 +23,8 @@ import sys
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 REQUIREMENTS = HERE / "requirements.txt"
+# Areas whose scripts need a different virtualenv (their own pinned requirements file).
+SEPARATE_ENVIRONMENTS = {"render_gsplat"}
 
 
 def check_pinned_versions():
@@ -42,7 +50,8 @@ def check_pinned_versions():
 def main():
     check_pinned_versions()
     sys.path.insert(0, str(HERE))
-    areas = sys.argv[1:] or sorted(p.stem[4:] for p in HERE.glob("ref_*.py"))
+    every = sorted(p.stem[4:] for p in HERE.glob("ref_*.py"))
+    areas = sys.argv[1:] or [a for a in every if a not in SEPARATE_ENVIRONMENTS]
     for area in areas:
         print(f"== {area}", flush=True)
         importlib.import_module(f"ref_{area}").main()
