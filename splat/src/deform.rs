@@ -20,7 +20,7 @@
 //! evaluated with world directions, as GaussianAvatars does). Work is split over Gaussians with
 //! rayon; every Gaussian is computed independently, so results do not depend on the thread count.
 
-use glam::{DMat3, DQuat, DVec3, Mat3A, Quat, Vec3, Vec3A};
+use glam::{DMat3, DQuat, DVec3, Mat3, Mat3A, Quat, Vec3, Vec3A};
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 use trisplat_geometry::{TriId, TriMesh};
@@ -28,8 +28,8 @@ use trisplat_geometry::{TriId, TriMesh};
 use crate::frames::{CanonicalTriangle, FrameOptions, corners_of, gaussian_avatars_frame};
 use crate::gaussians::{
     GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
-    to_wxyz,
 };
+use crate::lanes::{LANES, LaneInput, factor_lanes};
 
 /// Smallest output scale (a collapsed axis): `f32::MIN_POSITIVE`, whose log (≈ −87.3) is finite
 /// and whose `exp` in `f32` is still positive.
@@ -118,7 +118,10 @@ struct BindingTri {
 #[derive(Clone, Copy)]
 struct JacobianTri {
     m: DMat3,
+    m32: Mat3,
     origin: DVec3,
+    /// Factorise in `f64` ([`crate::lanes::needs_f64`]).
+    exact: bool,
 }
 
 /// Deforms bound Gaussians frame after frame for one template.
@@ -315,34 +318,28 @@ impl Deformer {
                 let tris = self.jacobian_triangles(positions);
                 let dims = set.scale_dims();
                 run_chunks(out, |start, means, rots, scales| {
-                    for j0 in (0..means.len()).step_by(BATCH) {
-                        let lanes = BATCH.min(means.len() - j0);
-                        // Covariance axes L = M R_local S per lane (identity padding).
-                        let ls: [DMat3; BATCH] = std::array::from_fn(|lane| {
+                    for j0 in (0..means.len()).step_by(LANES) {
+                        let lanes = LANES.min(means.len() - j0);
+                        let input: [LaneInput; LANES] = std::array::from_fn(|lane| {
                             if lane >= lanes {
-                                return DMat3::IDENTITY;
+                                return LaneInput::default();
                             }
                             let (j, i) = (j0 + lane, start + j0 + lane);
                             let t = &tris[binding[i].index()];
-                            let mean = t.m * set.means()[i].as_dvec3() + t.origin;
-                            means[j] = mean.as_vec3();
-                            let r_local = normalize_wxyz(set.rotations()[i])
-                                .map_or(DMat3::IDENTITY, DMat3::from_quat);
-                            let s = set.scale(i).as_dvec3();
-                            let a = t.m * r_local;
-                            DMat3::from_cols(a.x_axis * s.x, a.y_axis * s.y, a.z_axis * s.z)
+                            means[j] = (t.m * set.means()[i].as_dvec3() + t.origin).as_vec3();
+                            LaneInput {
+                                m: t.m32,
+                                rotation: set.rotations()[i],
+                                scale: set.scale(i),
+                                exact: t.exact,
+                            }
                         });
-                        let factors = rotation_and_scales_batch(&ls);
-                        for (lane, (rot, sigma)) in factors.iter().take(lanes).enumerate() {
-                            let j = j0 + lane;
-                            rots[j] = to_wxyz(quat_from_rotation(*rot));
-                            // The log in f32, the precision of the stored result.
-                            let ln = |v: f64| (v.max(MIN_OUTPUT_SCALE) as f32).ln();
-                            scales[j] = match dims {
-                                ScaleDims::Three => {
-                                    Vec3::new(ln(sigma.x), ln(sigma.y), ln(sigma.z))
-                                }
-                                ScaleDims::Two => Vec3::new(ln(sigma.x), ln(sigma.y), 0.0),
+                        let factors = factor_lanes(&input);
+                        for (lane, (q, ls)) in factors.iter().take(lanes).enumerate() {
+                            rots[j0 + lane] = *q;
+                            scales[j0 + lane] = match dims {
+                                ScaleDims::Three => *ls,
+                                ScaleDims::Two => Vec3::new(ls.x, ls.y, 0.0),
                             };
                         }
                     }
@@ -395,9 +392,12 @@ impl Deformer {
             .map(|(t, c)| {
                 let v = corners_of(positions, *t);
                 let j = c.gradient(v, &self.options);
+                let m = j * c.frame.rotation * c.frame.scale;
                 JacobianTri {
-                    m: j * c.frame.rotation * c.frame.scale,
+                    m,
+                    m32: m.as_mat3(),
                     origin: (v[0] + v[1] + v[2]) / 3.0,
+                    exact: crate::lanes::needs_f64(m),
                 }
             })
             .collect()
@@ -559,11 +559,13 @@ pub fn rotation_and_scales_batch(l: &[DMat3; BATCH]) -> [(DMat3, DVec3); BATCH] 
                 cs[lane] = 1.0 / (1.0 + t * t).sqrt();
                 sn[lane] = cs[lane] * t;
             }
-            for d in 0..3 {
+            // p < q: borrow both columns.
+            let (lo, hi) = c.split_at_mut(q);
+            for (rp, rq) in lo[p].iter_mut().zip(hi[0].iter_mut()) {
                 for lane in 0..BATCH {
-                    let (x, y) = (c[p][d][lane], c[q][d][lane]);
-                    c[p][d][lane] = x * cs[lane] - y * sn[lane];
-                    c[q][d][lane] = x * sn[lane] + y * cs[lane];
+                    let (x, y) = (rp[lane], rq[lane]);
+                    rp[lane] = x * cs[lane] - y * sn[lane];
+                    rq[lane] = x * sn[lane] + y * cs[lane];
                 }
             }
         }

@@ -13,6 +13,7 @@ pub mod deform;
 pub mod densify;
 pub mod frames;
 pub mod gaussians;
+pub mod lanes;
 pub mod lbs;
 pub mod ply;
 pub mod render;
