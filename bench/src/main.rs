@@ -9,6 +9,7 @@
 
 mod alpha;
 mod deform;
+mod delaunay;
 mod eval;
 mod harness;
 mod render;
@@ -40,6 +41,8 @@ struct Args {
 enum Bench {
     /// Deforming 100k bound Gaussians per frame (binding and jacobian modes); trisplat only.
     Deform(deform::DeformBenchArgs),
+    /// Incremental Delaunay of ~100k bound Gaussians: frame update vs rebuild, error vs time.
+    Delaunay(delaunay::DelaunayBenchArgs),
     /// 3D Delaunay + alpha shape of 100k scan samples vs Open3D (Qhull).
     Alpha(alpha::AlphaBenchArgs),
     /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
@@ -57,6 +60,7 @@ fn main() -> anyhow::Result<()> {
     let python = (!args.no_python).then_some(args.python.as_str());
     match args.bench {
         Bench::Deform(a) => deform::run(&a),
+        Bench::Delaunay(a) => delaunay::run(&a),
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Render(a) => render::run(&a),

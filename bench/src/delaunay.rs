@@ -1,0 +1,370 @@
+//! `delaunay`: incremental Delaunay meshing of ~100k bound Gaussians on an avatar template,
+//! frame update against full rebuild, and the "error against run time" table (hop threshold,
+//! rebuild period vs Chamfer vs ms).
+//!
+//! Template: the FLAME template (5,023 vertices, 9,976 triangles) from the shared data folder
+//! when present, else Spot subdivided once (23,424 triangles). Gaussians: GaussianAvatars
+//! binding, `--per-triangle` per triangle spread over the triangle, with a normal offset and an
+//! in-plane jitter (in units of the triangle scale `k`) so some lie beside their triangle and
+//! hop when the surface bends. Animation (made here, deterministic): the lower part of the head
+//! bends about a horizontal axis ("jaw"), with a smooth blend zone, plus a small twist, over
+//! `--frames` frames. Deformation of the Gaussians is timed separately; the update and rebuild
+//! times are those of `IncrementalDelaunay::update` plus collecting the triangle list.
+//!
+//! Chamfer: L1 Chamfer (surface mode, 20k area-uniform samples per side) of the extracted mesh
+//! against the deformed template, averaged over every 5th frame. "flipped" is the fraction of
+//! output triangles whose normal points against their chart's deformed template triangle.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use glam::{DVec3, Vec3};
+use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelaunay};
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
+use trisplat_geometry::rng::Rng;
+use trisplat_geometry::sampling::sample_uniform;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::bind::{BindOptions, init_bound};
+use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
+
+/// The FLAME template in the shared data folder (not redistributable: never a fixture).
+const FLAME: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/data/faces/flame/flame_template.ply"
+);
+
+/// Samples per side for the Chamfer distance.
+const CHAMFER_SAMPLES: usize = 20_000;
+
+/// Options of the delaunay benchmark.
+#[derive(Debug, clap::Args)]
+pub struct DelaunayBenchArgs {
+    /// Frames of the animation.
+    #[arg(long, default_value_t = 60)]
+    pub frames: usize,
+    /// Gaussians per template triangle.
+    #[arg(long, default_value_t = 10)]
+    pub per_triangle: usize,
+    /// Bend amplitude in radians.
+    #[arg(long, default_value_t = 0.35)]
+    pub amplitude: f64,
+    /// Normal offset of the Gaussians (uniform in ±this, in units of the triangle scale).
+    #[arg(long, default_value_t = 0.15)]
+    pub normal_offset: f32,
+    /// In-plane jitter of the Gaussians (uniform in ±this, in units of the triangle scale).
+    #[arg(long, default_value_t = 0.3)]
+    pub jitter: f32,
+    /// Skip the error/run-time table.
+    #[arg(long)]
+    pub no_table: bool,
+}
+
+fn load_template() -> anyhow::Result<(String, TriMesh)> {
+    if Path::new(FLAME).exists() {
+        let mesh = trisplat_geometry::io::read_mesh(Path::new(FLAME))
+            .with_context(|| format!("reading {FLAME}"))?;
+        return Ok(("FLAME template".into(), mesh));
+    }
+    let spot = trisplat_fixtures::spot()?;
+    Ok((
+        "Spot subdivided once".into(),
+        trisplat_geometry::subdivide::midpoint(&spot, 1)?,
+    ))
+}
+
+fn make_gaussians(mesh: &TriMesh, args: &DelaunayBenchArgs) -> anyhow::Result<GaussianSet> {
+    let set = init_bound(
+        mesh,
+        &BindOptions {
+            per_triangle: args.per_triangle,
+            ..BindOptions::default()
+        },
+    )?;
+    let mut parts = set.into_parts();
+    let mut rng = Rng::new(7);
+    for m in &mut parts.means {
+        let mut u = || 2.0 * rng.uniform_f32() - 1.0;
+        // GaussianAvatars local frame: y is the normal.
+        *m += Vec3::new(
+            args.jitter * u(),
+            args.normal_offset * u(),
+            args.jitter * u(),
+        );
+    }
+    Ok(GaussianSet::try_new(parts)?)
+}
+
+/// The animation: vertices below the pivot bend about the x axis through it by up to
+/// `amplitude · sin`, blended smoothly over a band, plus a twist about y.
+struct Animation {
+    rest: Vec<Vec3>,
+    pivot: DVec3,
+    height: f64,
+    amplitude: f64,
+    frames: usize,
+}
+
+impl Animation {
+    fn new(mesh: &TriMesh, amplitude: f64, frames: usize) -> Self {
+        let b = mesh
+            .bounds()
+            .map_or((Vec3::ZERO, Vec3::ONE), |b| (b.min, b.max));
+        let (lo, hi) = (b.0.as_dvec3(), b.1.as_dvec3());
+        Self {
+            rest: mesh.positions().to_vec(),
+            pivot: DVec3::new(0.5 * (lo.x + hi.x), lo.y + 0.45 * (hi.y - lo.y), lo.z),
+            height: (hi.y - lo.y).max(f64::MIN_POSITIVE),
+            amplitude,
+            frames: frames.max(1),
+        }
+    }
+
+    fn frame(&self, f: usize) -> Vec<Vec3> {
+        let phase = std::f64::consts::TAU * f as f64 / self.frames as f64;
+        let bend = self.amplitude * (0.5 - 0.5 * phase.cos());
+        let twist = 0.3 * self.amplitude * phase.sin();
+        self.rest
+            .iter()
+            .map(|p| {
+                let p = p.as_dvec3();
+                let s = (self.pivot.y - p.y) / (0.25 * self.height);
+                let w = s.clamp(0.0, 1.0);
+                let w = w * w * (3.0 - 2.0 * w);
+                let (sin, cos) = (bend * w).sin_cos();
+                let d = p - self.pivot;
+                let q = DVec3::new(d.x, cos * d.y - sin * d.z, sin * d.y + cos * d.z);
+                let t = twist * (p.y - self.pivot.y) / self.height;
+                let (st, ct) = t.sin_cos();
+                let q = DVec3::new(ct * q.x + st * q.z, q.y, -st * q.x + ct * q.z);
+                (q + self.pivot).as_vec3()
+            })
+            .collect()
+    }
+}
+
+/// Per-run results.
+struct Run {
+    update_ms: Vec<f64>,
+    hop_fraction: Vec<f64>,
+    charts_fraction: Vec<f64>,
+    chamfer: Vec<f64>,
+    flipped: Vec<f64>,
+    triangles: Vec<Vec<[u32; 3]>>,
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn flipped_fraction(d: &IncrementalDelaunay, positions: &[Vec3], template: &TriMesh) -> f64 {
+    let verts = d.vertices();
+    let (mut flipped, mut total) = (0usize, 0usize);
+    for (t, tri) in template.triangles().iter().enumerate() {
+        let c = tri.map(|k| positions[k as usize].as_dvec3());
+        let n = (c[1] - c[0]).cross(c[2] - c[0]);
+        for out in d.chart_triangles(t) {
+            let v = out.map(|k| verts[k as usize].as_dvec3());
+            total += 1;
+            if (v[1] - v[0]).cross(v[2] - v[0]).dot(n) < 0.0 {
+                flipped += 1;
+            }
+        }
+    }
+    flipped as f64 / total.max(1) as f64
+}
+
+#[expect(
+    clippy::too_many_arguments,
+    reason = "one benchmark driver, all inputs named"
+)]
+fn run_once(
+    template: &TriMesh,
+    set: &GaussianSet,
+    anim: &Animation,
+    options: DelaunayOptions,
+    frames: usize,
+    measure_error: bool,
+    keep_triangles: bool,
+    deform_ms: &mut Vec<f64>,
+) -> anyhow::Result<Run> {
+    let deformer = Deformer::new(template, DeformMode::Binding);
+    let mut d = IncrementalDelaunay::from_bound(template, set, DeformMode::Binding, options)?;
+    let mut geometry = WorldGeometry::default();
+    let n = set.len() as f64;
+    let charts = template.triangle_count() as f64;
+    let mut run = Run {
+        update_ms: Vec::new(),
+        hop_fraction: Vec::new(),
+        charts_fraction: Vec::new(),
+        chamfer: Vec::new(),
+        flipped: Vec::new(),
+        triangles: Vec::new(),
+    };
+    for f in 0..frames {
+        let positions = anim.frame(f);
+        let start = Instant::now();
+        deformer.deform_geometry(set, &positions, &mut geometry)?;
+        deform_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let start = Instant::now();
+        let stats = d.update(&positions, &geometry.means)?;
+        let triangles = d.triangles();
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        // Frame 0 is the initial build of every run.
+        if f > 0 {
+            run.update_ms.push(ms);
+            run.hop_fraction.push(stats.hopped as f64 / n);
+            run.charts_fraction
+                .push(stats.charts_redone as f64 / charts);
+        }
+        if measure_error && f % 5 == 0 {
+            let deformed = TriMesh::new_unchecked(positions.clone(), template.triangles().to_vec());
+            let mesh = d.mesh();
+            let (ps, gs) = (
+                sample_uniform(&mesh, CHAMFER_SAMPLES, 1),
+                sample_uniform(&deformed, CHAMFER_SAMPLES, 2),
+            );
+            let m = evaluate(
+                Shape::mesh(&mesh, &ps),
+                Shape::mesh(&deformed, &gs),
+                &MetricsOptions {
+                    taus: vec![1e-3],
+                    surface: true,
+                },
+            )?;
+            run.chamfer.push(m.chamfer_l1);
+            run.flipped.push(flipped_fraction(&d, &positions, template));
+        }
+        if keep_triangles {
+            run.triangles.push(triangles);
+        }
+    }
+    Ok(run)
+}
+
+fn canonical_set(mut t: Vec<[u32; 3]>) -> Vec<[u32; 3]> {
+    for tri in &mut t {
+        let k = (0..3).min_by_key(|&k| tri[k]).unwrap_or(0);
+        tri.rotate_left(k);
+    }
+    t.sort_unstable();
+    t
+}
+
+/// Runs the benchmark.
+///
+/// # Errors
+/// When the template cannot be read or meshing fails.
+pub fn run(args: &DelaunayBenchArgs) -> anyhow::Result<()> {
+    let (name, template) = load_template()?;
+    let set = make_gaussians(&template, args)?;
+    let anim = Animation::new(&template, args.amplitude, args.frames);
+    println!(
+        "delaunay: {name} ({} vertices, {} triangles), {} Gaussians, {} frames, {} threads",
+        template.vertex_count(),
+        template.triangle_count(),
+        set.len(),
+        args.frames,
+        rayon::current_num_threads()
+    );
+    let mut deform_ms = Vec::new();
+    let incremental = run_once(
+        &template,
+        &set,
+        &anim,
+        DelaunayOptions::default(),
+        args.frames,
+        false,
+        true,
+        &mut deform_ms,
+    )?;
+    let rebuild = run_once(
+        &template,
+        &set,
+        &anim,
+        DelaunayOptions {
+            rebuild_every: 1,
+            ..DelaunayOptions::default()
+        },
+        args.frames,
+        false,
+        true,
+        &mut deform_ms,
+    )?;
+    let same = incremental
+        .triangles
+        .iter()
+        .zip(&rebuild.triangles)
+        .filter(|(a, b)| canonical_set((*a).clone()) == canonical_set((*b).clone()))
+        .count();
+    let (inc, reb) = (median(&incremental.update_ms), median(&rebuild.update_ms));
+    println!(
+        "Gaussians hopped per frame: mean {:.2}%, max {:.2}%; charts redone per frame: mean {:.2}%",
+        100.0 * mean(&incremental.hop_fraction),
+        100.0 * incremental.hop_fraction.iter().copied().fold(0.0, f64::max),
+        100.0 * mean(&incremental.charts_fraction)
+    );
+    println!(
+        "deforming the Gaussians (not included below): median {:.2} ms/frame",
+        median(&deform_ms)
+    );
+    println!(
+        "incremental update (hop threshold 0): median {inc:.2} ms/frame   full rebuild: median \
+         {reb:.2} ms/frame   speed-up x{:.2} (target >= 5)",
+        reb / inc
+    );
+    println!(
+        "frames whose incremental mesh equals the rebuilt one: {same} of {}",
+        incremental.triangles.len()
+    );
+    if args.no_table {
+        return Ok(());
+    }
+    println!();
+    println!(
+        "| hop threshold (x mean edge) | rebuild every | ms/frame (median) | hopped/frame | Chamfer L1 vs deformed template | flipped triangles |"
+    );
+    println!("|---:|---:|---:|---:|---:|---:|");
+    for &tau in &[0.0, 0.05, 0.1, 0.25, 0.5] {
+        for &period in &[0usize, 10] {
+            let r = run_once(
+                &template,
+                &set,
+                &anim,
+                DelaunayOptions {
+                    hop_threshold: tau,
+                    rebuild_every: period,
+                    ..DelaunayOptions::default()
+                },
+                args.frames,
+                true,
+                false,
+                &mut Vec::new(),
+            )?;
+            println!(
+                "| {tau} | {} | {:.2} | {:.2}% | {:.3e} | {:.3}% |",
+                if period == 0 {
+                    "never".to_string()
+                } else {
+                    period.to_string()
+                },
+                median(&r.update_ms),
+                100.0 * mean(&r.hop_fraction),
+                mean(&r.chamfer),
+                100.0 * mean(&r.flipped)
+            );
+        }
+    }
+    Ok(())
+}
