@@ -61,6 +61,18 @@ const MAX_VOXEL_INDEX: f64 = (1u64 << 30) as f64;
 /// larger boxes use a hash set.
 const DENSE_MARK_CELLS: u64 = 1 << 24;
 
+/// `RECIPROCALS[w] = 1 / (w + 1)`: the running average multiplies instead of dividing for
+/// the first 256 observations of a voxel.
+const RECIPROCALS: [f64; 256] = {
+    let mut out = [0.0; 256];
+    let mut w = 0;
+    while w < 256 {
+        out[w] = 1.0 / (w as f64 + 1.0);
+        w += 1;
+    }
+    out
+};
+
 /// Side of the square pixel tiles whose largest depth culls blocks behind the surface.
 const TILE: usize = 16;
 
@@ -211,6 +223,8 @@ struct Prepared<'a> {
     row_sq: Vec<f64>,
     /// Largest depth per TILE x TILE tile (0 = no valid pixel).
     tile_max: Vec<f32>,
+    /// Smallest valid depth per tile (`f32::INFINITY` = none).
+    tile_min: Vec<f32>,
     tiles_x: usize,
     color: Option<&'a [[f32; 3]]>,
 }
@@ -250,10 +264,14 @@ impl<'a> Prepared<'a> {
         let tiles_x = width.div_ceil(TILE);
         let tiles_y = height.div_ceil(TILE);
         let mut tile_max = vec![0.0f32; tiles_x * tiles_y];
+        let mut tile_min = vec![f32::INFINITY; tiles_x * tiles_y];
         for (i, row) in depth.chunks_exact(width).enumerate() {
             for (j, &d) in row.iter().enumerate() {
-                let t = &mut tile_max[(i / TILE) * tiles_x + j / TILE];
-                *t = t.max(d);
+                let t = (i / TILE) * tiles_x + j / TILE;
+                tile_max[t] = tile_max[t].max(d);
+                if d > 0.0 {
+                    tile_min[t] = tile_min[t].min(d);
+                }
             }
         }
         Ok(Self {
@@ -270,6 +288,7 @@ impl<'a> Prepared<'a> {
             col_sq,
             row_sq,
             tile_max,
+            tile_min,
             tiles_x,
             color: frame.color.map(ColorImage::data),
         })
@@ -494,7 +513,6 @@ fn row_ranges(
     let lateral = 0.5 * (1.0 / (f.fx * f.fx) + 1.0 / (f.fy * f.fy)).sqrt();
     let fixed = params.trunc + 3f64.sqrt() * params.voxel;
     let inv_voxel = 1.0 / params.voxel;
-    let block = f64::from(BLOCK);
     let yn = (i as f64 + 0.5 - f.cy) / f.fy;
     let mut last: Option<(IVec3, IVec3)> = None;
     for j in 0..f.width {
@@ -505,15 +523,16 @@ fn row_ranges(
         let xn = (j as f64 + 0.5 - f.cx) / f.fx;
         let p = camera_to_world * DVec3::new(xn * d, yn * d, d) + f.center;
         let r = fixed + (d + params.trunc) * lateral;
-        let lo = ((p - r - origin) * inv_voxel).ceil();
-        let hi = ((p + r - origin) * inv_voxel).floor();
+        let lo = (p - r - origin) * inv_voxel;
+        let hi = (p + r - origin) * inv_voxel;
         if lo.abs().max_element() > MAX_VOXEL_INDEX || hi.abs().max_element() > MAX_VOXEL_INDEX {
             return Err(TsdfError::OutOfRange {
                 camera: f.name.to_owned(),
             });
         }
-        let lo = (lo / block).floor().as_ivec3();
-        let hi = (hi / block).floor().as_ivec3();
+        // Voxel range ceil(lo)..=floor(hi), then the blocks holding its ends.
+        let lo = (-floor(-lo)).as_ivec3().div_euclid(IVec3::splat(BLOCK));
+        let hi = floor(hi).as_ivec3().div_euclid(IVec3::splat(BLOCK));
         if last == Some((lo, hi)) {
             continue;
         }
@@ -528,6 +547,62 @@ fn row_ranges(
         visit(lo, hi);
     }
     Ok(())
+}
+
+/// Component-wise floor of values within ±2³⁰ (checked by the caller), without the libm call
+/// that `f64::floor` becomes on targets without SSE4.1.
+#[inline]
+fn floor(v: DVec3) -> DVec3 {
+    let t = v.as_i64vec3().as_dvec3();
+    DVec3::select(t.cmpgt(v), t - 1.0, t)
+}
+
+/// The box of block keys that contains the range of every valid pixel of `f`, from its tiles:
+/// each tile's pixels lie in the frustum piece between its smallest and largest depth, whose
+/// box is that of its eight corners; the radius is the largest the tile's depths give.
+fn tile_bounds(
+    f: &Prepared<'_>,
+    params: TsdfParams,
+    origin: DVec3,
+) -> Result<Option<(IVec3, IVec3)>, TsdfError> {
+    let camera_to_world = f.world_to_camera.transpose();
+    let lateral = 0.5 * (1.0 / (f.fx * f.fx) + 1.0 / (f.fy * f.fy)).sqrt();
+    let fixed = params.trunc + 3f64.sqrt() * params.voxel;
+    let inv_voxel = 1.0 / params.voxel;
+    let mut out: Option<(IVec3, IVec3)> = None;
+    for (t, (&d_min, &d_max)) in f.tile_min.iter().zip(&f.tile_max).enumerate() {
+        if d_max <= 0.0 {
+            continue;
+        }
+        let (ty, tx) = (t / f.tiles_x, t % f.tiles_x);
+        let (i0, j0) = (ty * TILE, tx * TILE);
+        let (i1, j1) = ((i0 + TILE).min(f.height) - 1, (j0 + TILE).min(f.width) - 1);
+        let xs = [j0, j1].map(|j| (j as f64 + 0.5 - f.cx) / f.fx);
+        let ys = [i0, i1].map(|i| (i as f64 + 0.5 - f.cy) / f.fy);
+        let mut b_min = DVec3::INFINITY;
+        let mut b_max = DVec3::NEG_INFINITY;
+        for d in [f64::from(d_min), f64::from(d_max)] {
+            for x in xs {
+                for y in ys {
+                    let p = camera_to_world * DVec3::new(x * d, y * d, d) + f.center;
+                    b_min = b_min.min(p);
+                    b_max = b_max.max(p);
+                }
+            }
+        }
+        let r = fixed + (f64::from(d_max) + params.trunc) * lateral;
+        let lo = (b_min - r - origin) * inv_voxel;
+        let hi = (b_max + r - origin) * inv_voxel;
+        if lo.abs().max_element() > MAX_VOXEL_INDEX || hi.abs().max_element() > MAX_VOXEL_INDEX {
+            return Err(TsdfError::OutOfRange {
+                camera: f.name.to_owned(),
+            });
+        }
+        let lo = floor(lo).as_ivec3().div_euclid(IVec3::splat(BLOCK));
+        let hi = (-floor(-hi)).as_ivec3().div_euclid(IVec3::splat(BLOCK));
+        out = Some(out.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+    }
+    Ok(out)
 }
 
 /// Every row of a frame, as (frame, row index) pairs.
@@ -551,14 +626,7 @@ fn frame_blocks(
 ) -> Result<Vec<IVec3>, TsdfError> {
     let bounds = frames
         .par_iter()
-        .flat_map(rows)
-        .map(|(f, i)| {
-            let mut b: Option<(IVec3, IVec3)> = None;
-            row_ranges(f, i, params, origin, limit, |lo, hi| {
-                b = Some(b.map_or((lo, hi), |(a, z)| (a.min(lo), z.max(hi))));
-            })?;
-            Ok::<_, TsdfError>(b)
-        })
+        .map(|f| tile_bounds(f, params, origin))
         .try_reduce(
             || None,
             |a, b| {
@@ -576,8 +644,14 @@ fn frame_blocks(
     if cells <= dense_cells {
         let (nx, ny) = (dims.x as usize, dims.y as usize);
         let marks: Vec<AtomicBool> = (0..cells).map(|_| AtomicBool::new(false)).collect();
+        let outside = AtomicBool::new(false);
         frames.par_iter().flat_map(rows).try_for_each(|(f, i)| {
             row_ranges(f, i, params, origin, limit, |a, b| {
+                // The tile boxes contain every pixel's range; never trust that blindly.
+                if a.cmplt(lo).any() || b.cmpgt(hi).any() {
+                    outside.store(true, Ordering::Relaxed);
+                    return;
+                }
                 let (a, b) = ((a - lo).as_uvec3(), (b - lo).as_uvec3());
                 for z in a.z..=b.z {
                     for y in a.y..=b.y {
@@ -604,7 +678,10 @@ fn frame_blocks(
                 voxel: params.voxel,
             });
         }
-        return Ok(keys);
+        if !outside.load(Ordering::Relaxed) {
+            return Ok(keys);
+        }
+        debug_assert!(false, "a pixel's block range left its tile's box");
     }
     let per_row: Vec<Vec<IVec3>> = frames
         .par_iter()
@@ -714,7 +791,8 @@ fn integrate_block(
                 };
                 let w0 = f64::from(block.weight[s]);
                 let w1 = w0 + 1.0;
-                block.value[s] = ((f64::from(block.value[s]) * w0 + tsdf) / w1) as f32;
+                let inv_w1 = RECIPROCALS.get(w0 as usize).copied().unwrap_or(1.0 / w1);
+                block.value[s] = ((f64::from(block.value[s]) * w0 + tsdf) * inv_w1) as f32;
                 block.weight[s] = w1 as f32;
                 if let (Some(color), Some(image)) = (block.color.as_deref_mut(), f.color) {
                     let c = image[pixel];
