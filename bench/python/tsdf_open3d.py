@@ -6,8 +6,7 @@ Usage:
 DIR holds cameras.json (3DGS layout, trisplat's pixel centres at j + 0.5: Open3D's principal
 point is cx - 0.5) and <img_name>_depth.npy (float32 z-depth, metres). Loading is not timed;
 timed: per frame compute_unique_block_coordinates + integrate, then extract_triangle_mesh
-(default weight threshold 3). BLOCK_RESOLUTION defaults to 16 (Open3D's default; 8 was slower
-here). Writes the mesh to OUT.ply; the last stdout line is JSON:
+(default weight threshold 3). BLOCK_RESOLUTION defaults to 16 (Open3D's default). Writes the mesh to OUT.ply; the last stdout line is JSON:
 {"seconds": ..., "integrate_seconds": ..., "vertices": ..., "triangles": ...}.
 """
 

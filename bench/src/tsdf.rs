@@ -11,7 +11,7 @@
 //! Both sides use the same voxel, truncation [`TRUNC_VOXELS`] voxels and depth truncation (2DGS
 //! default: 2 x the scene radius). Timed: ours = allocation + integration + marching cubes +
 //! 2DGS clean-up (`tsdf::fuse`); Open3D = `compute_unique_block_coordinates` + `integrate` per
-//! frame + `extract_triangle_mesh` (its default weight threshold 3; block resolution 8, as ours).
+//! frame + `extract_triangle_mesh` (its default weight threshold 3 and block resolution 16).
 //! Open3D's VoxelBlockGrid differs from the legacy rules we follow (SPEC §6): z-difference sdf,
 //! floored pixel lookup, integer voxel positions.
 //!
