@@ -66,7 +66,8 @@ pub fn needs_f64(m: DMat3) -> bool {
     !(kappa <= MAX_CONDITION * det && det.is_finite())
 }
 
-/// Rotation `[w, x, y, z]` (`w ≥ 0`) and log-scales (descending) of `L = M R S` for each lane.
+/// Rotation `[w, x, y, z]` (`w ≥ 0`) and log-scales (shortest axis last) of `L = M R S` for
+/// each lane.
 #[must_use]
 pub fn factor_lanes(input: &[LaneInput; LANES]) -> [([f32; 4], Vec3); LANES] {
     // c[k][d][lane]: component d of column k of L, pre-scaled.
@@ -152,68 +153,111 @@ pub fn factor_lanes(input: &[LaneInput; LANES]) -> [([f32; 4], Vec3); LANES] {
             break;
         }
     }
-    std::array::from_fn(|lane| {
+    let mut out = finish_lanes(&c, &unscale);
+    for (lane, o) in out.iter_mut().enumerate() {
         if use_f64[lane] {
-            return factor_f64(&input[lane]);
+            *o = factor_f64(&input[lane]);
         }
+    }
+    out
+}
+
+/// Rotation and log-scales of every lane from its orthogonal (pre-scaled) columns, without
+/// data-dependent branches (lane selects the compiler vectorises). The axes are output in the
+/// cyclic order that puts the shortest last (`k+1, k+2, k` for the shortest `k`): a proper
+/// rotation whose third axis is the normal of a flat Gaussian (the surfel convention); the two
+/// longer axes keep their relative order (no sorting: INRIA files do not require it).
+fn finish_lanes(c: &[[[f32; LANES]; 3]; 3], unscale: &[f32; LANES]) -> [([f32; 4], Vec3); LANES] {
+    let min_ln = (MIN_OUTPUT_SCALE as f32).ln();
+    std::array::from_fn(|lane| {
         let col = |k: usize| Vec3::new(c[k][0][lane], c[k][1][lane], c[k][2][lane]);
-        finish([col(0), col(1), col(2)], unscale[lane])
+        let (c0, c1, c2) = (col(0), col(1), col(2));
+        let (l0, l1, l2) = (c0.length(), c1.length(), c2.length());
+        // Cyclic shift putting the shortest column last (selects, not branches).
+        let k2_is_min = l2 <= l0 && l2 <= l1;
+        let k1_is_min = !k2_is_min && l1 <= l0;
+        let sel = |m: bool, a: Vec3, b: Vec3| Vec3::select(glam::BVec3::splat(m), a, b);
+        let self_ = |m: bool, a: f32, b: f32| if m { a } else { b };
+        // Order (a, b, short): k=2 -> (0, 1, 2); k=1 -> (2, 0, 1); k=0 -> (1, 2, 0).
+        let a = sel(k2_is_min, c0, sel(k1_is_min, c2, c1));
+        let b = sel(k2_is_min, c1, sel(k1_is_min, c0, c2));
+        let la = self_(k2_is_min, l0, self_(k1_is_min, l2, l1));
+        let lb = self_(k2_is_min, l1, self_(k1_is_min, l0, l2));
+        let ls = self_(k2_is_min, l2, self_(k1_is_min, l1, l0));
+        // The longer of a, b defines the first axis exactly; the other is orthogonalised.
+        let a_first = la >= lb;
+        let (p, q, lp) = (
+            sel(a_first, a, b),
+            sel(a_first, b, a),
+            self_(a_first, la, lb),
+        );
+        let up = p * (1.0 / lp);
+        let rq = q - up * up.dot(q);
+        let lq = rq.length();
+        let uq = if lq > 0.0 && up.is_finite() {
+            rq * (1.0 / lq)
+        } else {
+            up.any_orthonormal_vector()
+        };
+        // Back to (a, b) order; the third axis completes a proper rotation.
+        let ua = sel(a_first, up, uq);
+        let ub = sel(a_first, uq, up);
+        let un = ua.cross(ub);
+        let ok = lp > 0.0 && ua.is_finite() && ub.is_finite();
+        let q = if ok {
+            quat_from_columns(ua, ub, un)
+        } else {
+            [1.0, 0.0, 0.0, 0.0]
+        };
+        let u = unscale[lane];
+        let ln = |l: f32| {
+            if ok {
+                (l * u).max(MIN_OUTPUT_SCALE as f32).ln()
+            } else {
+                min_ln
+            }
+        };
+        (q, Vec3::new(ln(la), ln(lb), ln(ls)))
     })
 }
 
-/// Rotation and log-scales from orthogonal (pre-scaled) columns.
-fn finish(c: [Vec3; 3], unscale: f32) -> ([f32; 4], Vec3) {
-    let len = c.map(Vec3::length);
-    // Descending order by three compare-exchanges.
-    let (mut i0, mut i1, mut i2) = (0usize, 1usize, 2usize);
-    if len[i1] > len[i0] {
-        std::mem::swap(&mut i0, &mut i1);
-    }
-    if len[i2] > len[i1] {
-        std::mem::swap(&mut i1, &mut i2);
-    }
-    if len[i1] > len[i0] {
-        std::mem::swap(&mut i0, &mut i1);
-    }
-    if len[i0].is_nan() || len[i0] <= 0.0 {
-        let ln = (MIN_OUTPUT_SCALE as f32).ln();
-        return ([1.0, 0.0, 0.0, 0.0], Vec3::splat(ln));
-    }
-    let u0 = c[i0] / len[i0];
-    let v = c[i1];
-    let u1 = (v - u0 * u0.dot(v))
-        .try_normalize()
-        .unwrap_or_else(|| u0.any_orthonormal_vector());
-    let u2 = u0.cross(u1);
-    let ln = |l: f32| (l * unscale).max(MIN_OUTPUT_SCALE as f32).ln();
-    (
-        quat_from_columns(u0, u1, u2),
-        Vec3::new(ln(len[i0]), ln(len[i1]), ln(len[i2])),
-    )
-}
-
-/// Shepperd's method in `f32` for orthonormal columns: `[w, x, y, z]`, unit, `w ≥ 0`.
+/// Shepperd's method in `f32` for orthonormal columns, with selects instead of branches:
+/// `[w, x, y, z]`, unit, `w ≥ 0`.
 fn quat_from_columns(c0: Vec3, c1: Vec3, c2: Vec3) -> [f32; 4] {
     // m[row][col] = col.row
     let (m00, m11, m22) = (c0.x, c1.y, c2.z);
     let (m01, m02, m10, m12, m20, m21) = (c1.x, c2.x, c0.y, c2.y, c0.z, c1.z);
     let trace = m00 + m11 + m22;
-    let [w, x, y, z] = if trace > 0.0 {
-        let s = (trace + 1.0).sqrt() * 2.0;
-        [0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s]
-    } else if m00 > m11 && m00 > m22 {
-        let s = (1.0 + m00 - m11 - m22).sqrt() * 2.0;
-        [(m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s]
-    } else if m11 > m22 {
-        let s = (1.0 + m11 - m00 - m22).sqrt() * 2.0;
-        [(m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s]
+    // The largest of 4w², 4x², 4y², 4z² (minus 1) picks the stable formula.
+    let use_w = trace > 0.0;
+    let use_x = !use_w && m00 > m11 && m00 > m22;
+    let use_y = !use_w && !use_x && m11 > m22;
+    let t = if use_w {
+        1.0 + trace
+    } else if use_x {
+        1.0 + m00 - m11 - m22
+    } else if use_y {
+        1.0 + m11 - m00 - m22
     } else {
-        let s = (1.0 + m22 - m00 - m11).sqrt() * 2.0;
-        [(m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s]
+        1.0 + m22 - m00 - m11
     };
-    let n = (w * w + x * x + y * y + z * z).sqrt();
-    let sign = if w < 0.0 { -1.0 } else { 1.0 } / n;
-    [w * sign, x * sign, y * sign, z * sign]
+    let r = t.max(0.0).sqrt() * 2.0;
+    let inv = 1.0 / r;
+    let (d1, d2, d3) = ((m21 - m12) * inv, (m02 - m20) * inv, (m10 - m01) * inv);
+    let (s1, s2, s3) = ((m01 + m10) * inv, (m02 + m20) * inv, (m12 + m21) * inv);
+    let big = 0.25 * r;
+    let q = if use_w {
+        [big, d1, d2, d3]
+    } else if use_x {
+        [d1, big, s1, s2]
+    } else if use_y {
+        [d2, s1, big, s3]
+    } else {
+        [d3, s2, s3, big]
+    };
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let f = if q[0] < 0.0 { -1.0 } else { 1.0 } / n;
+    q.map(|v| v * f)
 }
 
 /// The `f64` factorisation of one lane (strongly graded Gaussians).
@@ -298,9 +342,13 @@ mod tests {
                 let md = g.m.as_dmat3();
                 let kappa = frob(md) * frob(crate::frames::cofactor(md)) / md.determinant().abs();
                 let bin = (kappa.log10().max(0.0) as usize).min(5);
+                // The kernel does not sort the two longer axes.
+                let mut sorted = ls.to_array();
+                sorted.sort_by(|a, b| b.total_cmp(a));
+                assert_eq!(ls.z, sorted[2], "shortest axis last");
                 for k in 0..3 {
                     if !(surfel && k == 2) {
-                        let e = f64::from((ls[k] - wls[k]).abs());
+                        let e = f64::from((sorted[k] - wls[k]).abs());
                         worst_ls = worst_ls.max(e);
                         bins[bin] = bins[bin].max(e);
                     }
