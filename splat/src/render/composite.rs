@@ -298,8 +298,8 @@ struct RowRules {
     median: MedianRule,
 }
 
-/// Pixels evaluated together: rows are processed in aligned groups of this many pixels (the
-/// width of an SSE vector), so the loops compile to fixed-width vector code. Pixels of a group
+/// Pixels evaluated together: rows are processed in groups of this many pixels (the width of
+/// an SSE vector), so the loops compile to fixed-width vector code. Pixels of a group
 /// outside a splat's box are evaluated too — exactly what gsplat does for every pixel of a
 /// tile — and contribute nothing (their alpha is below the skip threshold).
 const CHUNK: usize = 4;
@@ -442,7 +442,11 @@ impl<K: SplatKernel> TileContext<'_, K> {
                 }
                 let row = ly * ts;
                 let mut stopped = 0;
-                for lx in (sx0 / CHUNK * CHUNK..sx1).step_by(CHUNK) {
+                // The fewest groups covering the span, shifted left where they would leave
+                // the tile row (each lane is still evaluated at its own pixel).
+                let groups = (sx1 - sx0).div_ceil(CHUNK);
+                let gx0 = sx0.min(ts.saturating_sub(groups * CHUNK));
+                for lx in (gx0..gx0 + groups * CHUNK).step_by(CHUNK) {
                     let px0 = (x_start as usize + lx) as f32 + off;
                     let (alpha, depth) = self.kernel.sample4(kg, py, px0);
                     stopped += if extra {

@@ -184,8 +184,7 @@ pub fn exp_f32(x: f32) -> f32 {
 /// Four lanes of `e^(−sigma)` with the same range reduction and polynomial as [`exp_f32`], in
 /// `glam::Vec4` (SSE2) arithmetic. `sigma` is clamped to `[−88, 30]`: beyond 30 the result
 /// (`≈ 9e-14`) is far below any alpha threshold, and negative inputs are only ever discarded.
-/// The power of two `2^−n`, `n` in `0..=44`, is assembled from the bits of `n` by selects, so
-/// no lane leaves the vector unit.
+/// The power of two is assembled in the vector unit ([`pow2_neg4`]), so no lane leaves it.
 #[inline(always)]
 #[must_use]
 pub fn exp_neg4(sigma: Vec4) -> Vec4 {
@@ -203,25 +202,16 @@ pub fn exp_neg4(sigma: Vec4) -> Vec4 {
     p = p * r + 1.666_666_5e-1;
     p = p * r + 0.5;
     let e = p * r * r + r + 1.0;
-    // n is an integer in [−44, 127]; positive only for negative sigma (discarded by callers,
-    // kept finite here by the clamp: e^88 < f32::MAX).
-    let mut m = -n;
-    let mut scale = Vec4::ONE;
-    for (bit, factor) in [
-        (32.0, 2.328_306_4e-10),
-        (16.0, 1.525_878_9e-5),
-        (8.0, 3.906_25e-3),
-        (4.0, 0.0625),
-        (2.0, 0.25),
-        (1.0, 0.5),
-    ] {
-        let set = m.cmpge(Vec4::splat(bit));
-        scale = Vec4::select(set, scale * factor, scale);
-        m = Vec4::select(set, m - bit, m);
-    }
-    // Negative sigma (n > 0): the caller discards these lanes; give e^x without the scale
-    // rather than overflow.
-    e * scale
+    e * pow2_neg4(n)
+}
+
+/// `2^n` for the integer-valued lanes `n` in `[−44, 127]` of [`exp_neg4`], exact: the
+/// exponent bits `n + 127` are read off the mantissa of `n + 127 + 2^23` and shifted into
+/// place (bit casts and integer ops on four lanes, which the compiler keeps in the vector unit).
+#[inline(always)]
+fn pow2_neg4(n: Vec4) -> Vec4 {
+    let biased = (n + Vec4::splat(127.0 + 8_388_608.0)).to_array();
+    Vec4::from_array(biased.map(|v| f32::from_bits((v.to_bits() & 0x007f_ffff) << 23)))
 }
 
 /// Pixels of rounding margin on each side of an analytic row span.
