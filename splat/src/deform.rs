@@ -11,10 +11,12 @@
 //! - [`DeformMode::Jacobian`] (SurFhead/TGA): canonical frame `(R_c, k_c)` from the template's
 //!   rest triangle, `J = E(deformed) E(canonical)⁻¹`; `mu = J (k_c R_c mu_local) + c_f(deformed)`,
 //!   covariance axes `L = J R_c R_local k_c diag(exp(log_s))`, so `Σ' = L Lᵀ`. The output rotation
-//!   and scales come from the SVD `L = U Σ Vᵀ` in `f64` (`R = U` with `det U = +1`, `s = σ`), so
-//!   the file means exactly `Σ'` (one-sided Jacobi, [`rotation_and_scales_batch`], four
-//!   Gaussians in lockstep). A singular value of 0 (a collapsed triangle, or the flat axis
-//!   of a 2DGS surfel) is stored as [`MIN_OUTPUT_SCALE`] so the log-scale stays finite.
+//!   and scales come from the SVD `L = U Σ Vᵀ` (`R = U` with `det U = +1`, `s = σ`), so the file
+//!   means exactly `Σ'`: one-sided Jacobi, eight Gaussians at a time in `f32` lanes
+//!   ([`crate::lanes`]) with pre-scaling, and [`rotation_and_scales`] in `f64` for Gaussians on
+//!   ill-conditioned triangles or with axes too unequal for `f32`. A singular value of 0 (a
+//!   collapsed triangle, or the flat axis of a 2DGS surfel) is stored as [`MIN_OUTPUT_SCALE`]
+//!   so the log-scale stays finite; the shortest axis is stored last.
 //!
 //! SH coefficients, opacities and extra properties are copied unchanged (view-dependent colour is
 //! evaluated with world directions, as GaussianAvatars does). Work is split over Gaussians with
@@ -505,80 +507,6 @@ pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
     finish(c)
 }
 
-/// Lanes of [`rotation_and_scales_batch`]: independent matrices iterated in lockstep, so that
-/// the long-latency square roots and divisions of one overlap with those of the others.
-pub const BATCH: usize = 4;
-
-/// A sweep of [`rotation_and_scales_batch`] whose rotations all have `|tan θ|` below this ends
-/// the iteration: the columns are then orthogonal to `O(θ²)` = 1e-8 relative, which moves the
-/// output rotation by ~1e-8 rad (below `f32` resolution, where the result is stored) and the
-/// singular values only to second order (~1e-16 relative).
-pub const BATCH_SMALL_ROTATION: f64 = 1e-4;
-
-/// Relative orthogonality below which [`rotation_and_scales_batch`] leaves a column pair alone.
-pub const BATCH_TOL: f64 = 1e-12;
-
-/// [`rotation_and_scales`] for [`BATCH`] matrices at once, to the accuracy the `f32` outputs
-/// need (see [`BATCH_SMALL_ROTATION`]): the same one-sided Jacobi (relative accuracy for tiny
-/// columns, rank-deficient inputs allowed) with the lanes in lockstep, a sweep ending only when
-/// every lane is done (a converged lane gets identity rotations). The deformation hot path.
-#[must_use]
-pub fn rotation_and_scales_batch(l: &[DMat3; BATCH]) -> [(DMat3, DVec3); BATCH] {
-    // c[k][d][lane]: component d of column k.
-    let mut c = [[[0.0f64; BATCH]; 3]; 3];
-    for (lane, m) in l.iter().enumerate() {
-        for (k, col) in [m.x_axis, m.y_axis, m.z_axis].iter().enumerate() {
-            c[k][0][lane] = col.x;
-            c[k][1][lane] = col.y;
-            c[k][2][lane] = col.z;
-        }
-    }
-    let dot = |c: &[[[f64; BATCH]; 3]; 3], p: usize, q: usize, lane: usize| {
-        c[p][0][lane] * c[q][0][lane]
-            + c[p][1][lane] * c[q][1][lane]
-            + c[p][2][lane] * c[q][2][lane]
-    };
-    for _sweep in 0..JACOBI_MAX_SWEEPS {
-        let mut largest = [0.0f64; BATCH];
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            let mut cs = [1.0f64; BATCH];
-            let mut sn = [0.0f64; BATCH];
-            for lane in 0..BATCH {
-                let a = dot(&c, p, p, lane);
-                let b = dot(&c, q, q, lane);
-                let g = dot(&c, p, q, lane);
-                if g * g <= BATCH_TOL * BATCH_TOL * a * b {
-                    continue;
-                }
-                // tan θ = sign(ζ) / (|ζ| + √(1 + ζ²)), ζ = (b - a) / 2g, with the division
-                // by g folded in: one square root and one division.
-                let d = b - a;
-                let t = 2.0 * g * 1.0f64.copysign(d) / (d.abs() + (d * d + 4.0 * g * g).sqrt());
-                let t = if t.is_finite() { t } else { 0.0 };
-                largest[lane] = largest[lane].max(t.abs());
-                cs[lane] = 1.0 / (1.0 + t * t).sqrt();
-                sn[lane] = cs[lane] * t;
-            }
-            // p < q: borrow both columns.
-            let (lo, hi) = c.split_at_mut(q);
-            for (rp, rq) in lo[p].iter_mut().zip(hi[0].iter_mut()) {
-                for lane in 0..BATCH {
-                    let (x, y) = (rp[lane], rq[lane]);
-                    rp[lane] = x * cs[lane] - y * sn[lane];
-                    rq[lane] = x * sn[lane] + y * cs[lane];
-                }
-            }
-        }
-        if largest.iter().all(|&t| t < BATCH_SMALL_ROTATION) {
-            break;
-        }
-    }
-    std::array::from_fn(|lane| {
-        let col = |k: usize| DVec3::new(c[k][0][lane], c[k][1][lane], c[k][2][lane]);
-        finish([col(0), col(1), col(2)])
-    })
-}
-
 /// Rotation and descending singular values from mutually orthogonal columns.
 fn finish(c: [DVec3; 3]) -> (DMat3, DVec3) {
     let len = c.map(DVec3::length);
@@ -831,70 +759,6 @@ mod tests {
             rotation_and_scales(DMat3::from_cols(DVec3::X * 2.0, DVec3::ZERO, DVec3::ZERO));
         assert_eq!(s, DVec3::new(2.0, 0.0, 0.0));
         assert!((u.determinant() - 1.0).abs() < 1e-15);
-    }
-
-    #[test]
-    fn batch_matches_the_accurate_factorisation() {
-        let mut rng = Rng::new(12);
-        let (mut worst_sigma, mut worst_cov, mut worst_rot) = (0.0f64, 0.0f64, 0.0f64);
-        for case in 0..2000 {
-            let ls: [DMat3; BATCH] = std::array::from_fn(|lane| {
-                let a = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5));
-                // Near-rotations (mild deformations), general matrices, LAM-like tiny scales,
-                // exact zeros (surfels), equal scales.
-                let a = if lane % 2 == 0 {
-                    DMat3::IDENTITY + a * 0.2
-                } else {
-                    a
-                };
-                let mut s = DVec3::new(
-                    (rng.uniform_f64() * -30.0).exp(),
-                    (rng.uniform_f64() * -30.0).exp(),
-                    (rng.uniform_f64() * -30.0).exp(),
-                );
-                if case % 5 == 0 {
-                    s.z = 0.0;
-                }
-                if case % 7 == 0 {
-                    s = DVec3::splat(s.x);
-                }
-                DMat3::from_cols(a.x_axis * s.x, a.y_axis * s.y, a.z_axis * s.z)
-            });
-            let fast = rotation_and_scales_batch(&ls);
-            for (l, (u, sig)) in ls.iter().zip(fast) {
-                let (v, want) = rotation_and_scales(*l);
-                assert!((u.determinant() - 1.0).abs() < 1e-12);
-                for k in 0..3 {
-                    let rel = if want[k] == 0.0 {
-                        sig[k]
-                    } else {
-                        (sig[k] - want[k]).abs() / want[k]
-                    };
-                    worst_sigma = worst_sigma.max(rel);
-                }
-                let back = u * DMat3::from_diagonal(sig * sig) * u.transpose();
-                let cov = *l * l.transpose();
-                let size = cov
-                    .to_cols_array()
-                    .iter()
-                    .fold(0.0f64, |m, e| m.max(e.abs()));
-                let err = (back - cov)
-                    .to_cols_array()
-                    .iter()
-                    .fold(0.0f64, |m, e| m.max(e.abs()));
-                worst_cov = worst_cov.max(err / size.max(f64::MIN_POSITIVE));
-                // The axis of the largest scale, where it is well separated from the next.
-                if want.x > 1.01 * want.y {
-                    worst_rot = worst_rot.max(1.0 - u.x_axis.dot(v.x_axis).abs());
-                }
-            }
-        }
-        println!("batch vs accurate: σ {worst_sigma:.1e}, Σ {worst_cov:.1e}, axis {worst_rot:.1e}");
-        // Singular values to second order in the residual non-orthogonality (~1e-16), and
-        // covariances/axes to the f32 resolution of the stored output.
-        assert!(worst_sigma < 1e-9, "{worst_sigma}");
-        assert!(worst_cov < 1e-8, "{worst_cov}");
-        assert!(worst_rot < 1e-8, "{worst_rot}");
     }
 
     #[test]
