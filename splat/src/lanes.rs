@@ -162,102 +162,169 @@ pub fn factor_lanes(input: &[LaneInput; LANES]) -> [([f32; 4], Vec3); LANES] {
     out
 }
 
-/// Rotation and log-scales of every lane from its orthogonal (pre-scaled) columns, without
-/// data-dependent branches (lane selects the compiler vectorises). The axes are output in the
-/// cyclic order that puts the shortest last (`k+1, k+2, k` for the shortest `k`): a proper
-/// rotation whose third axis is the normal of a flat Gaussian (the surfel convention); the two
-/// longer axes keep their relative order (no sorting: INRIA files do not require it).
+/// Rotation and log-scales of every lane from its orthogonal (pre-scaled) columns, written as
+/// loops over lanes with selects instead of branches so that the compiler vectorises them. The
+/// axes are output in the cyclic order that puts the shortest last (`k+1, k+2, k` for the
+/// shortest `k`): a proper rotation whose third axis is the normal of a flat Gaussian (the
+/// surfel convention); the two longer axes keep their relative order (INRIA files do not
+/// require sorted scales). Quaternions are Shepperd's, from the largest of `4w², 4x², 4y²,
+/// 4z²`; orthonormal columns make them unit to `f32` rounding.
 fn finish_lanes(c: &[[[f32; LANES]; 3]; 3], unscale: &[f32; LANES]) -> [([f32; 4], Vec3); LANES] {
-    let min_ln = (MIN_OUTPUT_SCALE as f32).ln();
-    std::array::from_fn(|lane| {
-        let col = |k: usize| Vec3::new(c[k][0][lane], c[k][1][lane], c[k][2][lane]);
-        let (c0, c1, c2) = (col(0), col(1), col(2));
-        let (l0, l1, l2) = (c0.length(), c1.length(), c2.length());
-        // Cyclic shift putting the shortest column last (selects, not branches).
-        let k2_is_min = l2 <= l0 && l2 <= l1;
-        let k1_is_min = !k2_is_min && l1 <= l0;
-        let sel = |m: bool, a: Vec3, b: Vec3| Vec3::select(glam::BVec3::splat(m), a, b);
-        let self_ = |m: bool, a: f32, b: f32| if m { a } else { b };
-        // Order (a, b, short): k=2 -> (0, 1, 2); k=1 -> (2, 0, 1); k=0 -> (1, 2, 0).
-        let a = sel(k2_is_min, c0, sel(k1_is_min, c2, c1));
-        let b = sel(k2_is_min, c1, sel(k1_is_min, c0, c2));
-        let la = self_(k2_is_min, l0, self_(k1_is_min, l2, l1));
-        let lb = self_(k2_is_min, l1, self_(k1_is_min, l0, l2));
-        let ls = self_(k2_is_min, l2, self_(k1_is_min, l1, l0));
-        // The longer of a, b defines the first axis exactly; the other is orthogonalised.
-        let a_first = la >= lb;
-        let (p, q, lp) = (
-            sel(a_first, a, b),
-            sel(a_first, b, a),
-            self_(a_first, la, lb),
+    type Lanes = [f32; LANES];
+    let zero = [0.0f32; LANES];
+    let mut len = [zero; 3];
+    for k in 0..3 {
+        for l in 0..LANES {
+            let v = [c[k][0][l], c[k][1][l], c[k][2][l]];
+            len[k][l] = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        }
+    }
+    // a, b: the two longer columns in cyclic order; their lengths and the shortest length.
+    let (mut a, mut b) = ([zero; 3], [zero; 3]);
+    let (mut la, mut lb, mut ls): (Lanes, Lanes, Lanes) = (zero, zero, zero);
+    for l in 0..LANES {
+        let k2 = len[2][l] <= len[0][l] && len[2][l] <= len[1][l];
+        let k1 = !k2 && len[1][l] <= len[0][l];
+        // k = 2 -> (0, 1 | 2); k = 1 -> (2, 0 | 1); k = 0 -> (1, 2 | 0).
+        for d in 0..3 {
+            a[d][l] = if k2 {
+                c[0][d][l]
+            } else if k1 {
+                c[2][d][l]
+            } else {
+                c[1][d][l]
+            };
+            b[d][l] = if k2 {
+                c[1][d][l]
+            } else if k1 {
+                c[0][d][l]
+            } else {
+                c[2][d][l]
+            };
+        }
+        la[l] = if k2 {
+            len[0][l]
+        } else if k1 {
+            len[2][l]
+        } else {
+            len[1][l]
+        };
+        lb[l] = if k2 {
+            len[1][l]
+        } else if k1 {
+            len[0][l]
+        } else {
+            len[2][l]
+        };
+        ls[l] = if k2 {
+            len[2][l]
+        } else if k1 {
+            len[1][l]
+        } else {
+            len[0][l]
+        };
+    }
+    // The longer of a, b is normalised as is, the other orthogonalised against it.
+    let (mut ua, mut ub, mut un) = ([zero; 3], [zero; 3], [zero; 3]);
+    let mut ok = [false; LANES];
+    for l in 0..LANES {
+        let a_first = la[l] >= lb[l];
+        let p = [0, 1, 2].map(|d| if a_first { a[d][l] } else { b[d][l] });
+        let q = [0, 1, 2].map(|d| if a_first { b[d][l] } else { a[d][l] });
+        let lp = if a_first { la[l] } else { lb[l] };
+        let ip = 1.0 / lp;
+        let up = p.map(|v| v * ip);
+        let dot = up[0] * q[0] + up[1] * q[1] + up[2] * q[2];
+        let rq = [0, 1, 2].map(|d| q[d] - up[d] * dot);
+        let lq = (rq[0] * rq[0] + rq[1] * rq[1] + rq[2] * rq[2]).sqrt();
+        // Fallback for a vanishing second axis: up crossed with the axis least aligned.
+        let ax = if up[0].abs() <= up[1].abs() && up[0].abs() <= up[2].abs() {
+            [1.0, 0.0, 0.0]
+        } else if up[1].abs() <= up[2].abs() {
+            [0.0, 1.0, 0.0]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
+        let f = cross(up, ax);
+        let lf = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        let use_rq = lq > 0.0;
+        let il = 1.0 / if use_rq { lq } else { lf };
+        let uq = [0, 1, 2].map(|d| if use_rq { rq[d] } else { f[d] } * il);
+        for d in 0..3 {
+            ua[d][l] = if a_first { up[d] } else { uq[d] };
+            ub[d][l] = if a_first { uq[d] } else { up[d] };
+        }
+        let n = cross(
+            [ua[0][l], ua[1][l], ua[2][l]],
+            [ub[0][l], ub[1][l], ub[2][l]],
         );
-        let up = p * (1.0 / lp);
-        let rq = q - up * up.dot(q);
-        let lq = rq.length();
-        let uq = if lq > 0.0 && up.is_finite() {
-            rq * (1.0 / lq)
+        for d in 0..3 {
+            un[d][l] = n[d];
+        }
+        ok[l] = lp > 0.0 && ip.is_finite() && il.is_finite();
+    }
+    // Shepperd with selects; m[row][col] = column col, component row.
+    let mut q = [zero; 4];
+    for l in 0..LANES {
+        let (m00, m11, m22) = (ua[0][l], ub[1][l], un[2][l]);
+        let (m01, m02, m10) = (ub[0][l], un[0][l], ua[1][l]);
+        let (m12, m20, m21) = (un[1][l], ua[2][l], ub[2][l]);
+        let trace = m00 + m11 + m22;
+        let use_w = trace > 0.0;
+        let use_x = !use_w && m00 > m11 && m00 > m22;
+        let use_y = !use_w && !use_x && m11 > m22;
+        let t = if use_w {
+            1.0 + trace
+        } else if use_x {
+            1.0 + m00 - m11 - m22
+        } else if use_y {
+            1.0 + m11 - m00 - m22
         } else {
-            up.any_orthonormal_vector()
+            1.0 + m22 - m00 - m11
         };
-        // Back to (a, b) order; the third axis completes a proper rotation.
-        let ua = sel(a_first, up, uq);
-        let ub = sel(a_first, uq, up);
-        let un = ua.cross(ub);
-        let ok = lp > 0.0 && ua.is_finite() && ub.is_finite();
-        let q = if ok {
-            quat_from_columns(ua, ub, un)
+        let r = t.max(f32::MIN_POSITIVE).sqrt() * 2.0;
+        let inv = 1.0 / r;
+        let (d1, d2, d3) = ((m21 - m12) * inv, (m02 - m20) * inv, (m10 - m01) * inv);
+        let (s1, s2, s3) = ((m01 + m10) * inv, (m02 + m20) * inv, (m12 + m21) * inv);
+        let big = 0.25 * r;
+        let v = if use_w {
+            [big, d1, d2, d3]
+        } else if use_x {
+            [d1, big, s1, s2]
+        } else if use_y {
+            [d2, s1, big, s3]
         } else {
-            [1.0, 0.0, 0.0, 0.0]
+            [d3, s2, s3, big]
         };
-        let u = unscale[lane];
-        let ln = |l: f32| {
-            if ok {
-                (l * u).max(MIN_OUTPUT_SCALE as f32).ln()
+        let sign = if v[0] < 0.0 { -1.0 } else { 1.0 };
+        for (qc, vc) in q.iter_mut().zip(v) {
+            qc[l] = if ok[l] { vc * sign } else { 0.0 };
+        }
+        q[0][l] = if ok[l] { q[0][l] } else { 1.0 };
+    }
+    let min_ln = (MIN_OUTPUT_SCALE as f32).ln();
+    std::array::from_fn(|l| {
+        let u = unscale[l];
+        let ln = |x: f32| {
+            if ok[l] {
+                (x * u).max(MIN_OUTPUT_SCALE as f32).ln()
             } else {
                 min_ln
             }
         };
-        (q, Vec3::new(ln(la), ln(lb), ln(ls)))
+        (
+            [q[0][l], q[1][l], q[2][l], q[3][l]],
+            Vec3::new(ln(la[l]), ln(lb[l]), ln(ls[l])),
+        )
     })
 }
 
-/// Shepperd's method in `f32` for orthonormal columns, with selects instead of branches:
-/// `[w, x, y, z]`, unit, `w ≥ 0`.
-fn quat_from_columns(c0: Vec3, c1: Vec3, c2: Vec3) -> [f32; 4] {
-    // m[row][col] = col.row
-    let (m00, m11, m22) = (c0.x, c1.y, c2.z);
-    let (m01, m02, m10, m12, m20, m21) = (c1.x, c2.x, c0.y, c2.y, c0.z, c1.z);
-    let trace = m00 + m11 + m22;
-    // The largest of 4w², 4x², 4y², 4z² (minus 1) picks the stable formula.
-    let use_w = trace > 0.0;
-    let use_x = !use_w && m00 > m11 && m00 > m22;
-    let use_y = !use_w && !use_x && m11 > m22;
-    let t = if use_w {
-        1.0 + trace
-    } else if use_x {
-        1.0 + m00 - m11 - m22
-    } else if use_y {
-        1.0 + m11 - m00 - m22
-    } else {
-        1.0 + m22 - m00 - m11
-    };
-    let r = t.max(0.0).sqrt() * 2.0;
-    let inv = 1.0 / r;
-    let (d1, d2, d3) = ((m21 - m12) * inv, (m02 - m20) * inv, (m10 - m01) * inv);
-    let (s1, s2, s3) = ((m01 + m10) * inv, (m02 + m20) * inv, (m12 + m21) * inv);
-    let big = 0.25 * r;
-    let q = if use_w {
-        [big, d1, d2, d3]
-    } else if use_x {
-        [d1, big, s1, s2]
-    } else if use_y {
-        [d2, s1, big, s3]
-    } else {
-        [d3, s2, s3, big]
-    };
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let f = if q[0] < 0.0 { -1.0 } else { 1.0 } / n;
-    q.map(|v| v * f)
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// The `f64` factorisation of one lane (strongly graded Gaussians).
