@@ -5,6 +5,9 @@
 //! The targets on the 2-core machine: ≤ 2 ms/frame (`binding`), ≤ 4 ms/frame
 //! (`jacobian`). There is no CPU tool to compare with (GaussianAvatars and SurFhead deform on
 //! the GPU inside their PyTorch training code), so only trisplat's timings are printed.
+//!
+//! On a shared, loaded machine wall times inflate; `perf stat -e task-clock` around runs with
+//! `--frames 0` and `--frames N --mode M` gives the CPU time per frame (all threads summed).
 
 use std::time::Instant;
 
@@ -25,6 +28,9 @@ pub struct DeformBenchArgs {
     /// Timed frames per mode.
     #[arg(long, default_value_t = 100)]
     pub frames: usize,
+    /// Only this mode (`binding` or `jacobian`); default both.
+    #[arg(long)]
+    pub mode: Option<String>,
 }
 
 /// Runs the benchmark.
@@ -59,6 +65,13 @@ pub fn run(args: &DeformBenchArgs) -> anyhow::Result<()> {
         args.frames
     );
     for mode in [DeformMode::Binding, DeformMode::Jacobian] {
+        if args
+            .mode
+            .as_deref()
+            .is_some_and(|m| !format!("{mode:?}").eq_ignore_ascii_case(m))
+        {
+            continue;
+        }
         let deformer = Deformer::new(&mesh, mode);
         let mut out = WorldGeometry::default();
         let mut frame = rest.clone();
