@@ -161,8 +161,20 @@ pub fn rasterize<K: SplatKernel>(
             Vec::new()
         }
     };
+    let colors = gather3(&screen.colors, outputs.rgb);
+    let packed = centers
+        .iter()
+        .zip(&radii)
+        .enumerate()
+        .map(|(k, (&center, &radius))| PackedSplat {
+            center,
+            radius,
+            color: colors.get(k).copied().unwrap_or([0.0; 3]),
+            _pad: 0.0,
+        })
+        .collect();
     let sorted = SortedSplats {
-        colors: gather3(&screen.colors, outputs.rgb),
+        packed,
         normals: gather3(&screen.normals, outputs.normal),
         centers,
         radii,
@@ -236,11 +248,26 @@ pub fn rasterize<K: SplatKernel>(
     images
 }
 
+/// What the tile loop reads of one splat besides the kernel's data, in one 32-byte record (one
+/// cache line: a tile's splats lie far apart in the depth order).
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct PackedSplat {
+    center: [f32; 2],
+    radius: [f32; 2],
+    /// Zero unless rgb is rendered.
+    color: [f32; 3],
+    _pad: f32,
+}
+
 /// The screen data the tile loop reads, in depth order.
 struct SortedSplats {
+    /// Centre, radius and colour per splat.
+    packed: Vec<PackedSplat>,
+    /// Box centres, for binning.
     centers: Vec<[f32; 2]>,
+    /// Box half sizes, for binning.
     radii: Vec<[f32; 2]>,
-    colors: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
 }
 
@@ -396,17 +423,28 @@ impl<K: SplatKernel> TileContext<'_, K> {
         };
         let mut remaining = tw * th;
         let off = r.pixel_offset;
-        for &entry in entries {
+        for (k, &entry) in entries.iter().enumerate() {
             if remaining == 0 {
                 break;
             }
+            // Start loading the next splat's data now (tile lists jump through memory), so the
+            // cache misses overlap this splat's work.
+            if let Some(&next) = entries.get(k + 1) {
+                let next = next as usize;
+                let kn = self.kernel_index.map_or(next, |m| m[next] as usize);
+                std::hint::black_box(self.kernel.touch(kn));
+                std::hint::black_box(self.splats.packed.get(next).map(|p| p.center[0]));
+            }
             let g = entry as usize;
             let kg = self.kernel_index.map_or(g, |m| m[g] as usize);
+            let Some(&packed) = self.splats.packed.get(g) else {
+                continue;
+            };
             // Local pixel range of this splat in the tile: pixel centres j + off within
             // [c - r, c + r] (rounded outwards), or the whole tile.
             let (lx0, lx1, ly0, ly1) = if r.clip_to_box {
-                let c = self.splats.centers[g];
-                let rad = self.splats.radii[g];
+                let c = packed.center;
+                let rad = packed.radius;
                 (
                     lo(c[0] - rad[0] - off, x_start, tw),
                     hi(c[0] + rad[0] - off, x_start, tw),
@@ -417,11 +455,7 @@ impl<K: SplatKernel> TileContext<'_, K> {
                 (0, tw, 0, th)
             };
             let splat = RowSplat {
-                color: if o.rgb {
-                    self.splats.colors[g]
-                } else {
-                    [0.0; 3]
-                },
+                color: packed.color,
                 normal: if o.normal {
                     self.splats.normals[g]
                 } else {

@@ -113,6 +113,11 @@ impl SplatKernel for EwaKernel {
         )
     }
 
+    #[inline(always)]
+    fn touch(&self, i: usize) -> f32 {
+        self.splats.get(i).map_or(0.0, |s| s.mean[0])
+    }
+
     fn reordered(&self, order: &[u32]) -> Option<Self> {
         let splats = order
             .iter()

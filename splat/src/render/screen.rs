@@ -79,6 +79,15 @@ pub trait SplatKernel: Sync {
         None
     }
 
+    /// Optional: reads (any) one value of splat `i`'s data and returns it, so the compositor
+    /// can start loading a splat it will need next while it works on the current one. The
+    /// default reads nothing.
+    #[inline]
+    fn touch(&self, i: usize) -> f32 {
+        let _ = i;
+        0.0
+    }
+
     /// Optional tightening: the interval of pixel-centre x coordinates on the row at `py` outside
     /// of which splat `i` certainly contributes nothing (alpha below the skip threshold), or
     /// `None` to scan the whole box. Must be conservative (widen by rounding margins): the
