@@ -675,6 +675,18 @@ impl IncrementalDelaunay {
             let height = area2 / (q - p).length();
             Some((t, DVec3::new(tx.0, tx.1, 0.0), into, height))
         });
+        // Candidates with their boxes and edge filter, contiguous for the per-Gaussian loop.
+        let candidates: Vec<(u32, DVec3, DVec3, Option<(DVec3, f64, usize)>)> = candidates
+            .into_iter()
+            .map(|t| {
+                let (lo, hi) = bvh.leaf_box(t);
+                let filter = filters.iter().enumerate().find_map(|(j, f)| match f {
+                    Some((ft, tx, _, height)) if *ft == t => Some((*tx, *height, j)),
+                    _ => None,
+                });
+                (t, lo, hi, filter)
+            })
+            .collect();
         let checked = queries.len();
         for (g, q, bound, bary) in queries {
             let interior = bary.iter().all(|&b| b > 0.0);
@@ -683,16 +695,12 @@ impl IncrementalDelaunay {
             let limit = bound.0.sqrt() + slack;
             let mut best = bound;
             let mut found = false;
-            for &t in &candidates {
-                if bvh.leaf_box_distance_sq(q, t) > best.0 {
+            for &(t, lo, hi, filter) in &candidates {
+                let gap = (lo - q).max(q - hi).max(DVec3::ZERO);
+                if gap.length_squared() > best.0 {
                     continue;
                 }
-                if interior
-                    && let Some(j) = filters
-                        .iter()
-                        .position(|f| f.is_some_and(|(ft, ..)| ft == t))
-                    && let Some((_, tx, _, height)) = filters[j]
-                {
+                if interior && let Some((tx, height, j)) = filter {
                     // Point (r, h) in the cross-section; T's half-plane is the ray along tx.
                     let (x, y) = (bary[j] * height, h);
                     let along = x * tx.x + y * tx.y;

@@ -157,13 +157,16 @@ impl DeformedBvh {
         }
     }
 
-    /// Squared distance from `q` to the padded box of triangle `t`'s leaf (a lower bound of
-    /// its squared distance).
-    pub(crate) fn leaf_box_distance_sq(&self, q: DVec3, t: u32) -> f64 {
+    /// The padded box of triangle `t`'s leaf as `(min, max)` in f64 (its squared distance
+    /// from a point is a lower bound of the triangle's); an infinite box past the end.
+    pub(crate) fn leaf_box(&self, t: u32) -> (DVec3, DVec3) {
         self.leaf_of
             .get(t as usize)
             .and_then(|&l| self.bvh.nodes.get(l as usize))
-            .map_or(0.0, |n| box_distance_sq(n.aabb(), q))
+            .map_or((DVec3::NEG_INFINITY, DVec3::INFINITY), |n| {
+                let b = n.aabb();
+                (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3())
+            })
     }
 
     /// The lexicographically smallest `(squared distance, triangle)` that is smaller than
