@@ -33,7 +33,7 @@ impl From<ConventionArg> for Convention {
 /// Arguments of `trisplat bind`.
 #[derive(Debug, clap::Args)]
 #[command(
-    long_about = "Bind Gaussians to the triangles of a template mesh and write them as \
+    after_long_help = "Bind Gaussians to the triangles of a template mesh and write them as \
     a GaussianAvatars-style PLY: local, pre-activation parameters in each triangle's frame plus \
     the float property `binding_0` (the triangle index).\n\n\
     Without --gaussians, new Gaussians are initialised (SPEC §4): N per triangle, identity \

@@ -37,7 +37,7 @@ pub enum ModeArg {
 /// Arguments of `trisplat deform`.
 #[derive(Debug, clap::Args)]
 #[command(
-    long_about = "Deform bound Gaussians with an animated template and write one \
+    after_long_help = "Deform bound Gaussians with an animated template and write one \
     world-space, viewer-ready 3DGS PLY per frame: DIR/frame_000000.ply, ... (the number is the \
     animation's frame index), with normalised rotations (w >= 0) and no binding.\n\n\
     The animation A is one of:\n  \
@@ -48,7 +48,7 @@ pub enum ModeArg {
     - a .json weights file in the LAM/ARKit layout (names, frames[].weights): blendshapes. If \
     T is a .gltf/.glb, its morph targets are driven by name (extras.targetNames); otherwise T \
     is the neutral mesh and --targets DIR holds one .obj/.ply per target, named by the file \
-    stem (jawOpen.obj drives the channel jawOpen; ARKit names match case-insensitively).\n\n\
+    stem (jawOpen.obj drives the channel jawOpen; names match ignoring case, `_`/`.` and `_L`/`_R` vs `Left`/`Right`).\n\n\
     Every frame must have the vertices and triangles of T, in T's order; the Gaussians' \
     bindings must name triangles of T.\n\n\
     Modes: binding (GaussianAvatars: local parameters in the frame of the posed triangle, as \

@@ -138,7 +138,7 @@ pub enum OpArg {
 /// Arguments of `trisplat densify`.
 #[derive(Debug, clap::Args)]
 #[command(
-    long_about = "Densify Gaussians: clone or split a selection (3DGS / GaussianAvatars \
+    after_long_help = "Densify Gaussians: clone or split a selection (3DGS / GaussianAvatars \
     rules). On a bound set, clones and children keep the parent's triangle (binding \
     inheritance) and its local frame; the output stays bound (local parameters, binding_0).\n\n\
     Selection: --mask FILE (one 0/1 per Gaussian; default every Gaussian), narrowed by the \

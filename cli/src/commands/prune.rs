@@ -15,7 +15,7 @@ use super::{Context, refuse_to_overwrite};
 /// Arguments of `trisplat prune`.
 #[derive(Debug, clap::Args)]
 #[command(
-    long_about = "Remove Gaussians that meet any of the given criteria (at least one is \
+    after_long_help = "Remove Gaussians that meet any of the given criteria (at least one is \
     needed):\n  \
     --min-opacity O: opacity (sigmoid of the stored logit) below O (3DGS prunes below 0.005);\n  \
     --outlier-threshold D: mean distance to the --outlier-k nearest other Gaussians (default \
