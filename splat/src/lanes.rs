@@ -70,47 +70,75 @@ pub fn needs_f64(m: DMat3) -> bool {
 /// each lane.
 #[must_use]
 pub fn factor_lanes(input: &[LaneInput; LANES]) -> [([f32; 4], Vec3); LANES] {
-    // c[k][d][lane]: component d of column k of L, pre-scaled.
-    let mut c = [[[0.0f32; LANES]; 3]; 3];
-    let mut unscale = [1.0f32; LANES];
+    // Gather into lanes: m[col][row][lane], the quaternion, the scales.
+    let zero = [0.0f32; LANES];
+    let mut m = [[zero; 3]; 3];
+    let mut q = [zero; 4];
+    let mut sc = [zero; 3];
     let mut use_f64 = [false; LANES];
-    for (lane, g) in input.iter().enumerate() {
-        let [w, x, y, z] = g.rotation;
-        let n2 = w * w + x * x + y * y + z * z;
-        let r = if n2 > 0.0 && n2.is_finite() {
-            let q = glam::Quat::from_xyzw(x, y, z, w) * n2.sqrt().recip();
-            Mat3::from_quat(q)
-        } else {
-            Mat3::IDENTITY
-        };
-        let a = g.m * r;
-        let cols = [
-            a.x_axis * g.scale.x,
-            a.y_axis * g.scale.y,
-            a.z_axis * g.scale.z,
-        ];
-        let len = cols.map(Vec3::length);
-        let big = len[0].max(len[1]).max(len[2]);
-        let small = len
-            .iter()
-            .copied()
-            .filter(|&l| l > 0.0)
-            .fold(f32::INFINITY, f32::min);
-        if g.exact
-            || !(big.is_finite() && big >= f32::MIN_POSITIVE)
-            || big > small * MAX_COLUMN_RATIO
-        {
-            use_f64[lane] = true;
-            continue;
+    for (l, g) in input.iter().enumerate() {
+        for (k, col) in [g.m.x_axis, g.m.y_axis, g.m.z_axis].iter().enumerate() {
+            m[k][0][l] = col.x;
+            m[k][1][l] = col.y;
+            m[k][2][l] = col.z;
         }
-        // An exact power of two near 1 / big, from the exponent bits (big is normal here).
+        for (k, v) in g.rotation.iter().enumerate() {
+            q[k][l] = *v;
+        }
+        sc[0][l] = g.scale.x;
+        sc[1][l] = g.scale.y;
+        sc[2][l] = g.scale.z;
+        use_f64[l] = g.exact;
+    }
+    // c[k][d][lane]: component d of column k of L = M R S, then pre-scaled.
+    let mut c = [[zero; 3]; 3];
+    let mut unscale = [1.0f32; LANES];
+    for l in 0..LANES {
+        let n2 = q[0][l] * q[0][l] + q[1][l] * q[1][l] + q[2][l] * q[2][l] + q[3][l] * q[3][l];
+        let valid = n2 > 0.0 && n2.is_finite();
+        let inv = if valid { 1.0 / n2.sqrt() } else { 0.0 };
+        let w = if valid { q[0][l] * inv } else { 1.0 };
+        let (x, y, z) = (q[1][l] * inv, q[2][l] * inv, q[3][l] * inv);
+        // R columns (glam's Mat3::from_quat).
+        let (x2, y2, z2) = (x + x, y + y, z + z);
+        let (xx, xy, xz) = (x * x2, x * y2, x * z2);
+        let (yy, yz, zz) = (y * y2, y * z2, z * z2);
+        let (wx, wy, wz) = (w * x2, w * y2, w * z2);
+        let r = [
+            [1.0 - (yy + zz), xy + wz, xz - wy],
+            [xy - wz, 1.0 - (xx + zz), yz + wx],
+            [xz + wy, yz - wx, 1.0 - (xx + yy)],
+        ];
+        let mut len2 = [0.0f32; 3];
+        for k in 0..3 {
+            for d in 0..3 {
+                let v =
+                    (m[0][d][l] * r[k][0] + m[1][d][l] * r[k][1] + m[2][d][l] * r[k][2]) * sc[k][l];
+                c[k][d][l] = v;
+                len2[k] += v * v;
+            }
+        }
+        let big2 = len2[0].max(len2[1]).max(len2[2]);
+        let inf = f32::INFINITY;
+        let small2 = (if len2[0] > 0.0 { len2[0] } else { inf })
+            .min(if len2[1] > 0.0 { len2[1] } else { inf })
+            .min(if len2[2] > 0.0 { len2[2] } else { inf });
+        let big = big2.sqrt();
+        let bad = !(big.is_finite() && big >= f32::MIN_POSITIVE)
+            || big > small2.sqrt() * MAX_COLUMN_RATIO;
+        use_f64[l] |= bad;
+        // An exact power of two near 1 / big, from the exponent bits.
         let e = (((big.to_bits() >> 23) & 0xff) as i32 - 127).clamp(-126, 126);
-        let s = f32::from_bits(((127 - e) as u32) << 23);
-        unscale[lane] = f32::from_bits(((127 + e) as u32) << 23);
-        for (k, col) in cols.iter().enumerate() {
-            c[k][0][lane] = col.x * s;
-            c[k][1][lane] = col.y * s;
-            c[k][2][lane] = col.z * s;
+        let s = if bad {
+            0.0
+        } else {
+            f32::from_bits(((127 - e) as u32) << 23)
+        };
+        unscale[l] = f32::from_bits(((127 + e) as u32) << 23);
+        for col in &mut c {
+            for comp in col.iter_mut() {
+                comp[l] *= s;
+            }
         }
     }
     for _ in 0..MAX_SWEEPS {
