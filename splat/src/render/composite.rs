@@ -331,6 +331,9 @@ struct RowRules {
 /// tile — and contribute nothing (their alpha is below the skip threshold).
 const CHUNK: usize = 4;
 
+/// Splats whose data the tile loop loads ahead in one batch.
+const LOOKAHEAD: usize = 8;
+
 /// Composites one splat over the `CHUNK` pixels of a row starting at tile index `p0`, given the
 /// kernel's `alpha` (0 where it does not contribute) and `depth` per pixel. Branch-free so it
 /// vectorises. Returns how many pixels stopped.
@@ -427,13 +430,17 @@ impl<K: SplatKernel> TileContext<'_, K> {
             if remaining == 0 {
                 break;
             }
-            // Start loading the next splat's data now (tile lists jump through memory), so the
-            // cache misses overlap this splat's work.
-            if let Some(&next) = entries.get(k + 1) {
-                let next = next as usize;
-                let kn = self.kernel_index.map_or(next, |m| m[next] as usize);
-                std::hint::black_box(self.kernel.touch(kn));
-                std::hint::black_box(self.splats.packed.get(next).map(|p| p.center[0]));
+            // Tile lists jump through memory: every `LOOKAHEAD` splats, load the next
+            // `LOOKAHEAD` splats' data at once, so their cache misses overlap each other
+            // (one wait per batch rather than one per splat).
+            if k % LOOKAHEAD == 0 {
+                let ahead = entries.get(k + 1..(k + 1 + LOOKAHEAD).min(entries.len()));
+                for &next in ahead.unwrap_or(&[]) {
+                    let next = next as usize;
+                    let kn = self.kernel_index.map_or(next, |m| m[next] as usize);
+                    std::hint::black_box(self.kernel.touch(kn));
+                    std::hint::black_box(self.splats.packed.get(next).map(|p| p.center[0]));
+                }
             }
             let g = entry as usize;
             let kg = self.kernel_index.map_or(g, |m| m[g] as usize);
