@@ -429,7 +429,7 @@ fn animation_with_a_missing_accessor() {
     let g = dir.join("g.ply");
     ok(&[p("bind"), &fixture("gltf/SimpleSkin.gltf"), p("-o"), &g]);
     let out = dir.join("out");
-    fails(
+    let line = fails(
         &[
             p("deform"),
             p("--template"),
@@ -443,6 +443,32 @@ fn animation_with_a_missing_accessor() {
         ],
         &dir,
         &["missing.gltf", "animations"],
+    );
+    assert_eq!(
+        line.matches("out of bounds").count(),
+        1,
+        "the cause once: {line}"
+    );
+    // A missing animation file: the OS error once.
+    let line = fails(
+        &[
+            p("deform"),
+            p("--template"),
+            &fixture("gltf/SimpleSkin.gltf"),
+            p("--animation"),
+            &dir.join("nope.glb"),
+            p("--gaussians"),
+            &g,
+            p("-o"),
+            &out,
+        ],
+        &dir,
+        &["nope.glb"],
+    );
+    assert_eq!(
+        line.matches("os error").count(),
+        1,
+        "the cause once: {line}"
     );
 }
 

@@ -52,12 +52,12 @@ impl Buffers {
                 }
                 gltf::buffer::Source::Uri(uri) => {
                     let resolved = base.join(percent_decode(uri));
-                    std::fs::read(&resolved).map_err(|source| AnimationError::MissingBuffer {
+                    std::fs::read(&resolved).map_err(|error| AnimationError::MissingBuffer {
                         path: path.to_path_buf(),
                         buffer: index,
                         uri: uri.to_string(),
                         resolved: resolved.clone(),
-                        source,
+                        error,
                     })?
                 }
             };

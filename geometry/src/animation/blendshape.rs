@@ -102,9 +102,9 @@ impl WeightsTrack {
     /// fault (missing `names` or `frames`, a weight count that differs from the names, a
     /// NaN/infinite/null/non-number weight, a bad time).
     pub fn read(path: &Path) -> Result<Self, AnimationError> {
-        let text = std::fs::read_to_string(path).map_err(|source| AnimationError::Os {
+        let text = std::fs::read_to_string(path).map_err(|error| AnimationError::Os {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         Self::parse(&text, path)
     }

@@ -12,24 +12,29 @@ use crate::io::IoError;
 #[non_exhaustive]
 pub enum AnimationError {
     /// The operating system refused (missing file, permissions).
-    #[error("{path}: {source}")]
+    ///
+    /// The underlying errors of this and the next two variants are part of the message and
+    /// deliberately not exposed as [`std::error::Error::source`], so a reporter that prints the
+    /// cause chain prints them once (as [`crate::io::IoError`] does).
+    #[error("{path}: {error}")]
     Os {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The glTF JSON or GLB container could not be parsed or failed the `gltf` crate's
     /// validation (indices out of range, missing required fields).
-    #[error("{path}: invalid glTF: {source}")]
+    #[error("{path}: {error}")]
     Gltf {
         /// The glTF file.
         path: PathBuf,
-        /// The `gltf` crate's error.
-        source: gltf::Error,
+        /// The `gltf` crate's error (its message says what failed: `invalid glTF: ...`,
+        /// `JSON error: ...`).
+        error: gltf::Error,
     },
     /// A buffer's external file (`.bin`) cannot be read.
-    #[error("{path}: buffer {buffer} ({uri}): cannot read {resolved}: {source}")]
+    #[error("{path}: buffer {buffer} ({uri}): cannot read {resolved}: {error}")]
     MissingBuffer {
         /// The glTF file.
         path: PathBuf,
@@ -40,7 +45,7 @@ pub enum AnimationError {
         /// The file the URI resolves to.
         resolved: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A buffer is malformed (bad data URI, shorter than its declared `byteLength`).
     #[error("{path}: buffer {buffer}: {message}")]

@@ -223,13 +223,13 @@ impl GltfTemplate {
     /// [`AnimationError`] naming the file and the buffer, accessor, node, mesh, skin or
     /// animation at fault; [`AnimationError::ClipNotFound`] when `clip` does not exist.
     pub fn open(path: &Path, clip: &Clip) -> Result<Self, AnimationError> {
-        let bytes = std::fs::read(path).map_err(|source| AnimationError::Os {
+        let bytes = std::fs::read(path).map_err(|error| AnimationError::Os {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
-        let gltf_err = |source| AnimationError::Gltf {
+        let gltf_err = |error| AnimationError::Gltf {
             path: path.to_path_buf(),
-            source,
+            error,
         };
         let (json_bytes, blob): (Vec<u8>, Option<Vec<u8>>) = if bytes.starts_with(b"glTF") {
             let glb = gltf::binary::Glb::from_slice(&bytes).map_err(gltf_err)?;

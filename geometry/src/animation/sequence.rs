@@ -92,15 +92,15 @@ fn is_mesh_file(path: &Path) -> bool {
 }
 
 fn list_dir(dir: &Path) -> Result<Vec<PathBuf>, AnimationError> {
-    let entries = std::fs::read_dir(dir).map_err(|source| AnimationError::Os {
+    let entries = std::fs::read_dir(dir).map_err(|error| AnimationError::Os {
         path: dir.to_path_buf(),
-        source,
+        error,
     })?;
     let mut files = Vec::new();
     for entry in entries {
-        let entry = entry.map_err(|source| AnimationError::Os {
+        let entry = entry.map_err(|error| AnimationError::Os {
             path: dir.to_path_buf(),
-            source,
+            error,
         })?;
         let path = entry.path();
         if path.is_file() {
