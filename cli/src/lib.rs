@@ -55,6 +55,8 @@ pub enum Command {
     Prune(commands::prune::PruneArgs),
     /// Render Gaussians (3DGS/2DGS/perspective-aware) or a mesh on the CPU: rgb, alpha, depth, normals.
     Render(commands::render::RenderArgs),
+    /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
+    Cameras(commands::cameras::CamerasArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -91,5 +93,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Densify(args) => commands::densify::run(args, &ctx),
         Command::Prune(args) => commands::prune::run(args, &ctx),
         Command::Render(args) => commands::render::run(args, &ctx),
+        Command::Cameras(args) => commands::cameras::run(args, &ctx),
     }
 }

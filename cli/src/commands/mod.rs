@@ -2,6 +2,7 @@
 
 pub mod alpha_shape;
 pub mod bind;
+pub mod cameras;
 pub mod convert;
 pub mod deform;
 pub mod densify;
@@ -14,7 +15,9 @@ pub mod tsdf;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::bail;
+use anyhow::{Context as _, bail};
+use trisplat_geometry::Camera;
+use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
 
 use crate::progress::Progress;
 
@@ -53,4 +56,24 @@ fn canonical(path: &Path) -> Option<PathBuf> {
         _ => Path::new("."),
     };
     Some(parent.canonicalize().ok()?.join(path.file_name()?))
+}
+
+/// Reads a 3DGS cameras.json (a JSON list) or a NeRF transforms.json (an object with `frames`),
+/// told apart by the file's contents; `size` is the image size for a transforms.json without
+/// `w`/`h`.
+///
+/// # Errors
+/// An unreadable or malformed file, or one without cameras.
+pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result<Vec<Camera>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let cameras = if text.trim_start().starts_with('{') {
+        read_transforms_json(path, size)?
+    } else {
+        read_cameras_json(path)?
+    };
+    if cameras.is_empty() {
+        bail!("{}: no cameras", path.display());
+    }
+    Ok(cameras)
 }

@@ -2,11 +2,9 @@
 //! [--outputs rgb,alpha,depth,median_depth,normal] [--background r,g,b] [--compat-3dgs]
 //! [--antialiased]` and `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::Camera;
-use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame};
 use trisplat_splat::ply::read_gaussians;
@@ -14,7 +12,7 @@ use trisplat_splat::render::{
     Outputs, RenderImages, RenderMode, RenderOptions, options::DEFAULT_FAR, render,
 };
 
-use super::{Context, refuse_to_overwrite};
+use super::{Context, read_camera_file, refuse_to_overwrite};
 
 /// Splatting models.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -132,22 +130,6 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     }
 }
 
-/// Reads a 3DGS cameras.json (a JSON list) or a NeRF transforms.json (an object with `frames`),
-/// told apart by the file's contents.
-fn read_cameras(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result<Vec<Camera>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let cameras = if text.trim_start().starts_with('{') {
-        read_transforms_json(path, size)?
-    } else {
-        read_cameras_json(path)?
-    };
-    if cameras.is_empty() {
-        bail!("{}: no cameras", path.display());
-    }
-    Ok(cameras)
-}
-
 /// Runs `trisplat render`.
 ///
 /// # Errors
@@ -160,7 +142,7 @@ pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     refuse_to_overwrite(input, &args.output)?;
     refuse_to_overwrite(&args.cameras, &args.output)?;
-    let cameras = read_cameras(&args.cameras, args.image_size)?;
+    let cameras = read_camera_file(&args.cameras, args.image_size)?;
     let frame = match args.normal_frame {
         FrameArg::World => NormalFrame::World,
         FrameArg::Camera => NormalFrame::Camera,

@@ -3,15 +3,20 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use trisplat_extract::tsdf::{
-    DEFAULT_DEPTH_SCALE, TsdfOptions, fuse, read_color_dir, read_depth_dir,
+    DEFAULT_DEPTH_SCALE, DepthImage, TsdfOptions, fuse, read_color_dir, read_depth_dir,
 };
 use trisplat_geometry::Camera;
-use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
 use trisplat_geometry::io::{WriteOptions, write_mesh};
+use trisplat_splat::ply::read_gaussians;
+use trisplat_splat::render::{Outputs, RenderOptions, render};
 
-use super::{Context, refuse_to_overwrite};
+use super::{Context, read_camera_file, refuse_to_overwrite};
+
+/// Pixels whose rendered alpha is below this carry no depth when fusing rendered Gaussians
+/// (2DGS masks its rendered depth the same way).
+pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
 /// Arguments of `trisplat tsdf`.
 #[derive(Debug, clap::Args)]
@@ -30,14 +35,25 @@ With --colors, <img_name>_rgb.npy ([H, W, 3] in 0..1) or <img_name>_rgb.png give
 
 Defaults as 2DGS: depth truncation = 2 x the scene radius (the smallest distance from a camera \
 to the point nearest every optical axis), voxel = depth truncation / 1024, trunc = 5 voxels. \
-Depth maps without any valid pixel give an empty mesh.")]
+Depth maps without any valid pixel give an empty mesh.
+
+With --gaussians G.ply instead of --depth, the depth maps are rendered from the (world-space) \
+Gaussians first: 3DGS splatting with gsplat's rules, expected depth, set to 0 where the rendered \
+alpha is below 0.5.")]
 pub struct TsdfArgs {
     /// Cameras: a 3DGS cameras.json or a NeRF transforms.json (with w and h).
     #[arg(long)]
     pub cameras: PathBuf,
     /// Folder of depth maps named <img_name>_depth.npy or <img_name>_depth.png.
+    #[arg(
+        long,
+        required_unless_present = "gaussians",
+        conflicts_with = "gaussians"
+    )]
+    pub depth: Option<PathBuf>,
+    /// World-space Gaussians (3DGS PLY) to render the depth maps from, instead of --depth.
     #[arg(long)]
-    pub depth: PathBuf,
+    pub gaussians: Option<PathBuf>,
     /// Output mesh (.ply, .obj, .gltf, .glb).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
@@ -52,21 +68,6 @@ pub struct TsdfArgs {
     pub options: TsdfOptions,
 }
 
-/// Reads a 3DGS cameras.json (a JSON list) or a NeRF transforms.json (an object).
-fn read_cameras(path: &Path) -> anyhow::Result<Vec<Camera>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let cameras = if text.trim_start().starts_with('{') {
-        read_transforms_json(path, None)?
-    } else {
-        read_cameras_json(path)?
-    };
-    if cameras.is_empty() {
-        bail!("{}: no cameras", path.display());
-    }
-    Ok(cameras)
-}
-
 /// Runs `trisplat tsdf`.
 ///
 /// # Errors
@@ -74,18 +75,61 @@ fn read_cameras(path: &Path) -> anyhow::Result<Vec<Camera>> {
 /// is an input, a failed write.
 pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     refuse_to_overwrite(&args.cameras, &args.output)?;
-    let cameras = read_cameras(&args.cameras)?;
+    let cameras = read_camera_file(&args.cameras, None)?;
     let spinner = ctx.progress.spinner("reading depth maps");
-    let depths = read_depth_dir(&args.depth, &cameras, args.depth_scale)?;
-    let colors = if args.colors {
-        Some(read_color_dir(&args.depth, &cameras)?)
-    } else {
-        None
+    let (depths, colors, source) = match (&args.depth, &args.gaussians) {
+        (_, Some(gaussians)) => {
+            refuse_to_overwrite(gaussians, &args.output)?;
+            spinner.set_message("rendering depth maps");
+            let depths = render_depths(gaussians, &cameras)?;
+            (depths, None, gaussians.clone())
+        }
+        (Some(dir), None) => {
+            let depths = read_depth_dir(dir, &cameras, args.depth_scale)?;
+            let colors = if args.colors {
+                Some(read_color_dir(dir, &cameras)?)
+            } else {
+                None
+            };
+            (depths, colors, dir.clone())
+        }
+        (None, None) => anyhow::bail!("give --depth DIR or --gaussians G.ply"),
     };
     spinner.set_message("fusing");
     let fused = fuse(&cameras, &depths, colors.as_deref(), &args.options)
-        .with_context(|| format!("{}: fusion failed", args.depth.display()))?;
+        .with_context(|| format!("{}: fusion failed", source.display()))?;
     spinner.finish_and_clear();
     write_mesh(&args.output, &fused.mesh, WriteOptions::default())?;
     Ok(())
+}
+
+/// Expected-depth maps of world-space Gaussians, zero where alpha < [`RENDERED_ALPHA_MIN`].
+fn render_depths(path: &Path, cameras: &[Camera]) -> anyhow::Result<Vec<DepthImage>> {
+    let set = read_gaussians(path)?;
+    let options = RenderOptions {
+        outputs: Outputs {
+            rgb: false,
+            alpha: true,
+            depth: true,
+            median_depth: false,
+            normal: false,
+        },
+        ..RenderOptions::default()
+    };
+    cameras
+        .iter()
+        .map(|camera| {
+            let out = render(&set, camera, &options)
+                .with_context(|| format!("{}: camera '{}'", path.display(), camera.name))?;
+            let (Some(mut depth), Some(alpha)) = (out.images.depth, out.images.alpha) else {
+                anyhow::bail!("{}: the renderer returned no depth", path.display());
+            };
+            for (d, a) in depth.iter_mut().zip(&alpha) {
+                if *a < RENDERED_ALPHA_MIN {
+                    *d = 0.0;
+                }
+            }
+            Ok(DepthImage::try_new(camera.width, camera.height, depth)?)
+        })
+        .collect()
 }

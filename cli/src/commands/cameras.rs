@@ -1,0 +1,97 @@
+//! `trisplat cameras MESH -o CAMS.json [--rig sphere|orbit] [--views N] [--size WxH]
+//! [--fov DEG] [--elevation DEG]`: a camera rig around a mesh's bounding sphere, written as a
+//! 3DGS cameras.json (for `render` and `tsdf`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context as _, bail};
+use trisplat_geometry::camera::{orbit_rig, sphere_rig, write_cameras_json};
+use trisplat_geometry::io::read_points;
+
+use super::{Context, refuse_to_overwrite};
+
+/// The rig's layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RigArg {
+    /// Views spread evenly over the whole sphere (a Fibonacci lattice).
+    Sphere,
+    /// Views on a horizontal circle (world up +y) at `--elevation`.
+    Orbit,
+}
+
+/// Arguments of `trisplat cameras`.
+#[derive(Debug, clap::Args)]
+#[command(after_long_help = "\
+Cameras look at the centre of the mesh's bounding box from a distance at which the bounding \
+sphere (radius: the farthest vertex from that centre) fills the vertical field of view with a \
+10% margin. OpenCV axes, principal point at the image centre, square pixels; names view_000, \
+view_001, ...")]
+pub struct CamerasArgs {
+    /// Mesh or point cloud to frame (.ply, .obj, .gltf, .glb).
+    pub mesh: PathBuf,
+    /// Output cameras.json.
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Layout of the views.
+    #[arg(long, value_enum, default_value_t = RigArg::Sphere)]
+    pub rig: RigArg,
+    /// Number of views.
+    #[arg(long, default_value_t = 60)]
+    pub views: usize,
+    /// Image size WxH in pixels.
+    #[arg(long, default_value = "512x512", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 40.0)]
+    pub fov: f64,
+    /// Elevation of an orbit above the horizontal plane, in degrees.
+    #[arg(long, default_value_t = 15.0, allow_negative_numbers = true)]
+    pub elevation: f64,
+}
+
+/// Parses `WxH` with positive integers.
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or("expected WxH")?;
+    match (w.parse::<u32>(), h.parse::<u32>()) {
+        (Ok(w), Ok(h)) if w > 0 && h > 0 => Ok((w, h)),
+        _ => Err(format!("expected positive WxH, got '{s}'")),
+    }
+}
+
+/// Runs `trisplat cameras`.
+///
+/// # Errors
+/// An unreadable or empty mesh, an invalid rig, an output equal to the input, a failed write.
+pub fn run(args: CamerasArgs, _ctx: &Context) -> anyhow::Result<()> {
+    refuse_to_overwrite(&args.mesh, &args.output)?;
+    let points = read_points(&args.mesh)?;
+    let Some(bounds) = points.bounds() else {
+        bail!("{}: no vertices to frame", args.mesh.display());
+    };
+    let center = bounds.center().as_dvec3();
+    let radius = points
+        .positions()
+        .iter()
+        .map(|p| (p.as_dvec3() - center).length())
+        .fold(0.0, f64::max);
+    // A single point still gets a rig: frame a ball of a tiny but non-zero radius.
+    let radius = if radius > 0.0 {
+        radius
+    } else {
+        f64::from(f32::EPSILON) * center.length().max(1.0)
+    };
+    let cameras = match args.rig {
+        RigArg::Sphere => sphere_rig(center, radius, args.views, args.size, args.fov),
+        RigArg::Orbit => orbit_rig(
+            center,
+            radius,
+            args.views,
+            args.elevation,
+            args.size,
+            args.fov,
+        ),
+    }
+    .with_context(|| format!("{}: cannot build the camera rig", args.mesh.display()))?;
+    write_cameras_json(&args.output, &cameras)?;
+    Ok(())
+}
