@@ -10,7 +10,7 @@ use super::{Context, refuse_to_overwrite};
 /// Arguments of `trisplat convert`.
 #[derive(Debug, clap::Args)]
 #[command(
-    long_about = "Convert a mesh between PLY, OBJ, glTF and GLB; formats come from the \
+    after_long_help = "Convert a mesh between PLY, OBJ, glTF and GLB; formats come from the \
     extensions.\n\nOBJ input keeps its vertex order unless its texture coordinates or normals are \
     indexed differently from its positions; then vertices are split at the seams (as trimesh \
     does) so nothing is lost. PLY to PLY keeps unknown properties and elements. glTF input is \

@@ -39,7 +39,7 @@ pub enum FrameArg {
 /// Arguments of `trisplat render`.
 #[derive(Debug, clap::Args)]
 #[command(
-    long_about = "Render Gaussians (a world-space 3DGS PLY) or a mesh (--mesh) with the cameras \
+    after_long_help = "Render Gaussians (a world-space 3DGS PLY) or a mesh (--mesh) with the cameras \
     of a 3DGS cameras.json or a NeRF transforms.json, on the CPU.\n\n\
     Writes DIR/<img_name>_rgb.npy [H,W,3], _alpha.npy, _depth.npy (expected z-depth, 0 where \
     nothing), _median_depth.npy, _normal.npy [H,W,3] (alpha-composited unit normals facing the \
