@@ -332,7 +332,7 @@ struct RowRules {
 const CHUNK: usize = 4;
 
 /// Splats whose data the tile loop loads ahead in one batch.
-const LOOKAHEAD: usize = 8;
+const LOOKAHEAD: usize = 16;
 
 /// Composites one splat over the `CHUNK` pixels of a row starting at tile index `p0`, given the
 /// kernel's `alpha` (0 where it does not contribute) and `depth` per pixel. Branch-free so it

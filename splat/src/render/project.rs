@@ -115,7 +115,7 @@ impl SplatKernel for EwaKernel {
 
     #[inline(always)]
     fn touch(&self, i: usize) -> f32 {
-        self.splats.get(i).map_or(0.0, |s| s.mean[0])
+        self.splats.get(i).map_or(0.0, |s| s.mean[0] + s.span[2])
     }
 
     fn reordered(&self, order: &[u32]) -> Option<Self> {

@@ -64,16 +64,49 @@ pub fn sort_key(depth: f32, index: usize) -> u64 {
 
 /// The front-to-back order of splats at camera z `depths`: sorted by depth, ties by index (as
 /// gsplat's stable radix sort of `(tile, depth)` keys leaves them). Sorts once for the whole
-/// image, in parallel; binning in this order then leaves every tile's list sorted.
+/// image; binning in this order then leaves every tile's list sorted.
+///
+/// An LSD radix sort of the depths' bit patterns (three stable passes of 11 bits): depths are
+/// clamped to `>= 0`, where the bits order like the values, and stability keeps equal depths in
+/// index order, so the order is exactly that of [`sort_key`].
 #[must_use]
 pub fn depth_order(depths: &[f32]) -> Vec<u32> {
-    let mut keys: Vec<u64> = depths
-        .par_iter()
-        .enumerate()
-        .map(|(i, &d)| sort_key(d, i))
-        .collect();
-    keys.par_sort_unstable();
-    keys.into_iter().map(|k| (k & 0xffff_ffff) as u32).collect()
+    const BITS: u32 = 11;
+    const BUCKETS: usize = 1 << BITS;
+    let n = depths.len();
+    let mut keys: Vec<u32> = depths.iter().map(|d| d.max(0.0).to_bits()).collect();
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    if n <= 1 {
+        return order;
+    }
+    let mut keys_tmp = vec![0u32; n];
+    let mut order_tmp = vec![0u32; n];
+    for pass in 0..3 {
+        let shift = pass * BITS;
+        let mut counts = vec![0usize; BUCKETS];
+        for &k in &keys {
+            counts[((k >> shift) as usize) & (BUCKETS - 1)] += 1;
+        }
+        // A pass where every key falls in one bucket leaves the order as it is.
+        if counts.contains(&n) {
+            continue;
+        }
+        let mut sum = 0;
+        for c in &mut counts {
+            let here = *c;
+            *c = sum;
+            sum += here;
+        }
+        for (&k, &i) in keys.iter().zip(&order) {
+            let slot = &mut counts[((k >> shift) as usize) & (BUCKETS - 1)];
+            keys_tmp[*slot] = k;
+            order_tmp[*slot] = i;
+            *slot += 1;
+        }
+        std::mem::swap(&mut keys, &mut keys_tmp);
+        std::mem::swap(&mut order, &mut order_tmp);
+    }
+    order
 }
 
 /// Splats per tile, front to back: tile `t` lists `entries[offsets[t]..offsets[t + 1]]`, each
@@ -184,6 +217,24 @@ mod tests {
     #[test]
     fn order_is_by_depth_then_index() {
         assert_eq!(depth_order(&[2.0, 1.0, 3.0, 1.0]), [1, 3, 0, 2]);
+        assert_eq!(depth_order(&[]), [0u32; 0]);
+        assert_eq!(depth_order(&[5.0]), [0]);
+        // Equal to sorting the (depth, index) keys, over many magnitudes and with ties.
+        let mut rng = trisplat_geometry::rng::Rng::new(3);
+        let depths: Vec<f32> = (0..5000)
+            .map(|_| {
+                let d = 10f32.powf(6.0 * rng.uniform_f32() - 2.0);
+                if rng.below(4) == 0 { d.round() } else { d }
+            })
+            .collect();
+        let mut keys: Vec<u64> = depths
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| sort_key(d, i))
+            .collect();
+        keys.sort_unstable();
+        let expected: Vec<u32> = keys.iter().map(|k| (k & 0xffff_ffff) as u32).collect();
+        assert_eq!(depth_order(&depths), expected);
         let bins = TileBins::bin(
             &[[8.0, 8.0], [20.0, 8.0], [16.0, 8.0]],
             &[[2.0, 2.0], [2.0, 2.0], [2.0, 2.0]],
