@@ -336,7 +336,7 @@ const LOOKAHEAD: usize = 16;
 
 /// Composites one splat over the `CHUNK` pixels of a row starting at tile index `p0`, given the
 /// kernel's `alpha` (0 where it does not contribute) and `depth` per pixel. Branch-free so it
-/// vectorises. Returns how many pixels stopped.
+/// vectorises. Returns which pixels stopped (bit `k` for pixel `p0 + k`).
 #[inline(always)]
 fn composite_chunk<const EXTRA: bool>(
     s: &mut TileState,
@@ -345,7 +345,7 @@ fn composite_chunk<const EXTRA: bool>(
     depth: Vec4,
     g: RowSplat,
     r: RowRules,
-) -> usize {
+) -> u32 {
     let range = p0..p0 + CHUNK;
     if range.end > TILE_PIXELS {
         return 0;
@@ -379,7 +379,7 @@ fn composite_chunk<const EXTRA: bool>(
             (Vec4::from_slice(acc) + w * g.normal[c]).write_to_slice(acc);
         }
     }
-    stop.bitmask().count_ones() as usize
+    stop.bitmask()
 }
 
 impl<K: SplatKernel> TileContext<'_, K> {
@@ -482,21 +482,25 @@ impl<K: SplatKernel> TileContext<'_, K> {
                     continue;
                 }
                 let row = ly * ts;
-                let mut stopped = 0;
+                // Stopped pixels of this row, one bit per pixel (counted once per row: the
+                // baseline x86-64 target has no popcount instruction).
+                let mut stopped = 0u32;
                 // The fewest groups covering the span, shifted left where they would leave
                 // the tile row (each lane is still evaluated at its own pixel).
                 let groups = (sx1 - sx0).div_ceil(CHUNK);
                 let gx0 = sx0.min(ts.saturating_sub(groups * CHUNK));
-                for lx in (gx0..gx0 + groups * CHUNK).step_by(CHUNK) {
+                for j in 0..groups {
+                    let lx = gx0 + j * CHUNK;
                     let px0 = (x_start as usize + lx) as f32 + off;
                     let (alpha, depth) = self.kernel.sample4(kg, py, px0);
-                    stopped += if extra {
+                    let mask = if extra {
                         composite_chunk::<true>(s, row + lx, alpha, depth, splat, row_rules)
                     } else {
                         composite_chunk::<false>(s, row + lx, alpha, depth, splat, row_rules)
                     };
+                    stopped |= mask << lx;
                 }
-                remaining = remaining.saturating_sub(stopped);
+                remaining = remaining.saturating_sub(stopped.count_ones() as usize);
             }
         }
         // Write the tile into the band.

@@ -374,13 +374,15 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
     };
     let mut u = v.fx * t.x / z + v.cx;
     let mut w = v.fy * t.y / z + v.cy;
+    // `ln(255 opacity)`: the largest sigma with alpha >= 1/255 (negative, NaN or -inf for
+    // opacities below 1/255, which gsplat culls and the original rules clamp to 0 below).
+    let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
     let radius = match o.rules {
         Rules::Gsplat => {
             if opacity < f64::from(ALPHA_THRESHOLD) {
                 return None;
             }
-            let extent =
-                GSPLAT_EXTENT.min((2.0 * (opacity / f64::from(ALPHA_THRESHOLD)).ln()).sqrt());
+            let extent = GSPLAT_EXTENT.min((2.0 * log_ratio).sqrt());
             let rx = (extent * c00.sqrt()).ceil();
             let ry = (extent * c11.sqrt()).ceil();
             if rx <= 0.0 && ry <= 0.0 {
@@ -426,10 +428,7 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
             conic: [(c11 * inv) as f32, (-c01 * inv) as f32, (c00 * inv) as f32],
             opacity: opacity as f32,
             depth: z as f32,
-            span: row_span_coefficients(
-                [c11 * inv, -c01 * inv, c00 * inv],
-                (opacity / f64::from(ALPHA_THRESHOLD)).ln().max(0.0),
-            ),
+            span: row_span_coefficients([c11 * inv, -c01 * inv, c00 * inv], log_ratio.max(0.0)),
         },
         color,
         normal,
