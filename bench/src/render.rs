@@ -136,37 +136,38 @@ pub fn run(args: &RenderBenchArgs) -> anyhow::Result<()> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .build()?;
-        let (frames, best, sum, coverage, opaque, cpu) = pool.install(|| -> anyhow::Result<_> {
-            for _ in 0..WARM_UP {
-                render(&set, &camera, &options)?;
-            }
-            let mut best = f64::INFINITY;
-            let cpu_start = thread_cpu_s();
-            let mut sum = RenderStats::default();
-            let mut coverage = 0.0;
-            let mut opaque = 0.0;
-            for _ in 0..args.frames.max(1) {
-                let start = std::time::Instant::now();
-                let out = render(&set, &camera, &options)?;
-                best = best.min(start.elapsed().as_secs_f64());
-                let s = out.stats;
-                sum.project_s += s.project_s;
-                sum.sort_s += s.sort_s;
-                sum.composite_s += s.composite_s;
-                sum.visible = s.visible;
-                sum.intersections = s.intersections;
-                if let Some(alpha) = &out.images.alpha {
-                    let count = |min: f32| alpha.iter().filter(|a| **a > min).count() as f64;
-                    coverage = count(0.5) / alpha.len() as f64;
-                    opaque = count(0.9999) / alpha.len() as f64;
+        let (frames, best, sum, coverage, opaque, cpu) =
+            pool.install(|| -> anyhow::Result<_> {
+                for _ in 0..WARM_UP {
+                    render(&set, &camera, &options)?;
                 }
-            }
-            let cpu = match (cpu_start, thread_cpu_s()) {
-                (Some(a), Some(b)) if threads == 1 => Some((b - a) / args.frames.max(1) as f64),
-                _ => None,
-            };
-            Ok((args.frames.max(1), best, sum, coverage, opaque, cpu))
-        })?;
+                let mut best = f64::INFINITY;
+                let cpu_start = thread_cpu_s();
+                let mut sum = RenderStats::default();
+                let mut coverage = 0.0;
+                let mut opaque = 0.0;
+                for _ in 0..args.frames.max(1) {
+                    let start = std::time::Instant::now();
+                    let out = render(&set, &camera, &options)?;
+                    best = best.min(start.elapsed().as_secs_f64());
+                    let s = out.stats;
+                    sum.project_s += s.project_s;
+                    sum.sort_s += s.sort_s;
+                    sum.composite_s += s.composite_s;
+                    sum.visible = s.visible;
+                    sum.intersections = s.intersections;
+                    if let Some(alpha) = &out.images.alpha {
+                        let count = |min: f32| alpha.iter().filter(|a| **a > min).count() as f64;
+                        coverage = count(0.5) / alpha.len() as f64;
+                        opaque = count(0.9999) / alpha.len() as f64;
+                    }
+                }
+                let cpu = match (cpu_start, thread_cpu_s()) {
+                    (Some(a), Some(b)) if threads == 1 => Some((b - a) / args.frames.max(1) as f64),
+                    _ => None,
+                };
+                Ok((args.frames.max(1), best, sum, coverage, opaque, cpu))
+            })?;
         let f = frames as f64;
         if let Some(cpu) = cpu {
             println!(

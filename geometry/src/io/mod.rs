@@ -10,8 +10,8 @@
 
 mod atomic;
 mod error;
-mod npy;
 pub mod gltf;
+mod npy;
 pub mod obj;
 pub mod ply;
 
