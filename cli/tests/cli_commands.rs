@@ -141,3 +141,46 @@ fn bad_usage_exits_2() {
         assert_eq!(run(&args).status.code(), Some(2), "{args:?}");
     }
 }
+
+#[test]
+fn convert_evaluates_a_gltf_clip_at_a_time() {
+    use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate};
+    let dir = fresh_dir("convert_time");
+    let input = trisplat_fixtures::path("anim/CesiumMan.glb");
+    let out_path = dir.join("posed.ply");
+    let out = run(&[
+        "convert",
+        input.to_str().expect("utf-8"),
+        out_path.to_str().expect("utf-8"),
+        "--time",
+        "1.25",
+        "--clip",
+        "0",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let posed = read_mesh(&out_path).expect("read output");
+    let template = GltfTemplate::open(&input, &Clip::Index(0)).expect("open clip");
+    let want = template.evaluate_at(1.25).expect("evaluate");
+    assert_eq!(posed.triangles(), template.rest().triangles());
+    assert_eq!(posed.positions(), want.as_slice());
+    let moved = want
+        .iter()
+        .zip(template.rest().positions())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(moved > 100, "the clip moves the mesh ({moved} vertices)");
+    // A clip that does not exist is one clear error.
+    let bad = run(&[
+        "convert",
+        input.to_str().expect("utf-8"),
+        dir.join("x.ply").to_str().expect("utf-8"),
+        "--clip",
+        "no-such-clip",
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(!dir.join("x.ply").exists());
+}

@@ -3,9 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
+use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_geometry::io::{self, Format, ObjVertices, PlyEncoding, ReadOptions, WriteOptions};
 
-use super::{Context, refuse_to_overwrite};
+use super::{Context, parse_clip, refuse_to_overwrite};
 
 /// Arguments of `trisplat convert`.
 #[derive(Debug, clap::Args)]
@@ -25,10 +26,10 @@ pub struct ConvertArgs {
     /// Write PLY as ascii instead of binary little-endian.
     #[arg(long)]
     pub ascii: bool,
-    /// Animation clip to evaluate (name or index): not supported yet.
+    /// Animation clip of a glTF/GLB input to evaluate (name or index; default the first).
     #[arg(long, value_name = "NAME|INDEX")]
     pub clip: Option<String>,
-    /// Time in seconds at which to evaluate the animation: not supported yet.
+    /// Time in seconds at which to evaluate the clip (clamped to the clip; default 0).
     #[arg(long, value_name = "SECONDS")]
     pub time: Option<f64>,
 }
@@ -37,14 +38,10 @@ pub struct ConvertArgs {
 ///
 /// # Errors
 /// Unknown formats, unreadable or malformed input, an output equal to the input, a failed
-/// write, or animation options (not supported yet).
+/// write, animation options on a non-glTF input or a glTF without that clip.
 pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     if args.clip.is_some() || args.time.is_some() {
-        bail!(
-            "{}: --clip/--time need animation support, which trisplat convert does not have \
-             yet; without them it writes the rest state",
-            args.input.display()
-        );
+        return convert_animated(&args, ctx);
     }
     if args.input.is_dir() {
         bail!(
@@ -77,5 +74,31 @@ pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     spinner.finish_and_clear();
     result?;
+    Ok(())
+}
+
+/// `convert` of a glTF/GLB clip evaluated at `--time`: skins, morph targets and node
+/// animations applied, written as a static mesh.
+fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
+    if !matches!(Format::from_path(&args.input)?, Format::Gltf | Format::Glb) {
+        bail!(
+            "{}: --clip/--time evaluate an animation, which only glTF/GLB input has",
+            args.input.display()
+        );
+    }
+    Format::from_path(&args.output)?;
+    refuse_to_overwrite(&args.input, &args.output)?;
+    let time = args.time.unwrap_or(0.0);
+    let spinner = ctx
+        .progress
+        .spinner(&format!("evaluating {} at {time} s", args.input.display()));
+    let template = GltfTemplate::open(&args.input, &parse_clip(args.clip.as_deref()))?;
+    let positions = template.evaluate_at(time)?;
+    let mut mesh = template.rest().clone();
+    mesh.clear_normals();
+    mesh.set_positions(positions)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
+    spinner.finish_and_clear();
+    io::write_mesh(&args.output, &mesh, WriteOptions { ascii: args.ascii })?;
     Ok(())
 }

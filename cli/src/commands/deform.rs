@@ -17,7 +17,7 @@ use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::lbs::LbsDeformer;
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 
-use super::Context;
+use super::{Context, parse_clip};
 
 /// Largest difference between the template's positions and the animation's rest pose that
 /// `lbs` accepts, relative to the template's bounding-box diagonal (f32 storage of both).
@@ -118,16 +118,6 @@ fn extension(path: &Path) -> String {
 
 fn is_gltf(path: &Path) -> bool {
     matches!(extension(path).as_str(), "gltf" | "glb")
-}
-
-fn parse_clip(clip: Option<&str>) -> Clip {
-    match clip {
-        None => Clip::Index(0),
-        Some(s) => match s.parse::<usize>() {
-            Ok(i) => Clip::Index(i),
-            Err(_) => Clip::Name(s.to_string()),
-        },
-    }
 }
 
 /// Opens the animation `args.animation` (see the command's help).

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::Camera;
+use trisplat_geometry::animation::Clip;
 use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
 
 use crate::progress::Progress;
@@ -76,4 +77,16 @@ pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result
         bail!("{}: no cameras", path.display());
     }
     Ok(cameras)
+}
+
+/// A `--clip NAME|INDEX` value: a number is an index, anything else a name; none is the first.
+#[must_use]
+pub fn parse_clip(clip: Option<&str>) -> Clip {
+    match clip {
+        None => Clip::Index(0),
+        Some(s) => match s.parse::<usize>() {
+            Ok(i) => Clip::Index(i),
+            Err(_) => Clip::Name(s.to_string()),
+        },
+    }
 }
