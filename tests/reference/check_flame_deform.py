@@ -7,10 +7,10 @@ Gaussians and trisplat's output frame into a folder; this script recomputes the 
 Gaussians from the bound file and the registered scan with the GaussianAvatars formulas in numpy
 float64 (independently of the Rust code) and prints the largest relative differences as JSON.
 
-    TRISPLAT_SHARED_DATA=/work/shared/data cargo test -p trisplat-cli --test cli_splat \
+    TRISPLAT_SHARED_DATA=../shared/data cargo test -p trisplat-cli --test cli_splat \
         flame -- --ignored --nocapture
     python tests/reference/check_flame_deform.py target/tmp/flame_check \
-        /work/shared/data/faces/flame/flame_registered_scan.ply
+        ../shared/data/faces/flame/flame_registered_scan.ply
 
 Needs numpy and trimesh (tests/reference/requirements.txt).
 """

@@ -17,7 +17,7 @@ How trimesh is asked (the options every count here uses):
 
 Modes:
     python ref_io.py                       # writes fixtures/data/reference/io/trimesh_counts.json
-    python ref_io.py --check-shared BINARY # converts every mesh of /work/shared/data with
+    python ref_io.py --check-shared BINARY # converts every mesh of ../shared/data with
                                            # `BINARY convert` to .ply/.obj/.glb and checks that
                                            # trimesh and Open3D read the outputs with the counts
                                            # trimesh reports for the input; prints a table
@@ -38,7 +38,8 @@ import trimesh
 ROOT = Path(__file__).resolve().parents[2]
 FIXTURES = ROOT / "fixtures" / "data"
 OUT = FIXTURES / "reference" / "io" / "trimesh_counts.json"
-SHARED = Path("/work/shared/data")
+# The shared data folder beside the repository checkout (../shared/data).
+SHARED = ROOT.parent / "shared" / "data"
 
 # Fixture meshes whose counts the Rust test compares exactly (paths relative to fixtures/data).
 FIXTURE_MESHES = [
