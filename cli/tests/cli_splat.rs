@@ -560,7 +560,7 @@ fn lbs_needs_a_skin() {
 
 // ---------------------------------------------------------------------------------------------
 // The real-template check (FLAME is not redistributable: run with
-// `TRISPLAT_SHARED_DATA=../shared/data cargo test -p trisplat-cli --test cli_splat -- --ignored`).
+// `TRISPLAT_SHARED_DATA=$PWD/../shared/data cargo test -p trisplat-cli --test cli_splat -- --ignored`).
 
 /// Agreement of `deform --mode binding` with the float64 GaussianAvatars formulas (issue 3).
 const FLAME_REL_TOL: f64 = 1e-5;

@@ -7,7 +7,7 @@ Gaussians and trisplat's output frame into a folder; this script recomputes the 
 Gaussians from the bound file and the registered scan with the GaussianAvatars formulas in numpy
 float64 (independently of the Rust code) and prints the largest relative differences as JSON.
 
-    TRISPLAT_SHARED_DATA=../shared/data cargo test -p trisplat-cli --test cli_splat \
+    TRISPLAT_SHARED_DATA=$PWD/../shared/data cargo test -p trisplat-cli --test cli_splat \
         flame -- --ignored --nocapture
     python tests/reference/check_flame_deform.py target/tmp/flame_check \
         ../shared/data/faces/flame/flame_registered_scan.ply

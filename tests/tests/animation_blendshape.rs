@@ -293,7 +293,7 @@ fn to_f64(p: &[Vec3]) -> Vec<DVec3> {
 }
 
 /// The real ICT FaceKit blendshapes and LAM head (too large to commit). Run with
-/// `TRISPLAT_SHARED_DATA=../shared/data cargo test --release -p trisplat-tests --test
+/// `TRISPLAT_SHARED_DATA=$PWD/../shared/data cargo test --release -p trisplat-tests --test
 /// animation_blendshape -- --ignored --nocapture`.
 #[test]
 #[ignore = "needs TRISPLAT_SHARED_DATA (ICT FaceKit OBJs, LAM skin.glb)"]
