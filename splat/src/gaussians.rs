@@ -61,77 +61,8 @@ pub enum ParameterSpace {
     Local,
 }
 
-/// PLY scalar types, as named in PLY headers.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[non_exhaustive]
-pub enum ScalarType {
-    /// `char` / `int8`.
-    I8,
-    /// `uchar` / `uint8`.
-    U8,
-    /// `short` / `int16`.
-    I16,
-    /// `ushort` / `uint16`.
-    U16,
-    /// `int` / `int32`.
-    I32,
-    /// `uint` / `uint32`.
-    U32,
-    /// `float` / `float32`.
-    F32,
-    /// `double` / `float64`.
-    F64,
-}
-
-impl ScalarType {
-    /// Parses a PLY type name (both the classic and the sized spellings).
-    #[must_use]
-    pub fn from_ply_name(name: &str) -> Option<Self> {
-        Some(match name {
-            "char" | "int8" => Self::I8,
-            "uchar" | "uint8" => Self::U8,
-            "short" | "int16" => Self::I16,
-            "ushort" | "uint16" => Self::U16,
-            "int" | "int32" => Self::I32,
-            "uint" | "uint32" => Self::U32,
-            "float" | "float32" => Self::F32,
-            "double" | "float64" => Self::F64,
-            _ => return None,
-        })
-    }
-
-    /// The classic PLY name (`float`, `uchar`, ...), used when writing.
-    #[must_use]
-    pub fn ply_name(self) -> &'static str {
-        match self {
-            Self::I8 => "char",
-            Self::U8 => "uchar",
-            Self::I16 => "short",
-            Self::U16 => "ushort",
-            Self::I32 => "int",
-            Self::U32 => "uint",
-            Self::F32 => "float",
-            Self::F64 => "double",
-        }
-    }
-
-    /// Size in bytes in a binary PLY.
-    #[must_use]
-    pub fn size(self) -> usize {
-        match self {
-            Self::I8 | Self::U8 => 1,
-            Self::I16 | Self::U16 => 2,
-            Self::I32 | Self::U32 | Self::F32 => 4,
-            Self::F64 => 8,
-        }
-    }
-
-    /// Whether the type is an integer type.
-    #[must_use]
-    pub fn is_integer(self) -> bool {
-        !matches!(self, Self::F32 | Self::F64)
-    }
-}
+/// PLY scalar types, shared with the general PLY reader of the geometry crate.
+pub use trisplat_geometry::io::ply::ScalarType;
 
 /// Values of one per-Gaussian property, in the type the file stored them in (so they are written
 /// back bit for bit).

@@ -88,7 +88,9 @@ impl ScalarType {
         }
     }
 
-    fn parse(name: &str) -> Option<Self> {
+    /// Parses a PLY type name (both the classic and the sized spellings).
+    #[must_use]
+    pub fn from_ply_name(name: &str) -> Option<Self> {
         Some(match name {
             "char" | "int8" => Self::I8,
             "uchar" | "uint8" => Self::U8,
@@ -102,9 +104,9 @@ impl ScalarType {
         })
     }
 
-    /// The name written in headers (`uchar`, `int`, `float`, ...).
+    /// The classic PLY name written in headers (`uchar`, `int`, `float`, ...).
     #[must_use]
-    pub fn name(self) -> &'static str {
+    pub fn ply_name(self) -> &'static str {
         match self {
             Self::I8 => "char",
             Self::U8 => "uchar",
@@ -117,8 +119,10 @@ impl ScalarType {
         }
     }
 
-    fn is_float(self) -> bool {
-        matches!(self, Self::F32 | Self::F64)
+    /// Whether the type is an integer type.
+    #[must_use]
+    pub fn is_integer(self) -> bool {
+        !matches!(self, Self::F32 | Self::F64)
     }
 }
 
@@ -546,10 +550,10 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, IoError> {
                     .ok_or_else(|| bad(line_no, "property before any element".into()))?;
                 let ty = words.next().unwrap_or("");
                 let kind = if ty == "list" {
-                    let count = words.next().and_then(ScalarType::parse);
-                    let item = words.next().and_then(ScalarType::parse);
+                    let count = words.next().and_then(ScalarType::from_ply_name);
+                    let item = words.next().and_then(ScalarType::from_ply_name);
                     match (count, item) {
-                        (Some(count), Some(item)) if !count.is_float() => {
+                        (Some(count), Some(item)) if count.is_integer() => {
                             PropKind::List { count, item }
                         }
                         _ => {
@@ -558,7 +562,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, IoError> {
                     }
                 } else {
                     PropKind::Scalar(
-                        ScalarType::parse(ty)
+                        ScalarType::from_ply_name(ty)
                             .ok_or_else(|| bad(line_no, format!("unknown property type `{ty}`")))?,
                     )
                 };
@@ -838,7 +842,7 @@ pub fn read_ply_document(path: &Path) -> Result<PlyDocument, IoError> {
 
 impl fmt::Display for ScalarType {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        f.write_str(self.ply_name())
     }
 }
 
