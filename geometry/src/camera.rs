@@ -461,39 +461,20 @@ pub fn sphere_rig(
     size: (u32, u32),
     fov_y_deg: f64,
 ) -> Result<Vec<Camera>, CameraError> {
-    if !(radius.is_finite() && radius > 0.0) || count == 0 || !center.is_finite() {
-        return Err(CameraError::BadPosition);
-    }
-    if !valid_fov(fov_y_deg) {
-        return Err(CameraError::BadPosition);
-    }
-    let distance = 1.1 * radius / (0.5 * fov_y_deg.to_radians()).sin();
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..count)
-        .map(|i| {
-            let y = 1.0 - 2.0 * (i as f64 + 0.5) / count as f64;
-            let r = (1.0 - y * y).max(0.0).sqrt();
-            let phi = golden * i as f64;
-            let dir = DVec3::new(r * phi.cos(), y, r * phi.sin());
-            let mut cam = Camera::look_at(
-                format!("view_{i:03}"),
-                center + dir * distance,
-                center,
-                DVec3::Y,
-                size,
-                fov_y_deg,
-            )?;
-            cam.id = i as i64;
-            Ok(cam)
-        })
-        .collect()
+    rig(center, radius, count, size, fov_y_deg, |i| {
+        let y = 1.0 - 2.0 * (i as f64 + 0.5) / count as f64;
+        let r = (1.0 - y * y).max(0.0).sqrt();
+        let phi = golden * i as f64;
+        DVec3::new(r * phi.cos(), y, r * phi.sin())
+    })
 }
 
 /// Cameras on a horizontal circle (world up +y) around `center` at elevation `elevation_deg`,
 /// looking at `center`, framing a ball of `radius` as [`sphere_rig`] does.
 ///
 /// # Errors
-/// As [`sphere_rig`].
+/// As [`sphere_rig`], and when the elevation is not finite.
 pub fn orbit_rig(
     center: DVec3,
     radius: f64,
@@ -502,21 +483,38 @@ pub fn orbit_rig(
     size: (u32, u32),
     fov_y_deg: f64,
 ) -> Result<Vec<Camera>, CameraError> {
+    if !elevation_deg.is_finite() {
+        return Err(CameraError::BadPosition);
+    }
+    let (se, ce) = elevation_deg.to_radians().sin_cos();
+    rig(center, radius, count, size, fov_y_deg, |i| {
+        let phi = std::f64::consts::TAU * i as f64 / count as f64;
+        DVec3::new(ce * phi.cos(), se, ce * phi.sin())
+    })
+}
+
+/// `count` cameras at `center + direction(i) · distance` looking at `center`, where the distance
+/// frames a ball of `radius` in the vertical field of view with a 10% margin.
+fn rig(
+    center: DVec3,
+    radius: f64,
+    count: usize,
+    size: (u32, u32),
+    fov_y_deg: f64,
+    direction: impl Fn(usize) -> DVec3,
+) -> Result<Vec<Camera>, CameraError> {
     if !(radius.is_finite() && radius > 0.0) || count == 0 || !center.is_finite() {
         return Err(CameraError::BadPosition);
     }
-    if !valid_fov(fov_y_deg) || !elevation_deg.is_finite() {
+    if !valid_fov(fov_y_deg) {
         return Err(CameraError::BadPosition);
     }
     let distance = 1.1 * radius / (0.5 * fov_y_deg.to_radians()).sin();
-    let (se, ce) = elevation_deg.to_radians().sin_cos();
     (0..count)
         .map(|i| {
-            let phi = std::f64::consts::TAU * i as f64 / count as f64;
-            let dir = DVec3::new(ce * phi.cos(), se, ce * phi.sin());
             let mut cam = Camera::look_at(
                 format!("view_{i:03}"),
-                center + dir * distance,
+                center + direction(i) * distance,
                 center,
                 DVec3::Y,
                 size,

@@ -44,7 +44,7 @@ use trisplat_geometry::mesh_render::NormalFrame;
 use super::composite::{ALPHA_THRESHOLD, CompositeRules};
 use super::options::RenderOptions;
 use super::project::{EPS_2D, GSPLAT_EXTENT};
-use super::screen::{Sample, ScreenSplats, SplatKernel};
+use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
 
@@ -387,32 +387,22 @@ pub fn project_perspective(
         })
         .collect();
     let visible: usize = chunks.iter().map(Vec::len).sum();
-    let mut screen = ScreenSplats {
-        ids: Vec::with_capacity(visible),
-        centers: Vec::with_capacity(visible),
-        radii: Vec::with_capacity(visible),
-        depths: Vec::with_capacity(visible),
-        colors: Vec::with_capacity(if options.outputs.rgb { visible } else { 0 }),
-        normals: Vec::with_capacity(if options.outputs.normal { visible } else { 0 }),
-    };
+    let mut screen = ScreenSplats::with_capacity(visible, options.outputs);
     let mut kernel = PerspectiveKernel {
         splats: Vec::with_capacity(visible),
     };
     for (id, p, color, normal) in chunks.into_iter().flatten() {
-        screen.ids.push(id);
-        screen
-            .centers
-            .push([p.box_center.x as f32, p.box_center.y as f32]);
-        screen
-            .radii
-            .push([p.box_radius.x as f32, p.box_radius.y as f32]);
-        screen.depths.push(p.splat.z as f32);
-        if options.outputs.rgb {
-            screen.colors.push(color);
-        }
-        if options.outputs.normal {
-            screen.normals.push(normal);
-        }
+        screen.push(
+            ScreenEntry {
+                id,
+                center: [p.box_center.x as f32, p.box_center.y as f32],
+                radius: [p.box_radius.x as f32, p.box_radius.y as f32],
+                depth: p.splat.z as f32,
+                color,
+                normal,
+            },
+            options.outputs,
+        );
         kernel.splats.push(p.splat);
     }
     (screen, kernel)

@@ -24,7 +24,7 @@ use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::composite::ALPHA_THRESHOLD;
 use super::options::{RenderOptions, Rules};
-use super::screen::{Sample, ScreenSplats, SplatKernel};
+use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
 
@@ -307,28 +307,22 @@ pub fn project_ewa(
         })
         .collect();
     let visible: usize = chunks.iter().map(Vec::len).sum();
-    let mut screen = ScreenSplats {
-        ids: Vec::with_capacity(visible),
-        centers: Vec::with_capacity(visible),
-        radii: Vec::with_capacity(visible),
-        depths: Vec::with_capacity(visible),
-        colors: Vec::with_capacity(if options.outputs.rgb { visible } else { 0 }),
-        normals: Vec::with_capacity(if options.outputs.normal { visible } else { 0 }),
-    };
+    let mut screen = ScreenSplats::with_capacity(visible, options.outputs);
     let mut kernel = EwaKernel {
         splats: Vec::with_capacity(visible),
     };
     for p in chunks.into_iter().flatten() {
-        screen.ids.push(p.id);
-        screen.centers.push(p.center);
-        screen.radii.push(p.radius);
-        screen.depths.push(p.splat.depth);
-        if options.outputs.rgb {
-            screen.colors.push(p.color);
-        }
-        if options.outputs.normal {
-            screen.normals.push(p.normal);
-        }
+        screen.push(
+            ScreenEntry {
+                id: p.id,
+                center: p.center,
+                radius: p.radius,
+                depth: p.splat.depth,
+                color: p.color,
+                normal: p.normal,
+            },
+            options.outputs,
+        );
         kernel.splats.push(p.splat);
     }
     (screen, kernel)

@@ -15,6 +15,8 @@
 //! by depth and composites front to back with the [`super::composite::CompositeRules`] the mode
 //! chooses (alpha clamp, skip threshold, stop rule, pixel-centre offset, median-depth rule).
 
+use super::options::Outputs;
+
 /// One splat's contribution at one pixel, before the compositing rules are applied.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample {
@@ -130,4 +132,50 @@ impl ScreenSplats {
     pub fn is_empty(&self) -> bool {
         self.ids.is_empty()
     }
+
+    /// Empty arrays with room for `capacity` splats (colours and normals only when `outputs`
+    /// asks for them).
+    #[must_use]
+    pub fn with_capacity(capacity: usize, outputs: Outputs) -> Self {
+        Self {
+            ids: Vec::with_capacity(capacity),
+            centers: Vec::with_capacity(capacity),
+            radii: Vec::with_capacity(capacity),
+            depths: Vec::with_capacity(capacity),
+            colors: Vec::with_capacity(if outputs.rgb { capacity } else { 0 }),
+            normals: Vec::with_capacity(if outputs.normal { capacity } else { 0 }),
+        }
+    }
+
+    /// Appends one visible splat; its colour and normal are kept only when `outputs` asks for
+    /// them, so the arrays stay indexed alike.
+    pub fn push(&mut self, entry: ScreenEntry, outputs: Outputs) {
+        self.ids.push(entry.id);
+        self.centers.push(entry.center);
+        self.radii.push(entry.radius);
+        self.depths.push(entry.depth);
+        if outputs.rgb {
+            self.colors.push(entry.color);
+        }
+        if outputs.normal {
+            self.normals.push(entry.normal);
+        }
+    }
+}
+
+/// One visible splat's screen data, as [`ScreenSplats::push`] takes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScreenEntry {
+    /// Index in the source [`crate::GaussianSet`].
+    pub id: u32,
+    /// Centre of the screen box in pixels.
+    pub center: [f32; 2],
+    /// Half sizes of the screen box in pixels.
+    pub radius: [f32; 2],
+    /// Sort depth (camera z).
+    pub depth: f32,
+    /// Colour (ignored unless rgb is rendered).
+    pub color: [f32; 3],
+    /// Normal (ignored unless normals are rendered).
+    pub normal: [f32; 3],
 }

@@ -38,7 +38,7 @@ use super::composite::{
     ALPHA_THRESHOLD, CompositeRules, MedianRule, ORIGINAL_MAX_ALPHA, STOP_TRANSMITTANCE,
 };
 use super::options::RenderOptions;
-use super::screen::{Sample, ScreenSplats, SplatKernel};
+use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
 use super::tiles::{TILE_SIZE, TileRect, tile_range};
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
@@ -335,30 +335,22 @@ pub fn project_surfels(
         })
         .collect();
     let visible: usize = chunks.iter().map(Vec::len).sum();
-    let mut screen = ScreenSplats {
-        ids: Vec::with_capacity(visible),
-        centers: Vec::with_capacity(visible),
-        radii: Vec::with_capacity(visible),
-        depths: Vec::with_capacity(visible),
-        colors: Vec::with_capacity(if options.outputs.rgb { visible } else { 0 }),
-        normals: Vec::with_capacity(if options.outputs.normal { visible } else { 0 }),
-    };
+    let mut screen = ScreenSplats::with_capacity(visible, options.outputs);
     let mut kernel = SurfelKernel {
         splats: Vec::with_capacity(visible),
     };
     for (id, p, color, normal) in chunks.into_iter().flatten() {
-        screen.ids.push(id);
-        screen
-            .centers
-            .push([p.splat.center.x as f32, p.splat.center.y as f32]);
-        screen.radii.push([p.radius as f32; 2]);
-        screen.depths.push(p.depth as f32);
-        if options.outputs.rgb {
-            screen.colors.push(color);
-        }
-        if options.outputs.normal {
-            screen.normals.push(normal);
-        }
+        screen.push(
+            ScreenEntry {
+                id,
+                center: [p.splat.center.x as f32, p.splat.center.y as f32],
+                radius: [p.radius as f32; 2],
+                depth: p.depth as f32,
+                color,
+                normal,
+            },
+            options.outputs,
+        );
         kernel.splats.push(p.splat);
     }
     (screen, kernel)
