@@ -57,6 +57,10 @@ pub enum Command {
     Render(commands::render::RenderArgs),
     /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
     Cameras(commands::cameras::CamerasArgs),
+    /// The main job: per-frame meshes (tsdf, delaunay, alpha) of an animated avatar, report, plot.
+    Extract(commands::extract::ExtractArgs),
+    /// The main job on the bundled avatar fixture.
+    Demo(commands::demo::DemoArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -94,5 +98,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Prune(args) => commands::prune::run(args, &ctx),
         Command::Render(args) => commands::render::run(args, &ctx),
         Command::Cameras(args) => commands::cameras::run(args, &ctx),
+        Command::Extract(args) => commands::extract::run(args, &ctx),
+        Command::Demo(args) => commands::demo::run(args, &ctx),
     }
 }

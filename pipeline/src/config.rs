@@ -1,0 +1,228 @@
+//! What the main job is asked to do: inputs, methods, options and their defaults.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use trisplat_geometry::animation::DEFAULT_FPS;
+
+/// Default Gaussians per triangle when the pipeline binds them itself.
+pub const DEFAULT_PER_TRIANGLE: u32 = 4;
+/// Default TSDF voxel as a fraction of the template's bounding radius (radius / 256).
+pub const DEFAULT_VOXELS_PER_RADIUS: f64 = 256.0;
+/// Default number of views of the TSDF camera rig (a Fibonacci sphere around each frame).
+pub const DEFAULT_VIEWS: usize = 24;
+/// Default side of the square TSDF depth images, in pixels.
+pub const DEFAULT_RESOLUTION: u32 = 256;
+/// Vertical field of view of the TSDF rig, degrees (as `trisplat cameras`).
+pub const DEFAULT_FOV_DEG: f64 = 40.0;
+/// Default alpha of the alpha-shape method, in multiples of the mean spacing of the Gaussians
+/// (mean distance from each rest-pose mean to its nearest other mean).
+pub const DEFAULT_ALPHA_SPACINGS: f64 = 3.0;
+/// Default points sampled on each mesh for the metrics.
+pub const DEFAULT_SAMPLES: usize = 20_000;
+/// Default F-score threshold (input units; 2.5 mm for metres: "Recall@2.5mm").
+pub const DEFAULT_TAU: f64 = 0.0025;
+/// Opacity of the Gaussians the pipeline binds itself: opaque enough that the rendered
+/// alpha passes the TSDF's 0.5 mask on the surface (GaussianAvatars' 0.1 is a starting
+/// point for training, not a surface).
+pub const BIND_OPACITY: f32 = 0.9;
+/// Scale of self-bound Gaussians along their triangle's normal relative to the in-plane
+/// scale: flat discs, so that rendered depth lies on the surface.
+pub const BIND_NORMAL_SCALE: f32 = 0.1;
+
+/// Parses a positive integer (a count).
+#[cfg(feature = "cli")]
+fn parse_positive(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(format!("expected a positive integer, got '{s}'")),
+    }
+}
+
+/// An extraction method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Render depth maps of the deformed Gaussians from a camera rig and fuse them (TSDF +
+    /// marching cubes).
+    Tsdf,
+    /// Incremental Delaunay of the bound Gaussians: per-chart triangulations in the canonical
+    /// domain, lifted each frame.
+    Delaunay,
+    /// Alpha shape of the deformed Gaussian means.
+    Alpha,
+}
+
+impl Method {
+    /// Every method, in report order.
+    pub const ALL: [Self; 3] = [Self::Tsdf, Self::Delaunay, Self::Alpha];
+
+    /// The method's name on the command line and in output file names.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tsdf => "tsdf",
+            Self::Delaunay => "delaunay",
+            Self::Alpha => "alpha",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How bound Gaussians follow the template (SPEC §4).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// GaussianAvatars: rigid frame of the posed triangle plus its scale.
+    #[default]
+    Binding,
+    /// SurFhead/TGA: per-triangle deformation gradient.
+    Jacobian,
+    /// Linear blend skinning with the glTF skin's weights (the animation must be a skinned
+    /// glTF whose rest shape is the template).
+    Lbs,
+}
+
+impl Mode {
+    /// The mode's name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Binding => "binding",
+            Self::Jacobian => "jacobian",
+            Self::Lbs => "lbs",
+        }
+    }
+}
+
+/// The ground truth of the metrics.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum GroundTruth {
+    /// Each frame's deformed template (`--gt template`).
+    Template,
+    /// One static mesh for every frame.
+    Mesh(PathBuf),
+}
+
+impl GroundTruth {
+    /// Parses a `--gt` value: the word `template`, else a mesh file.
+    #[must_use]
+    pub fn parse(value: &str) -> Self {
+        if value == "template" {
+            Self::Template
+        } else {
+            Self::Mesh(PathBuf::from(value))
+        }
+    }
+
+    /// The value as given (`template` or the path).
+    #[must_use]
+    pub fn label(&self) -> String {
+        match self {
+            Self::Template => "template".to_owned(),
+            Self::Mesh(p) => p.display().to_string(),
+        }
+    }
+}
+
+/// The knobs of the main job; unset values are derived from the template (see each field).
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct ExtractOptions {
+    /// How the Gaussians follow the template (as `trisplat deform`).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = Mode::Binding))]
+    pub mode: Mode,
+    /// glTF animation clip by name or index [default: the first].
+    #[cfg_attr(feature = "cli", arg(long, value_name = "NAME|INDEX"))]
+    pub clip: Option<String>,
+    /// Sampling rate of a glTF clip, frames per second.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "F", default_value_t = DEFAULT_FPS))]
+    pub fps: f64,
+    /// Gaussians per triangle when the pipeline binds them itself (no --gaussians).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_PER_TRIANGLE,
+        value_parser = clap::value_parser!(u32).range(1..)))]
+    pub per_triangle: u32,
+    /// TSDF voxel size in scene units [default: template bounding radius / 256].
+    #[cfg_attr(feature = "cli", arg(long, value_name = "V"))]
+    pub voxel: Option<f64>,
+    /// TSDF camera views per frame (a Fibonacci sphere around the frame's bounding sphere).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_VIEWS,
+        value_parser = parse_positive))]
+    pub views: usize,
+    /// Side of the square TSDF depth images, pixels.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "PX", default_value_t = DEFAULT_RESOLUTION,
+        value_parser = clap::value_parser!(u32).range(8..=8192)))]
+    pub resolution: u32,
+    /// Alpha-shape radius in scene units [default: 3 x the mean nearest-neighbour spacing of
+    /// the rest-pose Gaussian means].
+    #[cfg_attr(feature = "cli", arg(long, value_name = "A"))]
+    pub alpha: Option<f64>,
+    /// Delaunay: rebuild from scratch every N frames (0: never; 1: every frame).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = 0))]
+    pub rebuild_every: usize,
+    /// Points sampled on each mesh for the metrics (with --gt).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_SAMPLES,
+        value_parser = parse_positive))]
+    pub samples: usize,
+    /// F-score threshold of the report, scene units.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "T", default_value_t = DEFAULT_TAU))]
+    pub tau: f64,
+}
+
+impl Default for ExtractOptions {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Binding,
+            clip: None,
+            fps: DEFAULT_FPS,
+            per_triangle: DEFAULT_PER_TRIANGLE,
+            voxel: None,
+            views: DEFAULT_VIEWS,
+            resolution: DEFAULT_RESOLUTION,
+            alpha: None,
+            rebuild_every: 0,
+            samples: DEFAULT_SAMPLES,
+            tau: DEFAULT_TAU,
+        }
+    }
+}
+
+/// A whole `trisplat extract` run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExtractConfig {
+    /// The template mesh (rest shape; a glTF may carry its own animation).
+    pub template: PathBuf,
+    /// The animation: a glTF, a folder or pattern of OBJ/PLY frames; `None`: the template's
+    /// own glTF clip, or the template alone as one frame.
+    pub animation: Option<String>,
+    /// Bound Gaussians; `None`: the pipeline binds new ones.
+    pub gaussians: Option<PathBuf>,
+    /// Methods, each run on every frame (duplicates are ignored).
+    pub methods: Vec<Method>,
+    /// Output folder.
+    pub output: PathBuf,
+    /// Frame selection `A..B`, `A..=B`, `A..`, `..B` or `A` (animation frame indices).
+    pub frames: Option<String>,
+    /// Ground truth of the metrics; `None`: no metrics.
+    pub gt: Option<GroundTruth>,
+    /// The knobs.
+    pub options: ExtractOptions,
+}
+
+impl ExtractConfig {
+    /// The methods asked for, without duplicates, in report order (tsdf, delaunay, alpha).
+    #[must_use]
+    pub fn methods(&self) -> Vec<Method> {
+        Method::ALL
+            .into_iter()
+            .filter(|m| self.methods.contains(m))
+            .collect()
+    }
+}

@@ -1,0 +1,224 @@
+//! The one error type of the pipeline: every variant names the file, frame or option at fault.
+
+use std::path::PathBuf;
+
+use trisplat_extract::alpha_shape::AlphaError;
+use trisplat_extract::incremental_delaunay::DelaunayError;
+use trisplat_extract::tsdf::TsdfError;
+use trisplat_geometry::animation::AnimationError;
+use trisplat_geometry::camera::CameraError;
+use trisplat_geometry::io::IoError;
+use trisplat_geometry::metrics::MetricsError;
+use trisplat_splat::bind::BindError;
+use trisplat_splat::deform::DeformError;
+use trisplat_splat::lbs::LbsError;
+use trisplat_splat::render::RenderError;
+
+use crate::Method;
+
+/// Why the pipeline stopped.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PipelineError {
+    /// A file could not be read or written (the error names it and the element).
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// The Gaussian file could not be read (the error names it and the Gaussian).
+    #[error(transparent)]
+    Ply(#[from] trisplat_splat::ply::PlyError),
+    /// The animation could not be opened or evaluated (the error names the file).
+    #[error(transparent)]
+    Animation(#[from] AnimationError),
+    /// No extraction method was asked for.
+    #[error("--method: name at least one of tsdf, delaunay, alpha")]
+    NoMethod,
+    /// An option is not a finite positive number (or out of its range).
+    #[error("--{name} {value}: {expected}")]
+    BadOption {
+        /// The option's name.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// What it must be.
+        expected: &'static str,
+    },
+    /// `--frames` does not parse or selects no frame of the animation.
+    #[error("--frames {spec}: {problem}")]
+    Frames {
+        /// The value given.
+        spec: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The template has no triangles.
+    #[error("{path}: the template has no triangles")]
+    EmptyTemplate {
+        /// The template file.
+        path: PathBuf,
+    },
+    /// The animation's frames do not have the template's vertices or triangles.
+    #[error(
+        "{animation}: the animation's {what} differ from those of the template {template} \
+         ({animation_count} vs {template_count})"
+    )]
+    Topology {
+        /// The animation source.
+        animation: String,
+        /// The template file.
+        template: PathBuf,
+        /// `vertices` or `triangles`.
+        what: &'static str,
+        /// Count (or first differing index) in the animation.
+        animation_count: usize,
+        /// Count (or first differing index) in the template.
+        template_count: usize,
+    },
+    /// The Gaussian file has no triangle binding.
+    #[error(
+        "{path}: the Gaussians are not bound to triangles (no `binding_0`/`binding` property); \
+         use `trisplat bind` first or leave out --gaussians"
+    )]
+    NotBound {
+        /// The Gaussian file.
+        path: PathBuf,
+    },
+    /// The Gaussians cannot be deformed with this template (bound to another template, world
+    /// space parameters, ...).
+    #[error("{path}: {source} (template {template})")]
+    Gaussians {
+        /// The Gaussian file.
+        path: PathBuf,
+        /// The template file.
+        template: PathBuf,
+        /// What the deformer found.
+        source: DeformError,
+    },
+    /// A Gaussian file whose own validity report has a problem.
+    #[error("{path}: {issue} (template {template})")]
+    GaussianIssue {
+        /// The Gaussian file.
+        path: PathBuf,
+        /// The template file.
+        template: PathBuf,
+        /// The first issue of the report.
+        issue: String,
+    },
+    /// Binding new Gaussians to the template failed.
+    #[error("{path}: binding Gaussians: {source}")]
+    Bind {
+        /// The template file.
+        path: PathBuf,
+        /// Why.
+        source: BindError,
+    },
+    /// `--mode lbs` without a skinned glTF, or with a template that is not its rest shape.
+    #[error("{path}: {problem}")]
+    Lbs {
+        /// The animation or template file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The skinning rig could not be built or evaluated.
+    #[error("{path}: frame {frame}: {source}")]
+    Skinning {
+        /// The animation file.
+        path: PathBuf,
+        /// Animation frame (or 0 when building the rig).
+        frame: usize,
+        /// Why.
+        source: LbsError,
+    },
+    /// Deforming the Gaussians to a frame failed.
+    #[error("{path}: frame {frame}: {source}")]
+    Deform {
+        /// The animation source.
+        path: String,
+        /// Animation frame.
+        frame: usize,
+        /// Why.
+        source: DeformError,
+    },
+    /// The camera rig around a frame could not be built.
+    #[error("frame {frame}: camera rig: {source}")]
+    Cameras {
+        /// Animation frame.
+        frame: usize,
+        /// Why.
+        source: CameraError,
+    },
+    /// Rendering depth for the TSDF method failed.
+    #[error("frame {frame}: rendering camera {camera}: {source}")]
+    Render {
+        /// Animation frame.
+        frame: usize,
+        /// Camera name.
+        camera: String,
+        /// Why.
+        source: RenderError,
+    },
+    /// TSDF fusion failed.
+    #[error("frame {frame}: tsdf: {source}")]
+    Tsdf {
+        /// Animation frame.
+        frame: usize,
+        /// Why.
+        source: TsdfError,
+    },
+    /// Incremental Delaunay meshing failed.
+    #[error("frame {frame}: delaunay: {source}")]
+    Delaunay {
+        /// Animation frame (or the first selected frame when building).
+        frame: usize,
+        /// Why.
+        source: DelaunayError,
+    },
+    /// The alpha shape failed.
+    #[error("frame {frame}: alpha: {source}")]
+    Alpha {
+        /// Animation frame.
+        frame: usize,
+        /// Why.
+        source: AlphaError,
+    },
+    /// Metrics against the ground truth failed.
+    #[error("{gt}: frame {frame}, method {method}: {source}")]
+    Metrics {
+        /// The ground truth (file or `template`).
+        gt: String,
+        /// Animation frame.
+        frame: usize,
+        /// The method whose mesh was measured.
+        method: Method,
+        /// Why.
+        source: MetricsError,
+    },
+    /// The ground-truth mesh has no surface to compare against.
+    #[error("{gt}: the ground truth has zero surface area (frame {frame})")]
+    EmptyGroundTruth {
+        /// The ground truth (file or `template`).
+        gt: String,
+        /// Animation frame.
+        frame: usize,
+    },
+    /// An output would replace an input file.
+    #[error("{path}: refusing to overwrite an input file; choose another output folder")]
+    OverwriteInput {
+        /// The output path.
+        path: PathBuf,
+    },
+    /// The output folder cannot be created.
+    #[error("{path}: cannot create the output folder: {source}")]
+    OutputDir {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A broken invariant of the pipeline itself (a bug: please report it).
+    #[error("internal error: {what}")]
+    Internal {
+        /// What went wrong.
+        what: &'static str,
+    },
+}

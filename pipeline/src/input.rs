@@ -1,0 +1,347 @@
+//! Reading the inputs: the template, its animation, the Gaussians (bound or bound here), the
+//! frame range and the ground truth.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::animation::{
+    AnimatedTemplate, Clip, GltfTemplate, MeshSequence, WeightsTrack,
+};
+use trisplat_geometry::io::read_mesh;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::bind::{BindOptions, init_bound};
+use trisplat_splat::deform::{DeformMode, Deformer};
+use trisplat_splat::frames::Convention;
+use trisplat_splat::ply::read_gaussians;
+
+use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, ExtractConfig, Mode};
+use crate::error::PipelineError;
+
+/// Largest difference between the template's positions and a skinned animation's rest pose
+/// that `lbs` accepts, relative to the template's bounding-box diagonal (as `trisplat deform`).
+pub const LBS_REST_TOLERANCE: f64 = 1e-5;
+
+/// The animation source; glTF kept concrete for `lbs`.
+pub enum Animation {
+    /// A glTF/GLB clip (skins, morphs, node animation).
+    Gltf(Box<GltfTemplate>),
+    /// Anything else (frame files, blendshape weights, or the template alone).
+    Other(Box<dyn AnimatedTemplate>),
+}
+
+impl Animation {
+    /// The animation as the common trait.
+    #[must_use]
+    pub fn get(&self) -> &dyn AnimatedTemplate {
+        match self {
+            Self::Gltf(g) => g.as_ref(),
+            Self::Other(o) => o.as_ref(),
+        }
+    }
+}
+
+/// A template without animation: one frame, the template itself.
+struct Still {
+    mesh: TriMesh,
+}
+
+impl AnimatedTemplate for Still {
+    fn frame_count(&self) -> usize {
+        1
+    }
+
+    fn frame_time(&self, frame: usize) -> Option<f64> {
+        (frame == 0).then_some(0.0)
+    }
+
+    fn topology(&self) -> &[[u32; 3]] {
+        self.mesh.triangles()
+    }
+
+    fn rest(&self) -> &TriMesh {
+        &self.mesh
+    }
+
+    fn frame(
+        &self,
+        frame: usize,
+    ) -> Result<Vec<Vec3>, trisplat_geometry::animation::AnimationError> {
+        if frame == 0 {
+            Ok(self.mesh.positions().to_vec())
+        } else {
+            Err(trisplat_geometry::animation::AnimationError::FrameOutOfRange { frame, count: 1 })
+        }
+    }
+}
+
+fn extension(path: &Path) -> String {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+fn is_gltf(path: &Path) -> bool {
+    matches!(extension(path).as_str(), "gltf" | "glb")
+}
+
+/// The template's label for messages: the animation argument, or the template file.
+#[must_use]
+pub fn animation_label(config: &ExtractConfig) -> String {
+    config
+        .animation
+        .clone()
+        .unwrap_or_else(|| config.template.display().to_string())
+}
+
+fn clip_of(clip: Option<&str>) -> Clip {
+    match clip {
+        None => Clip::Index(0),
+        Some(s) => match s.parse::<usize>() {
+            Ok(i) => Clip::Index(i),
+            Err(_) => Clip::Name(s.to_string()),
+        },
+    }
+}
+
+/// Opens a glTF with `clip`; a file without animations plays its stored scene unless a clip was
+/// asked for.
+fn open_gltf(path: &Path, clip: Option<&str>, fps: f64) -> Result<GltfTemplate, PipelineError> {
+    let first = GltfTemplate::open(path, &Clip::None)?;
+    if first.clip_names().is_empty() && clip.is_none() {
+        return Ok(first.with_fps(fps));
+    }
+    Ok(GltfTemplate::open(path, &clip_of(clip))?.with_fps(fps))
+}
+
+/// Opens the animation of `config` (see [`crate::config::ExtractConfig::animation`]) and lists
+/// the files it reads (never to be overwritten).
+///
+/// # Errors
+/// Unreadable files (named), a bad `--fps`, a weights file without a glTF template.
+pub fn open_animation(
+    config: &ExtractConfig,
+    template: &TriMesh,
+) -> Result<(Animation, Vec<PathBuf>), PipelineError> {
+    let o = &config.options;
+    if !(o.fps.is_finite() && o.fps > 0.0) {
+        return Err(PipelineError::BadOption {
+            name: "fps",
+            value: o.fps,
+            expected: "a positive number of frames per second",
+        });
+    }
+    let Some(a) = &config.animation else {
+        if is_gltf(&config.template) {
+            let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
+            return Ok((Animation::Gltf(Box::new(g)), Vec::new()));
+        }
+        let still = Still {
+            mesh: template.clone(),
+        };
+        return Ok((Animation::Other(Box::new(still)), Vec::new()));
+    };
+    let path = Path::new(a);
+    if is_gltf(path) {
+        let g = open_gltf(path, o.clip.as_deref(), o.fps)?;
+        return Ok((Animation::Gltf(Box::new(g)), vec![path.to_path_buf()]));
+    }
+    if extension(path) == "json" {
+        if !is_gltf(&config.template) {
+            return Err(PipelineError::Lbs {
+                path: path.to_path_buf(),
+                problem: "a weights file drives the morph targets of a glTF template; for \
+                          OBJ/PLY blendshape targets run `trisplat deform --targets` instead"
+                    .to_owned(),
+            });
+        }
+        let track = WeightsTrack::read(path)?;
+        let g = GltfTemplate::open(&config.template, &Clip::None)?;
+        let morph = trisplat_geometry::animation::GltfMorphAnimation::new(g, track)?;
+        return Ok((Animation::Other(Box::new(morph)), vec![path.to_path_buf()]));
+    }
+    let sequence = MeshSequence::from_pattern(a)?.with_fps(o.fps);
+    let files = sequence.files().to_vec();
+    Ok((Animation::Other(Box::new(sequence)), files))
+}
+
+/// Checks that the animation's frames have the template's vertices and triangles.
+///
+/// # Errors
+/// [`PipelineError::Topology`] naming the first difference.
+pub fn check_topology(
+    template: &TriMesh,
+    config: &ExtractConfig,
+    anim: &dyn AnimatedTemplate,
+) -> Result<(), PipelineError> {
+    let rest = anim.rest();
+    let err = |what, animation_count, template_count| PipelineError::Topology {
+        animation: animation_label(config),
+        template: config.template.clone(),
+        what,
+        animation_count,
+        template_count,
+    };
+    if rest.vertex_count() != template.vertex_count() {
+        return Err(err(
+            "vertex counts",
+            rest.vertex_count(),
+            template.vertex_count(),
+        ));
+    }
+    if rest.triangles() != template.triangles() {
+        return Err(err(
+            "triangles",
+            rest.triangle_count(),
+            template.triangle_count(),
+        ));
+    }
+    Ok(())
+}
+
+/// Parses `A..B` (B excluded), `A..=B`, `A..`, `..B` or `A` against `count` frames; `None` is
+/// every frame.
+///
+/// # Errors
+/// [`PipelineError::Frames`] for a malformed, empty or out-of-range selection.
+pub fn parse_frames(spec: Option<&str>, count: usize) -> Result<Range<usize>, PipelineError> {
+    let Some(spec) = spec else {
+        return Ok(0..count);
+    };
+    let err = |problem: String| PipelineError::Frames {
+        spec: spec.to_owned(),
+        problem,
+    };
+    let num = |s: &str, default: usize| -> Result<usize, PipelineError> {
+        let s = s.trim();
+        if s.is_empty() {
+            Ok(default)
+        } else {
+            s.parse::<usize>()
+                .map_err(|_| err(format!("`{s}` is not a frame number")))
+        }
+    };
+    let range = if let Some((a, b)) = spec.split_once("..=") {
+        num(a, 0)?..num(b, usize::MAX)?.saturating_add(1)
+    } else if let Some((a, b)) = spec.split_once("..") {
+        num(a, 0)?..num(b, count)?
+    } else {
+        let f = num(spec, 0)?;
+        f..f.saturating_add(1)
+    };
+    if range.start >= range.end {
+        return Err(err("the range is empty".to_owned()));
+    }
+    if range.end > count {
+        return Err(err(format!(
+            "the animation has {count} frame(s) (0..{count})"
+        )));
+    }
+    Ok(range)
+}
+
+/// The deform mode of the library for a pipeline mode (`lbs` bakes its rest pose in binding
+/// mode).
+#[must_use]
+pub fn deform_mode(mode: Mode) -> DeformMode {
+    match mode {
+        Mode::Jacobian => DeformMode::Jacobian,
+        Mode::Binding | Mode::Lbs => DeformMode::Binding,
+    }
+}
+
+/// Where the Gaussians came from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum GaussianSource {
+    /// Read from this bound file.
+    File(PathBuf),
+    /// Bound here: this many per triangle.
+    Bound(u32),
+}
+
+/// Reads the bound Gaussians of `config`, or binds new ones (opaque, flat discs: see
+/// [`BIND_OPACITY`] and [`BIND_NORMAL_SCALE`]); checks they fit the template.
+///
+/// # Errors
+/// Unreadable or unbound files, bindings past the template's triangles, parameters in world
+/// space, a failed binding.
+pub fn gaussians(
+    config: &ExtractConfig,
+    template: &TriMesh,
+) -> Result<(GaussianSet, GaussianSource), PipelineError> {
+    let mode = config.options.mode;
+    let (set, source) = match &config.gaussians {
+        Some(path) => {
+            let set = read_gaussians(path)?;
+            if set.binding().is_none() {
+                return Err(PipelineError::NotBound { path: path.clone() });
+            }
+            if let Some(issue) = set
+                .report(Some(template.triangle_count()))
+                .issues
+                .into_iter()
+                .next()
+            {
+                return Err(PipelineError::GaussianIssue {
+                    path: path.clone(),
+                    template: config.template.clone(),
+                    issue: issue.to_string(),
+                });
+            }
+            (set, GaussianSource::File(path.clone()))
+        }
+        None => {
+            let convention = if mode == Mode::Jacobian {
+                Convention::SurfHead
+            } else {
+                Convention::GaussianAvatars
+            };
+            let options = BindOptions {
+                per_triangle: config.options.per_triangle as usize,
+                convention,
+                opacity: BIND_OPACITY,
+            };
+            let set = init_bound(template, &options).map_err(|source| PipelineError::Bind {
+                path: config.template.clone(),
+                source,
+            })?;
+            (
+                flatten(set, convention),
+                GaussianSource::Bound(config.options.per_triangle),
+            )
+        }
+    };
+    let path = config.gaussians.clone().unwrap_or_default();
+    Deformer::new(template, deform_mode(mode))
+        .check(&set)
+        .map_err(|source| PipelineError::Gaussians {
+            path,
+            template: config.template.clone(),
+            source,
+        })?;
+    Ok((set, source))
+}
+
+/// Shrinks the local scale along the triangle normal by [`BIND_NORMAL_SCALE`] (local y for
+/// GaussianAvatars, local z for SurfHead).
+fn flatten(set: GaussianSet, convention: Convention) -> GaussianSet {
+    let ln = BIND_NORMAL_SCALE.ln();
+    let mut parts = set.into_parts();
+    for s in &mut parts.log_scales {
+        match convention {
+            Convention::GaussianAvatars => s.y += ln,
+            Convention::SurfHead => s.z += ln,
+        }
+    }
+    // Only finite log-scales were shifted by a finite amount: the set stays valid.
+    GaussianSet::new_unchecked(parts)
+}
+
+/// Reads a static ground-truth mesh.
+///
+/// # Errors
+/// An unreadable file.
+pub fn read_gt(path: &Path) -> Result<TriMesh, PipelineError> {
+    Ok(read_mesh(path)?)
+}

@@ -1,0 +1,62 @@
+//! The main job of trisplat (`trisplat extract`, `trisplat demo`): an animated template and
+//! Gaussians bound to its triangles in, one mesh per frame and method out, with timings,
+//! metrics against a ground truth, a report and a plot.
+//!
+//! # Stages (SPEC §1)
+//! A run does only the stages its arguments need; [`Plan`] lists them with the reason each
+//! runs or is skipped (`--explain` prints it):
+//!
+//! 1. **animate**: read the template T and open the animation A: a glTF clip (`--clip`,
+//!    sampled at `--fps`), a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
+//!    JSON driving a glTF template's morph targets. Without A, a glTF template plays its own
+//!    first clip; any other template is one still frame.
+//! 2. **bind** (only without `--gaussians`): `--per-triangle` Gaussians per triangle
+//!    (default [`config::DEFAULT_PER_TRIANGLE`]), spread evenly, opacity
+//!    [`config::BIND_OPACITY`], flattened along the triangle normal to
+//!    [`config::BIND_NORMAL_SCALE`] of their in-plane size: opaque surface discs, since
+//!    untrained GaussianAvatars-style blobs (opacity 0.1, isotropic) render no surface.
+//! 3. **deform**: every frame, `binding`, `jacobian` or `lbs` (as `trisplat deform`).
+//! 4. **render** (only for `tsdf`): expected depth from a sphere rig around each frame.
+//! 5. **mesh**: `tsdf`, `delaunay` and/or `alpha` (module [`methods`] for their defaults).
+//! 6. **metrics** (only with a ground truth): SPEC §8 in surface mode against each frame's
+//!    deformed template (`--gt template`) or one static mesh (`--gt FILE`).
+//! 7. **write**: `DIR/<method>/frame_NNNNNN.ply` (NNNNNN = animation frame index) and
+//!    `DIR/<method>.glb`, the animated sequence.
+//! 8. **report**: `DIR/report.json`, `DIR/report.md`, `DIR/error_vs_time.png`.
+//!
+//! # Defaults, derived from the template so that any scale works
+//! - TSDF voxel: template bounding radius / [`config::DEFAULT_VOXELS_PER_RADIUS`]; truncation
+//!   5 voxels; [`config::DEFAULT_VIEWS`] views of [`config::DEFAULT_RESOLUTION`]² pixels,
+//!   40° field of view, framing each frame's bounding sphere with a 10% margin.
+//! - Alpha: [`config::DEFAULT_ALPHA_SPACINGS`] × the mean nearest-neighbour spacing of the
+//!   rest-pose Gaussian means.
+//! - Delaunay: incremental (hop threshold 0: each frame equals a from-scratch triangulation);
+//!   `--rebuild-every N` rebuilds every N frames, 1 on every frame.
+//! - Metrics: [`config::DEFAULT_SAMPLES`] samples per mesh, F-score at
+//!   [`config::DEFAULT_TAU`] (input units).
+//!
+//! # Timing
+//! Each method's milliseconds per frame cover its own work only: rendering plus fusion for
+//! tsdf, the update plus mesh assembly for delaunay, the tetrahedralisation and boundary for
+//! alpha. Reading the frame, deforming (reported once as `deform_ms`), metrics and file
+//! writes are not included. Methods run one after the other, each using every thread.
+//!
+//! # Errors
+//! One [`PipelineError`] naming the file, frame, method or option at fault; files the run
+//! created are removed again. Outputs are written atomically and never over an input.
+
+pub mod config;
+pub mod error;
+mod font;
+pub mod input;
+pub mod methods;
+pub mod plan;
+pub mod plot;
+pub mod report;
+pub mod run;
+
+pub use config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode};
+pub use error::PipelineError;
+pub use plan::{Plan, Stage, StagePlan};
+pub use report::Report;
+pub use run::{Progress, run};

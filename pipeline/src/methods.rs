@@ -1,0 +1,350 @@
+//! The three meshers, each turning one deformed frame into a mesh, and the scale-derived
+//! defaults of their parameters.
+//!
+//! - **tsdf**: a sphere rig of `views` cameras (geometry's `sphere_rig`, 40° field of view)
+//!   around the bounding sphere of the frame (deformed template and Gaussian means), expected
+//!   depth rendered from the deformed Gaussians (3DGS, gsplat rules) and masked where the
+//!   rendered alpha is below [`RENDERED_ALPHA_MIN`], fused with the extract crate's TSDF at
+//!   `voxel` (default: template radius / 256), truncation 5 voxels, depth truncation twice the
+//!   rig's scene radius, largest connected piece kept.
+//! - **delaunay**: [`IncrementalDelaunay`] over the rest template and the Gaussians' canonical
+//!   means; each frame moves vertices and redoes only the charts Gaussians hopped into or out
+//!   of (`rebuild_every` forces full rebuilds).
+//! - **alpha**: the alpha shape of the deformed means at `alpha` (default
+//!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
+//!   means).
+
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use trisplat_extract::alpha_shape::alpha_shape;
+use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelaunay};
+use trisplat_extract::tsdf::{DepthImage, TsdfOptions, fuse};
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::camera::sphere_rig;
+use trisplat_geometry::spatial::PointIndex;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::deform::DeformMode;
+use trisplat_splat::render::{Outputs, RenderOptions, render};
+
+use crate::config::{
+    DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS, ExtractOptions, Method,
+};
+use crate::error::PipelineError;
+
+/// Pixels whose rendered alpha is below this carry no depth (as `trisplat tsdf --gaussians`
+/// and 2DGS).
+pub const RENDERED_ALPHA_MIN: f32 = 0.5;
+
+/// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
+/// point still gets a rig).
+const MIN_RADIUS_REL: f64 = f32::EPSILON as f64;
+
+/// One deformed frame, as every mesher sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInput<'a> {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Deformed template vertices.
+    pub positions: &'a [Vec3],
+    /// Deformed Gaussian means.
+    pub means: &'a [Vec3],
+    /// The whole deformed (world-space) Gaussian set; present when the tsdf method runs.
+    pub world: Option<&'a GaussianSet>,
+}
+
+/// One method's mesh of one frame.
+#[derive(Clone, Debug)]
+pub struct MethodOutput {
+    /// The mesh.
+    pub mesh: TriMesh,
+    /// Wall time of the method on this frame, milliseconds (rendering included for tsdf).
+    pub ms: f64,
+    /// Of which rendering depth maps (tsdf only), milliseconds.
+    pub render_ms: Option<f64>,
+}
+
+/// Centre and radius of the bounding sphere (about the box centre) of some point sets.
+#[must_use]
+pub fn bounding_sphere(sets: &[&[Vec3]]) -> Option<(DVec3, f64)> {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for p in sets.iter().flat_map(|s| s.iter()) {
+        let p = p.as_dvec3();
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return None;
+    }
+    let center = (lo + hi) * 0.5;
+    let radius = sets
+        .iter()
+        .flat_map(|s| s.iter())
+        .map(|p| (p.as_dvec3() - center).length())
+        .fold(0.0, f64::max);
+    let floor = MIN_RADIUS_REL * center.length().max(1.0);
+    Some((center, radius.max(floor)))
+}
+
+/// Mean distance from each point to its nearest other point (0 for a single point or only
+/// duplicates); `None` when the points cannot be indexed (none, or non-finite coordinates).
+#[must_use]
+pub fn mean_spacing(points: &[Vec3]) -> Option<f64> {
+    let index = PointIndex::new(points).ok()?;
+    let near = index.k_nearest_batch(points, 2).ok()?;
+    let sum: f64 = near
+        .iter()
+        .map(|n| n.iter().map(|x| x.distance).fold(0.0, f64::max))
+        .sum();
+    Some(sum / points.len().max(1) as f64)
+}
+
+/// Scale-derived parameters of the methods, resolved once for the run.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Resolved {
+    /// Bounding radius of the rest template (about its box centre).
+    pub template_radius: f64,
+    /// Mean nearest-neighbour spacing of the rest-pose Gaussian means.
+    pub mean_spacing: f64,
+    /// TSDF voxel.
+    pub voxel: f64,
+    /// Alpha-shape radius.
+    pub alpha: f64,
+}
+
+impl Resolved {
+    /// Resolves the defaults from the rest template and the rest-pose means.
+    ///
+    /// # Errors
+    /// [`PipelineError::BadOption`] for a given voxel or alpha that is not finite and
+    /// positive, or a template without a finite extent.
+    pub fn new(
+        options: &ExtractOptions,
+        rest: &TriMesh,
+        rest_means: &[Vec3],
+    ) -> Result<Self, PipelineError> {
+        let Some((_, template_radius)) = bounding_sphere(&[rest.positions()]) else {
+            return Err(PipelineError::BadOption {
+                name: "template",
+                value: f64::NAN,
+                expected: "a template with finite vertices",
+            });
+        };
+        let spacing = mean_spacing(rest_means).unwrap_or(0.0);
+        // Only duplicates (or one Gaussian): fall back to the template's scale.
+        let spacing = if spacing > 0.0 {
+            spacing
+        } else {
+            template_radius / DEFAULT_VOXELS_PER_RADIUS
+        };
+        let check = |name, v: Option<f64>, default: f64| match v {
+            Some(v) if !(v.is_finite() && v > 0.0) => Err(PipelineError::BadOption {
+                name,
+                value: v,
+                expected: "a finite positive length in scene units",
+            }),
+            Some(v) => Ok(v),
+            None => Ok(default),
+        };
+        Ok(Self {
+            template_radius,
+            mean_spacing: spacing,
+            voxel: check(
+                "voxel",
+                options.voxel,
+                template_radius / DEFAULT_VOXELS_PER_RADIUS,
+            )?,
+            alpha: check("alpha", options.alpha, DEFAULT_ALPHA_SPACINGS * spacing)?,
+        })
+    }
+}
+
+/// TSDF mesher settings.
+#[derive(Clone, Copy, Debug)]
+pub struct TsdfMesher {
+    voxel: f64,
+    views: usize,
+    resolution: u32,
+}
+
+impl TsdfMesher {
+    fn mesh(&self, input: &FrameInput<'_>) -> Result<MethodOutput, PipelineError> {
+        let start = Instant::now();
+        let frame = input.frame;
+        let Some(world) = input.world else {
+            return Err(PipelineError::Internal {
+                what: "the tsdf method was given no deformed Gaussian set",
+            });
+        };
+        let Some((center, radius)) = bounding_sphere(&[input.positions, input.means]) else {
+            return Ok(MethodOutput {
+                mesh: TriMesh::default(),
+                ms: start.elapsed().as_secs_f64() * 1e3,
+                render_ms: Some(0.0),
+            });
+        };
+        let cameras = sphere_rig(
+            center,
+            radius,
+            self.views,
+            (self.resolution, self.resolution),
+            DEFAULT_FOV_DEG,
+        )
+        .map_err(|source| PipelineError::Cameras { frame, source })?;
+        let options = RenderOptions {
+            outputs: Outputs {
+                rgb: false,
+                alpha: true,
+                depth: true,
+                median_depth: false,
+                normal: false,
+            },
+            ..RenderOptions::default()
+        };
+        let mut depths = Vec::with_capacity(cameras.len());
+        for camera in &cameras {
+            let out = render(world, camera, &options).map_err(|source| PipelineError::Render {
+                frame,
+                camera: camera.name.clone(),
+                source,
+            })?;
+            let (Some(mut depth), Some(alpha)) = (out.images.depth, out.images.alpha) else {
+                return Err(PipelineError::Render {
+                    frame,
+                    camera: camera.name.clone(),
+                    source: trisplat_splat::render::RenderError::LocalParameters,
+                });
+            };
+            for (d, a) in depth.iter_mut().zip(&alpha) {
+                if *a < RENDERED_ALPHA_MIN {
+                    *d = 0.0;
+                }
+            }
+            let image = DepthImage::try_new(camera.width, camera.height, depth)
+                .map_err(|source| PipelineError::Tsdf { frame, source })?;
+            depths.push(image);
+        }
+        let render_ms = start.elapsed().as_secs_f64() * 1e3;
+        let options = TsdfOptions {
+            voxel: Some(self.voxel),
+            ..TsdfOptions::default()
+        };
+        let fused = fuse(&cameras, &depths, None, &options)
+            .map_err(|source| PipelineError::Tsdf { frame, source })?;
+        Ok(MethodOutput {
+            mesh: fused.mesh,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+            render_ms: Some(render_ms),
+        })
+    }
+}
+
+/// A method with its state across frames.
+#[derive(Debug)]
+pub enum Mesher {
+    /// Render + fuse.
+    Tsdf(TsdfMesher),
+    /// Incremental Delaunay (keeps its triangulation between frames).
+    Delaunay(Box<IncrementalDelaunay>),
+    /// Alpha shape at this radius.
+    Alpha(f64),
+}
+
+impl Mesher {
+    /// A mesher for `method` on the rest template `rest` and the bound Gaussians `set`.
+    /// `first_frame` only labels errors.
+    ///
+    /// # Errors
+    /// [`PipelineError::Delaunay`] when the incremental mesher cannot be built.
+    pub fn new(
+        method: Method,
+        options: &ExtractOptions,
+        resolved: &Resolved,
+        rest: &TriMesh,
+        set: &GaussianSet,
+        mode: DeformMode,
+        first_frame: usize,
+    ) -> Result<Self, PipelineError> {
+        Ok(match method {
+            Method::Tsdf => Self::Tsdf(TsdfMesher {
+                voxel: resolved.voxel,
+                views: options.views,
+                resolution: options.resolution,
+            }),
+            Method::Delaunay => {
+                let d_options = DelaunayOptions {
+                    rebuild_every: options.rebuild_every,
+                    ..DelaunayOptions::default()
+                };
+                let d = IncrementalDelaunay::from_bound(rest, set, mode, d_options).map_err(
+                    |source| PipelineError::Delaunay {
+                        frame: first_frame,
+                        source,
+                    },
+                )?;
+                Self::Delaunay(Box::new(d))
+            }
+            Method::Alpha => Self::Alpha(resolved.alpha),
+        })
+    }
+
+    /// Meshes one frame.
+    ///
+    /// # Errors
+    /// The method's failure, naming the frame.
+    pub fn mesh(&mut self, input: &FrameInput<'_>) -> Result<MethodOutput, PipelineError> {
+        let frame = input.frame;
+        match self {
+            Self::Tsdf(t) => t.mesh(input),
+            Self::Delaunay(d) => {
+                let start = Instant::now();
+                d.update(input.positions, input.means)
+                    .map_err(|source| PipelineError::Delaunay { frame, source })?;
+                let mesh = d.mesh();
+                Ok(MethodOutput {
+                    mesh,
+                    ms: start.elapsed().as_secs_f64() * 1e3,
+                    render_ms: None,
+                })
+            }
+            Self::Alpha(alpha) => {
+                let start = Instant::now();
+                let shape = alpha_shape(input.means, *alpha)
+                    .map_err(|source| PipelineError::Alpha { frame, source })?;
+                Ok(MethodOutput {
+                    mesh: shape.mesh,
+                    ms: start.elapsed().as_secs_f64() * 1e3,
+                    render_ms: None,
+                })
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounding_sphere_of_a_box() {
+        let pts = [Vec3::new(-1.0, 0.0, 0.0), Vec3::new(1.0, 2.0, 0.0)];
+        let (c, r) = bounding_sphere(&[&pts]).expect("finite");
+        assert_eq!(c, DVec3::new(0.0, 1.0, 0.0));
+        assert!((r - 2f64.sqrt()).abs() < 1e-12);
+        assert!(bounding_sphere(&[&[]]).is_none());
+        // One point: a tiny positive radius.
+        let (_, r) = bounding_sphere(&[&[Vec3::ONE]]).expect("finite");
+        assert!(r > 0.0);
+    }
+
+    #[test]
+    fn spacing_of_a_grid() {
+        let pts: Vec<Vec3> = (0..10)
+            .flat_map(|i| (0..10).map(move |j| Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0)))
+            .collect();
+        let s = mean_spacing(&pts).expect("finite");
+        assert!((s - 0.5).abs() < 1e-6, "{s}");
+        assert_eq!(mean_spacing(&[]), None);
+    }
+}

@@ -1,0 +1,310 @@
+//! The stages a run needs, decided from the arguments alone (no file is read), each with the
+//! reason it runs or is skipped: what `trisplat extract --explain` prints.
+
+use std::fmt;
+
+use crate::config::{
+    DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
+};
+
+/// A stage of the main job (SPEC §1), in the order they run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Read the template and open its animation.
+    Animate,
+    /// Bind new Gaussians to the template's triangles.
+    Bind,
+    /// Deform the bound Gaussians to every frame.
+    Deform,
+    /// Render depth maps of the deformed Gaussians (CPU splatting).
+    Render,
+    /// Mesh every frame with one method.
+    Mesh(Method),
+    /// Chamfer, normal consistency and F-score against the ground truth.
+    Metrics,
+    /// Per-frame PLY files and one animated glTF per method.
+    Write,
+    /// report.json, report.md and error_vs_time.png.
+    Report,
+}
+
+impl fmt::Display for Stage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Animate => f.write_str("animate"),
+            Self::Bind => f.write_str("bind"),
+            Self::Deform => f.write_str("deform"),
+            Self::Render => f.write_str("render"),
+            Self::Mesh(m) => write!(f, "mesh:{m}"),
+            Self::Metrics => f.write_str("metrics"),
+            Self::Write => f.write_str("write"),
+            Self::Report => f.write_str("report"),
+        }
+    }
+}
+
+/// One stage of the plan.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StagePlan {
+    /// The stage.
+    pub stage: Stage,
+    /// Whether it runs.
+    pub runs: bool,
+    /// Why it runs (and with what) or why it is skipped.
+    pub why: String,
+}
+
+/// The stages of a run, in order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Plan {
+    /// Every stage, run or skipped.
+    pub stages: Vec<StagePlan>,
+}
+
+impl Plan {
+    /// The plan for `config`.
+    #[must_use]
+    pub fn new(config: &ExtractConfig) -> Self {
+        let o = &config.options;
+        let methods = config.methods();
+        let mut stages = Vec::new();
+        let mut push = |stage, runs, why: String| stages.push(StagePlan { stage, runs, why });
+
+        let t = config.template.display();
+        let animate = match &config.animation {
+            Some(a) => format!("template {t}, animation {a}"),
+            None => format!(
+                "template {t}; no --animation: its own glTF clip if it has one, else one frame"
+            ),
+        };
+        push(Stage::Animate, true, animate);
+
+        match &config.gaussians {
+            Some(g) => push(
+                Stage::Bind,
+                false,
+                format!("--gaussians {} is already bound", g.display()),
+            ),
+            None => push(
+                Stage::Bind,
+                true,
+                format!(
+                    "no --gaussians: {} per triangle ({} convention), opaque flat discs",
+                    o.per_triangle,
+                    if o.mode == Mode::Jacobian {
+                        "surfhead"
+                    } else {
+                        "gaussianavatars"
+                    }
+                ),
+            ),
+        }
+
+        let frames = config.frames.as_deref().unwrap_or("all");
+        push(
+            Stage::Deform,
+            true,
+            format!("mode {}, frames {frames}", o.mode.name()),
+        );
+
+        if methods.contains(&Method::Tsdf) {
+            push(
+                Stage::Render,
+                true,
+                format!(
+                    "tsdf needs depth maps: {} views of {}x{} px per frame (expected depth, alpha >= 0.5)",
+                    o.views, o.resolution, o.resolution
+                ),
+            );
+        } else {
+            push(
+                Stage::Render,
+                false,
+                "no tsdf method: nothing needs depth maps".to_owned(),
+            );
+        }
+
+        for m in Method::ALL {
+            if !methods.contains(&m) {
+                push(Stage::Mesh(m), false, "not asked for (--method)".to_owned());
+                continue;
+            }
+            let why = match m {
+                Method::Tsdf => match o.voxel {
+                    Some(v) => format!("voxel {v}, trunc 5 voxels"),
+                    None => format!(
+                        "voxel = template radius / {DEFAULT_VOXELS_PER_RADIUS}, trunc 5 voxels"
+                    ),
+                },
+                Method::Delaunay => match o.rebuild_every {
+                    0 => "incremental: only charts that Gaussians hop into or out of are redone"
+                        .to_owned(),
+                    1 => "--rebuild-every 1: triangulated from scratch every frame".to_owned(),
+                    n => format!("incremental, rebuilt from scratch every {n} frames"),
+                },
+                Method::Alpha => match o.alpha {
+                    Some(a) => format!("alpha {a} on the deformed means"),
+                    None => format!(
+                        "alpha = {DEFAULT_ALPHA_SPACINGS} x mean Gaussian spacing, on the deformed means"
+                    ),
+                },
+            };
+            push(Stage::Mesh(m), true, why);
+        }
+
+        match &config.gt {
+            None => push(
+                Stage::Metrics,
+                false,
+                "no --gt: nothing to compare against".to_owned(),
+            ),
+            Some(gt) => {
+                let against = match gt {
+                    GroundTruth::Template => "each frame's deformed template".to_owned(),
+                    GroundTruth::Mesh(p) => format!("the static mesh {}", p.display()),
+                };
+                push(
+                    Stage::Metrics,
+                    true,
+                    format!(
+                        "against {against}: {} samples per mesh, exact distances to the \
+                         triangles, F-score at tau {}",
+                        o.samples, o.tau
+                    ),
+                );
+            }
+        }
+
+        let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
+        push(
+            Stage::Write,
+            true,
+            format!(
+                "{}/<method>/frame_NNNNNN.ply and {}/<method>.glb for {}",
+                config.output.display(),
+                config.output.display(),
+                names.join(", ")
+            ),
+        );
+        let plot = if config.gt.is_some() {
+            "Chamfer L1 against ms/frame"
+        } else {
+            "ms per frame (no --gt: no error to plot)"
+        };
+        push(
+            Stage::Report,
+            true,
+            format!("report.json, report.md, error_vs_time.png ({plot})"),
+        );
+        Self { stages }
+    }
+
+    /// Whether `stage` runs.
+    #[must_use]
+    pub fn runs(&self, stage: Stage) -> bool {
+        self.stages.iter().any(|s| s.stage == stage && s.runs)
+    }
+}
+
+impl fmt::Display for Plan {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for s in &self.stages {
+            let mark = if s.runs { "run " } else { "skip" };
+            writeln!(f, "{mark}  {:<14} {}", s.stage.to_string(), s.why)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use super::*;
+    use crate::config::ExtractOptions;
+
+    fn config(methods: &[Method], gaussians: bool, gt: Option<GroundTruth>) -> ExtractConfig {
+        ExtractConfig {
+            template: PathBuf::from("t.glb"),
+            animation: None,
+            gaussians: gaussians.then(|| PathBuf::from("g.ply")),
+            methods: methods.to_vec(),
+            output: PathBuf::from("out"),
+            frames: None,
+            gt,
+            options: ExtractOptions::default(),
+        }
+    }
+
+    #[test]
+    fn render_only_for_tsdf() {
+        let p = Plan::new(&config(&[Method::Delaunay, Method::Alpha], false, None));
+        assert!(!p.runs(Stage::Render));
+        assert!(p.runs(Stage::Mesh(Method::Delaunay)));
+        assert!(p.runs(Stage::Mesh(Method::Alpha)));
+        assert!(!p.runs(Stage::Mesh(Method::Tsdf)));
+        let p = Plan::new(&config(&[Method::Tsdf], false, None));
+        assert!(p.runs(Stage::Render));
+        assert!(!p.runs(Stage::Mesh(Method::Delaunay)));
+    }
+
+    #[test]
+    fn bind_only_without_gaussians() {
+        assert!(Plan::new(&config(&[Method::Alpha], false, None)).runs(Stage::Bind));
+        let p = Plan::new(&config(&[Method::Alpha], true, None));
+        assert!(!p.runs(Stage::Bind));
+        assert!(p.to_string().contains("g.ply is already bound"));
+    }
+
+    #[test]
+    fn metrics_only_with_gt() {
+        assert!(!Plan::new(&config(&[Method::Alpha], false, None)).runs(Stage::Metrics));
+        let p = Plan::new(&config(
+            &[Method::Alpha],
+            false,
+            Some(GroundTruth::Template),
+        ));
+        assert!(p.runs(Stage::Metrics));
+        assert!(p.to_string().contains("deformed template"));
+        let p = Plan::new(&config(
+            &[Method::Alpha],
+            false,
+            Some(GroundTruth::Mesh("scan.ply".into())),
+        ));
+        assert!(p.to_string().contains("scan.ply"));
+    }
+
+    #[test]
+    fn every_stage_listed_once_in_order() {
+        let p = Plan::new(&config(&Method::ALL, true, None));
+        let order: Vec<Stage> = p.stages.iter().map(|s| s.stage).collect();
+        assert_eq!(
+            order,
+            vec![
+                Stage::Animate,
+                Stage::Bind,
+                Stage::Deform,
+                Stage::Render,
+                Stage::Mesh(Method::Tsdf),
+                Stage::Mesh(Method::Delaunay),
+                Stage::Mesh(Method::Alpha),
+                Stage::Metrics,
+                Stage::Write,
+                Stage::Report,
+            ]
+        );
+        // Every line says run or skip.
+        assert_eq!(p.to_string().lines().count(), order.len());
+    }
+
+    #[test]
+    fn rebuild_every_one_is_from_scratch() {
+        let mut c = config(&[Method::Delaunay], false, None);
+        c.options.rebuild_every = 1;
+        assert!(
+            Plan::new(&c)
+                .to_string()
+                .contains("from scratch every frame")
+        );
+    }
+}

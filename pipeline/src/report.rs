@@ -1,0 +1,498 @@
+//! Per-frame records, per-method means, and the two report files (report.json, report.md).
+//!
+//! Metrics follow SPEC §8 as `trisplat eval --surface` computes them: both meshes sampled
+//! area-uniformly (`samples` points each, seed 0 for the prediction and `splitmix64(0)` for the
+//! ground truth, as `eval`'s defaults), distances exact to the other side's triangles. So a
+//! frame's numbers equal `trisplat eval DIR/<method>/frame_NNNNNN.ply GT --surface --samples N
+//! --tau T` for a static ground truth.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use trisplat_geometry::io::{IoError, write_atomically};
+use trisplat_geometry::metrics::{MetricsError, MetricsOptions, Shape, evaluate};
+use trisplat_geometry::rng::splitmix64;
+use trisplat_geometry::sampling::sample_uniform;
+use trisplat_geometry::topology::{boundary_edges, non_manifold_edges};
+use trisplat_geometry::{PointCloud, TriMesh};
+
+use crate::config::Method;
+use crate::methods::Resolved;
+
+/// Seed of the prediction's surface samples (the ground truth uses `splitmix64` of it), as
+/// `trisplat eval`'s default.
+pub const SAMPLE_SEED: u64 = 0;
+
+/// A ground-truth mesh with its samples (drawn once per frame, shared by the methods).
+#[derive(Clone, Debug)]
+pub struct GtSamples {
+    /// The mesh.
+    pub mesh: TriMesh,
+    /// Its area-uniform samples with face normals.
+    pub samples: PointCloud,
+}
+
+impl GtSamples {
+    /// Samples `mesh`; `None` when it has no area.
+    #[must_use]
+    pub fn new(mesh: TriMesh, samples: usize) -> Option<Self> {
+        let points = sample_uniform(&mesh, samples, splitmix64(SAMPLE_SEED));
+        (!points.is_empty()).then_some(Self {
+            mesh,
+            samples: points,
+        })
+    }
+}
+
+/// The metrics of one method on one frame.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FrameMetrics {
+    /// (accuracy + completeness) / 2.
+    pub chamfer_l1: f64,
+    /// (mean d(p,G)^2 + mean d(g,P)^2) / 2.
+    pub chamfer_l2: f64,
+    /// Mean |n . n'| both ways (`None` when a side has no normals).
+    pub normal_consistency: Option<f64>,
+    /// Mean distance from the prediction to the ground truth.
+    pub accuracy: f64,
+    /// Mean distance from the ground truth to the prediction.
+    pub completeness: f64,
+    /// Precision at `tau`.
+    pub precision: f64,
+    /// Recall at `tau`.
+    pub recall: f64,
+    /// F-score at `tau`.
+    pub fscore: f64,
+    /// The F-score threshold.
+    pub tau: f64,
+}
+
+/// Metrics of `pred` against `gt` (surface mode, see the module docs); `Ok(None)` when `pred`
+/// has no surface (an empty mesh is not measured).
+///
+/// # Errors
+/// [`MetricsError`] for coordinates beyond the spatial indexes' range or a bad `tau`.
+pub fn measure(
+    pred: &TriMesh,
+    gt: &GtSamples,
+    samples: usize,
+    tau: f64,
+) -> Result<Option<FrameMetrics>, MetricsError> {
+    let points = sample_uniform(pred, samples, SAMPLE_SEED);
+    if points.is_empty() {
+        return Ok(None);
+    }
+    let options = MetricsOptions {
+        taus: vec![tau],
+        surface: true,
+    };
+    let m = evaluate(
+        Shape::mesh(pred, &points),
+        Shape::mesh(&gt.mesh, &gt.samples),
+        &options,
+    )?;
+    let t = m.thresholds.first().copied();
+    Ok(Some(FrameMetrics {
+        chamfer_l1: m.chamfer_l1,
+        chamfer_l2: m.chamfer_l2,
+        normal_consistency: m.normal_consistency,
+        accuracy: m.accuracy,
+        completeness: m.completeness,
+        precision: t.map_or(0.0, |t| t.precision),
+        recall: t.map_or(0.0, |t| t.recall),
+        fscore: t.map_or(0.0, |t| t.fscore),
+        tau,
+    }))
+}
+
+/// Whether every edge of `mesh` has exactly two triangles (and there is at least one).
+#[must_use]
+pub fn is_watertight(mesh: &TriMesh) -> bool {
+    let t = mesh.triangles();
+    !t.is_empty() && boundary_edges(t).is_empty() && non_manifold_edges(t).is_empty()
+}
+
+/// One method on one frame.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FrameRecord {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Its time in seconds.
+    pub time: f64,
+    /// Wall time of the method, milliseconds.
+    pub ms: f64,
+    /// Of which rendering (tsdf only).
+    pub render_ms: Option<f64>,
+    /// Mesh vertices.
+    pub vertices: usize,
+    /// Mesh triangles.
+    pub faces: usize,
+    /// Every edge shared by exactly two triangles.
+    pub watertight: bool,
+    /// Against the ground truth (`None` without --gt or for an empty mesh).
+    pub metrics: Option<FrameMetrics>,
+}
+
+/// Means of one method over the frames.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Summary {
+    /// Frames meshed.
+    pub frames: usize,
+    /// Mean milliseconds per frame.
+    pub ms: f64,
+    /// Median milliseconds per frame.
+    pub median_ms: f64,
+    /// Mean vertices.
+    pub vertices: f64,
+    /// Mean triangles.
+    pub faces: f64,
+    /// Frames whose mesh is watertight.
+    pub watertight_frames: usize,
+    /// Frames with metrics (non-empty mesh, --gt given).
+    pub measured_frames: usize,
+    /// Mean Chamfer L1 over the measured frames.
+    pub chamfer_l1: Option<f64>,
+    /// Mean Chamfer L2 over the measured frames.
+    pub chamfer_l2: Option<f64>,
+    /// Mean normal consistency over the measured frames that have it.
+    pub normal_consistency: Option<f64>,
+    /// Mean F-score over the measured frames.
+    pub fscore: Option<f64>,
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    (n > 0).then(|| sum / n as f64)
+}
+
+fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+impl Summary {
+    /// The means of `records`.
+    #[must_use]
+    pub fn of(records: &[FrameRecord]) -> Self {
+        let ms: Vec<f64> = records.iter().map(|r| r.ms).collect();
+        let metrics: Vec<&FrameMetrics> =
+            records.iter().filter_map(|r| r.metrics.as_ref()).collect();
+        Self {
+            frames: records.len(),
+            ms: mean(ms.iter().copied()).unwrap_or(0.0),
+            median_ms: median(&ms),
+            vertices: mean(records.iter().map(|r| r.vertices as f64)).unwrap_or(0.0),
+            faces: mean(records.iter().map(|r| r.faces as f64)).unwrap_or(0.0),
+            watertight_frames: records.iter().filter(|r| r.watertight).count(),
+            measured_frames: metrics.len(),
+            chamfer_l1: mean(metrics.iter().map(|m| m.chamfer_l1)),
+            chamfer_l2: mean(metrics.iter().map(|m| m.chamfer_l2)),
+            normal_consistency: mean(metrics.iter().filter_map(|m| m.normal_consistency)),
+            fscore: mean(metrics.iter().map(|m| m.fscore)),
+        }
+    }
+}
+
+/// Everything about one method.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MethodReport {
+    /// The method.
+    pub method: Method,
+    /// Its parameters, for the record (e.g. `voxel`, `alpha`, `views`).
+    pub parameters: BTreeMap<String, f64>,
+    /// Per-frame records, in frame order.
+    pub frames: Vec<FrameRecord>,
+    /// Means over the frames.
+    pub mean: Summary,
+    /// Folder of its per-frame PLY files, relative to the output folder.
+    pub ply_dir: String,
+    /// Its animated glTF, relative to the output folder.
+    pub glb: String,
+}
+
+/// The whole run (report.json).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Report {
+    /// trisplat version.
+    pub version: String,
+    /// Template file.
+    pub template: String,
+    /// Animation source (the template itself when it carries its clip).
+    pub animation: String,
+    /// Gaussian file, or `bound here: N per triangle`.
+    pub gaussians: String,
+    /// Number of Gaussians.
+    pub gaussian_count: usize,
+    /// Deform mode.
+    pub mode: String,
+    /// Animation frame indices meshed.
+    pub frames: Vec<usize>,
+    /// Their times in seconds.
+    pub frame_times: Vec<f64>,
+    /// Deformation wall time per frame, milliseconds (shared by the methods).
+    pub deform_ms: Vec<f64>,
+    /// `template`, the ground-truth file, or `None`.
+    pub ground_truth: Option<String>,
+    /// Samples per mesh for the metrics.
+    pub samples: usize,
+    /// F-score threshold.
+    pub tau: f64,
+    /// Scale-derived parameters.
+    pub resolved: Resolved,
+    /// One entry per method, by name.
+    pub methods: BTreeMap<String, MethodReport>,
+}
+
+impl Report {
+    /// The methods in report order (tsdf, delaunay, alpha).
+    #[must_use]
+    pub fn ordered(&self) -> Vec<&MethodReport> {
+        let mut v: Vec<&MethodReport> = self.methods.values().collect();
+        v.sort_by_key(|m| m.method);
+        v
+    }
+
+    /// Writes report.json atomically.
+    ///
+    /// # Errors
+    /// [`IoError`] when the file cannot be written.
+    pub fn write_json(&self, path: &Path) -> Result<(), IoError> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| IoError::os(path, std::io::Error::other(e)))?;
+        write_atomically(path, |w| {
+            w.write_all(text.as_bytes())
+                .and_then(|()| w.write_all(b"\n"))
+                .map_err(|e| IoError::os(path, e))
+        })
+    }
+
+    /// The Markdown report.
+    #[must_use]
+    pub fn markdown(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "# trisplat extract report\n");
+        let _ = writeln!(s, "- template: `{}`", self.template);
+        let _ = writeln!(s, "- animation: `{}`", self.animation);
+        let _ = writeln!(
+            s,
+            "- Gaussians: {} ({} Gaussians), mode {}",
+            self.gaussians, self.gaussian_count, self.mode
+        );
+        let (first, last) = (
+            self.frames.first().copied().unwrap_or(0),
+            self.frames.last().copied().unwrap_or(0),
+        );
+        let _ = writeln!(s, "- frames: {} ({first}..={last})", self.frames.len());
+        let _ = writeln!(
+            s,
+            "- template radius {:.6}, mean Gaussian spacing {:.6}",
+            self.resolved.template_radius, self.resolved.mean_spacing
+        );
+        match &self.ground_truth {
+            Some(gt) => {
+                let _ = writeln!(
+                    s,
+                    "- ground truth: `{gt}`; {} samples per mesh, exact point-to-triangle \
+                     distances (SPEC §8), F-score at tau {}",
+                    self.samples, self.tau
+                );
+            }
+            None => {
+                let _ = writeln!(s, "- ground truth: none (no metrics)");
+            }
+        }
+        let deform = mean(self.deform_ms.iter().copied()).unwrap_or(0.0);
+        let _ = writeln!(
+            s,
+            "- deformation: {deform:.2} ms/frame (not included below)\n"
+        );
+        let _ = writeln!(s, "## Means over frames\n");
+        let _ = writeln!(
+            s,
+            "| method | ms/frame | median ms | vertices | faces | watertight | Chamfer L1 | Chamfer L2 | normal consistency | F-score |"
+        );
+        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        let opt = |v: Option<f64>, digits: usize| {
+            v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$e}"))
+        };
+        let optf = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
+        for m in self.ordered() {
+            let a = &m.mean;
+            let _ = writeln!(
+                s,
+                "| {} | {:.2} | {:.2} | {:.0} | {:.0} | {}/{} | {} | {} | {} | {} |",
+                m.method,
+                a.ms,
+                a.median_ms,
+                a.vertices,
+                a.faces,
+                a.watertight_frames,
+                a.frames,
+                opt(a.chamfer_l1, 4),
+                opt(a.chamfer_l2, 4),
+                optf(a.normal_consistency),
+                optf(a.fscore),
+            );
+        }
+        for m in self.ordered() {
+            let params: Vec<String> = m
+                .parameters
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "\n## {}\n\nparameters: {}; files: `{}/`, `{}`\n",
+                m.method,
+                params.join(", "),
+                m.ply_dir,
+                m.glb
+            );
+            let _ = writeln!(
+                s,
+                "| frame | time s | ms | vertices | faces | watertight | Chamfer L1 | Chamfer L2 | normal consistency | F-score |"
+            );
+            let _ = writeln!(s, "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|");
+            for r in &m.frames {
+                let mm = r.metrics.as_ref();
+                let _ = writeln!(
+                    s,
+                    "| {} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {} |",
+                    r.frame,
+                    r.time,
+                    r.ms,
+                    r.vertices,
+                    r.faces,
+                    if r.watertight { "yes" } else { "no" },
+                    opt(mm.map(|m| m.chamfer_l1), 4),
+                    opt(mm.map(|m| m.chamfer_l2), 4),
+                    optf(mm.and_then(|m| m.normal_consistency)),
+                    optf(mm.map(|m| m.fscore)),
+                );
+            }
+        }
+        s
+    }
+
+    /// Writes report.md atomically.
+    ///
+    /// # Errors
+    /// [`IoError`] when the file cannot be written.
+    pub fn write_markdown(&self, path: &Path) -> Result<(), IoError> {
+        let text = self.markdown();
+        write_atomically(path, |w| {
+            w.write_all(text.as_bytes())
+                .map_err(|e| IoError::os(path, e))
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+    use trisplat_geometry::metrics::DEFAULT_TAUS;
+
+    use super::*;
+
+    fn tetra(scale: f32) -> TriMesh {
+        let p = vec![
+            Vec3::ZERO,
+            Vec3::X * scale,
+            Vec3::Y * scale,
+            Vec3::Z * scale,
+        ];
+        TriMesh::new(p, vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    }
+
+    fn record(frame: usize, ms: f64, metrics: Option<FrameMetrics>) -> FrameRecord {
+        FrameRecord {
+            frame,
+            time: frame as f64 / 30.0,
+            ms,
+            render_ms: None,
+            vertices: 4,
+            faces: 4,
+            watertight: frame % 2 == 0,
+            metrics,
+        }
+    }
+
+    #[test]
+    fn measure_equals_a_direct_evaluation() {
+        let pred = tetra(1.0);
+        let gt_mesh = tetra(1.1);
+        let gt = GtSamples::new(gt_mesh.clone(), 2000).expect("area");
+        let tau = DEFAULT_TAUS[3] * 10.0;
+        let got = measure(&pred, &gt, 2000, tau)
+            .expect("ok")
+            .expect("non-empty");
+        let p = sample_uniform(&pred, 2000, SAMPLE_SEED);
+        let g = sample_uniform(&gt_mesh, 2000, splitmix64(SAMPLE_SEED));
+        let m = evaluate(
+            Shape::mesh(&pred, &p),
+            Shape::mesh(&gt_mesh, &g),
+            &MetricsOptions {
+                taus: vec![tau],
+                surface: true,
+            },
+        )
+        .expect("ok");
+        assert_eq!(got.chamfer_l1, m.chamfer_l1);
+        assert_eq!(got.chamfer_l2, m.chamfer_l2);
+        assert_eq!(got.normal_consistency, m.normal_consistency);
+        assert_eq!(got.fscore, m.thresholds[0].fscore);
+        assert!(got.chamfer_l1 > 0.0);
+        // Same mesh: zero distance.
+        let same = measure(&gt_mesh, &gt, 2000, tau)
+            .expect("ok")
+            .expect("non-empty");
+        assert!(same.chamfer_l1 < 1e-6, "{}", same.chamfer_l1);
+        // An empty prediction is not measured.
+        assert_eq!(measure(&TriMesh::default(), &gt, 100, tau), Ok(None));
+    }
+
+    #[test]
+    fn summary_means_equal_direct_means() {
+        let m = |c: f64| FrameMetrics {
+            chamfer_l1: c,
+            chamfer_l2: c * c,
+            normal_consistency: Some(0.9),
+            accuracy: c,
+            completeness: c,
+            precision: 1.0,
+            recall: 0.5,
+            fscore: 2.0 / 3.0,
+            tau: 0.01,
+        };
+        let records = vec![
+            record(0, 10.0, Some(m(0.1))),
+            record(1, 30.0, None),
+            record(2, 20.0, Some(m(0.3))),
+        ];
+        let s = Summary::of(&records);
+        assert_eq!(s.frames, 3);
+        assert!((s.ms - 20.0).abs() < 1e-12);
+        assert_eq!(s.median_ms, 20.0);
+        assert_eq!(s.measured_frames, 2);
+        assert!((s.chamfer_l1.expect("measured") - 0.2).abs() < 1e-12);
+        assert!((s.chamfer_l2.expect("measured") - 0.05).abs() < 1e-12);
+        assert_eq!(s.watertight_frames, 2);
+        let none = Summary::of(&[record(0, 1.0, None)]);
+        assert_eq!(none.chamfer_l1, None);
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
+    }
+
+    #[test]
+    fn watertight_flags() {
+        assert!(is_watertight(&tetra(1.0)));
+        let open = TriMesh::new(tetra(1.0).positions().to_vec(), vec![[0, 2, 1], [0, 1, 3]]);
+        assert!(!is_watertight(&open));
+        assert!(!is_watertight(&TriMesh::default()));
+    }
+}

@@ -1,0 +1,486 @@
+//! The frame loop: per frame, deform once, then per method mesh (timed), measure, write.
+
+use std::collections::{BTreeMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::Vec3;
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::animation::AnimatedTemplate;
+use trisplat_geometry::io::{
+    SequenceLayout, WriteOptions, read_mesh, write_mesh, write_mesh_sequence,
+};
+use trisplat_splat::GaussianSet;
+use trisplat_splat::deform::{Deformer, WorldGeometry};
+use trisplat_splat::lbs::LbsDeformer;
+
+use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
+use crate::error::PipelineError;
+use crate::input::{
+    Animation, GaussianSource, LBS_REST_TOLERANCE, animation_label, check_topology, deform_mode,
+    gaussians, open_animation, parse_frames,
+};
+use crate::methods::{FrameInput, Mesher, Resolved};
+use crate::plot;
+use crate::report::{
+    FrameRecord, GtSamples, MethodReport, Report, Summary, is_watertight, measure,
+};
+
+/// File name of the JSON report in the output folder.
+pub const REPORT_JSON: &str = "report.json";
+/// File name of the Markdown report.
+pub const REPORT_MD: &str = "report.md";
+/// File name of the plot.
+pub const PLOT_PNG: &str = "error_vs_time.png";
+
+/// Name of frame `frame`'s mesh file in a method's folder.
+#[must_use]
+pub fn frame_file(frame: usize) -> String {
+    format!("frame_{frame:06}.ply")
+}
+
+/// Progress of a run, for a progress bar.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Progress {
+    /// Inputs read; `frames` frames will be meshed.
+    Started {
+        /// Frames to mesh.
+        frames: usize,
+    },
+    /// `done` frames of `total` meshed (all methods).
+    Frame {
+        /// Frames done.
+        done: usize,
+        /// Frames in all.
+        total: usize,
+    },
+    /// Writing the sequences, reports and plot.
+    Finishing,
+}
+
+/// How frames are deformed.
+enum Engine {
+    Frames(Deformer),
+    Lbs(Box<LbsDeformer>),
+}
+
+/// A deformed frame: the world set when the tsdf method needs it, and the means.
+struct Deformed {
+    world: Option<GaussianSet>,
+    means: Vec<Vec3>,
+}
+
+fn build_engine(
+    config: &ExtractConfig,
+    template: &TriMesh,
+    animation: &Animation,
+    set: &GaussianSet,
+) -> Result<Engine, PipelineError> {
+    let mode = config.options.mode;
+    if mode != Mode::Lbs {
+        return Ok(Engine::Frames(Deformer::new(template, deform_mode(mode))));
+    }
+    let a_path = PathBuf::from(animation_label(config));
+    let Animation::Gltf(g) = animation else {
+        return Err(PipelineError::Lbs {
+            path: a_path,
+            problem: "lbs mode needs a skinned glTF animation".to_owned(),
+        });
+    };
+    if !g.is_skinned() {
+        return Err(PipelineError::Lbs {
+            path: a_path,
+            problem: "lbs mode needs a skinned glTF (this file has no skin with joint weights)"
+                .to_owned(),
+        });
+    }
+    let diag = f64::from(template.bounds().map_or(0.0, |b| b.diagonal()));
+    let worst = template
+        .positions()
+        .iter()
+        .zip(g.rest().positions())
+        .map(|(a, b)| f64::from((*a - *b).length()))
+        .fold(0.0, f64::max);
+    if worst > LBS_REST_TOLERANCE * diag.max(f64::MIN_POSITIVE) {
+        return Err(PipelineError::Lbs {
+            path: config.template.clone(),
+            problem: format!(
+                "the template's positions differ from the animation's rest pose by up to \
+                 {worst:.3e}; lbs needs the template to be the animation's rest shape"
+            ),
+        });
+    }
+    let palette = g.palette_at(None)?;
+    let rig = LbsDeformer::new(set, template, &g.skinning(), &palette).map_err(|source| {
+        PipelineError::Skinning {
+            path: a_path.clone(),
+            frame: 0,
+            source,
+        }
+    })?;
+    Ok(Engine::Lbs(Box::new(rig)))
+}
+
+fn deform_frame(
+    engine: &Engine,
+    animation: &Animation,
+    set: &GaussianSet,
+    positions: &[Vec3],
+    frame: usize,
+    need_world: bool,
+    label: &str,
+) -> Result<Deformed, PipelineError> {
+    let deform_err = |source| PipelineError::Deform {
+        path: label.to_owned(),
+        frame,
+        source,
+    };
+    match engine {
+        Engine::Frames(d) if need_world => {
+            let world = d.deform(set, positions).map_err(deform_err)?;
+            let means = world.means().to_vec();
+            Ok(Deformed {
+                world: Some(world),
+                means,
+            })
+        }
+        Engine::Frames(d) => {
+            let mut geometry = WorldGeometry::default();
+            d.deform_geometry(set, positions, &mut geometry)
+                .map_err(deform_err)?;
+            Ok(Deformed {
+                world: None,
+                means: geometry.means,
+            })
+        }
+        Engine::Lbs(rig) => {
+            let Animation::Gltf(g) = animation else {
+                return Err(PipelineError::Internal {
+                    what: "lbs engine without a glTF animation",
+                });
+            };
+            let palette = g.frame_palette(frame)?;
+            let world =
+                rig.deform(set, &palette, None)
+                    .map_err(|source| PipelineError::Skinning {
+                        path: PathBuf::from(label),
+                        frame,
+                        source,
+                    })?;
+            let means = world.means().to_vec();
+            Ok(Deformed {
+                world: need_world.then_some(world),
+                means,
+            })
+        }
+    }
+}
+
+/// Canonical paths of existing files.
+fn canonical_set(paths: &[PathBuf]) -> HashSet<PathBuf> {
+    paths.iter().filter_map(|p| p.canonicalize().ok()).collect()
+}
+
+/// Errors when `path` is one of the inputs.
+fn check_output(path: &Path, inputs: &HashSet<PathBuf>) -> Result<(), PipelineError> {
+    if path.canonicalize().is_ok_and(|c| inputs.contains(&c)) {
+        return Err(PipelineError::OverwriteInput {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(())
+}
+
+/// Files this run created, removed again if the run fails.
+#[derive(Default)]
+struct Created(Vec<PathBuf>);
+
+impl Created {
+    fn note(&mut self, path: &Path, existed: bool) {
+        if !existed {
+            self.0.push(path.to_path_buf());
+        }
+    }
+
+    fn remove(&self) {
+        for p in &self.0 {
+            // Best effort: the error being reported matters more than a leftover file.
+            let _ = std::fs::remove_file(p);
+        }
+    }
+}
+
+/// The per-frame meshes of each method, kept for the animated glTF.
+pub type Sequences = BTreeMap<Method, Vec<TriMesh>>;
+
+/// Runs the main job and writes every output (see the crate docs); returns the report.
+/// `progress` is told when frames are done.
+///
+/// # Errors
+/// Bad inputs (named), an output that would replace an input, a failed method or write. The
+/// files this run created are removed again on failure.
+pub fn run(
+    config: &ExtractConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Report, PipelineError> {
+    let mut created = Created::default();
+    let result = run_inner(config, progress, &mut created);
+    if result.is_err() {
+        created.remove();
+    }
+    result
+}
+
+#[expect(
+    clippy::too_many_lines,
+    reason = "the frame loop reads best as one sequence of stages"
+)]
+fn run_inner(
+    config: &ExtractConfig,
+    progress: &mut dyn FnMut(Progress),
+    created: &mut Created,
+) -> Result<Report, PipelineError> {
+    let o = &config.options;
+    let methods = config.methods();
+    if methods.is_empty() {
+        return Err(PipelineError::NoMethod);
+    }
+    if !(o.tau.is_finite() && o.tau > 0.0) {
+        return Err(PipelineError::BadOption {
+            name: "tau",
+            value: o.tau,
+            expected: "a finite positive distance",
+        });
+    }
+    if o.samples == 0 {
+        return Err(PipelineError::BadOption {
+            name: "samples",
+            value: 0.0,
+            expected: "at least one sample",
+        });
+    }
+    // Inputs.
+    let template = read_mesh(&config.template)?;
+    if template.triangle_count() == 0 {
+        return Err(PipelineError::EmptyTemplate {
+            path: config.template.clone(),
+        });
+    }
+    let (animation, mut input_files) = open_animation(config, &template)?;
+    let anim = animation.get();
+    check_topology(&template, config, anim)?;
+    let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
+    let static_gt = match &config.gt {
+        Some(GroundTruth::Mesh(path)) => {
+            input_files.push(path.clone());
+            let mesh = read_mesh(path)?;
+            Some(GtSamples::new(mesh, o.samples).ok_or_else(|| {
+                PipelineError::EmptyGroundTruth {
+                    gt: path.display().to_string(),
+                    frame: frames.start,
+                }
+            })?)
+        }
+        _ => None,
+    };
+    let (set, source) = gaussians(config, &template)?;
+    let engine = build_engine(config, &template, &animation, &set)?;
+    let mode = deform_mode(o.mode);
+    let mut rest = WorldGeometry::default();
+    Deformer::new(&template, mode)
+        .deform_geometry(&set, template.positions(), &mut rest)
+        .map_err(|source| PipelineError::Gaussians {
+            path: config.gaussians.clone().unwrap_or_default(),
+            template: config.template.clone(),
+            source,
+        })?;
+    let resolved = Resolved::new(o, &template, &rest.means)?;
+
+    // Outputs: never over an input.
+    input_files.push(config.template.clone());
+    if let Some(g) = &config.gaussians {
+        input_files.push(g.clone());
+    }
+    let inputs = canonical_set(&input_files);
+    let out = &config.output;
+    for m in &methods {
+        let dir = out.join(m.name());
+        for f in frames.clone() {
+            check_output(&dir.join(frame_file(f)), &inputs)?;
+        }
+        check_output(&out.join(format!("{}.glb", m.name())), &inputs)?;
+    }
+    for name in [REPORT_JSON, REPORT_MD, PLOT_PNG] {
+        check_output(&out.join(name), &inputs)?;
+    }
+    for m in &methods {
+        let dir = out.join(m.name());
+        std::fs::create_dir_all(&dir)
+            .map_err(|source| PipelineError::OutputDir { path: dir, source })?;
+    }
+
+    let mut meshers = Vec::with_capacity(methods.len());
+    for &m in &methods {
+        meshers.push(Mesher::new(
+            m,
+            o,
+            &resolved,
+            &template,
+            &set,
+            mode,
+            frames.start,
+        )?);
+    }
+
+    let label = animation_label(config);
+    let need_world = methods.contains(&Method::Tsdf);
+    let total = frames.len();
+    progress(Progress::Started { frames: total });
+    let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
+    let mut sequences: Sequences = BTreeMap::new();
+    let mut frame_times = Vec::with_capacity(total);
+    let mut deform_ms = Vec::with_capacity(total);
+    for (done, f) in frames.clone().enumerate() {
+        let positions = anim.frame(f)?;
+        let time = anim.frame_time(f).unwrap_or(f as f64 / o.fps);
+        let start = Instant::now();
+        let deformed = deform_frame(&engine, &animation, &set, &positions, f, need_world, &label)?;
+        deform_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        frame_times.push(time);
+        let frame_gt = match &config.gt {
+            Some(GroundTruth::Template) => {
+                let mesh = TriMesh::new_unchecked(positions.clone(), template.triangles().to_vec());
+                Some(
+                    GtSamples::new(mesh, o.samples).ok_or(PipelineError::EmptyGroundTruth {
+                        gt: "template".to_owned(),
+                        frame: f,
+                    })?,
+                )
+            }
+            _ => None,
+        };
+        let gt = frame_gt.as_ref().or(static_gt.as_ref());
+        let input = FrameInput {
+            frame: f,
+            positions: &positions,
+            means: &deformed.means,
+            world: deformed.world.as_ref(),
+        };
+        for (mesher, &m) in meshers.iter_mut().zip(&methods) {
+            let result = mesher.mesh(&input)?;
+            let metrics = match gt {
+                Some(gt) => measure(&result.mesh, gt, o.samples, o.tau).map_err(|source| {
+                    PipelineError::Metrics {
+                        gt: config
+                            .gt
+                            .as_ref()
+                            .map_or_else(String::new, GroundTruth::label),
+                        frame: f,
+                        method: m,
+                        source,
+                    }
+                })?,
+                None => None,
+            };
+            let path = out.join(m.name()).join(frame_file(f));
+            let existed = path.exists();
+            write_mesh(&path, &result.mesh, WriteOptions::default())?;
+            created.note(&path, existed);
+            records.entry(m).or_default().push(FrameRecord {
+                frame: f,
+                time,
+                ms: result.ms,
+                render_ms: result.render_ms,
+                vertices: result.mesh.vertex_count(),
+                faces: result.mesh.triangle_count(),
+                watertight: is_watertight(&result.mesh),
+                metrics,
+            });
+            sequences.entry(m).or_default().push(result.mesh);
+        }
+        progress(Progress::Frame {
+            done: done + 1,
+            total,
+        });
+    }
+    progress(Progress::Finishing);
+
+    let mut method_reports = BTreeMap::new();
+    for (m, frames_of) in records {
+        let mut parameters = BTreeMap::new();
+        match m {
+            Method::Tsdf => {
+                parameters.insert("voxel".to_owned(), resolved.voxel);
+                parameters.insert("views".to_owned(), o.views as f64);
+                parameters.insert("resolution".to_owned(), f64::from(o.resolution));
+            }
+            Method::Delaunay => {
+                parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);
+            }
+            Method::Alpha => {
+                parameters.insert("alpha".to_owned(), resolved.alpha);
+            }
+        }
+        let mean = Summary::of(&frames_of);
+        method_reports.insert(
+            m.name().to_owned(),
+            MethodReport {
+                method: m,
+                parameters,
+                frames: frames_of,
+                mean,
+                ply_dir: m.name().to_owned(),
+                glb: format!("{}.glb", m.name()),
+            },
+        );
+    }
+    let report = Report {
+        version: env!("CARGO_PKG_VERSION").to_owned(),
+        template: config.template.display().to_string(),
+        animation: label,
+        gaussians: match source {
+            GaussianSource::File(p) => p.display().to_string(),
+            GaussianSource::Bound(n) => format!("bound here: {n} per triangle"),
+        },
+        gaussian_count: set.len(),
+        mode: o.mode.name().to_owned(),
+        frames: frames.collect(),
+        frame_times,
+        deform_ms,
+        ground_truth: config.gt.as_ref().map(GroundTruth::label),
+        samples: o.samples,
+        tau: o.tau,
+        resolved,
+        methods: method_reports,
+    };
+    write_outputs(out, &report, &sequences, created)?;
+    Ok(report)
+}
+
+/// Writes one animated glTF per method, the report files and the plot.
+fn write_outputs(
+    out: &Path,
+    report: &Report,
+    sequences: &Sequences,
+    created: &mut Created,
+) -> Result<(), PipelineError> {
+    for (m, meshes) in sequences {
+        let glb = out.join(format!("{}.glb", m.name()));
+        let existed = glb.exists();
+        write_mesh_sequence(&glb, meshes, &report.frame_times, SequenceLayout::Auto)?;
+        created.note(&glb, existed);
+    }
+    let json = out.join(REPORT_JSON);
+    let existed = json.exists();
+    report.write_json(&json)?;
+    created.note(&json, existed);
+    let md = out.join(REPORT_MD);
+    let existed = md.exists();
+    report.write_markdown(&md)?;
+    created.note(&md, existed);
+    let png = out.join(PLOT_PNG);
+    let existed = png.exists();
+    plot::write_plot(&png, report)?;
+    created.note(&png, existed);
+    Ok(())
+}
