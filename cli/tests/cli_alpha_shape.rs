@@ -1,29 +1,14 @@
 //! `trisplat alpha-shape` through the real binary: a closed, outward result on real samples,
 //! degenerate inputs that Open3D (Qhull) refuses, and the error contract.
 
+mod common;
+use common::{fresh_dir, run, s};
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::topology::boundary_edges;
-
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
-
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("run trisplat")
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_alpha_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 #[test]
 fn ball_samples_give_a_closed_outward_mesh() {

@@ -1,31 +1,11 @@
 //! `trisplat convert` on bad input: exit code 1, one stderr line naming the file and the
 //! problem, and nothing left in the output folder (no output, no temporary file).
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::{BIN, fresh_dir, listing};
+
+use std::path::Path;
 use std::process::Command;
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
-
-/// A fresh, empty folder under cargo's temporary folder for integration tests.
-fn fresh_dir(name: &str) -> PathBuf {
-    static NEXT: AtomicUsize = AtomicUsize::new(0);
-    let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_bad_input_{}_{n}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
-fn listing(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .expect("read folder")
-        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
 
 /// Runs `trisplat convert input output` (plus `extra`) in a folder holding only `input`;
 /// checks the failure contract (the line names the input) and returns the stderr line.

@@ -1,8 +1,8 @@
 //! `trisplat cameras` feeding `render --mesh` and `tsdf` (from depth maps and from Gaussians):
 //! the whole supervision chain through the real binary.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{fresh_dir, run, run_ok, s};
 
 use trisplat_geometry::camera::read_cameras_json;
 use trisplat_geometry::io::read_mesh;
@@ -10,36 +10,12 @@ use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::topology::boundary_edges;
 
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
-
-fn run(args: &[&str]) -> Output {
-    let out = Command::new(BIN).args(args).output().expect("run trisplat");
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_cameras_tsdf_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
 #[test]
 fn rig_render_fuse_recovers_spot() {
     let dir = fresh_dir("spot");
     let spot = trisplat_fixtures::path("spot_taubin.ply");
     let cams = dir.join("cams.json");
-    run(&[
+    run_ok(&[
         "cameras",
         s(&spot),
         "-o",
@@ -53,7 +29,7 @@ fn rig_render_fuse_recovers_spot() {
     assert_eq!(cameras.len(), 40);
 
     let maps = dir.join("maps");
-    run(&[
+    run_ok(&[
         "render",
         "--mesh",
         s(&spot),
@@ -65,7 +41,7 @@ fn rig_render_fuse_recovers_spot() {
         "depth",
     ]);
     let fused = dir.join("fused.ply");
-    run(&[
+    run_ok(&[
         "tsdf",
         "--cameras",
         s(&cams),
@@ -103,7 +79,7 @@ fn fuse_rendered_gaussians() {
     let dir = fresh_dir("gaussians");
     let gaussians = trisplat_fixtures::path("render/random_deg3.ply");
     let cams = dir.join("cams.json");
-    run(&[
+    run_ok(&[
         "cameras",
         s(&gaussians),
         "-o",
@@ -116,7 +92,7 @@ fn fuse_rendered_gaussians() {
         "orbit",
     ]);
     let fused = dir.join("fused.ply");
-    run(&[
+    run_ok(&[
         "tsdf",
         "--cameras",
         s(&cams),
@@ -131,19 +107,16 @@ fn fuse_rendered_gaussians() {
 
 #[test]
 fn depth_and_gaussians_are_exclusive() {
-    let out = Command::new(BIN)
-        .args([
-            "tsdf",
-            "--cameras",
-            "c.json",
-            "--depth",
-            "d",
-            "--gaussians",
-            "g.ply",
-            "-o",
-            "m.ply",
-        ])
-        .output()
-        .expect("run");
+    let out = run(&[
+        "tsdf",
+        "--cameras",
+        "c.json",
+        "--depth",
+        "d",
+        "--gaussians",
+        "g.ply",
+        "-o",
+        "m.ply",
+    ]);
     assert_eq!(out.status.code(), Some(2));
 }

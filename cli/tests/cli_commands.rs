@@ -1,37 +1,17 @@
 //! `trisplat sample`, `smooth` and common contract checks through the real binary: success
 //! paths produce readable files, usage errors exit 2, refused outputs leave inputs untouched.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{fresh_dir, one_error_line, run};
+
+use std::path::Path;
 
 use trisplat_geometry::io::{read_mesh, read_points};
-
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
-
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("run trisplat")
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_commands_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
 
 fn spot() -> String {
     trisplat_fixtures::path("spot_triangulated.obj")
         .to_string_lossy()
         .into_owned()
-}
-
-fn one_error_line(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
-    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
-    assert!(stderr.starts_with("error: "), "{stderr}");
-    stderr
 }
 
 #[test]

@@ -1,40 +1,10 @@
 //! `trisplat render` through the real binary: cameras.json and transforms.json, every mode, the
 //! files of SPEC §10, and the refusals (bound Gaussians, bad lists, overwriting an input).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{fixture, fresh_dir, one_error_line, run, s};
 
 use trisplat_geometry::io::read_npy;
-
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
-
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("run trisplat")
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_render_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
-fn fixture(name: &str) -> String {
-    trisplat_fixtures::path(name).to_string_lossy().into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-fn one_error_line(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
-    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
-    assert!(stderr.starts_with("error: "), "{stderr}");
-    stderr
-}
 
 #[test]
 fn renders_every_output_of_every_camera() {
@@ -91,7 +61,8 @@ fn renders_every_output_of_every_camera() {
             "alpha,depth,normal".to_owned(),
         ];
         args.extend(extra.iter().map(|a| (*a).to_owned()));
-        let o = Command::new(BIN).args(&args).output().unwrap();
+        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = run(&argv);
         assert!(
             o.status.success(),
             "{extra:?}: {}",
@@ -173,7 +144,8 @@ fn refusals_are_one_line() {
             s(&dir.join("out2")).to_owned(),
         ];
         args.extend(bad.iter().map(|a| (*a).to_owned()));
-        let o = Command::new(BIN).args(&args).output().unwrap();
+        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = run(&argv);
         assert_eq!(o.status.code(), Some(2), "{bad:?}");
     }
     // The output folder may not be an input file.

@@ -1,17 +1,17 @@
 //! `trisplat bind`, `deform`, `densify` and `prune`: success on fixtures, and the bad-input
 //! contract (exit 1, one stderr line naming the file and the element, no output left).
 
+mod common;
+use common::{BIN, fresh_dir, listing};
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_splat::glam::Vec3;
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 use trisplat_splat::{GaussianParts, GaussianSet};
-
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
 
 /// Positions written through f32 PLY files and deformed in f32, relative to the model size.
 const POSITION_TOL: f32 = 1e-5;
@@ -24,27 +24,6 @@ fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../fixtures/data")
         .join(name)
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    static NEXT: AtomicUsize = AtomicUsize::new(0);
-    let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_splat_{}_{n}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
-fn listing(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .map(|r| {
-            r.map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
-                .collect()
-        })
-        .unwrap_or_default();
-    names.sort();
-    names
 }
 
 fn trisplat(args: &[&Path]) -> Output {

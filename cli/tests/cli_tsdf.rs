@@ -1,40 +1,16 @@
 //! `trisplat tsdf` through the real binary, on the Spot depth maps of
 //! `fixtures/data/reference/tsdf/` (written by `tests/reference/ref_tsdf.py`).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{fresh_dir, one_error_line, run, s};
+
+use std::path::PathBuf;
 
 use trisplat_geometry::io::{read_mesh, write_npy};
 use trisplat_geometry::topology::boundary_edges;
 
-const BIN: &str = env!("CARGO_BIN_EXE_trisplat");
-
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("run trisplat")
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("cli_tsdf_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
 fn fixture_dir() -> PathBuf {
     trisplat_fixtures::path("reference/tsdf")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-fn one_error_line(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
-    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
-    assert!(stderr.starts_with("error: "), "{stderr}");
-    stderr
 }
 
 /// A copy of the fixture folder (cameras.json and depth maps) that a test may break.
