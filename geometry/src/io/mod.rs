@@ -11,6 +11,7 @@
 mod atomic;
 mod error;
 pub mod gltf;
+pub mod gltf_sequence;
 mod npy;
 pub mod obj;
 pub mod ply;
@@ -19,6 +20,7 @@ use std::path::Path;
 
 pub use atomic::write_atomically;
 pub use error::IoError;
+pub use gltf_sequence::{SequenceLayout, write_mesh_sequence};
 pub use npy::{NpyArray, read_npy, write_npy};
 pub use obj::ObjVertices;
 pub use ply::{PlyEncoding, PlyExtras};
