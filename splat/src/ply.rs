@@ -727,7 +727,7 @@ fn read_ascii(body: &[u8], elements: &[Element], path: &Path) -> Result<Columns,
                 name: p.name.clone(),
                 token: String::new(),
             })?;
-            if push_token(col, token).is_none() {
+            if !col.push_token(token) {
                 return Err(PlyError::BadValue {
                     path: path.to_path_buf(),
                     index,
@@ -738,20 +738,6 @@ fn read_ascii(body: &[u8], elements: &[Element], path: &Path) -> Result<Columns,
         }
     }
     Ok(columns)
-}
-
-fn push_token(col: &mut PropertyValues, token: &str) -> Option<()> {
-    match col {
-        PropertyValues::I8(v) => v.push(token.parse().ok()?),
-        PropertyValues::U8(v) => v.push(token.parse().ok()?),
-        PropertyValues::I16(v) => v.push(token.parse().ok()?),
-        PropertyValues::U16(v) => v.push(token.parse().ok()?),
-        PropertyValues::I32(v) => v.push(token.parse().ok()?),
-        PropertyValues::U32(v) => v.push(token.parse().ok()?),
-        PropertyValues::F32(v) => v.push(token.parse().ok()?),
-        PropertyValues::F64(v) => v.push(token.parse().ok()?),
-    }
-    Some(())
 }
 
 /// A column as `f32` (exact for `float`, rounded for `double`, converted for integers).

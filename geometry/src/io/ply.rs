@@ -159,6 +159,21 @@ macro_rules! each_column {
 }
 
 impl ScalarColumn {
+    /// The values at `indices`, in that order (indices past the end are skipped).
+    #[must_use]
+    pub fn gather(&self, indices: &[usize]) -> Self {
+        macro_rules! gathered {
+            ($($variant:ident),*) => {
+                match self {
+                    $(Self::$variant(v) => {
+                        Self::$variant(indices.iter().filter_map(|&i| v.get(i).copied()).collect())
+                    })*
+                }
+            };
+        }
+        gathered!(I8, U8, I16, U16, I32, U32, F32, F64)
+    }
+
     /// An empty column of type `ty` with room for `capacity` values.
     #[must_use]
     pub fn with_capacity(ty: ScalarType, capacity: usize) -> Self {
@@ -290,8 +305,9 @@ impl ScalarColumn {
         }
     }
 
-    /// Parses an ascii token into this column; `false` when it is not a valid value of the type.
-    fn push_token(&mut self, token: &str) -> bool {
+    /// Parses an ascii token into this column; `false` when it is not a valid value of the type
+    /// (integer columns also take integral float tokens such as `3.0`).
+    pub fn push_token(&mut self, token: &str) -> bool {
         fn int<T: TryFrom<i64>>(token: &str) -> Option<T> {
             let x: i64 = match token.parse() {
                 Ok(x) => x,
