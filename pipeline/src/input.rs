@@ -16,7 +16,7 @@ use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::frames::Convention;
 use trisplat_splat::ply::read_gaussians;
 
-use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, ExtractConfig, Mode};
+use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, ExtractConfig, Mode};
 use crate::error::PipelineError;
 
 /// Largest difference between the template's positions and a skinned animation's rest pose
@@ -323,15 +323,24 @@ pub fn gaussians(
     Ok((set, source))
 }
 
-/// Shrinks the local scale along the triangle normal by [`BIND_NORMAL_SCALE`] (local y for
-/// GaussianAvatars, local z for SurfHead).
+/// Multiplies the local scale along the triangle normal by [`BIND_NORMAL_SCALE`] (local y for
+/// GaussianAvatars, local z for SurfHead) and in the plane by [`BIND_TANGENT_SCALE`].
 fn flatten(set: GaussianSet, convention: Convention) -> GaussianSet {
     let ln = BIND_NORMAL_SCALE.ln();
+    let lt = BIND_TANGENT_SCALE.ln();
     let mut parts = set.into_parts();
     for s in &mut parts.log_scales {
         match convention {
-            Convention::GaussianAvatars => s.y += ln,
-            Convention::SurfHead => s.z += ln,
+            Convention::GaussianAvatars => {
+                s.y += ln;
+                s.x += lt;
+                s.z += lt;
+            }
+            Convention::SurfHead => {
+                s.z += ln;
+                s.x += lt;
+                s.y += lt;
+            }
         }
     }
     // Only finite log-scales were shifted by a finite amount: the set stays valid.
@@ -344,4 +353,74 @@ fn flatten(set: GaussianSet, convention: Convention) -> GaussianSet {
 /// An unreadable file.
 pub fn read_gt(path: &Path) -> Result<TriMesh, PipelineError> {
     Ok(read_mesh(path)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ExtractOptions, Method};
+
+    fn square() -> TriMesh {
+        let p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        TriMesh::new(p, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    fn config(mode: Mode) -> ExtractConfig {
+        ExtractConfig {
+            template: PathBuf::from("square.ply"),
+            animation: None,
+            gaussians: None,
+            methods: vec![Method::Delaunay],
+            output: PathBuf::from("out"),
+            frames: None,
+            gt: None,
+            options: ExtractOptions {
+                mode,
+                ..ExtractOptions::default()
+            },
+        }
+    }
+
+    #[test]
+    fn self_bound_gaussians_are_flat_along_the_normal() {
+        let mesh = square();
+        for mode in [Mode::Binding, Mode::Jacobian] {
+            let (set, source) = gaussians(&config(mode), &mesh).expect("bound");
+            assert_eq!(source, GaussianSource::Bound(4));
+            let world = Deformer::new(&mesh, deform_mode(mode))
+                .deform(&set, mesh.positions())
+                .expect("deformed");
+            for i in 0..world.len() {
+                let c = world.covariance(i);
+                let normal = c * glam::DVec3::Z;
+                let in_plane = c * glam::DVec3::X;
+                let (n, t) = (glam::DVec3::Z.dot(normal), glam::DVec3::X.dot(in_plane));
+                let ratio = f64::from(BIND_NORMAL_SCALE / BIND_TANGENT_SCALE).powi(2);
+                assert!(
+                    (n / t - ratio).abs() < 1e-3 * ratio.max(1e-3),
+                    "{mode:?} {i}: {n} {t}"
+                );
+                assert!((world.opacity(i) - BIND_OPACITY).abs() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn frame_ranges() {
+        assert_eq!(parse_frames(None, 5).expect("all"), 0..5);
+        assert_eq!(parse_frames(Some("1..3"), 5).expect("ok"), 1..3);
+        assert_eq!(parse_frames(Some("1..=3"), 5).expect("ok"), 1..4);
+        assert_eq!(parse_frames(Some("2.."), 5).expect("ok"), 2..5);
+        assert_eq!(parse_frames(Some("..2"), 5).expect("ok"), 0..2);
+        assert_eq!(parse_frames(Some("4"), 5).expect("ok"), 4..5);
+        for bad in ["3..3", "0..9", "x..2", "7", "5.."] {
+            let e = parse_frames(Some(bad), 5).expect_err(bad).to_string();
+            assert!(e.starts_with(&format!("--frames {bad}: ")), "{e}");
+        }
+    }
 }

@@ -27,7 +27,7 @@ Methods and their defaults (derived from the template, so any scale works):
   tsdf      render expected depth (3DGS, gsplat rules; alpha < 0.5 = no depth) from --views \
 cameras on a sphere around each frame (--resolution px square, 40 deg field of view) and fuse \
 (TSDF, marching cubes, largest piece kept); --voxel defaults to the template's bounding radius / \
-256, truncation 5 voxels.
+128, truncation 5 voxels.
   delaunay  incremental Delaunay of the bound Gaussians: per-triangle charts triangulated in the \
 rest pose, lifted to the deformed means each frame; only charts that Gaussians hop into or out \
 of are redone. --rebuild-every N rebuilds from scratch every N frames (1: every frame).
