@@ -37,14 +37,14 @@
 //! ellipsoid reaches behind the camera plane) the box is the whole image.
 
 use glam::{DMat3, DVec2, DVec3};
-use rayon::prelude::*;
 use trisplat_geometry::Camera;
-use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::composite::{ALPHA_THRESHOLD, CompositeRules};
 use super::options::RenderOptions;
 use super::project::{EPS_2D, GSPLAT_EXTENT};
-use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
+use super::screen::{
+    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible,
+};
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
 
@@ -348,85 +348,42 @@ pub fn project_perspective(
 ) -> (ScreenSplats, PerspectiveKernel) {
     let view = view_of(camera);
     let clip = (f64::from(options.near), f64::from(options.far));
-    let n = set.len();
-    const CHUNK: usize = 4096;
-    type Entry = (u32, ProjectedPerspective, [f32; 3], [f32; 3]);
-    let chunks: Vec<Vec<Entry>> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            (c * CHUNK..((c + 1) * CHUNK).min(n))
-                .filter_map(|i| {
-                    let mean = set.means()[i].as_dvec3();
-                    let opacity = f64::from(sigmoid(set.opacity_logits()[i]));
-                    let rot = set.rotation_matrix(i);
-                    let s = set.scale(i).as_dvec3();
-                    let l = view.w2c
-                        * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
-                    let t = view.w2c * (mean - view.position);
-                    let p = project_with(
-                        &view,
-                        t,
-                        l * l.transpose(),
-                        opacity,
-                        clip,
-                        options.antialiased,
-                    )?;
-                    let color = if options.outputs.rgb {
-                        crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
-                    } else {
-                        [0.0; 3]
-                    };
-                    let normal = if options.outputs.normal {
-                        facing_normal(rot, s, mean - view.position, &view, options.normal_frame)
-                    } else {
-                        [0.0; 3]
-                    };
-                    Some((i as u32, p, color, normal))
-                })
-                .collect()
-        })
-        .collect();
-    let visible: usize = chunks.iter().map(Vec::len).sum();
-    let mut screen = ScreenSplats::with_capacity(visible, options.outputs);
-    let mut kernel = PerspectiveKernel {
-        splats: Vec::with_capacity(visible),
-    };
-    for (id, p, color, normal) in chunks.into_iter().flatten() {
-        screen.push(
-            ScreenEntry {
-                id,
-                center: [p.box_center.x as f32, p.box_center.y as f32],
-                radius: [p.box_radius.x as f32, p.box_radius.y as f32],
-                depth: p.splat.z as f32,
-                color,
-                normal,
-            },
-            options.outputs,
-        );
-        kernel.splats.push(p.splat);
-    }
-    (screen, kernel)
-}
-
-/// The Gaussian's shortest axis (first of equal ones) turned to face the camera, in `frame`.
-fn facing_normal(rot: DMat3, s: DVec3, view_dir: DVec3, v: &View, frame: NormalFrame) -> [f32; 3] {
-    let axis = if s.x <= s.y && s.x <= s.z {
-        rot.x_axis
-    } else if s.y <= s.z {
-        rot.y_axis
-    } else {
-        rot.z_axis
-    };
-    let n = if axis.dot(view_dir) > 0.0 {
-        -axis
-    } else {
-        axis
-    };
-    let n = match frame {
-        NormalFrame::World => n,
-        NormalFrame::Camera => v.w2c * n,
-    };
-    n.as_vec3().to_array()
+    let (screen, splats) = gather_visible(set.len(), options.outputs, |i| {
+        let mean = set.means()[i].as_dvec3();
+        let opacity = f64::from(sigmoid(set.opacity_logits()[i]));
+        let rot = set.rotation_matrix(i);
+        let s = set.scale(i).as_dvec3();
+        let l = view.w2c * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
+        let t = view.w2c * (mean - view.position);
+        let p = project_with(
+            &view,
+            t,
+            l * l.transpose(),
+            opacity,
+            clip,
+            options.antialiased,
+        )?;
+        let color = if options.outputs.rgb {
+            crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
+        } else {
+            [0.0; 3]
+        };
+        let normal = if options.outputs.normal {
+            facing_normal(rot, s, mean - view.position, view.w2c, options.normal_frame)
+        } else {
+            [0.0; 3]
+        };
+        let entry = ScreenEntry {
+            id: i as u32,
+            center: [p.box_center.x as f32, p.box_center.y as f32],
+            radius: [p.box_radius.x as f32, p.box_radius.y as f32],
+            depth: p.splat.z as f32,
+            color,
+            normal,
+        };
+        Some((entry, p.splat))
+    });
+    (screen, PerspectiveKernel { splats })
 }
 
 #[cfg(test)]

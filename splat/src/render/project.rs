@@ -18,13 +18,13 @@
 //! −0.5 px (its integer pixel centres).
 
 use glam::{DMat3, DVec3, Vec4};
-use rayon::prelude::*;
 use trisplat_geometry::Camera;
-use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::composite::ALPHA_THRESHOLD;
 use super::options::{RenderOptions, Rules};
-use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
+use super::screen::{
+    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible,
+};
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
 
@@ -295,37 +295,19 @@ pub fn project_ewa(
     options: &RenderOptions,
 ) -> (ScreenSplats, EwaKernel) {
     let view = View::new(camera, options.rules);
-    let n = set.len();
-    const CHUNK: usize = 4096;
-    let chunks: Vec<Vec<Projected>> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-            range
-                .filter_map(|i| project_one(set, i, &view, options))
-                .collect()
-        })
-        .collect();
-    let visible: usize = chunks.iter().map(Vec::len).sum();
-    let mut screen = ScreenSplats::with_capacity(visible, options.outputs);
-    let mut kernel = EwaKernel {
-        splats: Vec::with_capacity(visible),
-    };
-    for p in chunks.into_iter().flatten() {
-        screen.push(
-            ScreenEntry {
-                id: p.id,
-                center: p.center,
-                radius: p.radius,
-                depth: p.splat.depth,
-                color: p.color,
-                normal: p.normal,
-            },
-            options.outputs,
-        );
-        kernel.splats.push(p.splat);
-    }
-    (screen, kernel)
+    let (screen, splats) = gather_visible(set.len(), options.outputs, |i| {
+        let p = project_one(set, i, &view, options)?;
+        let entry = ScreenEntry {
+            id: p.id,
+            center: p.center,
+            radius: p.radius,
+            depth: p.splat.depth,
+            color: p.color,
+            normal: p.normal,
+        };
+        Some((entry, p.splat))
+    });
+    (screen, EwaKernel { splats })
 }
 
 fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Option<Projected> {
@@ -409,7 +391,7 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
         [0.0; 3]
     };
     let normal = if o.outputs.normal {
-        facing_normal(rot, s, mean - v.position, v, o)
+        facing_normal(rot, s, mean - v.position, v.w2c, o.normal_frame)
     } else {
         [0.0; 3]
     };
@@ -427,26 +409,4 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
         color,
         normal,
     })
-}
-
-/// The Gaussian's shortest axis (first of equal ones), turned to face the camera, in the
-/// requested frame.
-fn facing_normal(rot: DMat3, s: DVec3, view_dir: DVec3, v: &View, o: &RenderOptions) -> [f32; 3] {
-    let axis = if s.x <= s.y && s.x <= s.z {
-        rot.x_axis
-    } else if s.y <= s.z {
-        rot.y_axis
-    } else {
-        rot.z_axis
-    };
-    let n = if axis.dot(view_dir) > 0.0 {
-        -axis
-    } else {
-        axis
-    };
-    let n = match o.normal_frame {
-        NormalFrame::World => n,
-        NormalFrame::Camera => v.w2c * n,
-    };
-    n.as_vec3().to_array()
 }

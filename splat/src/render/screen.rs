@@ -15,6 +15,11 @@
 //! by depth and composites front to back with the [`super::composite::CompositeRules`] the mode
 //! chooses (alpha clamp, skip threshold, stop rule, pixel-centre offset, median-depth rule).
 
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+
+use trisplat_geometry::mesh_render::NormalFrame;
+
 use super::options::Outputs;
 
 /// One splat's contribution at one pixel, before the compositing rules are applied.
@@ -178,4 +183,60 @@ pub struct ScreenEntry {
     pub color: [f32; 3],
     /// Normal (ignored unless normals are rendered).
     pub normal: [f32; 3],
+}
+
+/// Gaussians projected per parallel chunk (results do not depend on the thread count).
+const PROJECT_CHUNK: usize = 4096;
+
+/// Runs `project` on every Gaussian index `0..n` in parallel chunks and gathers the visible
+/// ones, in index order, into screen arrays plus the mode's own per-splat data.
+pub(crate) fn gather_visible<S: Send>(
+    n: usize,
+    outputs: Outputs,
+    project: impl Fn(usize) -> Option<(ScreenEntry, S)> + Sync,
+) -> (ScreenSplats, Vec<S>) {
+    let chunks: Vec<Vec<(ScreenEntry, S)>> = (0..n.div_ceil(PROJECT_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            (c * PROJECT_CHUNK..((c + 1) * PROJECT_CHUNK).min(n))
+                .filter_map(&project)
+                .collect()
+        })
+        .collect();
+    let visible: usize = chunks.iter().map(Vec::len).sum();
+    let mut screen = ScreenSplats::with_capacity(visible, outputs);
+    let mut splats = Vec::with_capacity(visible);
+    for (entry, splat) in chunks.into_iter().flatten() {
+        screen.push(entry, outputs);
+        splats.push(splat);
+    }
+    (screen, splats)
+}
+
+/// The Gaussian's shortest axis (first of equal ones) turned to face the camera (against
+/// `view_dir`, camera to mean), in world or camera (`w2c`) coordinates.
+pub(crate) fn facing_normal(
+    rot: DMat3,
+    s: DVec3,
+    view_dir: DVec3,
+    w2c: DMat3,
+    frame: NormalFrame,
+) -> [f32; 3] {
+    let axis = if s.x <= s.y && s.x <= s.z {
+        rot.x_axis
+    } else if s.y <= s.z {
+        rot.y_axis
+    } else {
+        rot.z_axis
+    };
+    let n = if axis.dot(view_dir) > 0.0 {
+        -axis
+    } else {
+        axis
+    };
+    let n = match frame {
+        NormalFrame::World => n,
+        NormalFrame::Camera => w2c * n,
+    };
+    n.as_vec3().to_array()
 }

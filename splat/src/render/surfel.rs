@@ -30,7 +30,6 @@
 //! All per-surfel and per-pixel arithmetic is `f64`.
 
 use glam::{DMat3, DVec2, DVec3};
-use rayon::prelude::*;
 use trisplat_geometry::Camera;
 use trisplat_geometry::mesh_render::NormalFrame;
 
@@ -38,7 +37,7 @@ use super::composite::{
     ALPHA_THRESHOLD, CompositeRules, MedianRule, ORIGINAL_MAX_ALPHA, STOP_TRANSMITTANCE,
 };
 use super::options::RenderOptions;
-use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
+use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel, gather_visible};
 use super::tiles::{TILE_SIZE, TileRect, tile_range};
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
@@ -283,77 +282,56 @@ pub fn project_surfels(
         camera.width.div_ceil(TILE_SIZE),
         camera.height.div_ceil(TILE_SIZE),
     );
-    let n = set.len();
-    const CHUNK: usize = 4096;
-    type Entry = (u32, ProjectedSurfel, [f32; 3], [f32; 3]);
-    let chunks: Vec<Vec<Entry>> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            (c * CHUNK..((c + 1) * CHUNK).min(n))
-                .filter_map(|i| {
-                    let opacity = f64::from(sigmoid(set.opacity_logits()[i]));
-                    if opacity < f64::from(ALPHA_THRESHOLD) {
-                        return None;
-                    }
-                    let mean = set.means()[i].as_dvec3();
-                    let s = set.scale(i).as_dvec3();
-                    let p = project_with(
-                        &view,
-                        mean,
-                        set.rotation_matrix(i),
-                        DVec2::new(s.x, s.y),
-                        opacity,
-                    )?;
-                    let (x0, x1, y0, y1) = tile_range(
-                        TileRect::Original3dgs,
-                        [p.splat.center.x as f32, p.splat.center.y as f32],
-                        [p.radius as f32; 2],
-                        tiles.0,
-                        tiles.1,
-                    );
-                    if x0 >= x1 || y0 >= y1 {
-                        return None;
-                    }
-                    let color = if options.outputs.rgb {
-                        crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
-                    } else {
-                        [0.0; 3]
-                    };
-                    let normal = if options.outputs.normal {
-                        match options.normal_frame {
-                            NormalFrame::Camera => p.normal_camera,
-                            NormalFrame::World => c2w * p.normal_camera,
-                        }
-                        .as_vec3()
-                        .to_array()
-                    } else {
-                        [0.0; 3]
-                    };
-                    Some((i as u32, p, color, normal))
-                })
-                .collect()
-        })
-        .collect();
-    let visible: usize = chunks.iter().map(Vec::len).sum();
-    let mut screen = ScreenSplats::with_capacity(visible, options.outputs);
-    let mut kernel = SurfelKernel {
-        splats: Vec::with_capacity(visible),
-    };
-    for (id, p, color, normal) in chunks.into_iter().flatten() {
-        screen.push(
-            ScreenEntry {
-                id,
-                center: [p.splat.center.x as f32, p.splat.center.y as f32],
-                radius: [p.radius as f32; 2],
-                depth: p.depth as f32,
-                color,
-                normal,
-            },
-            options.outputs,
+    let (screen, splats) = gather_visible(set.len(), options.outputs, |i| {
+        let opacity = f64::from(sigmoid(set.opacity_logits()[i]));
+        if opacity < f64::from(ALPHA_THRESHOLD) {
+            return None;
+        }
+        let mean = set.means()[i].as_dvec3();
+        let s = set.scale(i).as_dvec3();
+        let p = project_with(
+            &view,
+            mean,
+            set.rotation_matrix(i),
+            DVec2::new(s.x, s.y),
+            opacity,
+        )?;
+        let (x0, x1, y0, y1) = tile_range(
+            TileRect::Original3dgs,
+            [p.splat.center.x as f32, p.splat.center.y as f32],
+            [p.radius as f32; 2],
+            tiles.0,
+            tiles.1,
         );
-        kernel.splats.push(p.splat);
-    }
-    (screen, kernel)
+        if x0 >= x1 || y0 >= y1 {
+            return None;
+        }
+        let color = if options.outputs.rgb {
+            crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
+        } else {
+            [0.0; 3]
+        };
+        let normal = if options.outputs.normal {
+            match options.normal_frame {
+                NormalFrame::Camera => p.normal_camera,
+                NormalFrame::World => c2w * p.normal_camera,
+            }
+            .as_vec3()
+            .to_array()
+        } else {
+            [0.0; 3]
+        };
+        let entry = ScreenEntry {
+            id: i as u32,
+            center: [p.splat.center.x as f32, p.splat.center.y as f32],
+            radius: [p.radius as f32; 2],
+            depth: p.depth as f32,
+            color,
+            normal,
+        };
+        Some((entry, p.splat))
+    });
+    (screen, SurfelKernel { splats })
 }
 
 #[cfg(test)]
