@@ -1,10 +1,15 @@
-//! `trisplat convert`: PLY, OBJ, glTF and GLB meshes from one format to another.
+//! `trisplat convert`: PLY, OBJ, glTF and GLB meshes from one format to another, and a
+//! folder or pattern of same-topology OBJ/PLY frames to one animated glTF/GLB.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
-use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
-use trisplat_geometry::io::{self, Format, ObjVertices, PlyEncoding, ReadOptions, WriteOptions};
+use rayon::prelude::*;
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::animation::{AnimatedTemplate, DEFAULT_FPS, GltfTemplate, MeshSequence};
+use trisplat_geometry::io::{
+    self, Format, ObjVertices, PlyEncoding, ReadOptions, SequenceLayout, WriteOptions,
+};
 
 use super::{Context, parse_clip, refuse_to_overwrite};
 
@@ -16,12 +21,17 @@ use super::{Context, parse_clip, refuse_to_overwrite};
     indexed differently from its positions; then vertices are split at the seams (as trimesh \
     does) so nothing is lost. PLY to PLY keeps unknown properties and elements. glTF input is \
     read in its rest state (skinned meshes in bind pose, morph targets at zero) with node \
-    transforms applied. The output is written atomically and never over the input."
+    transforms applied. The output is written atomically and never over the input.\n\n\
+    A folder of OBJ/PLY frames (natural order of the file names: f2 before f10) or a pattern \
+    (frames/f_%04d.ply, frames/f_*.obj) as INPUT and a .glb/.gltf OUTPUT write one animated \
+    glTF: every frame must have the vertex count and triangles of the first; frame 0 is the \
+    base mesh, each later frame a morph target, and a STEP weights track shows frame k at \
+    k / FPS seconds (--fps, default 30)."
 )]
 pub struct ConvertArgs {
-    /// Input mesh (.ply, .obj, .gltf, .glb).
+    /// Input mesh (.ply, .obj, .gltf, .glb), or a folder or pattern of OBJ/PLY frames.
     pub input: PathBuf,
-    /// Output mesh (.ply, .obj, .gltf, .glb).
+    /// Output mesh (.ply, .obj, .gltf, .glb); .glb or .gltf for frames.
     pub output: PathBuf,
     /// Write PLY as ascii instead of binary little-endian.
     #[arg(long)]
@@ -32,6 +42,41 @@ pub struct ConvertArgs {
     /// Time in seconds at which to evaluate the clip (clamped to the clip; default 0).
     #[arg(long, value_name = "SECONDS")]
     pub time: Option<f64>,
+    /// Frame rate of a folder or pattern of frames: frame k is shown at k / F seconds
+    /// [default: 30].
+    #[arg(long, value_name = "F", value_parser = parse_fps)]
+    pub fps: Option<f64>,
+}
+
+/// A `--fps` value: finite and > 0.
+fn parse_fps(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
+        _ => Err(format!(
+            "expected a positive number of frames per second, got {s:?}"
+        )),
+    }
+}
+
+/// Whether `input` names a sequence of frames: a folder, or a file-name pattern (`%d`, `*`,
+/// `?`) that is not itself an existing file.
+fn is_sequence_input(input: &Path) -> bool {
+    input.is_dir()
+        || (!input.is_file()
+            && input
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().contains(['%', '*', '?'])))
+}
+
+/// Reports a usage error the way clap does (the message, the usage line) and exits with 2.
+fn usage_error(message: &str) -> ! {
+    use clap::CommandFactory as _;
+    let mut cli = crate::Cli::command();
+    cli.build();
+    let mut command = cli.find_subcommand_mut("convert").cloned().unwrap_or(cli);
+    command
+        .error(clap::error::ErrorKind::ArgumentConflict, message)
+        .exit()
 }
 
 /// Runs `trisplat convert`.
@@ -40,14 +85,17 @@ pub struct ConvertArgs {
 /// Unknown formats, unreadable or malformed input, an output equal to the input, a failed
 /// write, animation options on a non-glTF input or a glTF without that clip.
 pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
+    if is_sequence_input(&args.input) {
+        return convert_sequence(&args, ctx);
+    }
+    if args.fps.is_some() {
+        usage_error(&format!(
+            "--fps is the frame rate of a folder or pattern of frames; {} is one mesh",
+            args.input.display()
+        ));
+    }
     if args.clip.is_some() || args.time.is_some() {
         return convert_animated(&args, ctx);
-    }
-    if args.input.is_dir() {
-        bail!(
-            "{}: converting a folder of frames (an animated sequence) is not supported yet",
-            args.input.display()
-        );
     }
     let in_format = Format::from_path(&args.input)?;
     let out_format = Format::from_path(&args.output)?;
@@ -100,5 +148,120 @@ fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     spinner.finish_and_clear();
     io::write_mesh(&args.output, &mesh, WriteOptions { ascii: args.ascii })?;
+    Ok(())
+}
+
+/// `convert` of a folder or pattern of same-topology frames to one animated glTF/GLB (morph
+/// targets, frame k at k / fps seconds).
+fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
+    let input = args.input.display();
+    if args.clip.is_some() || args.time.is_some() {
+        usage_error(&format!(
+            "--clip/--time evaluate a glTF animation; {input} is a folder or pattern of frames"
+        ));
+    }
+    if !matches!(
+        Format::from_path(&args.output),
+        Ok(Format::Glb | Format::Gltf)
+    ) {
+        usage_error(&format!(
+            "{input} is a folder or pattern of frames, which converts to one animated .glb or \
+             .gltf, not {}; to convert one frame, name its file",
+            args.output.display()
+        ));
+    }
+    let sequence = if args.input.is_dir() {
+        MeshSequence::from_dir(&args.input)?
+    } else {
+        let Some(pattern) = args.input.to_str() else {
+            bail!("{input}: the pattern is not valid UTF-8");
+        };
+        MeshSequence::from_pattern(pattern)?
+    };
+    for file in sequence.files() {
+        refuse_to_overwrite(file, &args.output)?;
+    }
+    let files = sequence.files();
+    if sequence.rest().triangle_count() == 0 {
+        bail!(
+            "{}: has no triangles; the first frame is the base mesh of the animated glTF",
+            files[0].display()
+        );
+    }
+    let bar = ctx
+        .progress
+        .bar(files.len() as u64, &format!("reading frames of {input}"));
+    // Read in parallel; report the first bad frame in file order.
+    let first = sequence.rest();
+    let read: Vec<anyhow::Result<TriMesh>> = files
+        .par_iter()
+        .enumerate()
+        .map(|(k, file)| {
+            let mesh = if k == 0 {
+                first.clone()
+            } else {
+                let mesh = io::read_mesh(file)?;
+                check_topology(&mesh, first, file, &files[0])?;
+                mesh
+            };
+            bar.inc(1);
+            Ok(mesh)
+        })
+        .collect();
+    bar.finish_and_clear();
+    let frames = read.into_iter().collect::<anyhow::Result<Vec<_>>>()?;
+    let fps = args.fps.unwrap_or(DEFAULT_FPS);
+    let times: Vec<f64> = (0..frames.len()).map(|k| k as f64 / fps).collect();
+    let spinner = ctx
+        .progress
+        .spinner(&format!("writing {}", args.output.display()));
+    let result =
+        io::write_mesh_sequence(&args.output, &frames, &times, SequenceLayout::MorphTargets);
+    spinner.finish_and_clear();
+    result?;
+    Ok(())
+}
+
+/// Checks that frame `mesh` (read from `path`) has the vertex count and triangles of the first
+/// frame, with the message of the animation module's topology check.
+fn check_topology(
+    mesh: &TriMesh,
+    first: &TriMesh,
+    path: &Path,
+    first_path: &Path,
+) -> anyhow::Result<()> {
+    let differs = |what: String| {
+        anyhow::anyhow!(
+            "{}: topology differs from {}: {what} (every frame needs the topology of the first)",
+            path.display(),
+            first_path.display()
+        )
+    };
+    if mesh.vertex_count() != first.vertex_count() {
+        return Err(differs(format!(
+            "{} vertices instead of {}",
+            mesh.vertex_count(),
+            first.vertex_count()
+        )));
+    }
+    if mesh.triangle_count() != first.triangle_count() {
+        return Err(differs(format!(
+            "{} triangles instead of {}",
+            mesh.triangle_count(),
+            first.triangle_count()
+        )));
+    }
+    if let Some(t) = mesh
+        .triangles()
+        .iter()
+        .zip(first.triangles())
+        .position(|(a, b)| a != b)
+    {
+        return Err(differs(format!(
+            "triangle {t} is {:?} instead of {:?}",
+            mesh.triangles()[t],
+            first.triangles()[t]
+        )));
+    }
     Ok(())
 }
