@@ -16,19 +16,40 @@ use trisplat_splat::render::RenderError;
 
 use crate::Method;
 
+// The file errors below already print their cause in their message; they are wrapped without
+// `#[source]` so that the CLI's cause chain prints it once.
+
+impl From<IoError> for PipelineError {
+    fn from(e: IoError) -> Self {
+        Self::Io(e)
+    }
+}
+
+impl From<trisplat_splat::ply::PlyError> for PipelineError {
+    fn from(e: trisplat_splat::ply::PlyError) -> Self {
+        Self::Ply(e)
+    }
+}
+
+impl From<AnimationError> for PipelineError {
+    fn from(e: AnimationError) -> Self {
+        Self::Animation(e)
+    }
+}
+
 /// Why the pipeline stopped.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum PipelineError {
     /// A file could not be read or written (the error names it and the element).
-    #[error(transparent)]
-    Io(#[from] IoError),
+    #[error("{0}")]
+    Io(IoError),
     /// The Gaussian file could not be read (the error names it and the Gaussian).
-    #[error(transparent)]
-    Ply(#[from] trisplat_splat::ply::PlyError),
+    #[error("{0}")]
+    Ply(trisplat_splat::ply::PlyError),
     /// The animation could not be opened or evaluated (the error names the file).
-    #[error(transparent)]
-    Animation(#[from] AnimationError),
+    #[error("{0}")]
+    Animation(AnimationError),
     /// No extraction method was asked for.
     #[error("--method: name at least one of tsdf, delaunay, alpha")]
     NoMethod,

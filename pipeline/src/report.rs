@@ -418,7 +418,7 @@ mod tests {
             render_ms: None,
             vertices: 4,
             faces: 4,
-            watertight: frame % 2 == 0,
+            watertight: frame.is_multiple_of(2),
             metrics,
         }
     }
