@@ -408,20 +408,12 @@ pub fn outlier_mask(
     let Some(index) = index_of(set)? else {
         return Ok(Vec::new());
     };
-    Ok((0..set.len())
-        .into_par_iter()
-        .with_min_len(256)
-        .map(|i| {
-            let found = index.k_nearest(set.means()[i], k + 1);
-            let others: Vec<f64> = found
-                .iter()
-                .filter(|n| n.index as usize != i)
-                .take(k)
-                .map(|n| n.distance)
-                .collect();
-            !others.is_empty() && others.iter().sum::<f64>() / (others.len() as f64) > threshold
-        })
-        .collect())
+    Ok(
+        mean_over_neighbours(set, &index, k, |_, _, distance| distance)
+            .into_iter()
+            .map(|mean| mean.is_some_and(|m| m > threshold))
+            .collect(),
+    )
 }
 
 /// A Gaussian's normal: its shortest axis (the flat axis of a surfel), in the set's frame.
@@ -458,18 +450,35 @@ pub fn normal_inconsistency_mask(
         .into_par_iter()
         .map(|i| shortest_axis(set, i))
         .collect();
-    Ok((0..set.len())
+    Ok(
+        mean_over_neighbours(set, &index, k, |i, j, _| normals[i].dot(normals[j]).abs())
+            .into_iter()
+            .map(|mean| mean.is_some_and(|m| m < threshold))
+            .collect(),
+    )
+}
+
+/// For every Gaussian, the mean of `value(i, j, distance)` over its `k` nearest other
+/// Gaussians `j` (`None` when it has none).
+fn mean_over_neighbours(
+    set: &GaussianSet,
+    index: &PointIndex,
+    k: usize,
+    value: impl Fn(usize, usize, f64) -> f64 + Sync,
+) -> Vec<Option<f64>> {
+    (0..set.len())
         .into_par_iter()
         .with_min_len(256)
         .map(|i| {
-            let found = index.k_nearest(set.means()[i], k + 1);
-            let cosines: Vec<f64> = found
+            let (sum, count) = index
+                .k_nearest(set.means()[i], k + 1)
                 .iter()
                 .filter(|n| n.index as usize != i)
                 .take(k)
-                .map(|n| normals[i].dot(normals[n.index as usize]).abs())
-                .collect();
-            !cosines.is_empty() && cosines.iter().sum::<f64>() / (cosines.len() as f64) < threshold
+                .fold((0.0, 0usize), |(sum, count), n| {
+                    (sum + value(i, n.index as usize, n.distance), count + 1)
+                });
+            (count > 0).then(|| sum / count as f64)
         })
-        .collect())
+        .collect()
 }
