@@ -13,8 +13,9 @@
 //!   covariance axes `L = J R_c R_local k_c diag(exp(log_s))`, so `Σ' = L Lᵀ`. The output rotation
 //!   and scales come from the SVD `L = U Σ Vᵀ` (`R = U` with `det U = +1`, `s = σ`), so the file
 //!   means exactly `Σ'`: one-sided Jacobi, eight Gaussians at a time in `f32` lanes
-//!   ([`crate::lanes`]) with pre-scaling, and [`rotation_and_scales`] in `f64` for Gaussians on
-//!   ill-conditioned triangles or with axes too unequal for `f32`. A singular value of 0 (a
+//!   ([`crate::lanes`]), warm-started by the polar rotation of each triangle's `M`, and
+//!   [`rotation_and_scales`] in `f64` for Gaussians on ill-conditioned triangles or with axes
+//!   too unequal for `f32`. A singular value of 0 (a
 //!   collapsed triangle, or the flat axis of a 2DGS surfel) is stored as [`MIN_OUTPUT_SCALE`]
 //!   so the log-scale stays finite; the shortest axis is stored last.
 //!
@@ -22,7 +23,7 @@
 //! evaluated with world directions, as GaussianAvatars does). Work is split over Gaussians with
 //! rayon; every Gaussian is computed independently, so results do not depend on the thread count.
 
-use glam::{DMat3, DQuat, DVec3, Mat3, Mat3A, Quat, Vec3, Vec3A};
+use glam::{DMat3, DQuat, DVec3, Mat3A, Quat, Vec3, Vec3A};
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 use trisplat_geometry::{TriId, TriMesh};
@@ -31,7 +32,7 @@ use crate::frames::{CanonicalTriangle, FrameOptions, corners_of, gaussian_avatar
 use crate::gaussians::{
     GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
 };
-use crate::lanes::{LANES, LaneInput, factor_lanes};
+use crate::lanes::{LANES, LaneBatch, TriangleFactor, factor_f64, factor_lanes};
 
 /// Smallest output scale (a collapsed axis): `f32::MIN_POSITIVE`, whose log (≈ −87.3) is finite
 /// and whose `exp` in `f32` is still positive.
@@ -116,14 +117,13 @@ struct BindingTri {
     ln_k: f32,
 }
 
-/// Per-triangle data of the Jacobian mode: `M = J k_c R_c` and the deformed centroid.
+/// Per-triangle data of the Jacobian mode: `M = J k_c R_c`, its kernel data and the deformed
+/// centroid.
 #[derive(Clone, Copy)]
 struct JacobianTri {
     m: DMat3,
-    m32: Mat3,
+    factor: TriangleFactor,
     origin: DVec3,
-    /// Factorise in `f64` ([`crate::lanes::needs_f64`]).
-    exact: bool,
 }
 
 /// Deforms bound Gaussians frame after frame for one template.
@@ -318,30 +318,45 @@ impl Deformer {
             }
             DeformMode::Jacobian => {
                 let tris = self.jacobian_triangles(positions);
-                let dims = set.scale_dims();
+                let flat = set.scale_dims() == ScaleDims::Two;
+                let (local_rots, local_ls) = (set.rotations(), set.log_scales());
                 run_chunks(out, |start, means, rots, scales| {
+                    for (j, mean) in means.iter_mut().enumerate() {
+                        let i = start + j;
+                        let t = &tris[binding[i].index()];
+                        *mean = (t.m * set.means()[i].as_dvec3() + t.origin).as_vec3();
+                    }
+                    let mut batch = LaneBatch::default();
                     for j0 in (0..means.len()).step_by(LANES) {
                         let lanes = LANES.min(means.len() - j0);
-                        let input: [LaneInput; LANES] = std::array::from_fn(|lane| {
-                            if lane >= lanes {
-                                return LaneInput::default();
-                            }
-                            let (j, i) = (j0 + lane, start + j0 + lane);
-                            let t = &tris[binding[i].index()];
-                            means[j] = (t.m * set.means()[i].as_dvec3() + t.origin).as_vec3();
-                            LaneInput {
-                                m: t.m32,
-                                rotation: set.rotations()[i],
-                                scale: set.scale(i),
-                                exact: t.exact,
-                            }
-                        });
-                        let factors = factor_lanes(&input);
-                        for (lane, (q, ls)) in factors.iter().take(lanes).enumerate() {
-                            rots[j0 + lane] = *q;
-                            scales[j0 + lane] = match dims {
-                                ScaleDims::Three => *ls,
-                                ScaleDims::Two => Vec3::new(ls.x, ls.y, 0.0),
+                        for l in 0..lanes {
+                            let i = start + j0 + l;
+                            let t = &tris[binding[i].index()].factor;
+                            batch.set(l, local_rots[i], local_ls[i].to_array(), t);
+                        }
+                        let f = factor_lanes(&batch, flat);
+                        for l in 0..lanes {
+                            let j = j0 + l;
+                            let (q, ls) = if f.needs_f64[l] {
+                                let i = start + j;
+                                let m = tris[binding[i].index()].m;
+                                factor_f64(m, local_rots[i], local_ls[i].to_array(), flat)
+                            } else {
+                                (
+                                    [
+                                        f.rotation[0][l],
+                                        f.rotation[1][l],
+                                        f.rotation[2][l],
+                                        f.rotation[3][l],
+                                    ],
+                                    [f.log_scale[0][l], f.log_scale[1][l], f.log_scale[2][l]],
+                                )
+                            };
+                            rots[j] = q;
+                            scales[j] = if flat {
+                                Vec3::new(ls[0], ls[1], 0.0)
+                            } else {
+                                Vec3::from_array(ls)
                             };
                         }
                     }
@@ -397,9 +412,8 @@ impl Deformer {
                 let m = j * c.frame.rotation * c.frame.scale;
                 JacobianTri {
                     m,
-                    m32: m.as_mat3(),
+                    factor: TriangleFactor::new(m),
                     origin: (v[0] + v[1] + v[2]) / 3.0,
-                    exact: crate::lanes::needs_f64(m),
                 }
             })
             .collect()
