@@ -451,6 +451,11 @@ fn node_per_frame_on_request_for_a_fixed_topology() {
     write_mesh_sequence(&path, &frames, &times, SequenceLayout::NodePerFrame).expect("write");
     let doc = check_structure(&path);
     assert!(doc["meshes"][0]["primitives"][0]["targets"].is_null());
+    // Same triangles in every frame: one index accessor for all.
+    let indices: Vec<&Value> = (0..3)
+        .map(|m| &doc["meshes"][m]["primitives"][0]["indices"])
+        .collect();
+    assert!(indices.iter().all(|i| *i == indices[0]), "{indices:?}");
     check_node_roundtrip(&path, &frames, &times);
 }
 
@@ -516,7 +521,8 @@ fn hundred_frames_of_twenty_thousand_vertices() {
         (
             SequenceLayout::NodePerFrame,
             "big_nodes.glb",
-            vertex_bytes + 100 * index_bytes,
+            // Consecutive frames with the same triangles share one index accessor.
+            vertex_bytes + index_bytes,
         ),
     ] {
         let path: PathBuf = dir.path().join(name);
@@ -605,4 +611,44 @@ fn bad_sequences_are_errors_naming_the_element() {
         &ply,
         ".glb",
     );
+}
+
+/// An edit that breaks a valid document.
+type Breakage = Box<dyn Fn(&mut Value)>;
+
+/// The structural check is not vacuous: a wrong `min`, a misaligned view and a decreasing key
+/// time each make it fail.
+#[test]
+fn structure_check_catches_broken_files() {
+    let dir = out_dir();
+    let path = dir.path().join("good.gltf");
+    let frames = wave_frames(3, false);
+    write_mesh_sequence(&path, &frames, &[0.0, 0.5, 1.0], SequenceLayout::Auto).expect("write");
+    check_structure(&path);
+    let doc: Value = serde_json::from_slice(&std::fs::read(&path).expect("read")).expect("json");
+    let input = usize_of(&doc["animations"][0]["samplers"][0]["input"]);
+    let breakages: [(&str, Breakage); 3] = [
+        (
+            "min",
+            Box::new(|d| d["accessors"][0]["min"][0] = (-1e3).into()),
+        ),
+        (
+            "alignment",
+            Box::new(|d| d["bufferViews"][1]["byteOffset"] = 2.into()),
+        ),
+        (
+            "key times",
+            Box::new(move |d| d["accessors"][input]["max"][0] = (-1.0).into()),
+        ),
+    ];
+    for (what, breaking) in breakages {
+        let mut broken = doc.clone();
+        breaking(&mut broken);
+        let bad = dir
+            .path()
+            .join(format!("bad_{}.gltf", what.replace(' ', "_")));
+        std::fs::write(&bad, serde_json::to_vec(&broken).expect("json")).expect("write");
+        let caught = std::panic::catch_unwind(|| check_structure(&bad));
+        assert!(caught.is_err(), "{what}: the check passed a broken file");
+    }
 }
