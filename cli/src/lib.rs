@@ -72,7 +72,11 @@ pub fn main() -> ExitCode {
         Err(e) => {
             // One line: the chain of causes joined by ": ".
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            if e.downcast_ref::<commands::UsageError>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

@@ -4,8 +4,6 @@
 mod common;
 use common::{fresh_dir, run, s};
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::topology::boundary_edges;

@@ -11,7 +11,7 @@ use trisplat_geometry::io::{
     self, Format, ObjVertices, PlyEncoding, ReadOptions, SequenceLayout, WriteOptions,
 };
 
-use super::{Context, parse_clip, refuse_to_overwrite};
+use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
 
 /// Arguments of `trisplat convert`.
 #[derive(Debug, clap::Args)]
@@ -68,17 +68,6 @@ fn is_sequence_input(input: &Path) -> bool {
                 .is_some_and(|n| n.to_string_lossy().contains(['%', '*', '?'])))
 }
 
-/// Reports a usage error the way clap does (the message, the usage line) and exits with 2.
-fn usage_error(message: &str) -> ! {
-    use clap::CommandFactory as _;
-    let mut cli = crate::Cli::command();
-    cli.build();
-    let mut command = cli.find_subcommand_mut("convert").cloned().unwrap_or(cli);
-    command
-        .error(clap::error::ErrorKind::ArgumentConflict, message)
-        .exit()
-}
-
 /// Runs `trisplat convert`.
 ///
 /// # Errors
@@ -89,10 +78,11 @@ pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         return convert_sequence(&args, ctx);
     }
     if args.fps.is_some() {
-        usage_error(&format!(
+        return Err(UsageError(format!(
             "--fps is the frame rate of a folder or pattern of frames; {} is one mesh",
             args.input.display()
-        ));
+        ))
+        .into());
     }
     if args.clip.is_some() || args.time.is_some() {
         return convert_animated(&args, ctx);
@@ -156,19 +146,21 @@ fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
 fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     let input = args.input.display();
     if args.clip.is_some() || args.time.is_some() {
-        usage_error(&format!(
+        return Err(UsageError(format!(
             "--clip/--time evaluate a glTF animation; {input} is a folder or pattern of frames"
-        ));
+        ))
+        .into());
     }
     if !matches!(
         Format::from_path(&args.output),
         Ok(Format::Glb | Format::Gltf)
     ) {
-        usage_error(&format!(
+        return Err(UsageError(format!(
             "{input} is a folder or pattern of frames, which converts to one animated .glb or \
              .gltf, not {}; to convert one frame, name its file",
             args.output.display()
-        ));
+        ))
+        .into());
     }
     let sequence = if args.input.is_dir() {
         MeshSequence::from_dir(&args.input)?

@@ -24,6 +24,12 @@ use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
 
 use crate::progress::Progress;
 
+/// A command line that parses but makes no sense (options that do not go together): reported
+/// like clap's own usage errors, with exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
 /// What every command gets besides its arguments.
 #[derive(Clone, Copy, Debug)]
 pub struct Context {
