@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
-    AnimatedTemplate, Clip, GltfTemplate, MeshSequence, WeightsTrack,
+    AnimatedTemplate, Clip, GltfTemplate, MeshSequence, VertexSkinning, WeightsTrack,
 };
+use trisplat_geometry::cleanup::weld_vertices;
 use trisplat_geometry::io::read_mesh;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::bind::{BindOptions, init_bound};
@@ -347,6 +348,97 @@ fn flatten(set: GaussianSet, convention: Convention) -> GaussianSet {
     GaussianSet::new_unchecked(parts)
 }
 
+/// The template with its duplicated vertices welded by position (tolerance 0: equal
+/// positions; see [`weld_vertices`]).
+///
+/// glTF (and OBJ) files split a vertex wherever its UV or normal changes, so a closed surface
+/// is stored as open patches (CesiumMan: 3,273 vertices, 2,338 positions). Meshing the
+/// welded template makes the methods' output watertight wherever the surface is (the
+/// incremental Delaunay is watertight whenever its template is). Triangles keep their order,
+/// so Gaussian bindings to triangle ids stay valid.
+///
+/// Each frame of the animation is stored per original vertex; a welded vertex takes the
+/// position of its first (lowest-index) original vertex. Duplicates of a seam share their
+/// position in the rest pose; where an animation moved them apart (copies skinned or morphed
+/// differently), the seam is pinned to the first copy. `lbs` skins a welded vertex with the
+/// first copy's weights, for the same reason.
+#[derive(Clone, Debug)]
+pub struct WeldedTemplate {
+    /// The welded template.
+    pub mesh: TriMesh,
+    /// For each welded vertex, its first original vertex.
+    pub first: Vec<u32>,
+    /// Vertices of the template as stored.
+    pub stored_vertices: usize,
+}
+
+impl WeldedTemplate {
+    /// Welds `template` by position.
+    #[must_use]
+    pub fn new(template: &TriMesh) -> Self {
+        let (mesh, map) = weld_vertices(template, 0.0);
+        let mut first = Vec::with_capacity(mesh.vertex_count());
+        for (old, &new) in map.iter().enumerate() {
+            if new as usize == first.len() {
+                first.push(old as u32);
+            }
+        }
+        Self {
+            mesh,
+            first,
+            stored_vertices: template.vertex_count(),
+        }
+    }
+
+    /// Whether welding merged any vertex.
+    #[must_use]
+    pub fn merged(&self) -> bool {
+        self.first.len() != self.stored_vertices
+    }
+
+    /// A frame's positions (one per original vertex) on the welded vertices. `None` when the
+    /// frame does not have the stored template's vertex count.
+    #[must_use]
+    pub fn positions(&self, frame: Vec<Vec3>) -> Option<Vec<Vec3>> {
+        if frame.len() != self.stored_vertices {
+            return None;
+        }
+        if !self.merged() {
+            return Some(frame);
+        }
+        Some(self.first.iter().map(|&v| frame[v as usize]).collect())
+    }
+
+    /// Skin weights of the original vertices on the welded vertices (each welded vertex takes
+    /// its first copy's row). `None` when `skinning` does not have the stored vertex count.
+    #[must_use]
+    pub fn skinning(&self, skinning: &VertexSkinning) -> Option<VertexSkinning> {
+        if skinning.offsets.len() != self.stored_vertices + 1
+            || skinning.base_positions.len() != self.stored_vertices
+        {
+            return None;
+        }
+        let mut out = VertexSkinning {
+            offsets: Vec::with_capacity(self.first.len() + 1),
+            palette_len: skinning.palette_len,
+            ..VertexSkinning::default()
+        };
+        out.offsets.push(0);
+        for &v in &self.first {
+            let v = v as usize;
+            let (a, b) = (
+                skinning.offsets[v] as usize,
+                skinning.offsets[v + 1] as usize,
+            );
+            out.entries.extend_from_slice(skinning.entries.get(a..b)?);
+            out.weights.extend_from_slice(skinning.weights.get(a..b)?);
+            out.offsets.push(u32::try_from(out.entries.len()).ok()?);
+            out.base_positions.push(skinning.base_positions[v]);
+        }
+        Some(out)
+    }
+}
+
 /// Reads a static ground-truth mesh.
 ///
 /// # Errors
@@ -408,6 +500,56 @@ mod tests {
                 assert!((world.opacity(i) - BIND_OPACITY).abs() < 1e-6);
             }
         }
+    }
+
+    #[test]
+    fn welded_template_remaps_frames_and_skinning() {
+        // The square with its diagonal's vertices duplicated (a UV seam).
+        let p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        let stored = TriMesh::new(p.clone(), vec![[0, 1, 2], [3, 4, 5]]);
+        let w = WeldedTemplate::new(&stored);
+        assert!(w.merged());
+        assert_eq!(w.first, vec![0, 1, 2, 5]);
+        assert_eq!(w.mesh.triangles(), &[[0, 1, 2], [0, 2, 3]]);
+        // A frame where the copies moved apart: the first copy wins.
+        let mut frame = p.clone();
+        frame[3] = Vec3::splat(9.0);
+        let moved = w.positions(frame).expect("six vertices");
+        assert_eq!(moved, vec![p[0], p[1], p[2], p[5]]);
+        assert!(w.positions(vec![Vec3::ZERO; 5]).is_none());
+        // Skin rows of the first copies (vertex v: one influence, palette entry v).
+        let skinning = VertexSkinning {
+            offsets: (0..=6).collect(),
+            entries: (0..6).collect(),
+            weights: vec![1.0; 6],
+            palette_len: 6,
+            base_positions: p.iter().map(|v| v.as_dvec3()).collect(),
+        };
+        let s = w.skinning(&skinning).expect("six rows");
+        assert_eq!(s.offsets, vec![0, 1, 2, 3, 4]);
+        assert_eq!(s.entries, vec![0, 1, 2, 5]);
+        assert_eq!(s.palette_len, 6);
+        assert_eq!(s.base_positions.len(), 4);
+        let short = VertexSkinning {
+            offsets: vec![0, 1],
+            ..skinning
+        };
+        assert!(w.skinning(&short).is_none());
+        // Nothing to weld: frames pass through.
+        let single = TriMesh::new(p[..3].to_vec(), vec![[0, 1, 2]]);
+        let w = WeldedTemplate::new(&single);
+        assert!(!w.merged());
+        assert_eq!(
+            w.positions(p[..3].to_vec()).expect("three"),
+            p[..3].to_vec()
+        );
     }
 
     #[test]

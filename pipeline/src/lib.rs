@@ -10,6 +10,9 @@
 //!    sampled at `--fps`), a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
 //!    JSON driving a glTF template's morph targets. Without A, a glTF template plays its own
 //!    first clip; any other template is one still frame.
+//!    Vertices the file splits at UV/normal seams are welded by position
+//!    ([`input::WeldedTemplate`]): every later stage sees the welded template, so the meshes
+//!    are watertight wherever the surface is.
 //! 2. **bind** (only without `--gaussians`): `--per-triangle` Gaussians per triangle
 //!    (default [`config::DEFAULT_PER_TRIANGLE`]), spread evenly, opacity
 //!    [`config::BIND_OPACITY`], flattened along the triangle normal to

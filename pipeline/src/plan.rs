@@ -77,6 +77,7 @@ impl Plan {
                 "template {t}; no --animation: its own glTF clip if it has one, else one frame"
             ),
         };
+        let animate = format!("{animate}; vertices split at seams welded by position");
         push(Stage::Animate, true, animate);
 
         match &config.gaussians {

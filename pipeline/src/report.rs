@@ -6,7 +6,7 @@
 //! frame's numbers equal `trisplat eval DIR/<method>/frame_NNNNNN.ply GT --surface --samples N
 //! --tau T` for a static ground truth.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -14,7 +14,6 @@ use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::metrics::{MetricsError, MetricsOptions, Shape, evaluate};
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
-use trisplat_geometry::topology::{boundary_edges, non_manifold_edges};
 use trisplat_geometry::{PointCloud, TriMesh};
 
 use crate::config::Method;
@@ -106,11 +105,29 @@ pub fn measure(
     }))
 }
 
-/// Whether every edge of `mesh` has exactly two triangles (and there is at least one).
+/// Whether `mesh` is a closed, consistently oriented surface: it has triangles, none with a
+/// repeated vertex index, and every edge is shared by exactly two triangles that traverse it
+/// in opposite directions (each directed edge `a -> b` occurs once and so does `b -> a`).
+/// This is trimesh's `is_watertight and is_winding_consistent`.
 #[must_use]
 pub fn is_watertight(mesh: &TriMesh) -> bool {
     let t = mesh.triangles();
-    !t.is_empty() && boundary_edges(t).is_empty() && non_manifold_edges(t).is_empty()
+    if t.is_empty() {
+        return false;
+    }
+    let mut directed: HashSet<(u32, u32)> = HashSet::with_capacity(3 * t.len());
+    for &[a, b, c] in t {
+        if a == b || b == c || a == c {
+            return false;
+        }
+        for e in [(a, b), (b, c), (c, a)] {
+            if !directed.insert(e) {
+                // A third triangle on the edge, or two with the same direction.
+                return false;
+            }
+        }
+    }
+    directed.iter().all(|&(a, b)| directed.contains(&(b, a)))
 }
 
 /// One method on one frame.
@@ -223,6 +240,10 @@ pub struct Report {
     pub version: String,
     /// Template file.
     pub template: String,
+    /// Vertices of the template as stored.
+    pub template_vertices: usize,
+    /// Vertices of the template after welding its seams (the template every stage uses).
+    pub welded_vertices: usize,
     /// Animation source (the template itself when it carries its clip).
     pub animation: String,
     /// Gaussian file, or `bound here: N per triangle`.
@@ -277,7 +298,11 @@ impl Report {
     pub fn markdown(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "# trisplat extract report\n");
-        let _ = writeln!(s, "- template: `{}`", self.template);
+        let _ = writeln!(
+            s,
+            "- template: `{}` ({} vertices, {} after welding seams by position)",
+            self.template, self.template_vertices, self.welded_vertices
+        );
         let _ = writeln!(s, "- animation: `{}`", self.animation);
         let _ = writeln!(
             s,
@@ -490,9 +515,50 @@ mod tests {
 
     #[test]
     fn watertight_flags() {
-        assert!(is_watertight(&tetra(1.0)));
-        let open = TriMesh::new(tetra(1.0).positions().to_vec(), vec![[0, 2, 1], [0, 1, 3]]);
+        let closed = tetra(1.0);
+        assert!(is_watertight(&closed));
+        let p = closed.positions().to_vec();
+        let open = TriMesh::new(p.clone(), vec![[0, 2, 1], [0, 1, 3]]);
         assert!(!is_watertight(&open));
         assert!(!is_watertight(&TriMesh::default()));
+        // Closed but one face flipped: every edge has two triangles, the winding disagrees.
+        let flipped = TriMesh::new(p.clone(), vec![[0, 1, 2], [0, 1, 3], [0, 3, 2], [1, 2, 3]]);
+        assert!(!is_watertight(&flipped));
+        // Every edge of a face shared by three triangles (the tetrahedron plus a copy of one
+        // face, reversed): non-manifold.
+        let extra = TriMesh::new(
+            p.clone(),
+            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3], [0, 1, 2]],
+        );
+        assert!(!is_watertight(&extra));
+        // A repeated index.
+        let degenerate =
+            TriMesh::new_unchecked(p.clone(), vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 2]]);
+        assert!(!is_watertight(&degenerate));
+        // A closed sheet of two triangles with opposite windings is closed and oriented.
+        let sheet = TriMesh::new(p, vec![[0, 1, 2], [0, 2, 1]]);
+        assert!(is_watertight(&sheet));
+        // Two tetrahedra sharing one vertex: every edge fine (vertex non-manifold is allowed,
+        // as in trimesh).
+        let mut q = tetra(1.0).positions().to_vec();
+        q.extend([
+            Vec3::new(-1.0, 0.0, 0.0),
+            Vec3::new(0.0, -1.0, 0.0),
+            Vec3::new(0.0, 0.0, -1.0),
+        ]);
+        let two = TriMesh::new(
+            q,
+            vec![
+                [0, 2, 1],
+                [0, 1, 3],
+                [0, 3, 2],
+                [1, 2, 3],
+                [0, 4, 5],
+                [0, 6, 4],
+                [0, 5, 6],
+                [4, 6, 5],
+            ],
+        );
+        assert!(is_watertight(&two));
     }
 }

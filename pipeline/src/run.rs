@@ -17,8 +17,8 @@ use trisplat_splat::lbs::LbsDeformer;
 use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
 use crate::error::PipelineError;
 use crate::input::{
-    Animation, GaussianSource, LBS_REST_TOLERANCE, animation_label, check_topology, deform_mode,
-    gaussians, open_animation, parse_frames,
+    Animation, GaussianSource, LBS_REST_TOLERANCE, WeldedTemplate, animation_label, check_topology,
+    deform_mode, gaussians, open_animation, parse_frames,
 };
 use crate::methods::{FrameInput, Mesher, Resolved};
 use crate::plot;
@@ -70,13 +70,17 @@ struct Deformed {
     means: Vec<Vec3>,
 }
 
+/// The deformer of `config`'s mode on the welded template; `lbs` checks the stored template
+/// against the animation's rest pose and skins each welded vertex with its first copy.
 fn build_engine(
     config: &ExtractConfig,
-    template: &TriMesh,
+    stored: &TriMesh,
+    welded: &WeldedTemplate,
     animation: &Animation,
     set: &GaussianSet,
 ) -> Result<Engine, PipelineError> {
     let mode = config.options.mode;
+    let template = &welded.mesh;
     if mode != Mode::Lbs {
         return Ok(Engine::Frames(Deformer::new(template, deform_mode(mode))));
     }
@@ -94,8 +98,8 @@ fn build_engine(
                 .to_owned(),
         });
     }
-    let diag = f64::from(template.bounds().map_or(0.0, |b| b.diagonal()));
-    let worst = template
+    let diag = f64::from(stored.bounds().map_or(0.0, |b| b.diagonal()));
+    let worst = stored
         .positions()
         .iter()
         .zip(g.rest().positions())
@@ -111,7 +115,11 @@ fn build_engine(
         });
     }
     let palette = g.palette_at(None)?;
-    let rig = LbsDeformer::new(set, template, &g.skinning(), &palette).map_err(|source| {
+    let skinning = welded.skinning(&g.skinning()).ok_or(PipelineError::Lbs {
+        path: a_path.clone(),
+        problem: "the skin's vertex count differs from the template's".to_owned(),
+    })?;
+    let rig = LbsDeformer::new(set, template, &skinning, &palette).map_err(|source| {
         PipelineError::Skinning {
             path: a_path.clone(),
             frame: 0,
@@ -260,15 +268,18 @@ fn run_inner(
         });
     }
     // Inputs.
-    let template = read_mesh(&config.template)?;
-    if template.triangle_count() == 0 {
+    let stored = read_mesh(&config.template)?;
+    if stored.triangle_count() == 0 {
         return Err(PipelineError::EmptyTemplate {
             path: config.template.clone(),
         });
     }
-    let (animation, mut input_files) = open_animation(config, &template)?;
+    let (animation, mut input_files) = open_animation(config, &stored)?;
     let anim = animation.get();
-    check_topology(&template, config, anim)?;
+    check_topology(&stored, config, anim)?;
+    // Every later stage sees the template welded at its seams (see `WeldedTemplate`).
+    let welded = WeldedTemplate::new(&stored);
+    let template = &welded.mesh;
     let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
     let static_gt = match &config.gt {
         Some(GroundTruth::Mesh(path)) => {
@@ -283,18 +294,18 @@ fn run_inner(
         }
         _ => None,
     };
-    let (set, source) = gaussians(config, &template)?;
-    let engine = build_engine(config, &template, &animation, &set)?;
+    let (set, source) = gaussians(config, template)?;
+    let engine = build_engine(config, &stored, &welded, &animation, &set)?;
     let mode = deform_mode(o.mode);
     let mut rest = WorldGeometry::default();
-    Deformer::new(&template, mode)
+    Deformer::new(template, mode)
         .deform_geometry(&set, template.positions(), &mut rest)
         .map_err(|source| PipelineError::Gaussians {
             path: config.gaussians.clone().unwrap_or_default(),
             template: config.template.clone(),
             source,
         })?;
-    let resolved = Resolved::new(o, &template, &rest.means)?;
+    let resolved = Resolved::new(o, template, &rest.means)?;
 
     // Outputs: never over an input.
     input_files.push(config.template.clone());
@@ -325,7 +336,7 @@ fn run_inner(
             m,
             o,
             &resolved,
-            &template,
+            template,
             &set,
             mode,
             frames.start,
@@ -341,7 +352,18 @@ fn run_inner(
     let mut frame_times = Vec::with_capacity(total);
     let mut deform_ms = Vec::with_capacity(total);
     for (done, f) in frames.clone().enumerate() {
-        let positions = anim.frame(f)?;
+        let stored_positions = anim.frame(f)?;
+        let stored_count = stored_positions.len();
+        let positions =
+            welded
+                .positions(stored_positions)
+                .ok_or_else(|| PipelineError::Topology {
+                    animation: label.clone(),
+                    template: config.template.clone(),
+                    what: "vertex counts",
+                    animation_count: stored_count,
+                    template_count: welded.stored_vertices,
+                })?;
         let time = anim.frame_time(f).unwrap_or(f as f64 / o.fps);
         let start = Instant::now();
         let deformed = deform_frame(&engine, &animation, &set, &positions, f, need_world, &label)?;
@@ -437,6 +459,8 @@ fn run_inner(
     let report = Report {
         version: env!("CARGO_PKG_VERSION").to_owned(),
         template: config.template.display().to_string(),
+        template_vertices: welded.stored_vertices,
+        welded_vertices: welded.mesh.vertex_count(),
         animation: label,
         gaussians: match source {
             GaussianSource::File(p) => p.display().to_string(),
