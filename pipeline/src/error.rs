@@ -78,26 +78,26 @@ pub enum PipelineError {
         path: PathBuf,
     },
     /// The animation's frames do not have the template's vertices or triangles.
-    #[error(
-        "{animation}: the animation's {what} differ from those of the template {template} \
-         ({animation_count} vs {template_count})"
-    )]
+    #[error("{animation}: {problem}")]
     Topology {
         /// The animation source.
         animation: String,
-        /// The template file.
-        template: PathBuf,
-        /// `vertices` or `triangles`.
-        what: &'static str,
-        /// Count (or first differing index) in the animation.
-        animation_count: usize,
-        /// Count (or first differing index) in the template.
-        template_count: usize,
+        /// The difference, naming the template file.
+        problem: String,
+    },
+    /// The animation argument cannot be used as given (a `--clip` for a non-glTF file, a
+    /// weights file without morph targets, an empty targets folder, ...).
+    #[error("{path}: {problem}")]
+    BadAnimation {
+        /// The file or folder at fault.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
     },
     /// The Gaussian file has no triangle binding.
     #[error(
         "{path}: the Gaussians are not bound to triangles (no `binding_0`/`binding` property); \
-         use `trisplat bind` first or leave out --gaussians"
+         use `trisplat bind` first"
     )]
     NotBound {
         /// The Gaussian file.

@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
-    AnimatedTemplate, Clip, GltfTemplate, MeshSequence, VertexSkinning, WeightsTrack,
+    AnimatedTemplate, BlendshapeAnimation, BlendshapeSet, Clip, GltfMorphAnimation, GltfTemplate,
+    MeshSequence, VertexSkinning, WeightsTrack,
 };
 use trisplat_geometry::cleanup::weld_vertices;
 use trisplat_geometry::io::read_mesh;
@@ -15,14 +16,10 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::bind::{BindOptions, init_bound};
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::frames::Convention;
-use trisplat_splat::ply::read_gaussians;
 
 use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, ExtractConfig, Mode};
+use crate::deform::{check_set, read_bound};
 use crate::error::PipelineError;
-
-/// Largest difference between the template's positions and a skinned animation's rest pose
-/// that `lbs` accepts, relative to the template's bounding-box diagonal (as `trisplat deform`).
-pub const LBS_REST_TOLERANCE: f64 = 1e-5;
 
 /// The animation source; glTF kept concrete for `lbs`.
 pub enum Animation {
@@ -96,7 +93,10 @@ pub fn animation_label(config: &ExtractConfig) -> String {
         .unwrap_or_else(|| config.template.display().to_string())
 }
 
-fn clip_of(clip: Option<&str>) -> Clip {
+/// The clip of a `--clip` value: an index when it parses as one, else a name; the first clip
+/// without a value.
+#[must_use]
+pub fn clip_of(clip: Option<&str>) -> Clip {
     match clip {
         None => Clip::Index(0),
         Some(s) => match s.parse::<usize>() {
@@ -106,14 +106,133 @@ fn clip_of(clip: Option<&str>) -> Clip {
     }
 }
 
-/// Opens a glTF with `clip`; a file without animations plays its stored scene unless a clip was
-/// asked for.
-fn open_gltf(path: &Path, clip: Option<&str>, fps: f64) -> Result<GltfTemplate, PipelineError> {
+/// Opens a glTF with `clip` sampled at `fps`; a file without animations plays its stored scene
+/// unless a clip was asked for.
+///
+/// # Errors
+/// An unreadable file or a clip it does not have.
+pub fn open_gltf(path: &Path, clip: Option<&str>, fps: f64) -> Result<GltfTemplate, PipelineError> {
     let first = GltfTemplate::open(path, &Clip::None)?;
     if first.clip_names().is_empty() && clip.is_none() {
         return Ok(first.with_fps(fps));
     }
     Ok(GltfTemplate::open(path, &clip_of(clip))?.with_fps(fps))
+}
+
+/// Where an animation comes from (`trisplat deform --animation` and `trisplat extract
+/// --animation`).
+#[derive(Clone, Copy, Debug)]
+pub struct AnimationSource<'a> {
+    /// The animation argument: a glTF/GLB, a weights JSON, or a folder or pattern of OBJ/PLY
+    /// frames.
+    pub spec: &'a str,
+    /// The template file (a glTF template brings its own morph targets for a weights JSON).
+    pub template: &'a Path,
+    /// `--clip` (glTF animations only).
+    pub clip: Option<&'a str>,
+    /// Sampling rate of a glTF clip and frame rate of a sequence.
+    pub fps: f64,
+    /// Folder of blendshape target meshes, one `.obj`/`.ply` per target (a weights JSON with
+    /// an OBJ/PLY template).
+    pub targets: Option<&'a Path>,
+}
+
+impl AnimationSource<'_> {
+    fn bad(&self, path: &Path, problem: impl Into<String>) -> PipelineError {
+        PipelineError::BadAnimation {
+            path: path.to_path_buf(),
+            problem: problem.into(),
+        }
+    }
+
+    /// Opens the animation and lists the files it reads (never to be overwritten).
+    ///
+    /// - `.gltf`/`.glb`: its clip (`clip`, default the first) sampled at `fps`; a file without
+    ///   animations gives its stored scene as one frame;
+    /// - `.json`: LAM/ARKit blendshape weights, driving a glTF template's morph targets by
+    ///   name, or with `targets` the `.obj`/`.ply` meshes of that folder (named by file stem;
+    ///   the template file itself is skipped when it sits among them);
+    /// - anything else: a folder or pattern of OBJ/PLY frames at `fps`.
+    ///
+    /// # Errors
+    /// A bad `fps`; `clip` for a non-glTF animation; `targets` with a glTF template or a
+    /// non-JSON animation; a weights file without morph targets; unreadable files (named).
+    pub fn open(&self) -> Result<(Animation, Vec<PathBuf>), PipelineError> {
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(PipelineError::BadOption {
+                name: "fps",
+                value: self.fps,
+                expected: "a positive number of frames per second",
+            });
+        }
+        let path = Path::new(self.spec);
+        let files = vec![path.to_path_buf()];
+        if is_gltf(path) {
+            if self.targets.is_some() {
+                return Err(self.bad(path, "--targets is for a weights JSON animation"));
+            }
+            let g = open_gltf(path, self.clip, self.fps)?;
+            return Ok((Animation::Gltf(Box::new(g)), files));
+        }
+        if self.clip.is_some() {
+            return Err(self.bad(path, "--clip needs a glTF animation"));
+        }
+        if extension(path) == "json" {
+            return self.open_weights(path, files);
+        }
+        if self.targets.is_some() {
+            return Err(self.bad(path, "--targets is for a weights JSON animation"));
+        }
+        let sequence = MeshSequence::from_pattern(self.spec)?.with_fps(self.fps);
+        let files = sequence.files().to_vec();
+        Ok((Animation::Other(Box::new(sequence)), files))
+    }
+
+    /// A weights JSON: a glTF template's morph targets, or the meshes of `targets`.
+    fn open_weights(
+        &self,
+        path: &Path,
+        mut files: Vec<PathBuf>,
+    ) -> Result<(Animation, Vec<PathBuf>), PipelineError> {
+        let track = WeightsTrack::read(path)?;
+        if is_gltf(self.template) {
+            if self.targets.is_some() {
+                return Err(self.bad(
+                    self.template,
+                    "--targets is for an OBJ/PLY neutral template; a glTF template brings its \
+                     own morph targets",
+                ));
+            }
+            let g = GltfTemplate::open(self.template, &Clip::None)?;
+            let morph = GltfMorphAnimation::new(g, track)?;
+            return Ok((Animation::Other(Box::new(morph)), files));
+        }
+        let Some(dir) = self.targets else {
+            return Err(self.bad(
+                path,
+                "a weights file drives blendshapes: give a glTF template with morph targets, \
+                 or an OBJ/PLY template with --targets DIR (one .obj/.ply per target; \
+                 `trisplat deform`)",
+            ));
+        };
+        // The neutral may sit among the targets (ICT FaceKit): it is not a target.
+        let template_file = self.template.canonicalize().ok();
+        let listing = std::fs::read_dir(dir)
+            .map_err(|e| self.bad(dir, format!("cannot list the targets folder: {e}")))?;
+        let mut targets: Vec<PathBuf> = listing
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| matches!(extension(p).as_str(), "obj" | "ply"))
+            .filter(|p| p.canonicalize().ok() != template_file)
+            .collect();
+        targets.sort();
+        if targets.is_empty() {
+            return Err(self.bad(dir, "no .obj/.ply target meshes"));
+        }
+        let set = BlendshapeSet::from_files(self.template, &targets)?;
+        files.extend(targets);
+        let blend = BlendshapeAnimation::new(set, track)?;
+        Ok((Animation::Other(Box::new(blend)), files))
+    }
 }
 
 /// Opens the animation of `config` (see [`crate::config::ExtractConfig::animation`]) and lists
@@ -126,14 +245,14 @@ pub fn open_animation(
     template: &TriMesh,
 ) -> Result<(Animation, Vec<PathBuf>), PipelineError> {
     let o = &config.options;
-    if !(o.fps.is_finite() && o.fps > 0.0) {
-        return Err(PipelineError::BadOption {
-            name: "fps",
-            value: o.fps,
-            expected: "a positive number of frames per second",
-        });
-    }
     let Some(a) = &config.animation else {
+        if !(o.fps.is_finite() && o.fps > 0.0) {
+            return Err(PipelineError::BadOption {
+                name: "fps",
+                value: o.fps,
+                expected: "a positive number of frames per second",
+            });
+        }
         if is_gltf(&config.template) {
             let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
             return Ok((Animation::Gltf(Box::new(g)), Vec::new()));
@@ -143,60 +262,54 @@ pub fn open_animation(
         };
         return Ok((Animation::Other(Box::new(still)), Vec::new()));
     };
-    let path = Path::new(a);
-    if is_gltf(path) {
-        let g = open_gltf(path, o.clip.as_deref(), o.fps)?;
-        return Ok((Animation::Gltf(Box::new(g)), vec![path.to_path_buf()]));
+    AnimationSource {
+        spec: a,
+        template: &config.template,
+        clip: o.clip.as_deref(),
+        fps: o.fps,
+        targets: None,
     }
-    if extension(path) == "json" {
-        if !is_gltf(&config.template) {
-            return Err(PipelineError::Lbs {
-                path: path.to_path_buf(),
-                problem: "a weights file drives the morph targets of a glTF template; for \
-                          OBJ/PLY blendshape targets run `trisplat deform --targets` instead"
-                    .to_owned(),
-            });
-        }
-        let track = WeightsTrack::read(path)?;
-        let g = GltfTemplate::open(&config.template, &Clip::None)?;
-        let morph = trisplat_geometry::animation::GltfMorphAnimation::new(g, track)?;
-        return Ok((Animation::Other(Box::new(morph)), vec![path.to_path_buf()]));
-    }
-    let sequence = MeshSequence::from_pattern(a)?.with_fps(o.fps);
-    let files = sequence.files().to_vec();
-    Ok((Animation::Other(Box::new(sequence)), files))
+    .open()
 }
 
-/// Checks that the animation's frames have the template's vertices and triangles.
+/// Checks that the animation's frames have the vertices and triangles of `template` (read
+/// from `template_path`); `label` names the animation.
 ///
 /// # Errors
 /// [`PipelineError::Topology`] naming the first difference.
 pub fn check_topology(
     template: &TriMesh,
-    config: &ExtractConfig,
+    template_path: &Path,
     anim: &dyn AnimatedTemplate,
+    label: &str,
 ) -> Result<(), PipelineError> {
     let rest = anim.rest();
-    let err = |what, animation_count, template_count| PipelineError::Topology {
-        animation: animation_label(config),
-        template: config.template.clone(),
-        what,
-        animation_count,
-        template_count,
+    let err = |problem: String| PipelineError::Topology {
+        animation: label.to_owned(),
+        problem,
     };
     if rest.vertex_count() != template.vertex_count() {
-        return Err(err(
-            "vertex counts",
+        return Err(err(format!(
+            "the animation has {} vertices, the template {} has {}",
             rest.vertex_count(),
-            template.vertex_count(),
-        ));
+            template_path.display(),
+            template.vertex_count()
+        )));
     }
     if rest.triangles() != template.triangles() {
-        return Err(err(
-            "triangles",
+        let first = rest
+            .triangles()
+            .iter()
+            .zip(template.triangles())
+            .position(|(x, y)| x != y)
+            .unwrap_or(rest.triangle_count().min(template.triangle_count()));
+        return Err(err(format!(
+            "the animation's triangles differ from those of the template {} (triangle {first}; \
+             {} vs {} triangles)",
+            template_path.display(),
             rest.triangle_count(),
-            template.triangle_count(),
-        ));
+            template.triangle_count()
+        )));
     }
     Ok(())
 }
@@ -273,25 +386,10 @@ pub fn gaussians(
 ) -> Result<(GaussianSet, GaussianSource), PipelineError> {
     let mode = config.options.mode;
     let (set, source) = match &config.gaussians {
-        Some(path) => {
-            let set = read_gaussians(path)?;
-            if set.binding().is_none() {
-                return Err(PipelineError::NotBound { path: path.clone() });
-            }
-            if let Some(issue) = set
-                .report(Some(template.triangle_count()))
-                .issues
-                .into_iter()
-                .next()
-            {
-                return Err(PipelineError::GaussianIssue {
-                    path: path.clone(),
-                    template: config.template.clone(),
-                    issue: issue.to_string(),
-                });
-            }
-            (set, GaussianSource::File(path.clone()))
-        }
+        Some(path) => (
+            read_bound(path, template, &config.template)?,
+            GaussianSource::File(path.clone()),
+        ),
         None => {
             let convention = if mode == Mode::Jacobian {
                 Convention::SurfHead
@@ -314,13 +412,8 @@ pub fn gaussians(
         }
     };
     let path = config.gaussians.clone().unwrap_or_default();
-    Deformer::new(template, deform_mode(mode))
-        .check(&set)
-        .map_err(|source| PipelineError::Gaussians {
-            path,
-            template: config.template.clone(),
-            source,
-        })?;
+    let deformer = Deformer::new(template, deform_mode(mode));
+    check_set(&deformer, &set, &path, &config.template)?;
     Ok((set, source))
 }
 

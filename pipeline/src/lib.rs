@@ -49,10 +49,12 @@
 //! created are removed again. Outputs are written atomically and never over an input.
 
 pub mod config;
+pub mod deform;
 pub mod error;
 mod font;
 pub mod input;
 pub mod methods;
+pub mod output;
 pub mod plan;
 pub mod plot;
 pub mod report;

@@ -19,13 +19,14 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use trisplat_extract::alpha_shape::alpha_shape;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelaunay};
-use trisplat_extract::tsdf::{DepthImage, TsdfOptions, fuse};
+use trisplat_extract::tsdf::{DepthImage, TsdfError, TsdfOptions, fuse};
+use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::camera::sphere_rig;
 use trisplat_geometry::spatial::PointIndex;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::DeformMode;
-use trisplat_splat::render::{Outputs, RenderOptions, render};
+use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
     DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS, ExtractOptions, Method,
@@ -160,6 +161,50 @@ impl Resolved {
     }
 }
 
+/// Why [`rendered_depth`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderedDepthError {
+    /// The renderer failed (or returned no depth).
+    #[error("{0}")]
+    Render(RenderError),
+    /// The rendered depth does not make a depth image of the camera's size.
+    #[error("{0}")]
+    Image(TsdfError),
+}
+
+/// The expected depth of world-space Gaussians seen by `camera` (3DGS splatting, gsplat's
+/// rules), 0 (no surface) where the rendered alpha is below [`RENDERED_ALPHA_MIN`]: the depth
+/// maps `trisplat tsdf --gaussians` and the pipeline's tsdf method fuse.
+///
+/// # Errors
+/// [`RenderedDepthError`].
+pub fn rendered_depth(
+    world: &GaussianSet,
+    camera: &Camera,
+) -> Result<DepthImage, RenderedDepthError> {
+    let options = RenderOptions {
+        outputs: Outputs {
+            rgb: false,
+            alpha: true,
+            depth: true,
+            median_depth: false,
+            normal: false,
+        },
+        ..RenderOptions::default()
+    };
+    let out = render(world, camera, &options).map_err(RenderedDepthError::Render)?;
+    let (Some(mut depth), Some(alpha)) = (out.images.depth, out.images.alpha) else {
+        // Both were asked for: only a renderer that refused the set returns neither.
+        return Err(RenderedDepthError::Render(RenderError::LocalParameters));
+    };
+    for (d, a) in depth.iter_mut().zip(&alpha) {
+        if *a < RENDERED_ALPHA_MIN {
+            *d = 0.0;
+        }
+    }
+    DepthImage::try_new(camera.width, camera.height, depth).map_err(RenderedDepthError::Image)
+}
+
 /// TSDF mesher settings.
 #[derive(Clone, Copy, Debug)]
 pub struct TsdfMesher {
@@ -192,37 +237,16 @@ impl TsdfMesher {
             DEFAULT_FOV_DEG,
         )
         .map_err(|source| PipelineError::Cameras { frame, source })?;
-        let options = RenderOptions {
-            outputs: Outputs {
-                rgb: false,
-                alpha: true,
-                depth: true,
-                median_depth: false,
-                normal: false,
-            },
-            ..RenderOptions::default()
-        };
         let mut depths = Vec::with_capacity(cameras.len());
         for camera in &cameras {
-            let out = render(world, camera, &options).map_err(|source| PipelineError::Render {
-                frame,
-                camera: camera.name.clone(),
-                source,
-            })?;
-            let (Some(mut depth), Some(alpha)) = (out.images.depth, out.images.alpha) else {
-                return Err(PipelineError::Render {
+            let image = rendered_depth(world, camera).map_err(|e| match e {
+                RenderedDepthError::Render(source) => PipelineError::Render {
                     frame,
                     camera: camera.name.clone(),
-                    source: trisplat_splat::render::RenderError::LocalParameters,
-                });
-            };
-            for (d, a) in depth.iter_mut().zip(&alpha) {
-                if *a < RENDERED_ALPHA_MIN {
-                    *d = 0.0;
-                }
-            }
-            let image = DepthImage::try_new(camera.width, camera.height, depth)
-                .map_err(|source| PipelineError::Tsdf { frame, source })?;
+                    source,
+                },
+                RenderedDepthError::Image(source) => PipelineError::Tsdf { frame, source },
+            })?;
             depths.push(image);
         }
         let render_ms = start.elapsed().as_secs_f64() * 1e3;

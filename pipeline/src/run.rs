@@ -1,12 +1,11 @@
 //! The frame loop: per frame, deform once, then per method mesh (timed), measure, write.
 
-use std::collections::{BTreeMap, HashSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::animation::AnimatedTemplate;
 use trisplat_geometry::io::{
     SequenceLayout, WriteOptions, read_mesh, write_mesh, write_mesh_sequence,
 };
@@ -14,13 +13,17 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{Deformer, WorldGeometry};
 use trisplat_splat::lbs::LbsDeformer;
 
+pub use crate::output::frame_file;
+
 use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
+use crate::deform::{Engine, skinned_gltf};
 use crate::error::PipelineError;
 use crate::input::{
-    Animation, GaussianSource, LBS_REST_TOLERANCE, WeldedTemplate, animation_label, check_topology,
-    deform_mode, gaussians, open_animation, parse_frames,
+    Animation, GaussianSource, WeldedTemplate, animation_label, check_topology, deform_mode,
+    gaussians, open_animation, parse_frames,
 };
 use crate::methods::{FrameInput, Mesher, Resolved};
+use crate::output::{Created, Inputs};
 use crate::plot;
 use crate::report::{
     FrameRecord, GtSamples, MethodReport, Report, Summary, is_watertight, measure,
@@ -32,12 +35,6 @@ pub const REPORT_JSON: &str = "report.json";
 pub const REPORT_MD: &str = "report.md";
 /// File name of the plot.
 pub const PLOT_PNG: &str = "error_vs_time.png";
-
-/// Name of frame `frame`'s mesh file in a method's folder.
-#[must_use]
-pub fn frame_file(frame: usize) -> String {
-    format!("frame_{frame:06}.ply")
-}
 
 /// Progress of a run, for a progress bar.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,12 +53,6 @@ pub enum Progress {
     },
     /// Writing the sequences, reports and plot.
     Finishing,
-}
-
-/// How frames are deformed.
-enum Engine {
-    Frames(Deformer),
-    Lbs(Box<LbsDeformer>),
 }
 
 /// A deformed frame: the world set when the tsdf method needs it, and the means.
@@ -84,36 +75,9 @@ fn build_engine(
     if mode != Mode::Lbs {
         return Ok(Engine::Frames(Deformer::new(template, deform_mode(mode))));
     }
-    let a_path = PathBuf::from(animation_label(config));
-    let Animation::Gltf(g) = animation else {
-        return Err(PipelineError::Lbs {
-            path: a_path,
-            problem: "lbs mode needs a skinned glTF animation".to_owned(),
-        });
-    };
-    if !g.is_skinned() {
-        return Err(PipelineError::Lbs {
-            path: a_path,
-            problem: "lbs mode needs a skinned glTF (this file has no skin with joint weights)"
-                .to_owned(),
-        });
-    }
-    let diag = f64::from(stored.bounds().map_or(0.0, |b| b.diagonal()));
-    let worst = stored
-        .positions()
-        .iter()
-        .zip(g.rest().positions())
-        .map(|(a, b)| f64::from((*a - *b).length()))
-        .fold(0.0, f64::max);
-    if worst > LBS_REST_TOLERANCE * diag.max(f64::MIN_POSITIVE) {
-        return Err(PipelineError::Lbs {
-            path: config.template.clone(),
-            problem: format!(
-                "the template's positions differ from the animation's rest pose by up to \
-                 {worst:.3e}; lbs needs the template to be the animation's rest shape"
-            ),
-        });
-    }
+    let label = animation_label(config);
+    let a_path = PathBuf::from(&label);
+    let g = skinned_gltf(animation, stored, &config.template, &label)?;
     let palette = g.palette_at(None)?;
     let skinning = welded.skinning(&g.skinning()).ok_or(PipelineError::Lbs {
         path: a_path.clone(),
@@ -129,6 +93,7 @@ fn build_engine(
     Ok(Engine::Lbs(Box::new(rig)))
 }
 
+/// Deforms one frame: the world set when `need_world`, else (binding/jacobian) only the means.
 fn deform_frame(
     engine: &Engine,
     animation: &Animation,
@@ -138,84 +103,25 @@ fn deform_frame(
     need_world: bool,
     label: &str,
 ) -> Result<Deformed, PipelineError> {
-    let deform_err = |source| PipelineError::Deform {
-        path: label.to_owned(),
-        frame,
-        source,
-    };
-    match engine {
-        Engine::Frames(d) if need_world => {
-            let world = d.deform(set, positions).map_err(deform_err)?;
-            let means = world.means().to_vec();
-            Ok(Deformed {
-                world: Some(world),
-                means,
-            })
-        }
-        Engine::Frames(d) => {
-            let mut geometry = WorldGeometry::default();
-            d.deform_geometry(set, positions, &mut geometry)
-                .map_err(deform_err)?;
-            Ok(Deformed {
-                world: None,
-                means: geometry.means,
-            })
-        }
-        Engine::Lbs(rig) => {
-            let Animation::Gltf(g) = animation else {
-                return Err(PipelineError::Internal {
-                    what: "lbs engine without a glTF animation",
-                });
-            };
-            let palette = g.frame_palette(frame)?;
-            let world =
-                rig.deform(set, &palette, None)
-                    .map_err(|source| PipelineError::Skinning {
-                        path: PathBuf::from(label),
-                        frame,
-                        source,
-                    })?;
-            let means = world.means().to_vec();
-            Ok(Deformed {
-                world: need_world.then_some(world),
-                means,
-            })
-        }
-    }
-}
-
-/// Canonical paths of existing files.
-fn canonical_set(paths: &[PathBuf]) -> HashSet<PathBuf> {
-    paths.iter().filter_map(|p| p.canonicalize().ok()).collect()
-}
-
-/// Errors when `path` is one of the inputs.
-fn check_output(path: &Path, inputs: &HashSet<PathBuf>) -> Result<(), PipelineError> {
-    if path.canonicalize().is_ok_and(|c| inputs.contains(&c)) {
-        return Err(PipelineError::OverwriteInput {
-            path: path.to_path_buf(),
+    if let (Engine::Frames(d), false) = (engine, need_world) {
+        let mut geometry = WorldGeometry::default();
+        d.deform_geometry(set, positions, &mut geometry)
+            .map_err(|source| PipelineError::Deform {
+                path: label.to_owned(),
+                frame,
+                source,
+            })?;
+        return Ok(Deformed {
+            world: None,
+            means: geometry.means,
         });
     }
-    Ok(())
-}
-
-/// Files this run created, removed again if the run fails.
-#[derive(Default)]
-struct Created(Vec<PathBuf>);
-
-impl Created {
-    fn note(&mut self, path: &Path, existed: bool) {
-        if !existed {
-            self.0.push(path.to_path_buf());
-        }
-    }
-
-    fn remove(&self) {
-        for p in &self.0 {
-            // Best effort: the error being reported matters more than a leftover file.
-            let _ = std::fs::remove_file(p);
-        }
-    }
+    let world = engine.deform(animation, set, positions, frame, label)?;
+    let means = world.means().to_vec();
+    Ok(Deformed {
+        world: need_world.then_some(world),
+        means,
+    })
 }
 
 /// The per-frame meshes of each method, kept for the animated glTF.
@@ -276,7 +182,7 @@ fn run_inner(
     }
     let (animation, mut input_files) = open_animation(config, &stored)?;
     let anim = animation.get();
-    check_topology(&stored, config, anim)?;
+    check_topology(&stored, &config.template, anim, &animation_label(config))?;
     // Every later stage sees the template welded at its seams (see `WeldedTemplate`).
     let welded = WeldedTemplate::new(&stored);
     let template = &welded.mesh;
@@ -312,17 +218,17 @@ fn run_inner(
     if let Some(g) = &config.gaussians {
         input_files.push(g.clone());
     }
-    let inputs = canonical_set(&input_files);
+    let inputs = Inputs::new(&input_files);
     let out = &config.output;
     for m in &methods {
         let dir = out.join(m.name());
         for f in frames.clone() {
-            check_output(&dir.join(frame_file(f)), &inputs)?;
+            inputs.check(&dir.join(frame_file(f)))?;
         }
-        check_output(&out.join(format!("{}.glb", m.name())), &inputs)?;
+        inputs.check(&out.join(format!("{}.glb", m.name())))?;
     }
     for name in [REPORT_JSON, REPORT_MD, PLOT_PNG] {
-        check_output(&out.join(name), &inputs)?;
+        inputs.check(&out.join(name))?;
     }
     for m in &methods {
         let dir = out.join(m.name());
@@ -359,10 +265,11 @@ fn run_inner(
                 .positions(stored_positions)
                 .ok_or_else(|| PipelineError::Topology {
                     animation: label.clone(),
-                    template: config.template.clone(),
-                    what: "vertex counts",
-                    animation_count: stored_count,
-                    template_count: welded.stored_vertices,
+                    problem: format!(
+                        "frame {f} has {stored_count} vertices, the template {} has {}",
+                        config.template.display(),
+                        welded.stored_vertices
+                    ),
                 })?;
         let time = anim.frame_time(f).unwrap_or(f as f64 / o.fps);
         let start = Instant::now();

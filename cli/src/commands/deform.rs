@@ -1,27 +1,18 @@
 //! `trisplat deform --template T --animation A --gaussians G -o DIR [--mode binding|jacobian|lbs]
 //! [--frames A..B] [--clip NAME|INDEX] [--fps F] [--targets DIR] [--adaptive-scale]`.
 
-use std::collections::HashSet;
-use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::TriMesh;
-use trisplat_geometry::animation::{
-    AnimatedTemplate, BlendshapeAnimation, BlendshapeSet, Clip, GltfMorphAnimation, GltfTemplate,
-    MeshSequence, WeightsTrack,
-};
 use trisplat_geometry::io::read_mesh;
-use trisplat_splat::GaussianSet;
+use trisplat_pipeline::deform::{Engine, check_set, read_bound, skinned_gltf};
+use trisplat_pipeline::input::{AnimationSource, check_topology, parse_frames};
+use trisplat_pipeline::output::{Created, Inputs, frame_file};
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::lbs::LbsDeformer;
-use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
-use super::{Context, parse_clip};
-
-/// Largest difference between the template's positions and the animation's rest pose that
-/// `lbs` accepts, relative to the template's bounding-box diagonal (f32 storage of both).
-const LBS_REST_TOLERANCE: f64 = 1e-5;
+use super::Context;
 
 /// Deformation modes (SPEC §4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -95,198 +86,30 @@ pub struct DeformArgs {
     pub adaptive_scale: bool,
 }
 
-/// The animation source; glTF kept concrete for `lbs`.
-enum Animation {
-    Gltf(Box<GltfTemplate>),
-    Other(Box<dyn AnimatedTemplate>),
-}
-
-impl Animation {
-    fn get(&self) -> &dyn AnimatedTemplate {
-        match self {
-            Self::Gltf(g) => g.as_ref(),
-            Self::Other(o) => o.as_ref(),
-        }
-    }
-}
-
-fn extension(path: &Path) -> String {
-    path.extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default()
-}
-
-fn is_gltf(path: &Path) -> bool {
-    matches!(extension(path).as_str(), "gltf" | "glb")
-}
-
-/// Opens the animation `args.animation` (see the command's help).
-fn open_animation(args: &DeformArgs) -> anyhow::Result<Animation> {
-    let a = Path::new(&args.animation);
-    if !(args.fps.is_finite() && args.fps > 0.0) {
-        bail!("--fps {}: must be a positive number", args.fps);
-    }
-    if is_gltf(a) {
-        let clip = parse_clip(args.clip.as_deref());
-        let clip = match GltfTemplate::open(a, &Clip::None) {
-            // A file without animations plays its stored scene unless a clip was asked for.
-            Ok(g) if g.clip_names().is_empty() && args.clip.is_none() => Clip::None,
-            Ok(_) => clip,
-            Err(e) => return Err(e.into()),
-        };
-        let g = GltfTemplate::open(a, &clip)?.with_fps(args.fps);
-        return Ok(Animation::Gltf(Box::new(g)));
-    }
-    if args.clip.is_some() {
-        bail!("{}: --clip needs a glTF animation", args.animation);
-    }
-    if extension(a) == "json" {
-        let track = WeightsTrack::read(a)?;
-        if is_gltf(&args.template) {
-            if args.targets.is_some() {
-                bail!(
-                    "{}: --targets is for an OBJ/PLY neutral template; a glTF template brings \
-                     its own morph targets",
-                    args.template.display()
-                );
-            }
-            let g = GltfTemplate::open(&args.template, &Clip::None)?;
-            return Ok(Animation::Other(Box::new(GltfMorphAnimation::new(
-                g, track,
-            )?)));
-        }
-        let Some(dir) = &args.targets else {
-            bail!(
-                "{}: a weights file drives blendshapes: give --targets DIR (one .obj/.ply per \
-                 target) or a glTF template with morph targets",
-                args.animation
-            );
-        };
-        // The neutral may sit among the targets (ICT FaceKit): it is not a target.
-        let template_file = args.template.canonicalize().ok();
-        let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-            .with_context(|| format!("{}: cannot list the targets folder", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| matches!(extension(p).as_str(), "obj" | "ply"))
-            .filter(|p| p.canonicalize().ok() != template_file)
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            bail!("{}: no .obj/.ply target meshes", dir.display());
-        }
-        let set = BlendshapeSet::from_files(&args.template, &files)?;
-        return Ok(Animation::Other(Box::new(BlendshapeAnimation::new(
-            set, track,
-        )?)));
-    }
-    let sequence = MeshSequence::from_pattern(&args.animation)?.with_fps(args.fps);
-    Ok(Animation::Other(Box::new(sequence)))
-}
-
-/// Parses `A..B`, `A..=B`, `A..`, `..B`, `A` against `count` frames.
-fn parse_frames(spec: Option<&str>, count: usize) -> anyhow::Result<Range<usize>> {
-    let Some(spec) = spec else {
-        return Ok(0..count);
-    };
-    let num = |s: &str, default: usize| -> anyhow::Result<usize> {
-        let s = s.trim();
-        if s.is_empty() {
-            Ok(default)
-        } else {
-            s.parse::<usize>()
-                .with_context(|| format!("--frames {spec}: `{s}` is not a frame number"))
-        }
-    };
-    let range = if let Some((a, b)) = spec.split_once("..=") {
-        let end = num(b, usize::MAX)?;
-        num(a, 0)?..end.saturating_add(1)
-    } else if let Some((a, b)) = spec.split_once("..") {
-        num(a, 0)?..num(b, count)?
-    } else {
-        let f = num(spec, 0)?;
-        f..f.saturating_add(1)
-    };
-    if range.start >= range.end {
-        bail!("--frames {spec}: the range is empty");
-    }
-    if range.end > count {
-        bail!("--frames {spec}: the animation has {count} frame(s) (0..{count})",);
-    }
-    Ok(range)
-}
-
-/// Frame file name.
-fn frame_name(frame: usize) -> String {
-    format!("frame_{frame:06}.ply")
-}
-
-/// Checks that the animation's frames have the template's vertices and triangles.
-fn check_topology(
-    template: &TriMesh,
-    t_path: &Path,
-    anim: &dyn AnimatedTemplate,
-    a: &str,
-) -> anyhow::Result<()> {
-    let rest = anim.rest();
-    if rest.vertex_count() != template.vertex_count() {
-        bail!(
-            "{a}: the animation has {} vertices, the template {} has {}",
-            rest.vertex_count(),
-            t_path.display(),
-            template.vertex_count()
-        );
-    }
-    if rest.triangles() != template.triangles() {
-        let first = rest
-            .triangles()
-            .iter()
-            .zip(template.triangles())
-            .position(|(x, y)| x != y)
-            .unwrap_or(rest.triangle_count().min(template.triangle_count()));
-        bail!(
-            "{a}: the animation's triangles differ from those of the template {} (triangle {first}; \
-             {} vs {} triangles)",
-            t_path.display(),
-            rest.triangle_count(),
-            template.triangle_count()
-        );
-    }
-    Ok(())
-}
-
-/// How frames are deformed.
-enum Engine {
-    Frames(Deformer),
-    Lbs(LbsDeformer),
-}
-
 /// Runs `trisplat deform`.
+///
+/// The inputs are read and checked, the animation opened and each frame deformed by the same
+/// functions as the main job (`trisplat_pipeline`): one rule for every input format, frame
+/// range and mode.
 ///
 /// # Errors
 /// Unreadable or mismatched inputs (named), a failed write (files of this run removed).
 pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
     let template = read_mesh(&args.template)?;
-    let set = read_gaussians(&args.gaussians)?;
-    let g_name = args.gaussians.display().to_string();
-    if set.binding().is_none() {
-        bail!(
-            "{g_name}: the Gaussians are not bound to triangles (no `binding_0`/`binding` property); use `trisplat bind` first"
-        );
-    }
-    if let Some(issue) = set
-        .report(Some(template.triangle_count()))
-        .issues
-        .into_iter()
-        .next()
-    {
-        bail!("{g_name}: {issue} (template {})", args.template.display());
-    }
+    let set = read_bound(&args.gaussians, &template, &args.template)?;
     if args.adaptive_scale && args.mode == ModeArg::Jacobian {
         bail!(
             "--adaptive-scale: jacobian mode already carries the area change in J; use it with binding or lbs"
         );
     }
-    let animation = open_animation(&args)?;
+    let source = AnimationSource {
+        spec: &args.animation,
+        template: &args.template,
+        clip: args.clip.as_deref(),
+        fps: args.fps,
+        targets: args.targets.as_deref(),
+    };
+    let (animation, mut input_files) = source.open()?;
     let anim = animation.get();
     check_topology(&template, &args.template, anim, &args.animation)?;
     let frames = parse_frames(args.frames.as_deref(), anim.frame_count())?;
@@ -301,121 +124,46 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
             if args.adaptive_scale {
                 d = d.with_adaptive_scale(&template);
             }
-            d.check(&set).with_context(|| g_name.clone())?;
+            check_set(&d, &set, &args.gaussians, &args.template)?;
             Engine::Frames(d)
         }
         ModeArg::Lbs => {
-            let Animation::Gltf(g) = &animation else {
-                bail!(
-                    "{}: lbs mode needs a skinned glTF animation",
-                    args.animation
-                );
-            };
-            if !g.is_skinned() {
-                bail!(
-                    "{}: lbs mode needs a skinned glTF (this file has no skin with joint weights)",
-                    args.animation
-                );
-            }
-            let diag = f64::from(template.bounds().map_or(0.0, |b| b.diagonal()));
-            let worst = template
-                .positions()
-                .iter()
-                .zip(g.rest().positions())
-                .map(|(a, b)| f64::from((*a - *b).length()))
-                .fold(0.0, f64::max);
-            if worst > LBS_REST_TOLERANCE * diag.max(f64::MIN_POSITIVE) {
-                bail!(
-                    "{}: the template's positions differ from the rest pose of {} by up to {worst:.3e}; lbs needs T to be the animation's rest shape (e.g. T = A)",
-                    args.template.display(),
-                    args.animation
-                );
-            }
+            let g = skinned_gltf(&animation, &template, &args.template, &args.animation)?;
             let rig = LbsDeformer::new(&set, &template, &g.skinning(), &g.palette_at(None)?)
-                .with_context(|| g_name.clone())?;
-            Engine::Lbs(if args.adaptive_scale {
+                .with_context(|| args.gaussians.display().to_string())?;
+            Engine::Lbs(Box::new(if args.adaptive_scale {
                 rig.with_adaptive_scale(&template)
             } else {
                 rig
-            })
+            }))
         }
     };
     // Never write over an input.
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("{}: cannot create the output folder", args.output.display()))?;
-    let mut inputs = vec![
-        args.template.clone(),
-        args.gaussians.clone(),
-        PathBuf::from(&args.animation),
-    ];
-    if let Some(t) = &args.targets {
-        inputs.push(t.clone());
-    }
-    let inputs: HashSet<PathBuf> = inputs
-        .iter()
-        .filter_map(|p| p.canonicalize().ok())
-        .collect();
+    input_files.extend([args.template.clone(), args.gaussians.clone()]);
+    input_files.extend(args.targets.clone());
+    let inputs = Inputs::new(&input_files);
     for f in frames.clone() {
-        let out = args.output.join(frame_name(f));
-        if out.canonicalize().is_ok_and(|c| inputs.contains(&c)) {
-            bail!(
-                "{}: refusing to overwrite an input file; choose another output folder",
-                out.display()
-            );
-        }
+        inputs.check(&args.output.join(frame_file(f)))?;
     }
     let bar = ctx.progress.bar(frames.len() as u64, "deforming");
-    let mut created: Vec<PathBuf> = Vec::new();
+    let mut created = Created::default();
     let result = (|| -> anyhow::Result<()> {
         for f in frames.clone() {
-            let out = args.output.join(frame_name(f));
+            let out = args.output.join(frame_file(f));
             let existed = out.exists();
-            let world = deform_frame(&engine, &animation, &set, f, &g_name, &args.animation)?;
+            let positions = anim.frame(f)?;
+            let world = engine.deform(&animation, &set, &positions, f, &args.animation)?;
             write_gaussians(&out, &world, &PlyWriteOptions::default())?;
-            if !existed {
-                created.push(out);
-            }
+            created.note(&out, existed);
             bar.inc(1);
         }
         Ok(())
     })();
     bar.finish_and_clear();
     if result.is_err() {
-        for p in &created {
-            let _ = std::fs::remove_file(p);
-        }
+        created.remove();
     }
     result
-}
-
-/// One deformed frame.
-fn deform_frame(
-    engine: &Engine,
-    animation: &Animation,
-    set: &GaussianSet,
-    frame: usize,
-    g_name: &str,
-    a_name: &str,
-) -> anyhow::Result<GaussianSet> {
-    let anim = animation.get();
-    match engine {
-        Engine::Frames(d) => {
-            let positions = anim.frame(frame)?;
-            d.deform(set, &positions)
-                .with_context(|| format!("{g_name}: frame {frame} of {a_name}"))
-        }
-        Engine::Lbs(rig) => {
-            let Animation::Gltf(g) = animation else {
-                bail!("{a_name}: lbs mode needs a skinned glTF animation");
-            };
-            let palette = g.frame_palette(frame)?;
-            let positions = if rig.adaptive_scale() {
-                Some(anim.frame(frame)?)
-            } else {
-                None
-            };
-            rig.deform(set, &palette, positions.as_deref())
-                .with_context(|| format!("{g_name}: frame {frame} of {a_name}"))
-        }
-    }
 }

@@ -9,14 +9,10 @@ use trisplat_extract::tsdf::{
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
+use trisplat_pipeline::methods::rendered_depth;
 use trisplat_splat::ply::read_gaussians;
-use trisplat_splat::render::{Outputs, RenderOptions, render};
 
 use super::{Context, read_camera_file, refuse_to_overwrite};
-
-/// Pixels whose rendered alpha is below this carry no depth when fusing rendered Gaussians
-/// (2DGS masks its rendered depth the same way).
-pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
 /// Arguments of `trisplat tsdf`.
 #[derive(Debug, clap::Args)]
@@ -103,33 +99,16 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Expected-depth maps of world-space Gaussians, zero where alpha < [`RENDERED_ALPHA_MIN`].
+/// Expected-depth maps of world-space Gaussians, zero where alpha is below
+/// [`trisplat_pipeline::methods::RENDERED_ALPHA_MIN`]
+/// (the pipeline's tsdf method renders the same maps).
 fn render_depths(path: &Path, cameras: &[Camera]) -> anyhow::Result<Vec<DepthImage>> {
     let set = read_gaussians(path)?;
-    let options = RenderOptions {
-        outputs: Outputs {
-            rgb: false,
-            alpha: true,
-            depth: true,
-            median_depth: false,
-            normal: false,
-        },
-        ..RenderOptions::default()
-    };
     cameras
         .iter()
         .map(|camera| {
-            let out = render(&set, camera, &options)
-                .with_context(|| format!("{}: camera '{}'", path.display(), camera.name))?;
-            let (Some(mut depth), Some(alpha)) = (out.images.depth, out.images.alpha) else {
-                anyhow::bail!("{}: the renderer returned no depth", path.display());
-            };
-            for (d, a) in depth.iter_mut().zip(&alpha) {
-                if *a < RENDERED_ALPHA_MIN {
-                    *d = 0.0;
-                }
-            }
-            Ok(DepthImage::try_new(camera.width, camera.height, depth)?)
+            rendered_depth(&set, camera)
+                .with_context(|| format!("{}: camera '{}'", path.display(), camera.name))
         })
         .collect()
 }
