@@ -1,29 +1,14 @@
-//! `trisplat extract` through the real binary on a tiny case (the bundled RiggedFigure, two
-//! frames, small depth images): every promised output exists and reads back; bad inputs give
-//! exit 1 or 2 with one line naming the culprit; --explain prints the plan and writes nothing.
+//! `trisplat extract` through the real binary on tiny cases (the bundled RiggedFigure and
+//! CesiumMan, two frames, small depth images): every promised output exists and reads back;
+//! the jacobian and lbs modes run end to end with plausible errors; bad inputs give exit 1 or
+//! 2 with one line naming the culprit; --explain prints the plan and writes nothing.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use std::path::PathBuf;
+
+use common::{fixture, fresh_dir, one_error_line, run, run_ok, s};
 use trisplat_geometry::io::{read_mesh, write_mesh};
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_trisplat"))
-        .args(args)
-        .output()
-        .expect("run trisplat")
-}
-
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli_extract_{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("create test folder");
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 fn figure() -> PathBuf {
     trisplat_fixtures::path("anim/RiggedFigure.glb")
@@ -40,12 +25,6 @@ const TINY: [&str; 8] = [
     "--samples",
     "2000",
 ];
-
-fn stderr_line(out: &Output) -> String {
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
-    err
-}
 
 #[test]
 fn tiny_case_writes_every_promised_output() {
@@ -66,12 +45,7 @@ fn tiny_case_writes_every_promised_output() {
         s(&out),
     ];
     args.extend(TINY);
-    let res = run(&args);
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
+    let res = run_ok(&args);
     let stdout = String::from_utf8_lossy(&res.stdout);
     for m in ["tsdf", "delaunay", "alpha"] {
         assert!(stdout.contains(m), "{stdout}");
@@ -140,12 +114,7 @@ fn without_gt_no_metrics_and_rebuild_every_one() {
         s(&out),
     ];
     args.extend(TINY);
-    let res = run(&args);
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
+    run_ok(&args);
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("json"))
             .expect("parse");
@@ -196,8 +165,7 @@ fn bad_inputs_exit_with_one_line() {
         "-o",
         s(&out),
     ]);
-    assert_eq!(res.status.code(), Some(1));
-    assert!(stderr_line(&res).contains("missing.glb"));
+    assert!(one_error_line(&res).contains("missing.glb"));
     // Unknown method: usage error, exit 2.
     let res = run(&[
         "extract",
@@ -221,17 +189,11 @@ fn bad_inputs_exit_with_one_line() {
         "-o",
         s(&out),
     ]);
-    assert_eq!(res.status.code(), Some(1));
-    assert!(stderr_line(&res).contains("--frames 0..100000"));
+    assert!(one_error_line(&res).contains("--frames 0..100000"));
     // Gaussians bound to another (larger) template: refused, naming the file.
     let other = dir.join("cesium_bound.ply");
     let cesium = trisplat_fixtures::path("anim/CesiumMan.glb");
-    let res = run(&["bind", s(&cesium), "-o", s(&other)]);
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
+    run_ok(&["bind", s(&cesium), "-o", s(&other)]);
     let res = run(&[
         "extract",
         "--template",
@@ -243,8 +205,7 @@ fn bad_inputs_exit_with_one_line() {
         "-o",
         s(&out),
     ]);
-    assert_eq!(res.status.code(), Some(1));
-    assert!(stderr_line(&res).contains("cesium_bound.ply"));
+    assert!(one_error_line(&res).contains("cesium_bound.ply"));
     // A Gaussian file that is not bound at all: refused by name.
     let unbound = dir.join("points.ply");
     let mesh = read_mesh(&t).expect("figure");
@@ -265,8 +226,7 @@ fn bad_inputs_exit_with_one_line() {
         "-o",
         s(&out),
     ]);
-    assert_eq!(res.status.code(), Some(1));
-    assert!(stderr_line(&res).contains("points.ply"));
+    assert!(one_error_line(&res).contains("points.ply"));
     // A static ground truth that is the output folder's report: refused, nothing over inputs.
     let gt_out = dir.join("gt_out");
     std::fs::create_dir_all(gt_out.join("alpha")).expect("dir");
@@ -285,10 +245,118 @@ fn bad_inputs_exit_with_one_line() {
         "-o",
         s(&gt_out),
     ]);
-    assert_eq!(res.status.code(), Some(1));
-    assert!(stderr_line(&res).contains("refusing to overwrite"));
+    assert!(one_error_line(&res).contains("refusing to overwrite"));
     assert_eq!(
         read_mesh(&gt).expect("intact").triangle_count(),
         mesh.triangle_count()
+    );
+}
+
+/// Runs CesiumMan's first two frames (3 per second) in `mode` with every method, one Gaussian
+/// per triangle and small settings, and checks the report: finite metrics against the
+/// deformed template, a delaunay mesh on the surface and watertight (the template's glTF
+/// seams are welded), alpha and tsdf near it, finite output meshes.
+fn cesium_in_mode(mode: &str, delaunay_max_rel: f64) -> serde_json::Value {
+    let dir = fresh_dir(&format!("cesium_{mode}"));
+    let out = dir.join("out");
+    let t = fixture("anim/CesiumMan.glb");
+    run_ok(&[
+        "extract",
+        "--template",
+        &t,
+        "--method",
+        "tsdf,delaunay,alpha",
+        "--mode",
+        mode,
+        "--frames",
+        "0..2",
+        "--fps",
+        "3",
+        "--per-triangle",
+        "1",
+        "--views",
+        "6",
+        "--resolution",
+        "48",
+        "--voxel",
+        "0.02",
+        "--samples",
+        "2000",
+        "--gt",
+        "template",
+        "-o",
+        s(&out),
+    ]);
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    assert_eq!(r["mode"], mode);
+    assert_eq!(r["frames"], serde_json::json!([0, 1]));
+    assert_eq!(r["template_vertices"], 3273);
+    assert_eq!(r["welded_vertices"], 2338);
+    assert_eq!(r["gaussian_count"], 4672);
+    let radius = r["resolved"]["template_radius"].as_f64().expect("radius");
+    assert!((0.5..1.0).contains(&radius), "{radius}");
+    // Chamfer L1 bounds relative to the template radius: delaunay interpolates the
+    // Gaussians, which lie on the surface (jacobian/binding) or within skinning's blend of
+    // it (lbs); alpha and tsdf (48-pixel views, 0.02 voxels) are coarser.
+    for (method, max_rel) in [
+        ("delaunay", delaunay_max_rel),
+        ("alpha", 0.03),
+        ("tsdf", 0.1),
+    ] {
+        let m = &r["methods"][method];
+        for f in m["frames"].as_array().expect("frames") {
+            let c = f["metrics"]["chamfer_l1"].as_f64().expect("chamfer");
+            assert!(
+                c.is_finite() && c >= 0.0 && c < max_rel * radius,
+                "{method}: {c}"
+            );
+            let nc = f["metrics"]["normal_consistency"].as_f64().expect("nc");
+            assert!(nc > 0.5 && nc <= 1.0 + 1e-9, "{method}: {nc}");
+            assert!(f["ms"].as_f64().expect("ms").is_finite());
+            let frame = f["frame"].as_u64().expect("frame");
+            let ply = out.join(method).join(format!("frame_{frame:06}.ply"));
+            let mesh = read_mesh(&ply).unwrap_or_else(|e| panic!("{}: {e}", ply.display()));
+            assert!(mesh.triangle_count() > 0, "{}", ply.display());
+            assert!(
+                mesh.positions().iter().all(|p| p.is_finite()),
+                "{}",
+                ply.display()
+            );
+        }
+    }
+    let delaunay = &r["methods"]["delaunay"];
+    assert_eq!(delaunay["mean"]["watertight_frames"], 2, "{mode}");
+    // Welded template vertices plus one per Gaussian.
+    assert_eq!(delaunay["frames"][0]["vertices"], 2338 + 4672);
+    r
+}
+
+#[test]
+fn jacobian_mode_on_cesium_man() {
+    cesium_in_mode("jacobian", 1e-4);
+}
+
+#[test]
+fn lbs_mode_on_cesium_man() {
+    cesium_in_mode("lbs", 1e-3);
+    // lbs needs a skinned glTF animation: a still OBJ template is refused by name.
+    let dir = fresh_dir("lbs_still");
+    let spot = fixture("spot_triangulated.obj");
+    let res = run(&[
+        "extract",
+        "--template",
+        &spot,
+        "--method",
+        "delaunay",
+        "--mode",
+        "lbs",
+        "-o",
+        s(&dir.join("out")),
+    ]);
+    let line = one_error_line(&res);
+    assert!(
+        line.contains("spot_triangulated.obj") && line.contains("skinned glTF"),
+        "{line}"
     );
 }
