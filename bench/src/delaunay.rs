@@ -144,9 +144,23 @@ impl Animation {
     }
 }
 
+/// CPU time of all threads of the process in nanoseconds (Linux: the sum of
+/// `/proc/self/task/*/schedstat`), to see through a loaded machine.
+fn process_cpu_ns() -> Option<u64> {
+    let mut total = 0u64;
+    for entry in std::fs::read_dir("/proc/self/task").ok()? {
+        let path = entry.ok()?.path().join("schedstat");
+        let text = std::fs::read_to_string(path).ok()?;
+        total += text.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(total)
+}
+
 /// Per-run results.
 struct Run {
     update_ms: Vec<f64>,
+    /// Process CPU milliseconds of each update (all threads), when available.
+    update_cpu_ms: Vec<f64>,
     hop_fraction: Vec<f64>,
     charts_fraction: Vec<f64>,
     chamfer: Vec<f64>,
@@ -206,6 +220,7 @@ fn run_once(
     let charts = template.triangle_count() as f64;
     let mut run = Run {
         update_ms: Vec::new(),
+        update_cpu_ms: Vec::new(),
         hop_fraction: Vec::new(),
         charts_fraction: Vec::new(),
         chamfer: Vec::new(),
@@ -217,13 +232,18 @@ fn run_once(
         let start = Instant::now();
         deformer.deform_geometry(set, &positions, &mut geometry)?;
         deform_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let cpu_start = process_cpu_ns();
         let start = Instant::now();
         let stats = d.update(&positions, &geometry.means)?;
         let triangles = d.triangles();
         let ms = start.elapsed().as_secs_f64() * 1e3;
+        let cpu = cpu_start
+            .zip(process_cpu_ns())
+            .map(|(a, b)| b.saturating_sub(a) as f64 * 1e-6);
         // Frame 0 is the initial build of every run.
         if f > 0 {
             run.update_ms.push(ms);
+            run.update_cpu_ms.extend(cpu);
             run.hop_fraction.push(stats.hopped as f64 / n);
             run.charts_fraction
                 .push(stats.charts_redone as f64 / charts);
@@ -324,6 +344,17 @@ pub fn run(args: &DelaunayBenchArgs) -> anyhow::Result<()> {
          {reb:.2} ms/frame   speed-up x{:.2} (target >= 5)",
         reb / inc
     );
+    if !incremental.update_cpu_ms.is_empty() && !rebuild.update_cpu_ms.is_empty() {
+        let (inc, reb) = (
+            median(&incremental.update_cpu_ms),
+            median(&rebuild.update_cpu_ms),
+        );
+        println!(
+            "process CPU time (all threads): incremental median {inc:.2} ms/frame   rebuild \
+             median {reb:.2} ms/frame   ratio x{:.2}",
+            reb / inc
+        );
+    }
     println!(
         "frames whose incremental mesh equals the rebuilt one: {same} of {}",
         incremental.triangles.len()

@@ -83,6 +83,7 @@
 //! Work is split over Gaussians and charts with rayon; every item is computed independently and
 //! collected in order, so results do not depend on the thread count.
 
+mod certify;
 mod chart;
 mod search;
 
@@ -92,10 +93,11 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::spatial::MAX_COORDINATE;
-use trisplat_geometry::topology::{edge_key, edge_triangles};
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
+pub use self::certify::{CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, SNAPSHOT_MARGIN_REL};
+use self::certify::{Certificate, LocalFrame, Snapshot, is_flat};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
 pub use self::search::BOX_PADDING_REL;
 use self::search::DeformedBvh;
@@ -222,8 +224,9 @@ pub struct FrameStats {
     pub hopped: usize,
     /// Charts triangulated.
     pub charts_redone: usize,
-    /// Gaussians whose nearest-triangle search ran (the others were settled by the hop
-    /// threshold alone).
+    /// Gaussians whose full nearest-triangle check ran (the others were settled by their
+    /// motion certificate, possibly with an exact comparison against a few listed close
+    /// competitors; see module `certify`).
     pub searches: usize,
     /// Gaussians that are not vertices of the mesh (duplicates, degenerate charts).
     pub unmeshed: usize,
@@ -231,10 +234,76 @@ pub struct FrameStats {
     pub millis: f64,
 }
 
-/// A triangle that may be nearer than a chart's own to one of its Gaussians: id, padded box
-/// (min, max), and for the triangle across edge `j` of the chart, the half-plane filter
-/// (direction across in the (into-chart, normal) basis, height of corner `j`, `j`).
-type ChartCandidate = (u32, DVec3, DVec3, Option<(DVec3, f64, usize)>);
+/// Shared inputs of the per-chart hop search of one frame.
+struct SearchContext<'a> {
+    bvh: &'a DeformedBvh,
+    positions: &'a [Vec3],
+    means: &'a [Vec3],
+    /// Flat triangles (see [`FLAT_RATIO`]); `None` when there are none.
+    flat: Option<&'a [bool]>,
+}
+
+/// Per-thread buffers of the hop search.
+#[derive(Default)]
+struct Scratch {
+    stack: Vec<u32>,
+    found: Vec<u32>,
+    /// Candidate triangles: id, padded box (min, max), squared box distance from the centroid.
+    candidates: Vec<(u32, DVec3, DVec3, f64)>,
+    /// Gaussians to check exactly: id, deformed mean, squared distance to the chart.
+    pending: Vec<(u32, DVec3, f64)>,
+    /// Per BVH node, the token of the last frontier computation that marked it.
+    marks: Vec<u32>,
+    token: u32,
+    frontier: Vec<u32>,
+}
+
+impl Scratch {
+    /// A fresh token for `marks`, sized to `len` nodes.
+    fn next_token(&mut self, len: usize) -> u32 {
+        if self.marks.len() != len || self.token == u32::MAX {
+            self.marks.clear();
+            self.marks.resize(len, 0);
+            self.token = 0;
+        }
+        self.token += 1;
+        self.token
+    }
+}
+
+thread_local! {
+    /// Buffers of the hop search on this thread, kept between frames.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
+}
+
+/// The charts' part of a frame update, gathered per rayon task.
+#[derive(Default)]
+struct Outcome {
+    /// (Gaussian, new chart).
+    moves: Vec<(u32, u32)>,
+    /// Renewed certificates.
+    certificates: Vec<(u32, Certificate)>,
+    /// New snapshots (`None`: the chart has none now).
+    snapshots: Vec<(u32, Option<Snapshot>)>,
+    /// Gaussians checked exactly.
+    checked: usize,
+    /// Gaussians checked against their close competitors only.
+    checked_close: usize,
+    /// Charts that took a new snapshot.
+    refreshed: usize,
+}
+
+impl Outcome {
+    fn merge(mut self, mut other: Self) -> Self {
+        self.moves.append(&mut other.moves);
+        self.certificates.append(&mut other.certificates);
+        self.snapshots.append(&mut other.snapshots);
+        self.checked += other.checked;
+        self.checked_close += other.checked_close;
+        self.refreshed += other.refreshed;
+        self
+    }
+}
 
 /// Per-Gaussian placement in its chart.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -259,9 +328,6 @@ pub struct IncrementalDelaunay {
     canonical: Vec<DVec3>,
     /// Nearest rest triangle of each canonical mean (seeds the rebuild searches).
     rest_nearest: Vec<u32>,
-    /// Per triangle and corner `j`: the one other triangle across the edge opposite corner
-    /// `j` (`u32::MAX` for a boundary or non-manifold edge).
-    across: Vec<[u32; 3]>,
     /// Hop threshold in world units.
     hop_distance: f64,
     /// Bounding-box diagonal of the rest template (BVH padding).
@@ -273,6 +339,15 @@ pub struct IncrementalDelaunay {
     charts: Vec<ChartMesh>,
     bvh: Option<DeformedBvh>,
     vertices: Vec<Vec3>,
+    /// Motion certificates per Gaussian (module `certify`); valid only while `certified`.
+    certificates: Vec<Certificate>,
+    /// Neighbourhood snapshot per chart (module `certify`).
+    snapshots: Vec<Option<Snapshot>>,
+    /// Whether `certificates` and `snapshots` belong to the current state (false after a
+    /// rebuild, which does not compute them: the next update does).
+    certified: bool,
+    /// Per deformed triangle: flat in the sense of [`certify::FLAT_RATIO`] (reused buffer).
+    flat: Vec<bool>,
     updates: usize,
     since_rebuild: usize,
 }
@@ -360,21 +435,6 @@ impl IncrementalDelaunay {
             .sum();
         let mean_edge = edge_sum / (3 * triangles.len()) as f64;
         let diagonal = rest.bounds().map_or(0.0, |b| b.diagonal());
-        let edges = edge_triangles(&triangles);
-        let across = triangles
-            .iter()
-            .enumerate()
-            .map(|(t, tri)| {
-                std::array::from_fn(|j| {
-                    let (p, q) = (tri[(j + 1) % 3], tri[(j + 2) % 3]);
-                    match edges.get(&edge_key(p, q)).map(Vec::as_slice) {
-                        Some([x, y]) if *x as usize == t => *y,
-                        Some([x, y]) if *y as usize == t => *x,
-                        _ => u32::MAX,
-                    }
-                })
-            })
-            .collect();
         let rest_bvh = DeformedBvh::build(positions, &triangles, diagonal);
         let canonical: Vec<DVec3> = canonical_means.iter().map(|p| p.as_dvec3()).collect();
         let rest_nearest = canonical
@@ -395,7 +455,6 @@ impl IncrementalDelaunay {
             frames,
             canonical,
             rest_nearest,
-            across,
             hop_distance: o.hop_threshold * mean_edge,
             diagonal,
             assigned: Vec::new(),
@@ -404,6 +463,10 @@ impl IncrementalDelaunay {
             charts: Vec::new(),
             bvh: None,
             vertices: Vec::new(),
+            certificates: Vec::new(),
+            snapshots: Vec::new(),
+            certified: false,
+            flat: Vec::new(),
             updates: 0,
             since_rebuild: 0,
         })
@@ -576,6 +639,7 @@ impl IncrementalDelaunay {
         let all: Vec<u32> = (0..self.triangles.len() as u32).collect();
         self.charts = self.triangulate_charts(&all, &self.members);
         self.bvh = Some(bvh);
+        self.certified = false;
         self.since_rebuild = 1;
         self.lift(positions, means);
         FrameStats {
@@ -591,18 +655,61 @@ impl IncrementalDelaunay {
             return self.rebuild_now(positions, means);
         };
         bvh.refit(positions, &self.triangles, self.diagonal);
-        let slack = FILTER_MARGIN_REL * f64::from(self.diagonal);
-        // (Gaussian, new chart) and the number of candidate checks, chart by chart.
-        let per_chart: Vec<(Vec<(u32, u32)>, usize)> = self
+        if !self.certified {
+            self.certificates.clear();
+            self.certificates
+                .resize(self.canonical.len(), Certificate::NONE);
+            self.snapshots.clear();
+            self.snapshots.resize(self.triangles.len(), None);
+            self.certified = true;
+        }
+        let mut flat = std::mem::take(&mut self.flat);
+        flat.resize(self.triangles.len(), false);
+        flat.par_iter_mut()
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(t, f)| *f = is_flat(bvh.corners(t as u32)));
+        let any_flat = flat.contains(&true);
+        let context = SearchContext {
+            bvh: &bvh,
+            positions,
+            means,
+            flat: any_flat.then_some(flat.as_slice()),
+        };
+        let outcome = self
             .members
             .par_iter()
+            .zip(self.snapshots.par_iter())
             .enumerate()
             .with_min_len(64)
-            .map(|(a, list)| self.hops_of_chart(&bvh, a as u32, list, means, slack))
-            .collect();
+            .fold(Outcome::default, |mut acc, (a, (list, snapshot))| {
+                SCRATCH.with_borrow_mut(|scratch| {
+                    self.hops_of_chart(
+                        &context,
+                        a as u32,
+                        list,
+                        snapshot.as_ref(),
+                        scratch,
+                        &mut acc,
+                    );
+                });
+                acc
+            })
+            .reduce(Outcome::default, Outcome::merge);
+        self.flat = flat;
         self.bvh = Some(bvh);
-        let searches = per_chart.iter().map(|c| c.1).sum();
-        let mut moves: Vec<(u32, u32)> = per_chart.into_iter().flat_map(|c| c.0).collect();
+        let searches = outcome.checked;
+        for (g, c) in outcome.certificates {
+            if let Some(slot) = self.certificates.get_mut(g as usize) {
+                *slot = c;
+            }
+        }
+        for (a, snapshot) in outcome.snapshots {
+            if let Some(slot) = self.snapshots.get_mut(a as usize) {
+                *slot = snapshot;
+            }
+        }
+        let mut moves = outcome.moves;
         moves.sort_unstable();
         let found = moves;
         let mut dirty: Vec<u32> = Vec::new();
@@ -622,6 +729,7 @@ impl IncrementalDelaunay {
             }
             self.assigned[i] = c;
             self.anchors[i] = self.anchor(i, c);
+            self.certificates[i] = Certificate::NONE;
             dirty.push(a);
             dirty.push(c);
             hopped += 1;
@@ -643,125 +751,278 @@ impl IncrementalDelaunay {
         }
     }
 
-    /// Hop targets of the Gaussians of chart `a` at this frame, and how many Gaussians needed
-    /// a candidate check. Exactly the answer of a full BVH search per Gaussian (the nearest
-    /// triangle, ties to the smallest id, under the hop threshold), found cheaper: one range
-    /// query per chart collects every triangle that could be nearer than `a` to any of its
-    /// Gaussians, and per Gaussian a candidate is dismissed without an exact distance when its
-    /// box is too far, or, for the triangle across an edge, when the exact distance to that
-    /// triangle's half-plane (a 2D computation in the plane across the edge) already exceeds
-    /// the bound by `slack`.
+    /// Hop targets of the Gaussians of chart `a` at this frame, new certificates, and the
+    /// chart's new snapshot. Exactly the answer of a full BVH search per Gaussian (the nearest
+    /// triangle, ties to the smallest id, under the hop threshold), found cheaper: a Gaussian
+    /// whose motion certificate still holds cannot have hopped (module `certify`); the others
+    /// are checked exactly against the triangles of one range query per chart, which also
+    /// proves that no triangle from outside the chart's snapshot came near. A chart without a
+    /// snapshot, with a newcomer in its neighbourhood, or with most certificates failing,
+    /// checks all its Gaussians and takes a new snapshot.
     fn hops_of_chart(
         &self,
-        bvh: &DeformedBvh,
+        cx: &SearchContext<'_>,
         a: u32,
         list: &[u32],
-        means: &[Vec3],
-        slack: f64,
-    ) -> (Vec<(u32, u32)>, usize) {
-        let mut moves = Vec::new();
+        snapshot: Option<&Snapshot>,
+        scratch: &mut Scratch,
+        out: &mut Outcome,
+    ) {
         if list.is_empty() {
-            return (moves, 0);
+            return;
         }
+        let bvh = cx.bvh;
         let hop = self.hop_distance;
         let v = bvh.corners(a);
         let centre = (v[0] + v[1] + v[2]) / 3.0;
-        // Per Gaussian: (query, squared bound, bound id, closest-point weights, d_a).
-        let mut queries = Vec::with_capacity(list.len());
+        let size = v.iter().map(|p| (*p - centre).length()).fold(0.0, f64::max);
+        let margin = SNAPSHOT_MARGIN_REL * size;
+        let slack =
+            FILTER_MARGIN_REL * (f64::from(self.diagonal) + centre.abs().max_element() + size);
+        let usable = |snap: &Snapshot| match cx.flat {
+            None => true,
+            Some(flat) => snap.triangles.iter().all(|&t| !flat[t as usize]),
+        };
+        let (moves_before, checked_close_before) = (out.moves.len(), out.checked_close);
+        if let Some(snap) = snapshot
+            && usable(snap)
+            && let Some(fit) = snap.fit(v, cx.positions)
+        {
+            let mut reach = 0.0f64;
+            scratch.pending.clear();
+            for &g in list {
+                let q = cx.means[g as usize].as_dvec3();
+                let from_centre = (q - centre).length();
+                let c = self.certificates[g as usize];
+                let d2 = if c.is_some() {
+                    let (own, other) = c.bounds(&fit, q);
+                    let own_slack =
+                        slack + FILTER_MARGIN_REL * (q.abs().max_element() + from_centre + own);
+                    if !c.has_close() {
+                        if other - (own - hop) > own_slack {
+                            reach = reach.max(from_centre + (own - hop).max(0.0));
+                            continue;
+                        }
+                        bvh.distance_sq(q, a).0
+                    } else {
+                        // The listed competitors exactly, the others by the bound.
+                        let (d2, _) = bvh.distance_sq(q, a);
+                        let d = d2.sqrt();
+                        if other - (d - hop) > own_slack {
+                            // Triangles outside the snapshot are excluded by the query
+                            // below, whatever the outcome.
+                            reach = reach.max(from_centre + (d - hop).max(0.0));
+                            if let Some(t) = self.close_check(bvh, q, a, d2, &c.close) {
+                                out.moves.push((g, t));
+                            }
+                            out.checked_close += 1;
+                            continue;
+                        }
+                        d2
+                    }
+                } else {
+                    bvh.distance_sq(q, a).0
+                };
+                reach = reach.max(from_centre + (d2.sqrt() - hop).max(0.0));
+                scratch.pending.push((g, q, d2));
+            }
+            if scratch.pending.len() * 2 <= list.len() {
+                let pending = !scratch.pending.is_empty();
+                let radius = reach + slack + if pending { 0.5 * margin } else { 0.0 };
+                let inside =
+                    !bvh.any_within(&snap.frontier, centre, radius * radius, &mut scratch.stack);
+                if inside {
+                    if pending {
+                        scratch.found.clear();
+                        scratch.found.extend_from_slice(&snap.triangles);
+                        self.gather_candidates(bvh, a, centre, scratch);
+                        for &(g, q, d2) in &scratch.pending {
+                            let cap = radius - (q - centre).length();
+                            match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
+                                Ok((other, close)) => out
+                                    .certificates
+                                    .push((g, Certificate::new(&fit, q, d2.sqrt(), other, close))),
+                                Err(t) => out.moves.push((g, t)),
+                            }
+                        }
+                    }
+                    out.checked += scratch.pending.len();
+                    return;
+                }
+            }
+        }
+        // Check every Gaussian and take a new snapshot; forget what this chart found above.
+        out.moves.truncate(moves_before);
+        out.checked_close = checked_close_before;
+        out.refreshed += 1;
+        scratch.pending.clear();
         let mut reach = 0.0f64;
         for &g in list {
-            let q = means[g as usize].as_dvec3();
-            let (d2, bary) = bvh.distance_sq(q, a);
-            let d = d2.sqrt();
-            let bound = if hop > 0.0 {
-                let r = d - hop;
-                if r <= 0.0 {
-                    continue;
-                }
-                // Strictly nearer than r: (d², t) < (r², 0) means d² < r².
-                (r * r, 0u32)
-            } else {
-                (d2, a)
-            };
-            reach = reach.max((q - centre).length() + bound.0.sqrt());
-            queries.push((g, q, bound, bary));
+            let q = cx.means[g as usize].as_dvec3();
+            let (d2, _) = bvh.distance_sq(q, a);
+            reach = reach.max((q - centre).length() + (d2.sqrt() - hop).max(0.0));
+            scratch.pending.push((g, q, d2));
         }
-        if queries.is_empty() {
-            return (moves, 0);
-        }
-        let mut candidates = Vec::new();
-        bvh.triangles_within(centre, reach * reach * (1.0 + 1e-12), &mut candidates);
-        candidates.retain(|&t| t != a);
-        candidates.sort_unstable();
-        // Edge filters: for the triangle across the edge opposite corner j, the unit vectors
-        // (into a, across to T) in the plane perpendicular to the edge, the normal of a, and the
-        // height of corner j over that edge.
-        let normal = unit_normal(v);
-        let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length();
-        let filters: [Option<(u32, DVec3, DVec3, f64)>; 3] = std::array::from_fn(|j| {
-            let t = self.across.get(a as usize)?[j];
-            if t == u32::MAX || normal == DVec3::ZERO {
-                return None;
+        let radius = reach + slack + margin;
+        scratch.found.clear();
+        bvh.triangles_within_using(
+            centre,
+            radius * radius,
+            &mut scratch.found,
+            &mut scratch.stack,
+        );
+        let no_flat = cx
+            .flat
+            .is_none_or(|flat| scratch.found.iter().all(|&t| !flat[t as usize]));
+        let snap = match LocalFrame::of(v) {
+            Some(frame) if no_flat => {
+                let mut triangles = scratch.found.clone();
+                triangles.push(a);
+                triangles.sort_unstable();
+                triangles.dedup();
+                let token = scratch.next_token(bvh.node_count());
+                bvh.frontier(&triangles, &mut scratch.marks, token, &mut scratch.frontier);
+                let frontier = scratch.frontier.clone();
+                Snapshot::new(&frame, triangles, frontier, &self.triangles, cx.positions)
             }
-            let (p, q) = (v[(j + 1) % 3], v[(j + 2) % 3]);
-            let e = (q - p).try_normalize()?;
-            let into = ((v[j] - p) - e * (v[j] - p).dot(e)).try_normalize()?;
-            let w = bvh.corners(t);
-            let far = w.into_iter().find(|x| *x != p && *x != q)?;
-            let across = ((far - p) - e * (far - p).dot(e)).try_normalize()?;
-            let tx = (across.dot(into), across.dot(normal));
-            let height = area2 / (q - p).length();
-            Some((t, DVec3::new(tx.0, tx.1, 0.0), into, height))
-        });
-        // Candidates with their boxes and edge filter, contiguous for the per-Gaussian loop.
-        let candidates: Vec<ChartCandidate> = candidates
-            .into_iter()
-            .map(|t| {
-                let (lo, hi) = bvh.leaf_box(t);
-                let filter = filters.iter().enumerate().find_map(|(j, f)| match f {
-                    Some((ft, tx, _, height)) if *ft == t => Some((*tx, *height, j)),
-                    _ => None,
-                });
-                (t, lo, hi, filter)
-            })
-            .collect();
-        let checked = queries.len();
-        for (g, q, bound, bary) in queries {
-            let interior = bary.iter().all(|&b| b > 0.0);
-            let foot = v[0] * bary[0] + v[1] * bary[1] + v[2] * bary[2];
-            let h = (q - foot).dot(normal);
-            let limit = bound.0.sqrt() + slack;
-            let mut best = bound;
-            let mut found = false;
-            for &(t, lo, hi, filter) in &candidates {
-                let gap = (lo - q).max(q - hi).max(DVec3::ZERO);
-                if gap.length_squared() > best.0 {
-                    continue;
-                }
-                if interior && let Some((tx, height, j)) = filter {
-                    // Point (r, h) in the cross-section; T's half-plane is the ray along tx.
-                    let (x, y) = (bary[j] * height, h);
-                    let along = x * tx.x + y * tx.y;
-                    let lower = if along <= 0.0 {
-                        x.hypot(y)
-                    } else {
-                        (x * tx.y - y * tx.x).abs()
-                    };
-                    if lower > limit {
-                        continue;
+            _ => None,
+        };
+        let fit = snap.as_ref().and_then(|s| s.fit(v, cx.positions));
+        self.gather_candidates(bvh, a, centre, scratch);
+        for &(g, q, d2) in &scratch.pending {
+            let cap = radius - (q - centre).length();
+            match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
+                Ok((other, close)) => {
+                    if let Some(fit) = &fit {
+                        out.certificates
+                            .push((g, Certificate::new(fit, q, d2.sqrt(), other, close)));
                     }
                 }
-                let (d2, _) = bvh.distance_sq(q, t);
-                if (d2, t) < best {
-                    best = (d2, t);
-                    found = true;
-                }
-            }
-            if found && best.1 != a {
-                moves.push((g, best.1));
+                Err(t) => out.moves.push((g, t)),
             }
         }
-        (moves, checked)
+        out.checked += list.len();
+        out.snapshots
+            .push((a, if fit.is_some() { snap } else { None }));
+    }
+
+    /// Fills `scratch.candidates` with the triangles of `scratch.found` other than `a`, with
+    /// their padded boxes, nearest box to `centre` first.
+    fn gather_candidates(&self, bvh: &DeformedBvh, a: u32, centre: DVec3, scratch: &mut Scratch) {
+        scratch.candidates.clear();
+        for &t in &scratch.found {
+            if t != a {
+                let (lo, hi) = bvh.leaf_box(t);
+                let gap = (lo - centre).max(centre - hi).max(DVec3::ZERO);
+                scratch.candidates.push((t, lo, hi, gap.length_squared()));
+            }
+        }
+        scratch
+            .candidates
+            .sort_unstable_by(|x, y| x.3.total_cmp(&y.3).then(x.0.cmp(&y.0)));
+    }
+
+    /// Exact hop check of a Gaussian at `q` in chart `a` (own squared distance `d2`) against
+    /// `candidates`, which hold every triangle nearer than `cap`: `Err(target)` when it hops
+    /// (the nearest triangle, ties to the smallest id, under the hop threshold), else
+    /// `Ok((other, close))`: up to [`certify::MAX_CLOSE`] triangles nearer than the own
+    /// distance plus [`certify::CLOSE_GAP_REL`] times `size`, and `other ≤ d_U` for every
+    /// other triangle `U ≠ a` (and `≤ cap`).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one search step, all inputs named"
+    )]
+    fn exact_check(
+        &self,
+        bvh: &DeformedBvh,
+        q: DVec3,
+        a: u32,
+        d2: f64,
+        candidates: &[(u32, DVec3, DVec3, f64)],
+        cap: f64,
+        size: f64,
+    ) -> Result<(f64, [u32; MAX_CLOSE]), u32> {
+        let hop = self.hop_distance;
+        let d = d2.sqrt();
+        let r = d - hop;
+        let can_hop = hop == 0.0 || r > 0.0;
+        let near = d + CLOSE_GAP_REL * size;
+        // Strictly nearer than r: with a hop threshold, (d², t) < (r², 0) means d² < r².
+        let mut best = if hop > 0.0 { (r * r, 0u32) } else { (d2, a) };
+        let mut found = false;
+        let mut far = cap;
+        // Close competitors by distance, ascending.
+        let mut close = [(f64::INFINITY, u32::MAX); MAX_CLOSE];
+        let mut count = 0;
+        for &(t, lo, hi, _) in candidates {
+            let lower = (lo - q)
+                .max(q - hi)
+                .max(DVec3::ZERO)
+                .length_squared()
+                .sqrt();
+            let keep = if count == MAX_CLOSE {
+                close[MAX_CLOSE - 1].0
+            } else {
+                near
+            };
+            if (!can_hop || lower * lower > best.0) && lower >= far && lower >= keep {
+                continue;
+            }
+            let (du2, _) = bvh.distance_sq(q, t);
+            if can_hop && (du2, t) < best {
+                best = (du2, t);
+                found = true;
+            }
+            let du = du2.sqrt();
+            if du < near {
+                // Insert in order; the largest falls out to the far bound.
+                let mut item = (du, t);
+                for slot in &mut close {
+                    if item.0 < slot.0 {
+                        std::mem::swap(slot, &mut item);
+                    }
+                }
+                if item.1 == u32::MAX {
+                    count += 1;
+                } else {
+                    far = far.min(item.0);
+                }
+            } else {
+                far = far.min(du);
+            }
+        }
+        if found {
+            Err(best.1)
+        } else {
+            Ok((far, close.map(|c| c.1)))
+        }
+    }
+
+    /// Exact comparison of a Gaussian's own triangle `a` (squared distance `d2`) with its
+    /// listed competitors: the hop target when one of them wins (as [`Self::exact_check`]).
+    fn close_check(
+        &self,
+        bvh: &DeformedBvh,
+        q: DVec3,
+        a: u32,
+        d2: f64,
+        close: &[u32; MAX_CLOSE],
+    ) -> Option<u32> {
+        let hop = self.hop_distance;
+        let r = d2.sqrt() - hop;
+        if hop > 0.0 && r <= 0.0 {
+            return None;
+        }
+        let mut best = if hop > 0.0 { (r * r, 0u32) } else { (d2, a) };
+        let mut found = false;
+        for &t in close.iter().take_while(|&&t| t != u32::MAX) {
+            let (du2, _) = bvh.distance_sq(q, t);
+            if (du2, t) < best {
+                best = (du2, t);
+                found = true;
+            }
+        }
+        found.then_some(best.1)
     }
 
     /// Canonical placement of Gaussian `i` in chart `t`: barycentric weights of its canonical

@@ -33,6 +33,8 @@ pub(crate) struct DeformedBvh {
     corners: Vec<[Vec3; 3]>,
     /// Leaf node of each triangle.
     leaf_of: Vec<u32>,
+    /// Parent of each node (`u32::MAX` for the root).
+    parent: Vec<u32>,
 }
 
 impl DeformedBvh {
@@ -71,10 +73,21 @@ impl DeformedBvh {
                 }
             }
         }
+        let mut parent = vec![u32::MAX; bvh.nodes.len()];
+        for (index, node) in bvh.nodes.iter().enumerate() {
+            if !node.is_leaf() {
+                for child in [node.first_index, node.first_index.saturating_add(1)] {
+                    if let Some(p) = parent.get_mut(child as usize) {
+                        *p = index as u32;
+                    }
+                }
+            }
+        }
         let mut out = Self {
             bvh,
             corners,
             leaf_of,
+            parent,
         };
         out.set_leaf_boxes(diagonal);
         out.bvh.refit_all();
@@ -129,19 +142,33 @@ impl DeformedBvh {
     }
 
     /// Appends to `out` every triangle whose padded leaf box is within squared distance `r2`
-    /// of `q` (a superset of the triangles within distance `√r2`).
-    pub(crate) fn triangles_within(&self, q: DVec3, r2: f64, out: &mut Vec<u32>) {
+    /// of `q` (a superset of the triangles within distance `√r2`), with a caller-owned
+    /// traversal stack (no allocation once it has grown). The boxes are tested in f32: their
+    /// padding ([`BOX_PADDING_REL`]) is far above the f32 rounding of the test, so a triangle
+    /// within `√r2` is never left out.
+    pub(crate) fn triangles_within_using(
+        &self,
+        q: DVec3,
+        r2: f64,
+        out: &mut Vec<u32>,
+        stack: &mut Vec<u32>,
+    ) {
         let nodes = &self.bvh.nodes;
+        stack.clear();
         if nodes.is_empty() {
             return;
         }
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        let p = Vec3A::from(q.as_vec3());
+        // Round the radius up (f32 keeps 24 bits; the padding covers the rest).
+        let r2 = (r2 * (1.0 + 1e-6)) as f32;
         stack.push(0);
         while let Some(index) = stack.pop() {
             let Some(node) = nodes.get(index as usize) else {
                 continue;
             };
-            if box_distance_sq(node.aabb(), q) > r2 {
+            let b = node.aabb();
+            let d = (b.min - p).max(p - b.max).max(Vec3A::ZERO);
+            if d.length_squared() > r2 {
                 continue;
             }
             if node.is_leaf() {
@@ -155,6 +182,103 @@ impl DeformedBvh {
                 stack.push(node.first_index.saturating_add(1));
             }
         }
+    }
+
+    /// Number of nodes.
+    pub(crate) fn node_count(&self) -> usize {
+        self.bvh.nodes.len()
+    }
+
+    /// Fills `out` with the *frontier* of the triangles `inside`: nodes whose subtrees hold no
+    /// triangle of `inside` and together hold every other triangle (the children, off the
+    /// paths from the root to `inside`'s leaves, of nodes on those paths). `marks` is a
+    /// per-node scratch array (`token` marks this call; it must differ from every earlier
+    /// token written to it).
+    pub(crate) fn frontier(
+        &self,
+        inside: &[u32],
+        marks: &mut [u32],
+        token: u32,
+        out: &mut Vec<u32>,
+    ) {
+        out.clear();
+        let nodes = &self.bvh.nodes;
+        if nodes.is_empty() {
+            return;
+        }
+        for &t in inside {
+            let mut n = self.leaf_of.get(t as usize).copied().unwrap_or(u32::MAX);
+            while let Some(m) = marks.get_mut(n as usize) {
+                if *m == token {
+                    break;
+                }
+                *m = token;
+                n = self.parent.get(n as usize).copied().unwrap_or(u32::MAX);
+            }
+        }
+        if marks.first() != Some(&token) {
+            out.push(0);
+            return;
+        }
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let Some(node) = nodes.get(n as usize) else {
+                continue;
+            };
+            if node.is_leaf() {
+                continue;
+            }
+            for child in [node.first_index, node.first_index.saturating_add(1)] {
+                if marks.get(child as usize) == Some(&token) {
+                    stack.push(child);
+                } else {
+                    out.push(child);
+                }
+            }
+        }
+    }
+
+    /// Whether a triangle under one of the nodes `roots` has its padded leaf box within
+    /// squared distance `r2` of `q` (tested in f32 as [`DeformedBvh::triangles_within_using`]).
+    pub(crate) fn any_within(
+        &self,
+        roots: &[u32],
+        q: DVec3,
+        r2: f64,
+        stack: &mut Vec<u32>,
+    ) -> bool {
+        let nodes = &self.bvh.nodes;
+        let p = Vec3A::from(q.as_vec3());
+        let r2 = (r2 * (1.0 + 1e-6)) as f32;
+        let near = |node: &obvhs::bvh2::node::Bvh2Node| {
+            let b = node.aabb();
+            let d = (b.min - p).max(p - b.max).max(Vec3A::ZERO);
+            d.length_squared() <= r2
+        };
+        for &root in roots {
+            let Some(node) = nodes.get(root as usize) else {
+                continue;
+            };
+            if !near(node) {
+                continue;
+            }
+            stack.clear();
+            stack.push(root);
+            while let Some(index) = stack.pop() {
+                let Some(node) = nodes.get(index as usize) else {
+                    continue;
+                };
+                if !near(node) {
+                    continue;
+                }
+                if node.is_leaf() {
+                    return true;
+                }
+                stack.push(node.first_index);
+                stack.push(node.first_index.saturating_add(1));
+            }
+        }
+        false
     }
 
     /// The padded box of triangle `t`'s leaf as `(min, max)` in f64 (its squared distance

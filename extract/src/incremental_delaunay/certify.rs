@@ -1,0 +1,331 @@
+//! Motion-bounded certificates for hop detection (Verlet-list style).
+//!
+//! At hop threshold `τ = 0` the assignment of a Gaussian changes only when another deformed
+//! triangle becomes nearer than its own, and proving that it did not for ~100k Gaussians every
+//! frame is what an update spends its time on. A certificate makes that proof almost free for
+//! most Gaussians.
+//!
+//! # The bound
+//! Distances are invariant under rigid motions, and a point-triangle distance changes by at
+//! most `|Δq|` when the point moves by `Δq` and by at most `δ` when every corner moves by at
+//! most `δ` (the moved triangle contains the moved closest point, and vice versa). Each chart
+//! `T` carries a *rigid local frame* `A_f` built from its deformed corners at frame `f`
+//! (origin at corner 0, axes by Gram-Schmidt, so `A_f` is an isometry however the triangle is
+//! shaped) and, from its last *snapshot* at frame `f0`, the set `N` of triangles that were near
+//! it and the local coordinates `s(v) = A_{f0} v(f0)` of their vertices. At frame `f`,
+//! `δ(f) = max_{v ∈ N} |A_f v(f) − s(v)|` bounds how much the neighbourhood moved relative to
+//! the chart; for a rigidly moving neighbourhood it is 0 however far it travelled.
+//!
+//! After an exact check of Gaussian `i` at frame `f_i` (own distance `d_T`, threshold
+//! `r = d_T − hop`), its certificate keeps the local position `l_i = A_{f_i} q_i(f_i)`, `d_T`,
+//! `e_i = δ(f_i)` and a lower bound `g_i` of `min_{U ≠ T} d_U(f_i) − r`. For `U ∈ N`, with
+//! `|A_f v(f) − A_{f_i} v(f_i)| ≤ δ(f) + e_i` by the triangle inequality through `s(v)`,
+//! `d_U(f) − r(f) ≥ g_i − 2 |A_f q_i(f) − l_i| − 2 (δ(f) + e_i)`; when that exceeds the
+//! slack, no triangle of `N` can take the Gaussian. Triangles outside `N` are excluded by one
+//! BVH range query per chart and frame with radius `max_i |q_i − c| + d_T⁺_i` (centroid `c`,
+//! `d_T⁺` the certified upper bound of the own distance): every triangle it returns must be in
+//! `N`, or the chart takes a new snapshot. Gaussians whose certificate does not hold get the
+//! exact search, which renews their certificate.
+//!
+//! The slack ([`FILTER_MARGIN_REL`](super::FILTER_MARGIN_REL) of the template diagonal plus the
+//! coordinate magnitude) is far above the rounding of the computed distances, so a certified
+//! Gaussian's own triangle is strictly nearest in the computed distances too: the result is
+//! exactly the exact search's, ties included (a tie has gap 0 and is never certified). The
+//! computed distance to a nearly flat triangle is that of its edges (see
+//! `closest_point_on_triangle`), which is not continuous in the corners, so a chart whose
+//! neighbourhood holds a triangle flatter than [`FLAT_RATIO`] is always checked exactly.
+
+use glam::{DMat3, DVec3};
+
+/// A triangle counts as flat for certificates when its squared doubled area is at most this
+/// fraction of its longest edge to the fourth (flatter than 1e-4 relative): there the computed
+/// distance may switch to the edges-only treatment of degenerate triangles (at 1e-14), so the
+/// motion bound is not used near it.
+pub const FLAT_RATIO: f64 = 1e-8;
+
+/// A chart takes a new snapshot of its neighbourhood with a query this much wider (relative to
+/// the chart's circumradius about its centroid) than its Gaussians need, so that triangles
+/// moving a little do not leave the snapshot at once.
+pub const SNAPSHOT_MARGIN_REL: f64 = 0.25;
+
+/// Whether the triangle `v` is flat in the sense of [`FLAT_RATIO`] (or not finite).
+pub(crate) fn is_flat(v: [DVec3; 3]) -> bool {
+    let longest = (v[1] - v[0])
+        .length_squared()
+        .max((v[2] - v[0]).length_squared())
+        .max((v[2] - v[1]).length_squared());
+    let n2 = (v[1] - v[0]).cross(v[2] - v[0]).length_squared();
+    // NaN (non-finite corners) counts as flat.
+    n2.partial_cmp(&(FLAT_RATIO * longest * longest)) != Some(std::cmp::Ordering::Greater)
+}
+
+/// An isometry of space built from a triangle: origin at its corner 0, first axis along edge
+/// 0-1, second in the plane of the triangle, third along the normal.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LocalFrame {
+    origin: DVec3,
+    axes: [DVec3; 3],
+}
+
+impl LocalFrame {
+    /// The frame of triangle `v`, or `None` for a triangle flat in the sense of
+    /// [`FLAT_RATIO`] (the axes would be ill-defined; any isometry would do for correctness,
+    /// but such charts are checked exactly anyway).
+    pub(crate) fn of(v: [DVec3; 3]) -> Option<Self> {
+        if is_flat(v) {
+            return None;
+        }
+        let x = (v[1] - v[0]).try_normalize()?;
+        let e2 = v[2] - v[0];
+        // Two Gram-Schmidt passes: orthogonal to rounding whatever the angle.
+        let y = e2 - x * x.dot(e2);
+        let y = y.try_normalize()?;
+        let y = (y - x * x.dot(y)).try_normalize()?;
+        let z = x.cross(y);
+        Some(Self {
+            origin: v[0],
+            axes: [x, y, z],
+        })
+    }
+
+    /// Local coordinates of `p`.
+    pub(crate) fn apply(&self, p: DVec3) -> DVec3 {
+        let d = p - self.origin;
+        DVec3::new(
+            self.axes[0].dot(d),
+            self.axes[1].dot(d),
+            self.axes[2].dot(d),
+        )
+    }
+}
+
+/// A chart's neighbourhood at its last snapshot (frame `f0`), in the chart's rigid local
+/// frame then.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Snapshot {
+    /// Triangles that were near the chart (sorted, the chart included).
+    pub(crate) triangles: Vec<u32>,
+    /// BVH nodes whose subtrees hold every other triangle (see `DeformedBvh::frontier`).
+    pub(crate) frontier: Vec<u32>,
+    /// Their template vertices (each once) with local coordinates.
+    pub(crate) vertices: Vec<(u32, DVec3)>,
+    /// Mean of the vertices' local coordinates.
+    mean: DVec3,
+    /// Inverse of the regularised Gram matrix `Σ s̃ s̃ᵀ + w ẑ ẑᵀ` of the centred local
+    /// coordinates `s̃` (see [`Snapshot::fit`]).
+    gram_inverse: DMat3,
+    /// The regularisation weight `w`.
+    weight: f64,
+}
+
+/// An affine map from snapshot coordinates to the current frame (the least-squares fit of the
+/// neighbourhood's motion), with bounds of its singular values and of how far the
+/// neighbourhood's vertices are from following it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Fit {
+    linear: DMat3,
+    inverse: DMat3,
+    translation: DVec3,
+    /// Lower bound of the smallest singular value of `linear` (`> 0`).
+    pub(crate) sigma_lo: f64,
+    /// Upper bound of the largest singular value of `linear`.
+    pub(crate) sigma_hi: f64,
+    /// Largest distance of a snapshot vertex's current position from its mapped snapshot
+    /// position.
+    pub(crate) residual: f64,
+}
+
+impl Snapshot {
+    /// The snapshot of `triangles` (sorted) whose corners are `corners` (template vertex ids)
+    /// at positions `positions`, in `frame` (built from the chart triangle `v`). `None` when
+    /// the chart triangle is flat.
+    pub(crate) fn new(
+        frame: &LocalFrame,
+        triangles: Vec<u32>,
+        frontier: Vec<u32>,
+        corners: &[[u32; 3]],
+        positions: &[glam::Vec3],
+    ) -> Option<Self> {
+        let mut ids: Vec<u32> = triangles
+            .iter()
+            .filter_map(|&t| corners.get(t as usize))
+            .flatten()
+            .copied()
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        let vertices: Vec<(u32, DVec3)> = ids
+            .into_iter()
+            .filter_map(|k| Some((k, frame.apply(positions.get(k as usize)?.as_dvec3()))))
+            .collect();
+        if vertices.is_empty() {
+            return None;
+        }
+        let mean = vertices.iter().map(|v| v.1).sum::<DVec3>() / vertices.len() as f64;
+        let mut gram = DMat3::ZERO;
+        for &(_, s) in &vertices {
+            let d = s - mean;
+            gram += DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        }
+        // The normal of the chart is the local z axis; a flat neighbourhood says nothing about
+        // how it maps, so it is tied to the chart's current unit normal with this weight.
+        let weight = (gram.x_axis.x + gram.y_axis.y + gram.z_axis.z).max(f64::MIN_POSITIVE);
+        gram.z_axis.z += weight;
+        let gram_inverse = gram.inverse();
+        if !gram_inverse.is_finite() {
+            return None;
+        }
+        Some(Self {
+            triangles,
+            frontier,
+            vertices,
+            mean,
+            gram_inverse,
+            weight,
+        })
+    }
+
+    /// The fit for the chart's current corners `v`; `None` when the triangle is flat or the
+    /// map is (nearly) singular.
+    pub(crate) fn fit(&self, v: [DVec3; 3], positions: &[glam::Vec3]) -> Option<Fit> {
+        let normal = (v[1] - v[0]).cross(v[2] - v[0]).try_normalize()?;
+        let mut cross = DMat3::from_cols(DVec3::ZERO, DVec3::ZERO, normal * self.weight);
+        let mut sum = DVec3::ZERO;
+        for &(k, s) in &self.vertices {
+            let p = positions.get(k as usize)?.as_dvec3();
+            let d = s - self.mean;
+            cross += DMat3::from_cols(p * d.x, p * d.y, p * d.z);
+            sum += p;
+        }
+        let linear = cross * self.gram_inverse;
+        let translation = sum / self.vertices.len() as f64 - linear * self.mean;
+        // Gershgorin bounds of the eigenvalues of LᵀL.
+        let c = [linear.x_axis, linear.y_axis, linear.z_axis];
+        let mut lo = f64::INFINITY;
+        let mut hi = 0.0f64;
+        for i in 0..3 {
+            let diag = c[i].length_squared();
+            let off: f64 = (0..3)
+                .filter(|&j| j != i)
+                .map(|j| c[i].dot(c[j]).abs())
+                .sum();
+            lo = lo.min(diag - off);
+            hi = hi.max(diag + off);
+        }
+        // Only nearly rigid maps are used (a map shrinking by half is far past any motion
+        // a certificate survives).
+        if !(lo > 0.25 && hi.is_finite()) {
+            return None;
+        }
+        let inverse = linear.inverse();
+        if !inverse.is_finite() {
+            return None;
+        }
+        let mut worst = 0.0f64;
+        for &(k, s) in &self.vertices {
+            let p = positions.get(k as usize)?.as_dvec3();
+            worst = worst.max((p - (linear * s + translation)).length_squared());
+        }
+        Some(Fit {
+            linear,
+            inverse,
+            translation,
+            sigma_lo: lo.sqrt(),
+            sigma_hi: hi.sqrt(),
+            residual: worst.sqrt(),
+        })
+    }
+}
+
+impl Fit {
+    /// Snapshot coordinates of a current point (approximately; bounds use
+    /// [`Fit::mismatch`]).
+    pub(crate) fn pull_back(&self, q: DVec3) -> DVec3 {
+        self.inverse * (q - self.translation)
+    }
+
+    /// Distance between a current point and the image of snapshot point `s`.
+    pub(crate) fn mismatch(&self, q: DVec3, s: DVec3) -> f64 {
+        (q - (self.linear * s + self.translation)).length()
+    }
+}
+
+/// Most close competitors a certificate lists (see [`CLOSE_GAP_REL`]).
+pub const MAX_CLOSE: usize = 3;
+
+/// A competitor triangle whose distance is within this fraction of the chart's circumradius of
+/// the Gaussian's own distance is listed in its certificate and compared exactly every frame
+/// (up to [`MAX_CLOSE`] of them); the motion bound covers only the farther ones.
+pub const CLOSE_GAP_REL: f64 = 0.05;
+
+/// What an exact check proved about one Gaussian, pulled back to the chart's snapshot
+/// coordinates (see the module documentation). Stored in f32 (32 bytes): the bounds are
+/// rounded outward and the position's rounding is part of the measured mismatch, so the
+/// rounding never weakens the proof.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Certificate {
+    /// The deformed mean in snapshot coordinates.
+    local: [f32; 3],
+    /// Upper bound of its distance to the chart triangle there.
+    own: f32,
+    /// Lower bound of its distance to every other triangle of the snapshot not in `close`
+    /// there; `-∞`: no certificate.
+    other: f32,
+    /// Competitors compared exactly every frame (`u32::MAX`: none).
+    pub(crate) close: [u32; MAX_CLOSE],
+}
+
+impl Certificate {
+    /// No certificate: the next update checks the Gaussian exactly.
+    pub(crate) const NONE: Self = Self {
+        local: [0.0; 3],
+        own: f32::INFINITY,
+        other: f32::NEG_INFINITY,
+        close: [u32::MAX; MAX_CLOSE],
+    };
+
+    /// The certificate of a Gaussian at `q` with own distance `own`, every other triangle
+    /// but `close` at distance at least `other`, under `fit`.
+    pub(crate) fn new(fit: &Fit, q: DVec3, own: f64, other: f64, close: [u32; MAX_CLOSE]) -> Self {
+        let local = fit.pull_back(q).as_vec3();
+        let error = fit.mismatch(q, local.as_dvec3()) + fit.residual;
+        Self {
+            local: local.to_array(),
+            own: round_up((own + error) / fit.sigma_lo),
+            other: round_down((other - error) / fit.sigma_hi),
+            close,
+        }
+    }
+
+    /// Whether it certifies anything.
+    pub(crate) fn is_some(&self) -> bool {
+        self.other > f32::NEG_INFINITY
+    }
+
+    /// Whether it lists close competitors.
+    pub(crate) fn has_close(&self) -> bool {
+        self.close[0] != u32::MAX
+    }
+
+    /// Bounds `(own distance upper, other distances lower)` for the Gaussian now at `q`.
+    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> (f64, f64) {
+        let local = glam::Vec3::from_array(self.local).as_dvec3();
+        let error = fit.mismatch(q, local) + fit.residual;
+        (
+            fit.sigma_hi * f64::from(self.own) + error,
+            fit.sigma_lo * f64::from(self.other) - error,
+        )
+    }
+}
+
+/// The smallest f32 not below `x` (NaN stays NaN).
+fn round_up(x: f64) -> f32 {
+    let y = x as f32;
+    if f64::from(y) < x { y.next_up() } else { y }
+}
+
+/// The largest f32 not above `x` (NaN stays NaN).
+fn round_down(x: f64) -> f32 {
+    let y = x as f32;
+    if f64::from(y) > x { y.next_down() } else { y }
+}
