@@ -123,7 +123,9 @@ struct BindingTri {
 struct JacobianTri {
     m: DMat3,
     factor: TriangleFactor,
-    origin: DVec3,
+    /// `M` and the centroid in `f32` for the means (as in the binding mode).
+    m32: Mat3A,
+    origin: Vec3A,
 }
 
 /// Deforms bound Gaussians frame after frame for one template.
@@ -324,7 +326,7 @@ impl Deformer {
                     for (j, mean) in means.iter_mut().enumerate() {
                         let i = start + j;
                         let t = &tris[binding[i].index()];
-                        *mean = (t.m * set.means()[i].as_dvec3() + t.origin).as_vec3();
+                        *mean = Vec3::from(t.m32 * Vec3A::from(set.means()[i]) + t.origin);
                     }
                     let mut batch = LaneBatch::default();
                     for j0 in (0..means.len()).step_by(LANES) {
@@ -413,7 +415,12 @@ impl Deformer {
                 JacobianTri {
                     m,
                     factor: TriangleFactor::new(m),
-                    origin: (v[0] + v[1] + v[2]) / 3.0,
+                    m32: Mat3A::from_cols(
+                        m.x_axis.as_vec3().into(),
+                        m.y_axis.as_vec3().into(),
+                        m.z_axis.as_vec3().into(),
+                    ),
+                    origin: ((v[0] + v[1] + v[2]) / 3.0).as_vec3().into(),
                 }
             })
             .collect()
