@@ -49,7 +49,7 @@ impl Engine {
                 .map_err(|source| PipelineError::Deform {
                     path: label.to_owned(),
                     frame,
-                    source,
+                    cause: source,
                 }),
             Self::Lbs(rig) => {
                 let Animation::Gltf(g) = animation else {
@@ -63,7 +63,7 @@ impl Engine {
                     .map_err(|source| PipelineError::Skinning {
                         path: PathBuf::from(label),
                         frame,
-                        source,
+                        cause: source,
                     })
             }
         }
@@ -176,6 +176,6 @@ pub fn check_set(
         .map_err(|source| PipelineError::Gaussians {
             path: path.to_path_buf(),
             template: template_path.to_path_buf(),
-            source,
+            cause: source,
         })
 }

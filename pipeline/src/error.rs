@@ -16,8 +16,9 @@ use trisplat_splat::render::RenderError;
 
 use crate::Method;
 
-// The file errors below already print their cause in their message; they are wrapped without
-// `#[source]` so that the CLI's cause chain prints it once.
+// Every variant prints its cause in its own message, so none is a `#[source]` (the wrapped
+// errors are fields named `cause`, which thiserror does not chain): the CLI's `{:#}` cause
+// chain prints each cause once.
 
 impl From<IoError> for PipelineError {
     fn from(e: IoError) -> Self {
@@ -105,14 +106,14 @@ pub enum PipelineError {
     },
     /// The Gaussians cannot be deformed with this template (bound to another template, world
     /// space parameters, ...).
-    #[error("{path}: {source} (template {template})")]
+    #[error("{path}: {cause} (template {template})")]
     Gaussians {
         /// The Gaussian file.
         path: PathBuf,
         /// The template file.
         template: PathBuf,
         /// What the deformer found.
-        source: DeformError,
+        cause: DeformError,
     },
     /// A Gaussian file whose own validity report has a problem.
     #[error("{path}: {issue} (template {template})")]
@@ -125,12 +126,12 @@ pub enum PipelineError {
         issue: String,
     },
     /// Binding new Gaussians to the template failed.
-    #[error("{path}: binding Gaussians: {source}")]
+    #[error("{path}: binding Gaussians: {cause}")]
     Bind {
         /// The template file.
         path: PathBuf,
         /// Why.
-        source: BindError,
+        cause: BindError,
     },
     /// `--mode lbs` without a skinned glTF, or with a template that is not its rest shape.
     #[error("{path}: {problem}")]
@@ -141,69 +142,69 @@ pub enum PipelineError {
         problem: String,
     },
     /// The skinning rig could not be built or evaluated.
-    #[error("{path}: frame {frame}: {source}")]
+    #[error("{path}: frame {frame}: {cause}")]
     Skinning {
         /// The animation file.
         path: PathBuf,
         /// Animation frame (or 0 when building the rig).
         frame: usize,
         /// Why.
-        source: LbsError,
+        cause: LbsError,
     },
     /// Deforming the Gaussians to a frame failed.
-    #[error("{path}: frame {frame}: {source}")]
+    #[error("{path}: frame {frame}: {cause}")]
     Deform {
         /// The animation source.
         path: String,
         /// Animation frame.
         frame: usize,
         /// Why.
-        source: DeformError,
+        cause: DeformError,
     },
     /// The camera rig around a frame could not be built.
-    #[error("frame {frame}: camera rig: {source}")]
+    #[error("frame {frame}: camera rig: {cause}")]
     Cameras {
         /// Animation frame.
         frame: usize,
         /// Why.
-        source: CameraError,
+        cause: CameraError,
     },
     /// Rendering depth for the TSDF method failed.
-    #[error("frame {frame}: rendering camera {camera}: {source}")]
+    #[error("frame {frame}: rendering camera {camera}: {cause}")]
     Render {
         /// Animation frame.
         frame: usize,
         /// Camera name.
         camera: String,
         /// Why.
-        source: RenderError,
+        cause: RenderError,
     },
     /// TSDF fusion failed.
-    #[error("frame {frame}: tsdf: {source}")]
+    #[error("frame {frame}: tsdf: {cause}")]
     Tsdf {
         /// Animation frame.
         frame: usize,
         /// Why.
-        source: TsdfError,
+        cause: TsdfError,
     },
     /// Incremental Delaunay meshing failed.
-    #[error("frame {frame}: delaunay: {source}")]
+    #[error("frame {frame}: delaunay: {cause}")]
     Delaunay {
         /// Animation frame (or the first selected frame when building).
         frame: usize,
         /// Why.
-        source: DelaunayError,
+        cause: DelaunayError,
     },
     /// The alpha shape failed.
-    #[error("frame {frame}: alpha: {source}")]
+    #[error("frame {frame}: alpha: {cause}")]
     Alpha {
         /// Animation frame.
         frame: usize,
         /// Why.
-        source: AlphaError,
+        cause: AlphaError,
     },
     /// Metrics against the ground truth failed.
-    #[error("{gt}: frame {frame}, method {method}: {source}")]
+    #[error("{gt}: frame {frame}, method {method}: {cause}")]
     Metrics {
         /// The ground truth (file or `template`).
         gt: String,
@@ -212,7 +213,7 @@ pub enum PipelineError {
         /// The method whose mesh was measured.
         method: Method,
         /// Why.
-        source: MetricsError,
+        cause: MetricsError,
     },
     /// The ground-truth mesh has no surface to compare against.
     #[error("{gt}: the ground truth has zero surface area (frame {frame})")]
@@ -229,12 +230,12 @@ pub enum PipelineError {
         path: PathBuf,
     },
     /// The output folder cannot be created.
-    #[error("{path}: cannot create the output folder: {source}")]
+    #[error("{path}: cannot create the output folder: {cause}")]
     OutputDir {
         /// The folder.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A broken invariant of the pipeline itself (a bug: please report it).
     #[error("internal error: {what}")]
@@ -242,4 +243,26 @@ pub enum PipelineError {
         /// What went wrong.
         what: &'static str,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn causes_print_once() {
+        let e = PipelineError::OutputDir {
+            path: PathBuf::from("out"),
+            cause: std::io::Error::other("boom"),
+        };
+        assert!(std::error::Error::source(&e).is_none());
+        assert_eq!(e.to_string(), "out: cannot create the output folder: boom");
+        let e = PipelineError::Deform {
+            path: "walk.glb".to_owned(),
+            frame: 3,
+            cause: DeformError::NotBound,
+        };
+        assert!(std::error::Error::source(&e).is_none());
+        assert!(e.to_string().starts_with("walk.glb: frame 3: "), "{e}");
+    }
 }

@@ -403,7 +403,7 @@ pub fn gaussians(
             };
             let set = init_bound(template, &options).map_err(|source| PipelineError::Bind {
                 path: config.template.clone(),
-                source,
+                cause: source,
             })?;
             (
                 flatten(set, convention),

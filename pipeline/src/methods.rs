@@ -236,16 +236,22 @@ impl TsdfMesher {
             (self.resolution, self.resolution),
             DEFAULT_FOV_DEG,
         )
-        .map_err(|source| PipelineError::Cameras { frame, source })?;
+        .map_err(|source| PipelineError::Cameras {
+            frame,
+            cause: source,
+        })?;
         let mut depths = Vec::with_capacity(cameras.len());
         for camera in &cameras {
             let image = rendered_depth(world, camera).map_err(|e| match e {
                 RenderedDepthError::Render(source) => PipelineError::Render {
                     frame,
                     camera: camera.name.clone(),
-                    source,
+                    cause: source,
                 },
-                RenderedDepthError::Image(source) => PipelineError::Tsdf { frame, source },
+                RenderedDepthError::Image(source) => PipelineError::Tsdf {
+                    frame,
+                    cause: source,
+                },
             })?;
             depths.push(image);
         }
@@ -254,8 +260,11 @@ impl TsdfMesher {
             voxel: Some(self.voxel),
             ..TsdfOptions::default()
         };
-        let fused = fuse(&cameras, &depths, None, &options)
-            .map_err(|source| PipelineError::Tsdf { frame, source })?;
+        let fused =
+            fuse(&cameras, &depths, None, &options).map_err(|source| PipelineError::Tsdf {
+                frame,
+                cause: source,
+            })?;
         Ok(MethodOutput {
             mesh: fused.mesh,
             ms: start.elapsed().as_secs_f64() * 1e3,
@@ -304,7 +313,7 @@ impl Mesher {
                 let d = IncrementalDelaunay::from_bound(rest, set, mode, d_options).map_err(
                     |source| PipelineError::Delaunay {
                         frame: first_frame,
-                        source,
+                        cause: source,
                     },
                 )?;
                 Self::Delaunay(Box::new(d))
@@ -323,8 +332,12 @@ impl Mesher {
             Self::Tsdf(t) => t.mesh(input),
             Self::Delaunay(d) => {
                 let start = Instant::now();
-                d.update(input.positions, input.means)
-                    .map_err(|source| PipelineError::Delaunay { frame, source })?;
+                d.update(input.positions, input.means).map_err(|source| {
+                    PipelineError::Delaunay {
+                        frame,
+                        cause: source,
+                    }
+                })?;
                 let mesh = d.mesh();
                 Ok(MethodOutput {
                     mesh,
@@ -334,8 +347,11 @@ impl Mesher {
             }
             Self::Alpha(alpha) => {
                 let start = Instant::now();
-                let shape = alpha_shape(input.means, *alpha)
-                    .map_err(|source| PipelineError::Alpha { frame, source })?;
+                let shape =
+                    alpha_shape(input.means, *alpha).map_err(|source| PipelineError::Alpha {
+                        frame,
+                        cause: source,
+                    })?;
                 Ok(MethodOutput {
                     mesh: shape.mesh,
                     ms: start.elapsed().as_secs_f64() * 1e3,

@@ -87,7 +87,7 @@ fn build_engine(
         PipelineError::Skinning {
             path: a_path.clone(),
             frame: 0,
-            source,
+            cause: source,
         }
     })?;
     Ok(Engine::Lbs(Box::new(rig)))
@@ -109,7 +109,7 @@ fn deform_frame(
             .map_err(|source| PipelineError::Deform {
                 path: label.to_owned(),
                 frame,
-                source,
+                cause: source,
             })?;
         return Ok(Deformed {
             world: None,
@@ -209,7 +209,7 @@ fn run_inner(
         .map_err(|source| PipelineError::Gaussians {
             path: config.gaussians.clone().unwrap_or_default(),
             template: config.template.clone(),
-            source,
+            cause: source,
         })?;
     let resolved = Resolved::new(o, template, &rest.means)?;
 
@@ -232,8 +232,10 @@ fn run_inner(
     }
     for m in &methods {
         let dir = out.join(m.name());
-        std::fs::create_dir_all(&dir)
-            .map_err(|source| PipelineError::OutputDir { path: dir, source })?;
+        std::fs::create_dir_all(&dir).map_err(|source| PipelineError::OutputDir {
+            path: dir,
+            cause: source,
+        })?;
     }
 
     let mut meshers = Vec::with_capacity(methods.len());
@@ -306,7 +308,7 @@ fn run_inner(
                             .map_or_else(String::new, GroundTruth::label),
                         frame: f,
                         method: m,
-                        source,
+                        cause: source,
                     }
                 })?,
                 None => None,
