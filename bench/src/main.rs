@@ -14,6 +14,7 @@ mod eval;
 mod harness;
 mod render;
 mod smooth;
+mod sweep;
 mod tsdf;
 
 use clap::{Parser, Subcommand};
@@ -51,6 +52,8 @@ enum Bench {
     Render(render::RenderBenchArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
     Smooth,
+    /// The main job's three methods on real animated templates: Chamfer against ms per frame.
+    Sweep(sweep::SweepArgs),
     /// TSDF fusion of 60 depth maps 512x512 of Spot vs Open3D VoxelBlockGrid, error vs time.
     Tsdf(tsdf::TsdfBenchArgs),
 }
@@ -65,6 +68,7 @@ fn main() -> anyhow::Result<()> {
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Render(a) => render::run(&a),
         Bench::Smooth => smooth::run(python),
+        Bench::Sweep(a) => sweep::run(&a),
         Bench::Tsdf(a) => tsdf::run(&a, python),
     }
 }
