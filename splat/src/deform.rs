@@ -337,29 +337,28 @@ impl Deformer {
                             batch.set(l, local_rots[i], local_ls[i].to_array(), t);
                         }
                         let f = factor_lanes(&batch, flat);
+                        // Straight copies first (no per-lane branch), then the f64 lanes.
                         for l in 0..lanes {
                             let j = j0 + l;
-                            let (q, ls) = if f.needs_f64[l] {
-                                let i = start + j;
-                                let m = tris[binding[i].index()].m;
-                                factor_f64(m, local_rots[i], local_ls[i].to_array(), flat)
-                            } else {
-                                (
-                                    [
-                                        f.rotation[0][l],
-                                        f.rotation[1][l],
-                                        f.rotation[2][l],
-                                        f.rotation[3][l],
-                                    ],
-                                    [f.log_scale[0][l], f.log_scale[1][l], f.log_scale[2][l]],
-                                )
-                            };
+                            rots[j] = [
+                                f.rotation[0][l],
+                                f.rotation[1][l],
+                                f.rotation[2][l],
+                                f.rotation[3][l],
+                            ];
+                            scales[j] = Vec3::new(
+                                f.log_scale[0][l],
+                                f.log_scale[1][l],
+                                if flat { 0.0 } else { f.log_scale[2][l] },
+                            );
+                        }
+                        for l in (0..lanes).filter(|&l| f.needs_f64[l]) {
+                            let (j, i) = (j0 + l, start + j0 + l);
+                            let m = tris[binding[i].index()].m;
+                            let (q, ls) =
+                                factor_f64(m, local_rots[i], local_ls[i].to_array(), flat);
                             rots[j] = q;
-                            scales[j] = if flat {
-                                Vec3::new(ls[0], ls[1], 0.0)
-                            } else {
-                                Vec3::from_array(ls)
-                            };
+                            scales[j] = Vec3::new(ls[0], ls[1], if flat { 0.0 } else { ls[2] });
                         }
                     }
                 })

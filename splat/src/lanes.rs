@@ -94,14 +94,25 @@ const POLAR_MAX_STEPS: usize = 6;
 /// or singular `M`: strong anisotropic stretch, collapsed triangles).
 #[must_use]
 pub fn needs_f64(m: DMat3) -> bool {
-    let det = m.determinant().abs();
-    let kappa = frob(m) * frob(cofactor(m));
-    // κ = |M|_F |cof M|_F / |det M|; compared without dividing (det may be 0).
-    !(kappa <= MAX_CONDITION * det && det.is_finite())
+    let det = m.determinant();
+    !well_conditioned(frob2(m), frob2(cofactor(m)), det.abs())
 }
 
+/// `κ_F = |M|_F |cof M|_F / |det M| ≤ MAX_CONDITION`, from the squares (no roots, no division:
+/// `det` may be 0).
+fn well_conditioned(frob2_m: f64, frob2_cof: f64, abs_det: f64) -> bool {
+    frob2_m * frob2_cof <= MAX_CONDITION * MAX_CONDITION * abs_det * abs_det
+        && (frob2_m * frob2_cof).is_finite()
+}
+
+/// Squared Frobenius norm.
+fn frob2(m: DMat3) -> f64 {
+    m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()
+}
+
+#[cfg(test)]
 fn frob(m: DMat3) -> f64 {
-    m.to_cols_array().iter().map(|v| v * v).sum::<f64>().sqrt()
+    frob2(m).sqrt()
 }
 
 /// The per-triangle data of the kernel: `M = ν U Q` (see the module docs).
@@ -133,19 +144,31 @@ impl TriangleFactor {
     /// The kernel data of a triangle with `M = J k_c R_c`.
     #[must_use]
     pub fn new(m: DMat3) -> Self {
-        if needs_f64(m) {
+        let cof = cofactor(m);
+        let det = m.x_axis.dot(cof.x_axis);
+        let f2 = frob2(m);
+        // Ill-conditioned, flat or inverted (no proper polar rotation): f64 factorisation.
+        if !(det > 0.0 && well_conditioned(f2, frob2(cof), det)) {
             return Self::default();
         }
-        let nu = frob(m);
-        let Some(x) = polar_rotation(m / nu) else {
+        let nu = f2.sqrt();
+        let inv_nu = 1.0 / nu;
+        let Some(x) = polar_rotation(m * inv_nu, cof * (inv_nu * inv_nu), det * inv_nu.powi(3))
+        else {
             return Self::default();
         };
         let u32 = to_wxyz(quat_from_rotation(x).normalize());
         // Q from exactly the rotation the kernel composes with (the f32 quaternion).
         let [w, qx, qy, qz] = u32.map(f64::from);
         let u = DMat3::from_quat(DQuat::from_xyzw(qx, qy, qz, w).normalize());
-        let q = (u.transpose() * m / nu).as_mat3().to_cols_array();
-        let ln_norm = nu.ln() as f32;
+        let q = (u.transpose() * (m * inv_nu)).as_mat3().to_cols_array();
+        // f32 is enough for the stored ln ν (f2 is finite here; f32 only if it is normal).
+        let f2_32 = f2 as f32;
+        let ln_norm = if f2_32.is_normal() {
+            0.5 * f2_32.ln()
+        } else {
+            (0.5 * f2.ln()) as f32
+        };
         let exact = !(q.iter().all(|v| v.is_finite()) && ln_norm.is_finite());
         Self {
             q,
@@ -156,22 +179,28 @@ impl TriangleFactor {
     }
 }
 
-/// An approximation of the rotation of the polar decomposition of `m` (`det m > 0`, `|m|_F =
-/// 1`): Newton's iteration `X ← (X + X⁻ᵀ) / 2` from `X = √3 m` (exact at once for a
-/// similarity), stopped once a step is below [`POLAR_TOL`] (the error is then about its square);
-/// `None` for `det m ≤ 0`.
-fn polar_rotation(m: DMat3) -> Option<DMat3> {
-    let mut x = m * 3f64.sqrt();
-    for _ in 0..POLAR_MAX_STEPS {
-        let det = x.determinant();
-        if !(det > 0.0 && det.is_finite()) {
-            return None;
+/// An approximation of the rotation of the polar decomposition of `m` (`|m|_F = 1`, with its
+/// cofactor matrix and determinant `det > 0`): Newton's iteration `X ← (X + X⁻ᵀ) / 2` from
+/// `X = √3 m` (exact at once for a similarity), stopped once a step is below [`POLAR_TOL`]
+/// (the error is then about its square); `None` if it leaves the proper rotations.
+fn polar_rotation(m: DMat3, cof: DMat3, det: f64) -> Option<DMat3> {
+    const S: f64 = 1.732_050_807_568_877_2;
+    let mut x = m * S;
+    // cof(s m) = s² cof m, det(s m) = s³ det m: X⁻ᵀ = cof / det.
+    let mut inv_t = cof * (1.0 / (S * det));
+    for step in 0..POLAR_MAX_STEPS {
+        if step > 0 {
+            let cof = cofactor(x);
+            let det = x.x_axis.dot(cof.x_axis);
+            if !(det > 0.0 && det.is_finite()) {
+                return None;
+            }
+            inv_t = cof * (1.0 / det);
         }
-        // X⁻ᵀ = cof(X) / det X.
-        let next = (x + cofactor(x) * (1.0 / det)) * 0.5;
-        let step = frob(next - x);
+        let next = (x + inv_t) * 0.5;
+        let step2 = frob2(next - x);
         x = next;
-        if step <= POLAR_TOL {
+        if step2 <= POLAR_TOL * POLAR_TOL {
             break;
         }
     }
