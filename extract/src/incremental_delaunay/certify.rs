@@ -46,7 +46,11 @@ pub const FLAT_RATIO: f64 = 1e-8;
 /// A chart takes a new snapshot of its neighbourhood with a query this much wider (relative to
 /// the chart's circumradius about its centroid) than its Gaussians need, so that triangles
 /// moving a little do not leave the snapshot at once.
-pub const SNAPSHOT_MARGIN_REL: f64 = 0.25;
+pub const SNAPSHOT_MARGIN_REL: f64 = 0.1;
+
+/// A chart checks all its Gaussians exactly and takes a new snapshot when more than one in
+/// this many fail their certificate (the errors of old certificates only grow until then).
+pub const REFRESH_DIVISOR: usize = 4;
 
 /// Whether the triangle `v` is flat in the sense of [`FLAT_RATIO`] (or not finite).
 pub(crate) fn is_flat(v: [DVec3; 3]) -> bool {
@@ -256,7 +260,7 @@ pub const MAX_CLOSE: usize = 3;
 /// A competitor triangle whose distance is within this fraction of the chart's circumradius of
 /// the Gaussian's own distance is listed in its certificate and compared exactly every frame
 /// (up to [`MAX_CLOSE`] of them); the motion bound covers only the farther ones.
-pub const CLOSE_GAP_REL: f64 = 0.05;
+pub const CLOSE_GAP_REL: f64 = 0.15;
 
 /// What an exact check proved about one Gaussian, pulled back to the chart's snapshot
 /// coordinates (see the module documentation). Stored in f32 (32 bytes): the bounds are
@@ -271,6 +275,8 @@ pub(crate) struct Certificate {
     /// Lower bound of its distance to every other triangle of the snapshot not in `close`
     /// there; `-∞`: no certificate.
     other: f32,
+    /// Lower bound of its distance to the triangles in `close` there (`+∞` when none).
+    near: f32,
     /// Competitors compared exactly every frame (`u32::MAX`: none).
     pub(crate) close: [u32; MAX_CLOSE],
 }
@@ -281,18 +287,27 @@ impl Certificate {
         local: [0.0; 3],
         own: f32::INFINITY,
         other: f32::NEG_INFINITY,
+        near: f32::INFINITY,
         close: [u32::MAX; MAX_CLOSE],
     };
 
-    /// The certificate of a Gaussian at `q` with own distance `own`, every other triangle
-    /// but `close` at distance at least `other`, under `fit`.
-    pub(crate) fn new(fit: &Fit, q: DVec3, own: f64, other: f64, close: [u32; MAX_CLOSE]) -> Self {
+    /// The certificate of a Gaussian at `q` with own distance `own`, the triangles `close`
+    /// at distance at least `near` and every other triangle at distance at least `other`,
+    /// under `fit`.
+    pub(crate) fn new(
+        fit: &Fit,
+        q: DVec3,
+        own: f64,
+        (near, close): (f64, [u32; MAX_CLOSE]),
+        other: f64,
+    ) -> Self {
         let local = fit.pull_back(q).as_vec3();
         let error = fit.mismatch(q, local.as_dvec3()) + fit.residual;
         Self {
             local: local.to_array(),
             own: round_up((own + error) / fit.sigma_lo),
             other: round_down((other - error) / fit.sigma_hi),
+            near: round_down((near - error) / fit.sigma_hi),
             close,
         }
     }
@@ -308,11 +323,14 @@ impl Certificate {
     }
 
     /// Bounds `(own distance upper, other distances lower)` for the Gaussian now at `q`.
-    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> (f64, f64) {
+    /// Bounds `(own distance upper, listed competitors lower, other distances lower)` for the
+    /// Gaussian now at `q`.
+    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> (f64, f64, f64) {
         let local = glam::Vec3::from_array(self.local).as_dvec3();
         let error = fit.mismatch(q, local) + fit.residual;
         (
             fit.sigma_hi * f64::from(self.own) + error,
+            fit.sigma_lo * f64::from(self.near) - error,
             fit.sigma_lo * f64::from(self.other) - error,
         )
     }

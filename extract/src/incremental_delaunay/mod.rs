@@ -96,7 +96,9 @@ use trisplat_geometry::spatial::MAX_COORDINATE;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
-pub use self::certify::{CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, SNAPSHOT_MARGIN_REL};
+pub use self::certify::{
+    CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REFRESH_DIVISOR, SNAPSHOT_MARGIN_REL,
+};
 use self::certify::{Certificate, LocalFrame, Snapshot, is_flat};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
 pub use self::search::BOX_PADDING_REL;
@@ -795,38 +797,35 @@ impl IncrementalDelaunay {
                 let from_centre = (q - centre).length();
                 let c = self.certificates[g as usize];
                 let d2 = if c.is_some() {
-                    let (own, other) = c.bounds(&fit, q);
+                    let (own, near, other) = c.bounds(&fit, q);
                     let own_slack =
                         slack + FILTER_MARGIN_REL * (q.abs().max_element() + from_centre + own);
-                    if !c.has_close() {
-                        if other - (own - hop) > own_slack {
-                            reach = reach.max(from_centre + (own - hop).max(0.0));
-                            continue;
-                        }
-                        bvh.distance_sq(q, a).0
-                    } else {
-                        // The listed competitors exactly, the others by the bound.
-                        let (d2, _) = bvh.distance_sq(q, a);
-                        let d = d2.sqrt();
-                        if other - (d - hop) > own_slack {
-                            // Triangles outside the snapshot are excluded by the query
-                            // below, whatever the outcome.
-                            reach = reach.max(from_centre + (d - hop).max(0.0));
-                            if let Some(t) = self.close_check(bvh, q, a, d2, &c.close) {
-                                out.moves.push((g, t));
-                            }
-                            out.checked_close += 1;
-                            continue;
-                        }
-                        d2
+                    if near.min(other) - (own - hop) > own_slack {
+                        // Every other triangle is certainly farther.
+                        reach = reach.max(from_centre + (own - hop).max(0.0));
+                        continue;
                     }
+                    let (d2, _) = bvh.distance_sq(q, a);
+                    let d = d2.sqrt();
+                    if c.has_close() && other - (d - hop) > own_slack {
+                        // The listed competitors exactly, the others by the bound. Triangles
+                        // outside the snapshot are excluded by the test below, whatever the
+                        // outcome.
+                        reach = reach.max(from_centre + (d - hop).max(0.0));
+                        if let Some(t) = self.close_check(bvh, q, a, d2, &c.close) {
+                            out.moves.push((g, t));
+                        }
+                        out.checked_close += 1;
+                        continue;
+                    }
+                    d2
                 } else {
                     bvh.distance_sq(q, a).0
                 };
                 reach = reach.max(from_centre + (d2.sqrt() - hop).max(0.0));
                 scratch.pending.push((g, q, d2));
             }
-            if scratch.pending.len() * 2 <= list.len() {
+            if scratch.pending.len() * REFRESH_DIVISOR <= list.len() {
                 let pending = !scratch.pending.is_empty();
                 let radius = reach + slack + if pending { 0.5 * margin } else { 0.0 };
                 let inside =
@@ -892,10 +891,10 @@ impl IncrementalDelaunay {
         for &(g, q, d2) in &scratch.pending {
             let cap = radius - (q - centre).length();
             match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
-                Ok((other, close)) => {
+                Ok((close, other)) => {
                     if let Some(fit) = &fit {
                         out.certificates
-                            .push((g, Certificate::new(fit, q, d2.sqrt(), other, close)));
+                            .push((g, Certificate::new(fit, q, d2.sqrt(), close, other)));
                     }
                 }
                 Err(t) => out.moves.push((g, t)),
@@ -925,9 +924,10 @@ impl IncrementalDelaunay {
     /// Exact hop check of a Gaussian at `q` in chart `a` (own squared distance `d2`) against
     /// `candidates`, which hold every triangle nearer than `cap`: `Err(target)` when it hops
     /// (the nearest triangle, ties to the smallest id, under the hop threshold), else
-    /// `Ok((other, close))`: up to [`certify::MAX_CLOSE`] triangles nearer than the own
-    /// distance plus [`certify::CLOSE_GAP_REL`] times `size`, and `other ≤ d_U` for every
-    /// other triangle `U ≠ a` (and `≤ cap`).
+    /// `Ok(((near, close), other))`: up to [`certify::MAX_CLOSE`] triangles `close` nearer
+    /// than the own distance plus [`certify::CLOSE_GAP_REL`] times `size`, `near` their
+    /// smallest distance (`+∞` when none), and `other ≤ d_U` for every other triangle `U ≠ a`
+    /// (and `≤ cap`).
     #[expect(
         clippy::too_many_arguments,
         reason = "one search step, all inputs named"
@@ -941,7 +941,7 @@ impl IncrementalDelaunay {
         candidates: &[(u32, DVec3, DVec3, f64)],
         cap: f64,
         size: f64,
-    ) -> Result<(f64, [u32; MAX_CLOSE]), u32> {
+    ) -> Result<((f64, [u32; MAX_CLOSE]), f64), u32> {
         let hop = self.hop_distance;
         let d = d2.sqrt();
         let r = d - hop;
@@ -994,7 +994,7 @@ impl IncrementalDelaunay {
         if found {
             Err(best.1)
         } else {
-            Ok((far, close.map(|c| c.1)))
+            Ok(((close[0].0, close.map(|c| c.1)), far))
         }
     }
 
