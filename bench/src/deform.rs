@@ -11,10 +11,11 @@
 
 use std::time::Instant;
 
-use glam::Vec3;
-use trisplat_geometry::TriId;
+use glam::{DMat3, DQuat, Vec3};
 use trisplat_geometry::rng::Rng;
+use trisplat_geometry::{TriId, TriMesh};
 use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
+use trisplat_splat::frames::{CanonicalTriangle, FrameOptions, corners_of};
 use trisplat_splat::{Binding, BindingEncoding, GaussianParts, GaussianSet, ParameterSpace};
 
 /// Gaussians per Spot triangle: 5,856 × 17 = 99,552.
@@ -31,6 +32,10 @@ pub struct DeformBenchArgs {
     /// Only this mode (`binding` or `jacobian`); default both.
     #[arg(long)]
     pub mode: Option<String>,
+    /// After timing `jacobian`, compare the last frame's covariances with a `f64` evaluation
+    /// of `Σ' = M Σ_local Mᵀ` (`M = J k_c R_c` from the canonical and deformed triangles).
+    #[arg(long)]
+    pub check: bool,
 }
 
 /// Runs the benchmark.
@@ -100,6 +105,41 @@ pub fn run(args: &DeformBenchArgs) -> anyhow::Result<()> {
             times[times.len() / 2],
             times[0]
         );
+        if args.check && mode == DeformMode::Jacobian {
+            let (max_entry, frob) = jacobian_errors(&mesh, &set, &frame, &out);
+            println!(
+                "jacobian vs f64 Σ' = M Σ Mᵀ over {n} Gaussians: max |ΔΣ_ij| / max |Σ_ij| {max_entry:.2e}, |ΔΣ|_F / |Σ|_F {frob:.2e}"
+            );
+        }
     }
     Ok(())
+}
+
+/// Worst errors of the deformed covariances against `f64`: the largest entry error relative to
+/// the largest entry, and the Frobenius-relative error.
+fn jacobian_errors(
+    mesh: &TriMesh,
+    set: &GaussianSet,
+    frame: &[Vec3],
+    out: &WorldGeometry,
+) -> (f64, f64) {
+    let opts = FrameOptions::for_positions(mesh.positions());
+    let binding = set.binding().map_or(&[][..], |b| b.triangles.as_slice());
+    let (mut worst_entry, mut worst_frob) = (0.0f64, 0.0f64);
+    for (i, tri) in binding.iter().enumerate() {
+        let t = mesh.triangles()[tri.index()];
+        let canonical = CanonicalTriangle::new(corners_of(mesh.positions(), t), &opts);
+        let j = canonical.gradient(corners_of(frame, t), &opts);
+        let m = j * canonical.frame.rotation * canonical.frame.scale;
+        let want = m * set.covariance(i) * m.transpose();
+        let [w, x, y, z] = out.rotations[i].map(f64::from);
+        let r = DMat3::from_quat(DQuat::from_xyzw(x, y, z, w));
+        let s = out.log_scales[i].as_dvec3().exp();
+        let got = r * DMat3::from_diagonal(s * s) * r.transpose();
+        let max = |m: DMat3| m.to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let f = |m: DMat3| m.to_cols_array().iter().map(|v| v * v).sum::<f64>().sqrt();
+        worst_entry = worst_entry.max(max(got - want) / max(want));
+        worst_frob = worst_frob.max(f(got - want) / f(want));
+    }
+    (worst_entry, worst_frob)
 }
