@@ -252,8 +252,9 @@ struct Scratch {
     found: Vec<u32>,
     /// Candidate triangles: id, padded box (min, max), squared box distance from the centroid.
     candidates: Vec<(u32, DVec3, DVec3, f64)>,
-    /// Gaussians to check exactly: id, deformed mean, squared distance to the chart.
-    pending: Vec<(u32, DVec3, f64)>,
+    /// Gaussians to check exactly: index in the chart, id, deformed mean, squared distance
+    /// to the chart.
+    pending: Vec<(usize, u32, DVec3, f64)>,
     /// Per BVH node, the token of the last frontier computation that marked it.
     marks: Vec<u32>,
     token: u32,
@@ -278,15 +279,20 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
 }
 
+/// A chart's certificate state.
+#[derive(Clone, Debug, Default)]
+struct ChartState {
+    /// Certificates of the chart's members, in the order of its member list.
+    certificates: Vec<Certificate>,
+    /// The neighbourhood snapshot the certificates refer to.
+    snapshot: Option<Snapshot>,
+}
+
 /// The charts' part of a frame update, gathered per rayon task.
 #[derive(Default)]
 struct Outcome {
     /// (Gaussian, new chart).
     moves: Vec<(u32, u32)>,
-    /// Renewed certificates.
-    certificates: Vec<(u32, Certificate)>,
-    /// New snapshots (`None`: the chart has none now).
-    snapshots: Vec<(u32, Option<Snapshot>)>,
     /// Gaussians checked exactly.
     checked: usize,
     /// Gaussians checked against their close competitors only.
@@ -298,8 +304,6 @@ struct Outcome {
 impl Outcome {
     fn merge(mut self, mut other: Self) -> Self {
         self.moves.append(&mut other.moves);
-        self.certificates.append(&mut other.certificates);
-        self.snapshots.append(&mut other.snapshots);
         self.checked += other.checked;
         self.checked_close += other.checked_close;
         self.refreshed += other.refreshed;
@@ -341,11 +345,10 @@ pub struct IncrementalDelaunay {
     charts: Vec<ChartMesh>,
     bvh: Option<DeformedBvh>,
     vertices: Vec<Vec3>,
-    /// Motion certificates per Gaussian (module `certify`); valid only while `certified`.
-    certificates: Vec<Certificate>,
-    /// Neighbourhood snapshot per chart (module `certify`).
-    snapshots: Vec<Option<Snapshot>>,
-    /// Whether `certificates` and `snapshots` belong to the current state (false after a
+    /// Per chart: its snapshot and its members' certificates (module `certify`), in the
+    /// order of `members`; valid only while `certified`.
+    states: Vec<ChartState>,
+    /// Whether `states` belong to the current state (false after a
     /// rebuild, which does not compute them: the next update does).
     certified: bool,
     /// Per deformed triangle: flat in the sense of [`certify::FLAT_RATIO`] (reused buffer).
@@ -465,8 +468,7 @@ impl IncrementalDelaunay {
             charts: Vec::new(),
             bvh: None,
             vertices: Vec::new(),
-            certificates: Vec::new(),
-            snapshots: Vec::new(),
+            states: Vec::new(),
             certified: false,
             flat: Vec::new(),
             updates: 0,
@@ -658,13 +660,17 @@ impl IncrementalDelaunay {
         };
         bvh.refit(positions, &self.triangles, self.diagonal);
         if !self.certified {
-            self.certificates.clear();
-            self.certificates
-                .resize(self.canonical.len(), Certificate::NONE);
-            self.snapshots.clear();
-            self.snapshots.resize(self.triangles.len(), None);
+            self.states = self
+                .members
+                .iter()
+                .map(|list| ChartState {
+                    certificates: vec![Certificate::NONE; list.len()],
+                    snapshot: None,
+                })
+                .collect();
             self.certified = true;
         }
+        let mut states = std::mem::take(&mut self.states);
         let mut flat = std::mem::take(&mut self.flat);
         flat.resize(self.triangles.len(), false);
         flat.par_iter_mut()
@@ -681,36 +687,20 @@ impl IncrementalDelaunay {
         let outcome = self
             .members
             .par_iter()
-            .zip(self.snapshots.par_iter())
+            .zip(states.par_iter_mut())
             .enumerate()
             .with_min_len(64)
-            .fold(Outcome::default, |mut acc, (a, (list, snapshot))| {
+            .fold(Outcome::default, |mut acc, (a, (list, state))| {
                 SCRATCH.with_borrow_mut(|scratch| {
-                    self.hops_of_chart(
-                        &context,
-                        a as u32,
-                        list,
-                        snapshot.as_ref(),
-                        scratch,
-                        &mut acc,
-                    );
+                    self.hops_of_chart(&context, a as u32, list, state, scratch, &mut acc);
                 });
                 acc
             })
             .reduce(Outcome::default, Outcome::merge);
         self.flat = flat;
         self.bvh = Some(bvh);
+        self.states = states;
         let searches = outcome.checked;
-        for (g, c) in outcome.certificates {
-            if let Some(slot) = self.certificates.get_mut(g as usize) {
-                *slot = c;
-            }
-        }
-        for (a, snapshot) in outcome.snapshots {
-            if let Some(slot) = self.snapshots.get_mut(a as usize) {
-                *slot = snapshot;
-            }
-        }
         let mut moves = outcome.moves;
         moves.sort_unstable();
         let found = moves;
@@ -723,15 +713,20 @@ impl IncrementalDelaunay {
                 && let Ok(k) = list.binary_search(&g)
             {
                 list.remove(k);
+                if let Some(state) = self.states.get_mut(a as usize) {
+                    state.certificates.remove(k);
+                }
             }
             if let Some(list) = self.members.get_mut(c as usize)
                 && let Err(k) = list.binary_search(&g)
             {
                 list.insert(k, g);
+                if let Some(state) = self.states.get_mut(c as usize) {
+                    state.certificates.insert(k, Certificate::NONE);
+                }
             }
             self.assigned[i] = c;
             self.anchors[i] = self.anchor(i, c);
-            self.certificates[i] = Certificate::NONE;
             dirty.push(a);
             dirty.push(c);
             hopped += 1;
@@ -766,7 +761,7 @@ impl IncrementalDelaunay {
         cx: &SearchContext<'_>,
         a: u32,
         list: &[u32],
-        snapshot: Option<&Snapshot>,
+        state: &mut ChartState,
         scratch: &mut Scratch,
         out: &mut Outcome,
     ) {
@@ -786,16 +781,17 @@ impl IncrementalDelaunay {
             Some(flat) => snap.triangles.iter().all(|&t| !flat[t as usize]),
         };
         let (moves_before, checked_close_before) = (out.moves.len(), out.checked_close);
-        if let Some(snap) = snapshot
+        let certificates = &mut state.certificates;
+        if let Some(snap) = &state.snapshot
+            && certificates.len() == list.len()
             && usable(snap)
             && let Some(fit) = snap.fit(v, cx.positions)
         {
             let mut reach = 0.0f64;
             scratch.pending.clear();
-            for &g in list {
+            for (k, (&g, c)) in list.iter().zip(certificates.iter()).enumerate() {
                 let q = cx.means[g as usize].as_dvec3();
                 let from_centre = (q - centre).length();
-                let c = self.certificates[g as usize];
                 let d2 = if c.is_some() {
                     let (own, near, other) = c.bounds(&fit, q);
                     let own_slack =
@@ -823,7 +819,7 @@ impl IncrementalDelaunay {
                     bvh.distance_sq(q, a).0
                 };
                 reach = reach.max(from_centre + (d2.sqrt() - hop).max(0.0));
-                scratch.pending.push((g, q, d2));
+                scratch.pending.push((k, g, q, d2));
             }
             if scratch.pending.len() * REFRESH_DIVISOR <= list.len() {
                 let pending = !scratch.pending.is_empty();
@@ -835,12 +831,13 @@ impl IncrementalDelaunay {
                         scratch.found.clear();
                         scratch.found.extend_from_slice(&snap.triangles);
                         self.gather_candidates(bvh, a, centre, scratch);
-                        for &(g, q, d2) in &scratch.pending {
+                        for &(k, g, q, d2) in &scratch.pending {
                             let cap = radius - (q - centre).length();
                             match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
-                                Ok((other, close)) => out
-                                    .certificates
-                                    .push((g, Certificate::new(&fit, q, d2.sqrt(), other, close))),
+                                Ok((near, far)) => {
+                                    certificates[k] =
+                                        Certificate::new(&fit, q, d2.sqrt(), near, far);
+                                }
                                 Err(t) => out.moves.push((g, t)),
                             }
                         }
@@ -856,12 +853,14 @@ impl IncrementalDelaunay {
         out.refreshed += 1;
         scratch.pending.clear();
         let mut reach = 0.0f64;
-        for &g in list {
+        for (k, &g) in list.iter().enumerate() {
             let q = cx.means[g as usize].as_dvec3();
             let (d2, _) = bvh.distance_sq(q, a);
             reach = reach.max((q - centre).length() + (d2.sqrt() - hop).max(0.0));
-            scratch.pending.push((g, q, d2));
+            scratch.pending.push((k, g, q, d2));
         }
+        certificates.clear();
+        certificates.resize(list.len(), Certificate::NONE);
         let radius = reach + slack + margin;
         scratch.found.clear();
         bvh.triangles_within_using(
@@ -888,21 +887,19 @@ impl IncrementalDelaunay {
         };
         let fit = snap.as_ref().and_then(|s| s.fit(v, cx.positions));
         self.gather_candidates(bvh, a, centre, scratch);
-        for &(g, q, d2) in &scratch.pending {
+        for &(k, g, q, d2) in &scratch.pending {
             let cap = radius - (q - centre).length();
             match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
-                Ok((close, other)) => {
+                Ok((near, far)) => {
                     if let Some(fit) = &fit {
-                        out.certificates
-                            .push((g, Certificate::new(fit, q, d2.sqrt(), close, other)));
+                        certificates[k] = Certificate::new(fit, q, d2.sqrt(), near, far);
                     }
                 }
                 Err(t) => out.moves.push((g, t)),
             }
         }
         out.checked += list.len();
-        out.snapshots
-            .push((a, if fit.is_some() { snap } else { None }));
+        state.snapshot = if fit.is_some() { snap } else { None };
     }
 
     /// Fills `scratch.candidates` with the triangles of `scratch.found` other than `a`, with
