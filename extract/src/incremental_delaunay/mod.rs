@@ -20,6 +20,25 @@
 //! rebuild every `N` frames ([`DelaunayOptions::rebuild_every`]) re-assigns every Gaussian to
 //! its nearest triangle and bounds that drift; at `τ = 0` a rebuild changes nothing.
 //!
+//! **Hop detection** (module `certify`). Proving that the other ~99.7% of the Gaussians did
+//! not hop is most of an update, so it is done with motion-bounded certificates (Verlet-list
+//! style) instead of a search per Gaussian. Each chart keeps a *snapshot* of the triangles
+//! near it (and the BVH *frontier* holding all the others); each frame it fits an affine map
+//! from the snapshot to the current neighbourhood and measures how far the neighbourhood's
+//! vertices are from following it. An exact check of a Gaussian leaves a certificate: its
+//! position pulled back to the snapshot, an upper bound of its own distance and lower bounds
+//! of every other distance, with the (up to [`MAX_CLOSE`]) competitors within
+//! [`CLOSE_GAP_REL`] of the chart size listed apart. Point-triangle distances change by at
+//! most the motion of the point and of the corners, and scale by at most the extreme
+//! singular values of the fit, so as long as the bounds keep the own triangle strictly
+//! nearest (by more than [`FILTER_MARGIN_REL`]), nothing is computed; listed competitors whose
+//! bound is inconclusive are compared with the exact distances (ties resolve as in a full
+//! search); triangles outside the snapshot are excluded by testing the frontier's boxes
+//! against the chart's reach. Gaussians whose certificate fails get the exact search (one per
+//! chart against the snapshot's triangles) and a new certificate; a chart where more than one
+//! in [`REFRESH_DIVISOR`] fail, or an outside triangle comes near, takes a new snapshot.
+//! Rebuilds do not compute certificates; the next update does.
+//!
 //! **Canonical coordinates.** In chart `T`, Gaussian `i` sits at the barycentric weights of its
 //! canonical (rest-pose) mean projected onto the plane of the *rest* triangle `T`, mapped
 //! strictly inside `T`: points inside shrink toward the centroid by
@@ -50,29 +69,36 @@
 //! # Error against run time
 //! `cargo run --release -p trisplat-bench -- delaunay`: FLAME template (5,023 vertices, 9,976
 //! triangles), 99,760 bound Gaussians (10 per triangle, normal offset ±0.15 k, in-plane jitter
-//! ±0.3 k), 60 frames of a jaw-like bend plus twist, 2 threads on the shared 2-core machine
-//! (load average 4-5 while measuring, so times vary by up to 2x between runs). Deforming the
-//! Gaussians (~1.3-3.5 ms/frame) is not included. At `τ = 0`, 0.33% of the Gaussians hop per
-//! frame (6.1% of the charts are redone); the incremental mesh equals the rebuilt one on all
-//! 60 frames. Update 19.7 / 45.6 ms vs rebuild 54.6 / 156.2 ms per frame in two runs: x2.8 and
-//! x3.4, short of the x5 target at `τ = 0`; with `τ ≥ 0.1` it is met. Every nearest-triangle
-//! check is exact, so at `τ = 0` most of an update is spent proving that the other 99.7% of
-//! the Gaussians did not hop; a rebuild searches the BVH per Gaussian (seeded with its rest
-//! triangle) and triangulates all 9,976 charts.
+//! ±0.3 k), 60 frames of a jaw-like bend plus twist (the twist shears the whole head by ~0.5%
+//! per frame, the bend's blend band stretches by up to ~5% per frame), 2 threads on the shared
+//! 2-core machine (load average 2-4 from other builds while measuring). Deforming the
+//! Gaussians (~2.4 ms/frame) is not included; the times include collecting the triangle list.
+//! At `τ = 0`, 0.33% of the Gaussians hop per frame (6.1% of the charts are redone), 5.9% get
+//! a full check (the others are settled by their certificates), and the incremental mesh
+//! equals the rebuilt one on all 60 frames. Medians over frames 1-59, five runs: update
+//! 22.5-26.1 ms vs rebuild 97.8-106.5 ms wall (x4.1-x4.4); process CPU time (all threads)
+//! 21.4-26.1 ms vs 97.3-106.8 ms (x4.1-x4.7). The x5 target at `τ = 0` is not met yet; the
+//! remaining update time is mostly the per-chart fit and frontier test, the per-Gaussian bound
+//! (random reads of the means of Gaussians that sit in a neighbour's chart), re-triangulating
+//! the ~600 touched charts and collecting the 210k output triangles. Before certificates the
+//! update took 19.7-21.7 ms vs 54.6-55.0 ms on a quieter machine (x2.5-x2.8).
 //!
 //! | τ (× mean edge) | rebuild every | ms/frame (mean, rebuilds incl.) | ms/frame (median) | hopped/frame | Chamfer L1 | flipped triangles |
 //! |---:|---:|---:|---:|---:|---:|---:|
-//! | 0 | never | 25.5 | 20.4 | 0.33% | 4.468e-4 | 2.27% |
-//! | 0 | 10 | 63.4 | 56.4 | 0.30% | 4.468e-4 | 2.27% |
-//! | 0.05 | never | 30.8 | 31.7 | 0.01% | 4.454e-4 | 2.82% |
-//! | 0.05 | 10 | 44.4 | 33.5 | 0.00% | 4.470e-4 | 2.39% |
-//! | 0.1 | never | 17.8 | 17.4 | 0.01% | 4.468e-4 | 2.85% |
-//! | 0.1 | 10 | 33.1 | 19.9 | 0.00% | 4.471e-4 | 2.39% |
-//! | 0.25 | never | 12.3 | 12.6 | 0.00% | 4.459e-4 | 2.86% |
-//! | 0.25 | 10 | 25.2 | 12.7 | 0.00% | 4.469e-4 | 2.39% |
-//! | 0.5 | never | 8.8 | 9.8 | 0.00% | 4.463e-4 | 2.86% |
-//! | 0.5 | 10 | 19.0 | 8.3 | 0.00% | 4.469e-4 | 2.39% |
+//! | 0 | never | 27.3 | 26.1 | 0.33% | 4.468e-4 | 2.27% |
+//! | 0 | 10 | 38.5 | 23.5 | 0.30% | 4.468e-4 | 2.27% |
+//! | 0.05 | never | 13.6 | 12.6 | 0.01% | 4.454e-4 | 2.82% |
+//! | 0.05 | 10 | 27.3 | 11.0 | 0.00% | 4.470e-4 | 2.39% |
+//! | 0.1 | never | 13.3 | 12.0 | 0.01% | 4.468e-4 | 2.85% |
+//! | 0.1 | 10 | 27.3 | 10.6 | 0.00% | 4.471e-4 | 2.39% |
+//! | 0.25 | never | 12.6 | 10.2 | 0.00% | 4.459e-4 | 2.86% |
+//! | 0.25 | 10 | 24.5 | 8.7 | 0.00% | 4.469e-4 | 2.39% |
+//! | 0.5 | never | 12.0 | 10.0 | 0.00% | 4.463e-4 | 2.86% |
+//! | 0.5 | 10 | 25.5 | 8.6 | 0.00% | 4.469e-4 | 2.39% |
 //!
+//! (Load average 3.3-3.6 during the table; the full rebuild took 106 ms/frame in the same
+//! run.) With a rebuild period the update after each rebuild checks every Gaussian again to
+//! issue new certificates, which is most of the difference between the mean and the median.
 //! Chamfer (surface mode, 20k samples per side, every 5th frame, against the deformed
 //! template) hardly moves: with [`Lift::Means`] the vertices are the Gaussian means wherever
 //! they are meshed, and the Gaussians' own offsets dominate it. The sensitive error is the
@@ -528,10 +554,20 @@ impl IncrementalDelaunay {
     #[must_use]
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         let total = self.charts.iter().map(|c| c.triangles.len()).sum();
-        let mut out = Vec::with_capacity(total);
+        let mut out = vec![[0u32; 3]; total];
+        // One destination slice per chart, filled in parallel.
+        let mut rest = out.as_mut_slice();
+        let mut parts = Vec::with_capacity(self.charts.len());
         for c in &self.charts {
-            out.extend_from_slice(&c.triangles);
+            let (head, tail) = rest.split_at_mut(c.triangles.len());
+            parts.push(head);
+            rest = tail;
         }
+        parts
+            .into_par_iter()
+            .zip(self.charts.par_iter())
+            .with_min_len(256)
+            .for_each(|(dst, c)| dst.copy_from_slice(&c.triangles));
         out
     }
 
