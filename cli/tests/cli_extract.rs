@@ -360,3 +360,67 @@ fn lbs_mode_on_cesium_man() {
         "{line}"
     );
 }
+
+#[test]
+fn hop_threshold_is_recorded_with_the_delaunay_statistics() {
+    let dir = fresh_dir("hop");
+    let out = dir.join("out");
+    let t = figure();
+    let mut args = vec![
+        "extract",
+        "--template",
+        s(&t),
+        "--method",
+        "delaunay",
+        "--frames",
+        "0..3",
+        "--hop-threshold",
+        "0.1",
+        "-o",
+        s(&out),
+    ];
+    args.extend(TINY);
+    run_ok(&args);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("json"))
+            .expect("parse");
+    let d = &r["methods"]["delaunay"];
+    assert_eq!(d["parameters"]["hop_threshold"], 0.1);
+    assert_eq!(d["parameters"]["rebuild_every"], 0.0);
+    let stats = &d["delaunay"];
+    assert_eq!(stats["gaussians"], r["gaussian_count"]);
+    let frames = stats["frames"].as_array().expect("per-frame statistics");
+    assert_eq!(frames.len(), 3);
+    for (i, f) in frames.iter().enumerate() {
+        assert_eq!(f["frame"], i);
+        // The first update triangulates every chart; the others only what changed.
+        assert_eq!(f["rebuilt"], i == 0, "{f}");
+        let redone = f["charts_redone"].as_u64().expect("charts");
+        let charts = stats["charts"].as_u64().expect("charts");
+        assert!(redone <= charts);
+        if i == 0 {
+            assert_eq!(redone, charts);
+        }
+        assert!(f["hopped"].as_u64().is_some());
+    }
+    assert_eq!(stats["rebuilt_frames"], 1);
+    let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    assert!(md.contains("hopped | charts redone | rebuilt |"), "{md}");
+    assert!(md.contains("hop_threshold 0.1"), "{md}");
+    // Not a finite number >= 0: exit 1 naming the option.
+    for bad in ["inf", "-1", "nan"] {
+        let flag = format!("--hop-threshold={bad}");
+        let res = run(&[
+            "extract",
+            "--template",
+            s(&t),
+            "--method",
+            "delaunay",
+            &flag,
+            "-o",
+            s(&dir.join("bad")),
+        ]);
+        let line = one_error_line(&res);
+        assert!(line.contains("--hop-threshold"), "{line}");
+    }
+}

@@ -3,6 +3,7 @@
 use std::fmt;
 use std::path::PathBuf;
 
+use trisplat_extract::incremental_delaunay::DEFAULT_HOP_THRESHOLD;
 use trisplat_geometry::animation::DEFAULT_FPS;
 
 /// Default Gaussians per triangle when the pipeline binds them itself.
@@ -17,8 +18,12 @@ pub const DEFAULT_RESOLUTION: u32 = 256;
 /// Vertical field of view of the TSDF rig, degrees (as `trisplat cameras`).
 pub const DEFAULT_FOV_DEG: f64 = 40.0;
 /// Default alpha of the alpha-shape method, in multiples of the mean spacing of the Gaussians
-/// (mean distance from each rest-pose mean to its nearest other mean).
-pub const DEFAULT_ALPHA_SPACINGS: f64 = 3.0;
+/// (mean distance from each rest-pose mean to its nearest other mean). 6, not 3: with the
+/// pipeline's self-bound Gaussians (4 per triangle) 3 spacings leaves holes on real templates,
+/// while 6 lowers Chamfer L1 against the deformed template at the same cost (docs/benchmarks.md,
+/// "Main job (`sweep`)": CesiumMan 6.6e-3 -> 3.4e-3, F-score 0.55 -> 0.72; the LAM head
+/// 8.7e-3 -> 1.4e-3, F-score 0.43 -> 0.75; the time is the tetrahedralisation's either way).
+pub const DEFAULT_ALPHA_SPACINGS: f64 = 6.0;
 /// Default points sampled on each mesh for the metrics.
 pub const DEFAULT_SAMPLES: usize = 20_000;
 /// Default F-score threshold (input units; 2.5 mm for metres: "Recall@2.5mm").
@@ -166,13 +171,22 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "PX", default_value_t = DEFAULT_RESOLUTION,
         value_parser = clap::value_parser!(u32).range(8..=8192)))]
     pub resolution: u32,
-    /// Alpha-shape radius in scene units [default: 3 x the mean nearest-neighbour spacing of
+    /// Alpha-shape radius in scene units [default: 6 x the mean nearest-neighbour spacing of
     /// the rest-pose Gaussian means].
     #[cfg_attr(feature = "cli", arg(long, value_name = "A"))]
     pub alpha: Option<f64>,
     /// Delaunay: rebuild from scratch every N frames (0: never; 1: every frame).
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = 0))]
     pub rebuild_every: usize,
+    /// Delaunay hop threshold T, relative to the mean template edge: a Gaussian moves to
+    /// another triangle's chart only when that triangle is nearer than its own by more than
+    /// T x the mean edge. 0: every frame equals a from-scratch triangulation; T > 0 redoes
+    /// fewer charts per frame (faster: CesiumMan's charts redone 4.1% -> 0.3% per frame at
+    /// 0.1), but a frame may then differ from a from-scratch triangulation (Gaussians stay in
+    /// charts they drifted out of by less than T edges) until the next rebuild.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "T",
+        default_value_t = DEFAULT_HOP_THRESHOLD))]
+    pub hop_threshold: f64,
     /// Points sampled on each mesh for the metrics (with --gt).
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_SAMPLES,
         value_parser = parse_positive))]
@@ -194,6 +208,7 @@ impl Default for ExtractOptions {
             resolution: DEFAULT_RESOLUTION,
             alpha: None,
             rebuild_every: 0,
+            hop_threshold: DEFAULT_HOP_THRESHOLD,
             samples: DEFAULT_SAMPLES,
             tau: DEFAULT_TAU,
         }

@@ -86,6 +86,28 @@ pub enum PipelineError {
         /// The difference, naming the template file.
         problem: String,
     },
+    /// The animation's frames are not at the template's scale (different units, or a
+    /// transform applied to one of them only).
+    #[error(
+        "{animation}: frame {frame} has bounding radius {frame_radius:.4e}, {ratio:.3e} times \
+         that of the template {template} ({template_radius:.4e}): the template and the \
+         animation are not at the same scale (different units, or a node transform applied to \
+         one of them only); bring them to one scale"
+    )]
+    ScaleMismatch {
+        /// The animation source.
+        animation: String,
+        /// The template file.
+        template: PathBuf,
+        /// The animation frame compared (the first selected).
+        frame: usize,
+        /// Bounding radius of that frame.
+        frame_radius: f64,
+        /// Bounding radius of the template.
+        template_radius: f64,
+        /// `frame_radius / template_radius`.
+        ratio: f64,
+    },
     /// The animation argument cannot be used as given (a `--clip` for a non-glTF file, a
     /// weights file without morph targets, an empty targets folder, ...).
     #[error("{path}: {problem}")]

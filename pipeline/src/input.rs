@@ -20,6 +20,7 @@ use trisplat_splat::frames::Convention;
 use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, ExtractConfig, Mode};
 use crate::deform::{check_set, read_bound};
 use crate::error::PipelineError;
+use crate::methods::bounding_sphere;
 
 /// The animation source; glTF kept concrete for `lbs`.
 pub enum Animation {
@@ -270,6 +271,73 @@ pub fn open_animation(
         targets: None,
     }
     .open()
+}
+
+/// Reads the template in world space, as the animation evaluates it.
+///
+/// A glTF/GLB template is its stored scene posed as [`GltfTemplate`] poses it: node transforms,
+/// skins and the meshes' default morph weights applied (glTF 2.0: a skinned mesh is placed
+/// by its joints and ignores its own node's transform). The static reader
+/// ([`read_mesh`], like trimesh) applies the node transform to a skinned mesh instead, which
+/// puts a mesh whose node scales it and whose joints scale it back (LAM's `skin.glb`: node
+/// scale 0.01) at another scale than every frame of its animation; binding, the
+/// scale-derived defaults and `lbs` all need the frames' space. Other formats are read as
+/// stored.
+///
+/// # Errors
+/// An unreadable file (named).
+pub fn read_template(path: &Path) -> Result<TriMesh, PipelineError> {
+    if is_gltf(path) {
+        let g = GltfTemplate::open(path, &Clip::None)?;
+        return Ok(g.rest().clone());
+    }
+    Ok(read_mesh(path)?)
+}
+
+/// Largest ratio, either way, between the bounding radius of the first frame meshed and that
+/// of the template before a run refuses the pair as being at different scales. A pose moves
+/// the radius (about the box centre) by far less (CesiumMan's walk: within 5% of its rest
+/// pose's); a change of units by far more (cm/m: 100, inch/m: 39.4, mm/m: 1000).
+pub const SCALE_MISMATCH: f64 = 10.0;
+
+/// Checks that `frame` (the positions of animation frame `index`, named by `label`) is at the
+/// scale of `template` (read from `template_path`): their bounding radii differ by at most
+/// [`SCALE_MISMATCH`] either way. The scale-derived defaults (TSDF voxel, alpha) come from the
+/// template; frames at another scale would get a voxel or an alpha that many times off.
+///
+/// # Errors
+/// [`PipelineError::ScaleMismatch`]; [`PipelineError::Topology`] for a frame without finite
+/// positions.
+pub fn check_scale(
+    template: &TriMesh,
+    template_path: &Path,
+    frame: &[Vec3],
+    index: usize,
+    label: &str,
+) -> Result<(), PipelineError> {
+    let radius = |points: &[Vec3]| bounding_sphere(&[points]).map(|(_, r)| r);
+    let (Some(template_radius), Some(frame_radius)) = (radius(template.positions()), radius(frame))
+    else {
+        return Err(PipelineError::Topology {
+            animation: label.to_owned(),
+            problem: format!(
+                "frame {index} or the template {} has no finite vertex",
+                template_path.display()
+            ),
+        });
+    };
+    let ratio = frame_radius / template_radius;
+    if (1.0 / SCALE_MISMATCH..=SCALE_MISMATCH).contains(&ratio) {
+        return Ok(());
+    }
+    Err(PipelineError::ScaleMismatch {
+        animation: label.to_owned(),
+        template: template_path.to_path_buf(),
+        frame: index,
+        frame_radius,
+        template_radius,
+        ratio,
+    })
 }
 
 /// Checks that the animation's frames have the vertices and triangles of `template` (read
@@ -643,6 +711,32 @@ mod tests {
             w.positions(p[..3].to_vec()).expect("three"),
             p[..3].to_vec()
         );
+    }
+
+    #[test]
+    fn scale_mismatch_is_refused_either_way() {
+        let t = square();
+        let path = Path::new("t.ply");
+        let scaled = |k: f32| -> Vec<Vec3> { t.positions().iter().map(|&p| p * k).collect() };
+        for k in [1.0, 0.5, 2.0, 9.9, 1.0 / 9.9] {
+            check_scale(&t, path, &scaled(k), 0, "a").expect("same scale");
+        }
+        for k in [10.5, 100.0, 1.0 / 10.5, 0.01] {
+            let e = check_scale(&t, path, &scaled(k), 3, "anim").expect_err("mismatch");
+            let PipelineError::ScaleMismatch { frame, ratio, .. } = &e else {
+                panic!("{e}");
+            };
+            assert_eq!(*frame, 3);
+            assert!((ratio / f64::from(k) - 1.0).abs() < 1e-5, "{ratio} {k}");
+            let text = e.to_string();
+            assert!(
+                text.starts_with("anim: frame 3 ") && text.contains("t.ply"),
+                "{text}"
+            );
+        }
+        // A frame without finite vertices is an error, not a pass.
+        let bad = vec![Vec3::NAN; 4];
+        assert!(check_scale(&t, path, &bad, 0, "a").is_err());
     }
 
     #[test]

@@ -10,6 +10,10 @@
 //!    sampled at `--fps`), a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
 //!    JSON driving a glTF template's morph targets. Without A, a glTF template plays its own
 //!    first clip; any other template is one still frame.
+//!    The template is read in world space as its animation poses it
+//!    ([`input::read_template`]: a glTF's node transforms, skins and default morph weights
+//!    applied), and the first frame meshed must be at its scale
+//!    ([`input::check_scale`], within [`input::SCALE_MISMATCH`]).
 //!    Vertices the file splits at UV/normal seams are welded by position
 //!    ([`input::WeldedTemplate`]): every later stage sees the welded template, so the meshes
 //!    are watertight wherever the surface is.
@@ -27,14 +31,16 @@
 //!    `DIR/<method>.glb`, the animated sequence.
 //! 8. **report**: `DIR/report.json`, `DIR/report.md`, `DIR/error_vs_time.png`.
 //!
-//! # Defaults, derived from the template so that any scale works
+//! # Defaults, derived from the (world-space) template so that any scale works
 //! - TSDF voxel: template bounding radius / [`config::DEFAULT_VOXELS_PER_RADIUS`]; truncation
 //!   5 voxels; [`config::DEFAULT_VIEWS`] views of [`config::DEFAULT_RESOLUTION`]² pixels,
 //!   40° field of view, framing each frame's bounding sphere with a 10% margin.
 //! - Alpha: [`config::DEFAULT_ALPHA_SPACINGS`] × the mean nearest-neighbour spacing of the
 //!   rest-pose Gaussian means.
-//! - Delaunay: incremental (hop threshold 0: each frame equals a from-scratch triangulation);
-//!   `--rebuild-every N` rebuilds every N frames, 1 on every frame.
+//! - Delaunay: incremental (`--hop-threshold`, default 0: each frame equals a from-scratch
+//!   triangulation; above 0 fewer charts are redone and frames may differ from one);
+//!   `--rebuild-every N` rebuilds every N frames, 1 on every frame. The report keeps what each
+//!   update did (Gaussians hopped, charts redone, rebuilt).
 //! - Metrics: [`config::DEFAULT_SAMPLES`] samples per mesh, F-score at
 //!   [`config::DEFAULT_TAU`] (input units).
 //!

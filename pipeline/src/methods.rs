@@ -5,11 +5,13 @@
 //!   around the bounding sphere of the frame (deformed template and Gaussian means), expected
 //!   depth rendered from the deformed Gaussians (3DGS, gsplat rules) and masked where the
 //!   rendered alpha is below [`RENDERED_ALPHA_MIN`], fused with the extract crate's TSDF at
-//!   `voxel` (default: template radius / 256), truncation 5 voxels, depth truncation twice the
+//!   `voxel` (default: template radius / [`DEFAULT_VOXELS_PER_RADIUS`]), truncation 5 voxels, depth truncation twice the
 //!   rig's scene radius, largest connected piece kept.
 //! - **delaunay**: [`IncrementalDelaunay`] over the rest template and the Gaussians' canonical
 //!   means; each frame moves vertices and redoes only the charts Gaussians hopped into or out
-//!   of (`rebuild_every` forces full rebuilds).
+//!   of (`hop_threshold` lets Gaussians stay in a chart they left by less than that many mean
+//!   template edges; `rebuild_every` forces full rebuilds); [`MethodOutput::delaunay`] says
+//!   what each update did.
 //! - **alpha**: the alpha shape of the deformed means at `alpha` (default
 //!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
 //!   means).
@@ -18,7 +20,7 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use trisplat_extract::alpha_shape::alpha_shape;
-use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelaunay};
+use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, IncrementalDelaunay};
 use trisplat_extract::tsdf::{DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
@@ -63,6 +65,8 @@ pub struct MethodOutput {
     pub ms: f64,
     /// Of which rendering depth maps (tsdf only), milliseconds.
     pub render_ms: Option<f64>,
+    /// What the incremental update did (delaunay only).
+    pub delaunay: Option<FrameStats>,
 }
 
 /// Centre and radius of the bounding sphere (about the box centre) of some point sets.
@@ -115,7 +119,9 @@ pub struct Resolved {
 }
 
 impl Resolved {
-    /// Resolves the defaults from the rest template and the rest-pose means.
+    /// Resolves the defaults from the rest template and the rest-pose means, both in world
+    /// space (the template as [`crate::input::read_template`] reads it: the scale of the
+    /// frames, which [`crate::input::check_scale`] checks).
     ///
     /// # Errors
     /// [`PipelineError::BadOption`] for a given voxel or alpha that is not finite and
@@ -227,6 +233,7 @@ impl TsdfMesher {
                 mesh: TriMesh::default(),
                 ms: start.elapsed().as_secs_f64() * 1e3,
                 render_ms: Some(0.0),
+                delaunay: None,
             });
         };
         let cameras = sphere_rig(
@@ -269,6 +276,7 @@ impl TsdfMesher {
             mesh: fused.mesh,
             ms: start.elapsed().as_secs_f64() * 1e3,
             render_ms: Some(render_ms),
+            delaunay: None,
         })
     }
 }
@@ -308,6 +316,7 @@ impl Mesher {
             Method::Delaunay => {
                 let d_options = DelaunayOptions {
                     rebuild_every: options.rebuild_every,
+                    hop_threshold: options.hop_threshold,
                     ..DelaunayOptions::default()
                 };
                 let d = IncrementalDelaunay::from_bound(rest, set, mode, d_options).map_err(
@@ -332,7 +341,7 @@ impl Mesher {
             Self::Tsdf(t) => t.mesh(input),
             Self::Delaunay(d) => {
                 let start = Instant::now();
-                d.update(input.positions, input.means).map_err(|source| {
+                let stats = d.update(input.positions, input.means).map_err(|source| {
                     PipelineError::Delaunay {
                         frame,
                         cause: source,
@@ -343,6 +352,7 @@ impl Mesher {
                     mesh,
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
+                    delaunay: Some(stats),
                 })
             }
             Self::Alpha(alpha) => {
@@ -356,6 +366,7 @@ impl Mesher {
                     mesh: shape.mesh,
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
+                    delaunay: None,
                 })
             }
         }

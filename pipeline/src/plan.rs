@@ -137,12 +137,26 @@ impl Plan {
                         "voxel = template radius / {DEFAULT_VOXELS_PER_RADIUS}, trunc 5 voxels"
                     ),
                 },
-                Method::Delaunay => match o.rebuild_every {
-                    0 => "incremental: only charts that Gaussians hop into or out of are redone"
-                        .to_owned(),
-                    1 => "--rebuild-every 1: triangulated from scratch every frame".to_owned(),
-                    n => format!("incremental, rebuilt from scratch every {n} frames"),
-                },
+                Method::Delaunay => {
+                    let rebuild = match o.rebuild_every {
+                        0 => "incremental: only charts that Gaussians hop into or out of are \
+                              redone"
+                            .to_owned(),
+                        1 => "--rebuild-every 1: triangulated from scratch every frame".to_owned(),
+                        n => format!("incremental, rebuilt from scratch every {n} frames"),
+                    };
+                    let hop = if o.hop_threshold == 0.0 {
+                        "hop threshold 0: every frame equals a from-scratch triangulation"
+                            .to_owned()
+                    } else {
+                        format!(
+                            "hop threshold {} x mean template edge: fewer charts redone, frames \
+                             may differ from a from-scratch triangulation",
+                            o.hop_threshold
+                        )
+                    };
+                    format!("{rebuild}; {hop}")
+                }
                 Method::Alpha => match o.alpha {
                     Some(a) => format!("alpha {a} on the deformed means"),
                     None => format!(
@@ -296,6 +310,22 @@ mod tests {
         );
         // Every line says run or skip.
         assert_eq!(p.to_string().lines().count(), order.len());
+    }
+
+    #[test]
+    fn hop_threshold_is_explained() {
+        let mut c = config(&[Method::Delaunay], false, None);
+        assert!(
+            Plan::new(&c)
+                .to_string()
+                .contains("hop threshold 0: every frame equals")
+        );
+        c.options.hop_threshold = 0.25;
+        let text = Plan::new(&c).to_string();
+        assert!(
+            text.contains("hop threshold 0.25 x mean template edge"),
+            "{text}"
+        );
     }
 
     #[test]

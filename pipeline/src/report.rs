@@ -10,6 +10,7 @@ use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
 use std::path::Path;
 
+use trisplat_extract::incremental_delaunay::FrameStats;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::metrics::{MetricsError, MetricsOptions, Shape, evaluate};
 use trisplat_geometry::rng::splitmix64;
@@ -151,6 +152,85 @@ pub struct FrameRecord {
     pub metrics: Option<FrameMetrics>,
 }
 
+/// What the incremental Delaunay update did on one frame (its `FrameStats`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct DelaunayFrame {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Whether every chart was triangulated from scratch (the first frame, and every
+    /// `--rebuild-every` frames).
+    pub rebuilt: bool,
+    /// Gaussians that changed chart (0 on a rebuild, which reassigns them all).
+    pub hopped: usize,
+    /// Charts (template triangles) triangulated again.
+    pub charts_redone: usize,
+    /// Gaussians whose full nearest-triangle search ran (the others were settled by their
+    /// motion certificate).
+    pub searches: usize,
+    /// Gaussians that are not vertices of the mesh (duplicates, degenerate charts).
+    pub unmeshed: usize,
+    /// Wall time of the update alone, milliseconds (the frame's `ms` adds the mesh assembly).
+    pub update_ms: f64,
+}
+
+impl DelaunayFrame {
+    /// The record of frame `frame` from the mesher's statistics.
+    #[must_use]
+    pub fn new(frame: usize, stats: &FrameStats) -> Self {
+        Self {
+            frame,
+            rebuilt: stats.rebuilt,
+            hopped: stats.hopped,
+            charts_redone: stats.charts_redone,
+            searches: stats.searches,
+            unmeshed: stats.unmeshed,
+            update_ms: stats.millis,
+        }
+    }
+}
+
+/// The incremental Delaunay's work over the frames (delaunay only).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DelaunayStats {
+    /// Charts: one per template triangle.
+    pub charts: usize,
+    /// Gaussians meshed.
+    pub gaussians: usize,
+    /// Per frame, in frame order.
+    pub frames: Vec<DelaunayFrame>,
+    /// Frames rebuilt from scratch (the first frame included).
+    pub rebuilt_frames: usize,
+    /// Mean fraction of the Gaussians that hopped per incremental (not rebuilt) frame;
+    /// `None` when every frame was rebuilt.
+    pub hopped_fraction: Option<f64>,
+    /// Mean fraction of the charts redone per incremental frame; `None` when every frame was
+    /// rebuilt.
+    pub charts_redone_fraction: Option<f64>,
+}
+
+impl DelaunayStats {
+    /// The statistics of `frames` for `charts` charts and `gaussians` Gaussians.
+    #[must_use]
+    pub fn new(charts: usize, gaussians: usize, frames: Vec<DelaunayFrame>) -> Self {
+        let incremental: Vec<&DelaunayFrame> = frames.iter().filter(|f| !f.rebuilt).collect();
+        let fraction = |count: fn(&DelaunayFrame) -> usize, of: usize| {
+            mean(
+                incremental
+                    .iter()
+                    .map(|f| count(f) as f64 / of.max(1) as f64),
+            )
+        };
+        Self {
+            charts,
+            gaussians,
+            rebuilt_frames: frames.len() - incremental.len(),
+            hopped_fraction: fraction(|f| f.hopped, gaussians),
+            charts_redone_fraction: fraction(|f| f.charts_redone, charts),
+            frames,
+        }
+    }
+}
+
 /// Means of one method over the frames.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Summary {
@@ -231,6 +311,9 @@ pub struct MethodReport {
     pub ply_dir: String,
     /// Its animated glTF, relative to the output folder.
     pub glb: String,
+    /// What the incremental update did per frame (delaunay only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delaunay: Option<DelaunayStats>,
 }
 
 /// The whole run (report.json).
@@ -379,16 +462,56 @@ impl Report {
                 m.ply_dir,
                 m.glb
             );
-            let _ = writeln!(
-                s,
-                "| frame | time s | ms | vertices | faces | watertight | Chamfer L1 | Chamfer L2 | normal consistency | F-score |"
-            );
-            let _ = writeln!(s, "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|");
-            for r in &m.frames {
-                let mm = r.metrics.as_ref();
+            if let Some(d) = &m.delaunay {
+                let pct = |v: Option<f64>| {
+                    v.map_or_else(|| "-".to_owned(), |x| format!("{:.3}%", 100.0 * x))
+                };
                 let _ = writeln!(
                     s,
-                    "| {} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {} |",
+                    "incremental updates: {} of {} frames rebuilt from scratch; per other frame, \
+                     Gaussians hopped {} (of {}), charts redone {} (of {})\n",
+                    d.rebuilt_frames,
+                    d.frames.len(),
+                    pct(d.hopped_fraction),
+                    d.gaussians,
+                    pct(d.charts_redone_fraction),
+                    d.charts
+                );
+            }
+            // Delaunay adds what its update did.
+            let (extra_head, extra_rule) = if m.delaunay.is_some() {
+                (" hopped | charts redone | rebuilt |", "---:|---:|---|")
+            } else {
+                ("", "")
+            };
+            let _ = writeln!(
+                s,
+                "| frame | time s | ms | vertices | faces | watertight | Chamfer L1 | Chamfer L2 | normal consistency | F-score |{extra_head}"
+            );
+            let _ = writeln!(
+                s,
+                "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|{extra_rule}"
+            );
+            let stats: BTreeMap<usize, &DelaunayFrame> = m
+                .delaunay
+                .iter()
+                .flat_map(|d| d.frames.iter().map(|f| (f.frame, f)))
+                .collect();
+            for r in &m.frames {
+                let mm = r.metrics.as_ref();
+                let extra = match (&m.delaunay, stats.get(&r.frame)) {
+                    (Some(_), Some(d)) => format!(
+                        " {} | {} | {} |",
+                        d.hopped,
+                        d.charts_redone,
+                        if d.rebuilt { "yes" } else { "no" }
+                    ),
+                    (Some(_), None) => " - | - | - |".to_owned(),
+                    (None, _) => String::new(),
+                };
+                let _ = writeln!(
+                    s,
+                    "| {} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {} |{extra}",
                     r.frame,
                     r.time,
                     r.ms,
@@ -511,6 +634,104 @@ mod tests {
         let none = Summary::of(&[record(0, 1.0, None)]);
         assert_eq!(none.chamfer_l1, None);
         assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
+    }
+
+    #[test]
+    fn delaunay_statistics_and_their_columns() {
+        let frame = |f: usize, rebuilt: bool, hopped: usize, charts: usize| DelaunayFrame {
+            frame: f,
+            rebuilt,
+            hopped,
+            charts_redone: charts,
+            searches: 0,
+            unmeshed: 0,
+            update_ms: 1.0,
+        };
+        let frames = vec![
+            frame(4, true, 0, 10),
+            frame(5, false, 2, 1),
+            frame(6, false, 6, 3),
+        ];
+        let d = DelaunayStats::new(10, 40, frames.clone());
+        assert_eq!(d.rebuilt_frames, 1);
+        // Means over the incremental frames only: (2 + 6) / 2 of 40, (1 + 3) / 2 of 10.
+        assert!((d.hopped_fraction.expect("incremental") - 0.1).abs() < 1e-12);
+        assert!((d.charts_redone_fraction.expect("incremental") - 0.2).abs() < 1e-12);
+        let all_rebuilt = DelaunayStats::new(10, 40, vec![frame(0, true, 0, 10)]);
+        assert_eq!(all_rebuilt.hopped_fraction, None);
+        let stats = FrameStats {
+            frame: 2,
+            rebuilt: false,
+            hopped: 7,
+            charts_redone: 5,
+            searches: 3,
+            unmeshed: 1,
+            millis: 2.5,
+        };
+        assert_eq!(
+            DelaunayFrame::new(6, &stats),
+            DelaunayFrame {
+                frame: 6,
+                rebuilt: false,
+                hopped: 7,
+                charts_redone: 5,
+                searches: 3,
+                unmeshed: 1,
+                update_ms: 2.5,
+            }
+        );
+        let records: Vec<FrameRecord> = (4..7).map(|f| record(f, 1.0, None)).collect();
+        let method = |m: Method, delaunay: Option<DelaunayStats>| MethodReport {
+            method: m,
+            parameters: BTreeMap::new(),
+            mean: Summary::of(&records),
+            frames: records.clone(),
+            ply_dir: m.name().to_owned(),
+            glb: format!("{}.glb", m.name()),
+            delaunay,
+        };
+        let report = Report {
+            version: "0".to_owned(),
+            template: "t.glb".to_owned(),
+            template_vertices: 4,
+            welded_vertices: 4,
+            animation: "t.glb".to_owned(),
+            gaussians: "bound here: 4 per triangle".to_owned(),
+            gaussian_count: 40,
+            mode: "binding".to_owned(),
+            frames: vec![4, 5, 6],
+            frame_times: vec![0.0; 3],
+            deform_ms: vec![0.0; 3],
+            ground_truth: None,
+            samples: 10,
+            tau: 0.01,
+            resolved: Resolved {
+                template_radius: 1.0,
+                mean_spacing: 0.1,
+                voxel: 0.01,
+                alpha: 0.6,
+            },
+            methods: BTreeMap::from([
+                ("delaunay".to_owned(), method(Method::Delaunay, Some(d))),
+                ("alpha".to_owned(), method(Method::Alpha, None)),
+            ]),
+        };
+        let md = report.markdown();
+        assert!(
+            md.contains("| F-score | hopped | charts redone | rebuilt |"),
+            "{md}"
+        );
+        assert!(md.contains("| - | 0 | 10 | yes |\n"), "{md}");
+        assert!(md.contains("| - | 6 | 3 | no |\n"), "{md}");
+        assert!(md.contains("Gaussians hopped 10.000% (of 40), charts redone 20.000% (of 10)"));
+        // Only the delaunay table has the columns.
+        assert_eq!(md.matches("| hopped |").count(), 1);
+        let json = serde_json::to_value(&report).expect("json");
+        assert_eq!(
+            json["methods"]["delaunay"]["delaunay"]["frames"][1]["hopped"],
+            2
+        );
+        assert!(json["methods"]["alpha"].get("delaunay").is_none());
     }
 
     #[test]

@@ -19,14 +19,15 @@ use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
 use crate::deform::{Engine, skinned_gltf};
 use crate::error::PipelineError;
 use crate::input::{
-    Animation, GaussianSource, WeldedTemplate, animation_label, check_topology, deform_mode,
-    gaussians, open_animation, parse_frames,
+    Animation, GaussianSource, WeldedTemplate, animation_label, check_scale, check_topology,
+    deform_mode, gaussians, open_animation, parse_frames, read_template,
 };
 use crate::methods::{FrameInput, Mesher, Resolved};
 use crate::output::{Created, Inputs};
 use crate::plot;
 use crate::report::{
-    FrameRecord, GtSamples, MethodReport, Report, Summary, is_watertight, measure,
+    DelaunayFrame, DelaunayStats, FrameRecord, GtSamples, MethodReport, Report, Summary,
+    is_watertight, measure,
 };
 
 /// File name of the JSON report in the output folder.
@@ -166,6 +167,13 @@ fn run_inner(
             expected: "a finite positive distance",
         });
     }
+    if !(o.hop_threshold.is_finite() && o.hop_threshold >= 0.0) {
+        return Err(PipelineError::BadOption {
+            name: "hop-threshold",
+            value: o.hop_threshold,
+            expected: "a finite number >= 0 (multiples of the mean template edge)",
+        });
+    }
     if o.samples == 0 {
         return Err(PipelineError::BadOption {
             name: "samples",
@@ -173,8 +181,8 @@ fn run_inner(
             expected: "at least one sample",
         });
     }
-    // Inputs.
-    let stored = read_mesh(&config.template)?;
+    // Inputs: the template in world space, as its animation poses it (see `read_template`).
+    let stored = read_template(&config.template)?;
     if stored.triangle_count() == 0 {
         return Err(PipelineError::EmptyTemplate {
             path: config.template.clone(),
@@ -187,6 +195,17 @@ fn run_inner(
     let welded = WeldedTemplate::new(&stored);
     let template = &welded.mesh;
     let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
+    // The scale-derived defaults come from the template: its frames must share its scale.
+    let label = animation_label(config);
+    let first_positions = anim.frame(frames.start)?;
+    check_scale(
+        &stored,
+        &config.template,
+        &first_positions,
+        frames.start,
+        &label,
+    )?;
+    let mut first_positions = Some(first_positions);
     let static_gt = match &config.gt {
         Some(GroundTruth::Mesh(path)) => {
             input_files.push(path.clone());
@@ -251,16 +270,19 @@ fn run_inner(
         )?);
     }
 
-    let label = animation_label(config);
     let need_world = methods.contains(&Method::Tsdf);
     let total = frames.len();
     progress(Progress::Started { frames: total });
     let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
+    let mut delaunay_frames: Vec<DelaunayFrame> = Vec::new();
     let mut sequences: Sequences = BTreeMap::new();
     let mut frame_times = Vec::with_capacity(total);
     let mut deform_ms = Vec::with_capacity(total);
     for (done, f) in frames.clone().enumerate() {
-        let stored_positions = anim.frame(f)?;
+        let stored_positions = match first_positions.take() {
+            Some(p) => p,
+            None => anim.frame(f)?,
+        };
         let stored_count = stored_positions.len();
         let positions =
             welded
@@ -313,6 +335,9 @@ fn run_inner(
                 })?,
                 None => None,
             };
+            if let Some(stats) = &result.delaunay {
+                delaunay_frames.push(DelaunayFrame::new(f, stats));
+            }
             let path = out.join(m.name()).join(frame_file(f));
             let existed = path.exists();
             write_mesh(&path, &result.mesh, WriteOptions::default())?;
@@ -347,6 +372,7 @@ fn run_inner(
             }
             Method::Delaunay => {
                 parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);
+                parameters.insert("hop_threshold".to_owned(), o.hop_threshold);
             }
             Method::Alpha => {
                 parameters.insert("alpha".to_owned(), resolved.alpha);
@@ -362,6 +388,13 @@ fn run_inner(
                 mean,
                 ply_dir: m.name().to_owned(),
                 glb: format!("{}.glb", m.name()),
+                delaunay: (m == Method::Delaunay).then(|| {
+                    DelaunayStats::new(
+                        template.triangle_count(),
+                        set.len(),
+                        std::mem::take(&mut delaunay_frames),
+                    )
+                }),
             },
         );
     }

@@ -19,7 +19,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::Camera;
-use trisplat_geometry::animation::Clip;
 use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
 
 use crate::progress::Progress;
@@ -87,14 +86,6 @@ pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result
     Ok(cameras)
 }
 
-/// A `--clip NAME|INDEX` value: a number is an index, anything else a name; none is the first.
-#[must_use]
-pub fn parse_clip(clip: Option<&str>) -> Clip {
-    match clip {
-        None => Clip::Index(0),
-        Some(s) => match s.parse::<usize>() {
-            Ok(i) => Clip::Index(i),
-            Err(_) => Clip::Name(s.to_string()),
-        },
-    }
-}
+/// A `--clip NAME|INDEX` value: a number is an index, anything else a name; none is the first
+/// (the pipeline's parser, so that every command reads `--clip` alike).
+pub use trisplat_pipeline::input::clip_of as parse_clip;
