@@ -32,7 +32,7 @@ use crate::frames::{CanonicalTriangle, FrameOptions, corners_of, gaussian_avatar
 use crate::gaussians::{
     GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
 };
-use crate::lanes::{LANES, LaneBatch, TriangleFactor, factor_f64, factor_lanes};
+use crate::lanes::{LANES, LaneBatch, LaneFactors, TriangleFactor, factor_f64, factor_lanes};
 
 /// Smallest output scale (a collapsed axis): `f32::MIN_POSITIVE`, whose log (≈ −87.3) is finite
 /// and whose `exp` in `f32` is still positive.
@@ -329,6 +329,7 @@ impl Deformer {
                         *mean = Vec3::from(t.m32 * Vec3A::from(set.means()[i]) + t.origin);
                     }
                     let mut batch = LaneBatch::default();
+                    let mut f = LaneFactors::default();
                     for j0 in (0..means.len()).step_by(LANES) {
                         let lanes = LANES.min(means.len() - j0);
                         for l in 0..lanes {
@@ -336,7 +337,7 @@ impl Deformer {
                             let t = &tris[binding[i].index()].factor;
                             batch.set(l, local_rots[i], local_ls[i].to_array(), t);
                         }
-                        let f = factor_lanes(&batch, flat);
+                        factor_lanes(&batch, flat, &mut f);
                         // Straight copies first (no per-lane branch), then the f64 lanes.
                         for l in 0..lanes {
                             let j = j0 + l;

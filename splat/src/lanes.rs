@@ -283,6 +283,16 @@ pub struct LaneFactors {
     pub needs_f64: [bool; LANES],
 }
 
+impl Default for LaneFactors {
+    fn default() -> Self {
+        Self {
+            rotation: [[1.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]],
+            log_scale: [[0.0; LANES]; 3],
+            needs_f64: [true; LANES],
+        }
+    }
+}
+
 /// `acc[l] = max(acc[l], v[l])` without the NaN rules of `f32::max` (vectorises to `maxps`).
 #[inline(always)]
 fn vmax(a: f32, b: f32) -> f32 {
@@ -376,13 +386,12 @@ fn sel(c: bool, a: f32, b: f32) -> f32 {
     if c { a } else { b }
 }
 
-/// Rotations and log-scales of the lanes of `b` (surfels: `flat`, third scale 0); lanes
-/// flagged in `needs_f64` of the result are left for [`factor_f64`].
+/// Rotations and log-scales of the lanes of `b` (surfels: `flat`, third scale 0) into `out`;
+/// lanes flagged in its `needs_f64` are left for [`factor_f64`].
 ///
 /// Every stage is a loop over lanes of scalar arithmetic and selects (no calls, no arrays
 /// chosen by branches), which LLVM turns into SSE2 code.
-#[must_use]
-pub fn factor_lanes(b: &LaneBatch, flat: bool) -> LaneFactors {
+pub fn factor_lanes(b: &LaneBatch, flat: bool, out: &mut LaneFactors) {
     let zero = [0.0f32; LANES];
     // Normalised local quaternion (identity for zero or non-finite ones).
     let mut qr = [zero; 4];
@@ -457,7 +466,7 @@ pub fn factor_lanes(b: &LaneBatch, flat: bool) -> LaneFactors {
     let (qw, len2) = finish_lanes(&c);
     // q = q_U ⊗ q_local ⊗ q_W, normalised, w ≥ 0.
     let q = qmul(&qmul(&b.u, &qr), &qw);
-    let mut rotation = [zero; 4];
+    let rotation = &mut out.rotation;
     for l in 0..LANES {
         let n2 = q[0][l] * q[0][l] + q[1][l] * q[1][l] + q[2][l] * q[2][l] + q[3][l] * q[3][l];
         let inv = 1.0 / n2.sqrt();
@@ -468,7 +477,7 @@ pub fn factor_lanes(b: &LaneBatch, flat: bool) -> LaneFactors {
         rotation[3][l] = q[3][l] * inv;
     }
     let min_ln = (MIN_OUTPUT_SCALE as f32).ln();
-    let mut log_scale = [zero; 3];
+    let log_scale = &mut out.log_scale;
     for k in 0..3 {
         let mut y = zero;
         for l in 0..LANES {
@@ -480,19 +489,13 @@ pub fn factor_lanes(b: &LaneBatch, flat: bool) -> LaneFactors {
             log_scale[k][l] = sel(len2[k][l] > 0.0, vmax(v, min_ln), min_ln);
         }
     }
-    let mut needs_f64 = fallback;
     for l in 0..LANES {
         let mut sum = 0.0f32;
-        for v in rotation.iter().chain(&log_scale) {
+        for v in out.rotation.iter().chain(&out.log_scale) {
             sum += v[l] * 0.0;
         }
         // NaN or infinity anywhere makes `0 * v` NaN.
-        needs_f64[l] |= sum.is_nan();
-    }
-    LaneFactors {
-        rotation,
-        log_scale,
-        needs_f64,
+        out.needs_f64[l] = fallback[l] | sum.is_nan();
     }
 }
 
@@ -801,7 +804,8 @@ mod tests {
             for (l, (m, q, ls)) in group.iter().enumerate() {
                 batch.set(l, *q, *ls, &TriangleFactor::new(*m));
             }
-            let got = factor_lanes(&batch, flat);
+            let mut got = LaneFactors::default();
+            factor_lanes(&batch, flat, &mut got);
             for (l, (m, q, ls)) in group.iter().enumerate() {
                 let (wq, wls) = factor_f64(*m, *q, *ls, flat);
                 let (gq, gls) = if got.needs_f64[l] {
@@ -898,7 +902,9 @@ mod tests {
             for l in 0..LANES {
                 b.set(l, [1.0, 0.1, 0.2, 0.3], ls, &TriangleFactor::new(m));
             }
-            factor_lanes(&b, false).needs_f64
+            let mut out = LaneFactors::default();
+            factor_lanes(&b, false, &mut out);
+            out.needs_f64
         };
         assert_eq!(batch_for([0.0, -5.0, -29.0], m), [true; LANES]);
         assert_eq!(batch_for([-2.0, -5.0, -25.0], m), [false; LANES]);
@@ -973,7 +979,8 @@ mod tests {
             b.set(l, *q, *ls, &TriangleFactor::new(*m));
         }
         for flat in [false, true] {
-            let got = factor_lanes(&b, flat);
+            let mut got = LaneFactors::default();
+            factor_lanes(&b, flat, &mut got);
             for (l, (m, q, ls)) in cases.iter().enumerate() {
                 let (q, ls) = if got.needs_f64[l] {
                     factor_f64(*m, *q, *ls, flat)
