@@ -77,7 +77,10 @@ impl Plan {
                 "template {t}; no --animation: its own glTF clip if it has one, else one frame"
             ),
         };
-        let animate = format!("{animate}; vertices split at seams welded by position");
+        let animate = format!(
+            "{animate}; template in world space (glTF: node transforms and skins applied), \
+             checked against the first frame's scale; vertices split at seams welded by position"
+        );
         push(Stage::Animate, true, animate);
 
         match &config.gaussians {
