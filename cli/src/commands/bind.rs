@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use trisplat_geometry::io::read_mesh;
+use trisplat_pipeline::input::read_template;
 use trisplat_splat::bind::{BindOptions, DEFAULT_INITIAL_OPACITY, attach, init_bound};
 use trisplat_splat::frames::Convention;
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
@@ -77,7 +77,7 @@ pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
     if let Some(g) = &args.gaussians {
         refuse_to_overwrite(g, &args.output)?;
     }
-    let mesh = read_mesh(&args.mesh)?;
+    let mesh = read_template(&args.mesh)?;
     let convention = Convention::from(args.convention);
     let spinner = ctx.progress.spinner("binding");
     let bound = match &args.gaussians {

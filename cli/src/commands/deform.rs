@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::io::read_mesh;
 use trisplat_pipeline::deform::{Engine, check_set, read_bound, skinned_gltf};
+use trisplat_pipeline::input::read_template;
 use trisplat_pipeline::input::{AnimationSource, check_topology, parse_frames};
 use trisplat_pipeline::output::{Created, Inputs, frame_file};
 use trisplat_splat::deform::{DeformMode, Deformer};
@@ -95,7 +95,7 @@ pub struct DeformArgs {
 /// # Errors
 /// Unreadable or mismatched inputs (named), a failed write (files of this run removed).
 pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
-    let template = read_mesh(&args.template)?;
+    let template = read_template(&args.template)?;
     let set = read_bound(&args.gaussians, &template, &args.template)?;
     if args.adaptive_scale && args.mode == ModeArg::Jacobian {
         bail!(

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::io::read_mesh;
+use trisplat_pipeline::input::read_template;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::densify::{
@@ -62,7 +62,7 @@ pub fn load(path: &Path, template: &TemplateArgs) -> anyhow::Result<Loaded> {
     let Some(t_path) = &template.template else {
         bail!("{name}: the Gaussians are bound to triangles: give --template T");
     };
-    let mesh = read_mesh(t_path)?;
+    let mesh = read_template(t_path)?;
     let mode = match template.convention {
         ConventionArg::Gaussianavatars => DeformMode::Binding,
         ConventionArg::Surfhead => DeformMode::Jacobian,
