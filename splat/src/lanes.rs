@@ -614,13 +614,15 @@ fn jacobi(c: &mut [[Lanes; 3]; 3]) {
                 // magnitude of t² + 2 (h / g) t - 1 = 0); with d = |h| + r,
                 // cos θ = d / √(d² + g²) = d / √(2 r d), sin θ = sign(h) g / √(2 r d).
                 // Scaled against underflow (only ratios matter).
+                // `g` (not the `gs` of the test above): a pair left alone has g = 0 here, so
+                // r = |h| and the rotation is exactly the identity.
+                let gs = v::map(&g, |x| x * TEST_SCALE);
                 let hs = v::map(&h, |x| x * TEST_SCALE);
                 let r = v::zip(&hs, &gs, |h, g| (h * h + g * g).sqrt());
                 let d = v::zip(&hs, &r, |h, r| h.abs() + r);
                 let inv = v::zip(&r, &d, |r, d| 1.0 / (2.0 * r * d).sqrt());
                 // h = g = 0 (or a pair left alone): nothing to do (inv = ∞ or g = 0).
                 let keep = v::cmp(&inv, &zero, |i, _| i < f32::INFINITY);
-                let gs = v::map(&g, |x| x * TEST_SCALE);
                 let sg = v::zip(&gs, &hs, |g, h| if h < 0.0 { -g } else { g });
                 let sin = v::zip(&sg, &inv, |g, i| g * i);
                 let cos = v::zip(&d, &inv, |d, i| d * i);
@@ -848,8 +850,11 @@ mod tests {
         let mut u = move || rng.uniform_f64() - 0.5;
         let mut report = Vec::new();
         // Near-similarities (animation), general matrices, ill-conditioned ones up to the
-        // condition bound, each with random, repeated and strongly graded scales.
-        for kind in 0..4 {
+        // condition bound, each with random, repeated and strongly graded scales; kind 4
+        // mixes, in every batch, isotropic Gaussians on near-exact similarities (a translated
+        // frame: columns orthogonal and of equal length up to f32 rounding) with general
+        // lanes that force the square-root rotations on the whole batch.
+        for kind in 0..5 {
             for flat in [false, true] {
                 let cases: Vec<_> = (0..4000)
                     .map(|case| {
@@ -865,10 +870,16 @@ mod tests {
                                 let d = DVec3::new(1.0, 0.2 + u(), 1.0 / (9.0 + 10.0 * u()));
                                 rot * DMat3::from_diagonal(d) * random_rotation(&mut u)
                             }
-                            _ => rot * (1e3 * (u() + 0.6)),
+                            3 => rot * (1e3 * (u() + 0.6)),
+                            _ if case % 2 == 0 => {
+                                let noise = DMat3::from_cols_array(&[0; 9].map(|_: i32| u()));
+                                (rot + noise * 1e-6) * 0.03
+                            }
+                            _ => DMat3::from_cols_array(&[0; 9].map(|_: i32| u())),
                         };
                         let mut ls = [u() * 8.0, u() * 8.0, u() * 8.0].map(|v| v as f32);
                         match case % 6 {
+                            _ if kind == 4 && case % 2 == 0 => ls = [ls[0]; 3],
                             0 => ls = [ls[0]; 3],
                             1 => ls[1] = ls[0],
                             2 => ls[2] -= 29.0,
