@@ -262,8 +262,12 @@ pub const MAX_CLOSE: usize = 3;
 /// (up to [`MAX_CLOSE`] of them); the motion bound covers only the farther ones.
 pub const CLOSE_GAP_REL: f64 = 0.15;
 
+/// Listed close competitors: lower bounds of their distances (`+∞` in empty slots) and their
+/// ids (`u32::MAX` in empty slots).
+pub(crate) type Close = ([f64; MAX_CLOSE], [u32; MAX_CLOSE]);
+
 /// What an exact check proved about one Gaussian, pulled back to the chart's snapshot
-/// coordinates (see the module documentation). Stored in f32 (32 bytes): the bounds are
+/// coordinates (see the module documentation). Stored in f32 (44 bytes): the bounds are
 /// rounded outward and the position's rounding is part of the measured mismatch, so the
 /// rounding never weakens the proof.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -275,8 +279,8 @@ pub(crate) struct Certificate {
     /// Lower bound of its distance to every other triangle of the snapshot not in `close`
     /// there; `-∞`: no certificate.
     other: f32,
-    /// Lower bound of its distance to the triangles in `close` there (`+∞` when none).
-    near: f32,
+    /// Lower bounds of its distances to the triangles in `close` there (`+∞` where none).
+    near: [f32; MAX_CLOSE],
     /// Competitors compared exactly every frame (`u32::MAX`: none).
     pub(crate) close: [u32; MAX_CLOSE],
 }
@@ -287,27 +291,21 @@ impl Certificate {
         local: [0.0; 3],
         own: f32::INFINITY,
         other: f32::NEG_INFINITY,
-        near: f32::INFINITY,
+        near: [f32::INFINITY; MAX_CLOSE],
         close: [u32::MAX; MAX_CLOSE],
     };
 
     /// The certificate of a Gaussian at `q` with own distance `own`, the triangles `close`
-    /// at distance at least `near` and every other triangle at distance at least `other`,
-    /// under `fit`.
-    pub(crate) fn new(
-        fit: &Fit,
-        q: DVec3,
-        own: f64,
-        (near, close): (f64, [u32; MAX_CLOSE]),
-        other: f64,
-    ) -> Self {
+    /// at distances at least `near` (slot by slot) and every other triangle at distance at
+    /// least `other`, under `fit`.
+    pub(crate) fn new(fit: &Fit, q: DVec3, own: f64, (near, close): Close, other: f64) -> Self {
         let local = fit.pull_back(q).as_vec3();
         let error = fit.mismatch(q, local.as_dvec3()) + fit.residual;
         Self {
             local: local.to_array(),
             own: round_up((own + error) / fit.sigma_lo),
             other: round_down((other - error) / fit.sigma_hi),
-            near: round_down((near - error) / fit.sigma_hi),
+            near: near.map(|n| round_down((n - error) / fit.sigma_hi)),
             close,
         }
     }
@@ -317,22 +315,26 @@ impl Certificate {
         self.other > f32::NEG_INFINITY
     }
 
-    /// Whether it lists close competitors.
-    pub(crate) fn has_close(&self) -> bool {
-        self.close[0] != u32::MAX
-    }
-
-    /// Bounds `(own distance upper, other distances lower)` for the Gaussian now at `q`.
-    /// Bounds `(own distance upper, listed competitors lower, other distances lower)` for the
-    /// Gaussian now at `q`.
-    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> (f64, f64, f64) {
+    /// Bounds `(own distance upper, listed competitors lower, other distances lower, error)`
+    /// for the Gaussian now at `q` (`error` is what [`Certificate::near_bound`] needs).
+    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> (f64, f64, f64, f64) {
         let local = glam::Vec3::from_array(self.local).as_dvec3();
         let error = fit.mismatch(q, local) + fit.residual;
+        let near = self.near.iter().copied().fold(f32::INFINITY, f32::min);
         (
             fit.sigma_hi * f64::from(self.own) + error,
-            fit.sigma_lo * f64::from(self.near) - error,
+            fit.sigma_lo * f64::from(near) - error,
             fit.sigma_lo * f64::from(self.other) - error,
+            error,
         )
+    }
+
+    /// Lower bound of the current distance to the listed competitor in slot `j` (`error` as
+    /// returned by [`Certificate::bounds`]; `+∞` for an empty slot).
+    pub(crate) fn near_bound(&self, fit: &Fit, error: f64, j: usize) -> f64 {
+        self.near
+            .get(j)
+            .map_or(f64::INFINITY, |&n| fit.sigma_lo * f64::from(n) - error)
     }
 }
 

@@ -125,7 +125,7 @@ use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 pub use self::certify::{
     CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REFRESH_DIVISOR, SNAPSHOT_MARGIN_REL,
 };
-use self::certify::{Certificate, LocalFrame, Snapshot, is_flat};
+use self::certify::{Certificate, Close, LocalFrame, Snapshot, is_flat};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
 pub use self::search::BOX_PADDING_REL;
 use self::search::DeformedBvh;
@@ -829,7 +829,7 @@ impl IncrementalDelaunay {
                 let q = cx.means[g as usize].as_dvec3();
                 let from_centre = (q - centre).length();
                 let d2 = if c.is_some() {
-                    let (own, near, other) = c.bounds(&fit, q);
+                    let (own, near, other, error) = c.bounds(&fit, q);
                     let own_slack =
                         slack + FILTER_MARGIN_REL * (q.abs().max_element() + from_centre + own);
                     if near.min(other) - (own - hop) > own_slack {
@@ -838,16 +838,26 @@ impl IncrementalDelaunay {
                         continue;
                     }
                     let (d2, _) = bvh.distance_sq(q, a);
-                    let d = d2.sqrt();
-                    if c.has_close() && other - (d - hop) > own_slack {
-                        // The listed competitors exactly, the others by the bound. Triangles
-                        // outside the snapshot are excluded by the test below, whatever the
-                        // outcome.
-                        reach = reach.max(from_centre + (d - hop).max(0.0));
-                        if let Some(t) = self.close_check(bvh, q, a, d2, &c.close) {
-                            out.moves.push((g, t));
+                    let r = d2.sqrt() - hop;
+                    if other - r > own_slack {
+                        // The unlisted triangles by the bound against the exact own distance;
+                        // the listed competitors likewise when their bound suffices, else
+                        // exactly. Triangles outside the snapshot are excluded by the test
+                        // below, whatever the outcome.
+                        reach = reach.max(from_centre + r.max(0.0));
+                        if near - r <= own_slack {
+                            // Only the listed competitors whose own bound is inconclusive.
+                            let mut close = c.close;
+                            for (j, t) in close.iter_mut().enumerate() {
+                                if c.near_bound(&fit, error, j) - r > own_slack {
+                                    *t = u32::MAX;
+                                }
+                            }
+                            if let Some(t) = self.close_check(bvh, q, a, d2, &close) {
+                                out.moves.push((g, t));
+                            }
+                            out.checked_close += 1;
                         }
-                        out.checked_close += 1;
                         continue;
                     }
                     d2
@@ -868,8 +878,11 @@ impl IncrementalDelaunay {
                         scratch.found.extend_from_slice(&snap.triangles);
                         self.gather_candidates(bvh, a, centre, scratch);
                         for &(k, g, q, d2) in &scratch.pending {
-                            let cap = radius - (q - centre).length();
-                            match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
+                            let from_centre = (q - centre).length();
+                            let cap = radius - from_centre;
+                            let lead = from_centre + slack;
+                            let candidates = &scratch.candidates;
+                            match self.exact_check(bvh, q, a, d2, candidates, cap, size, lead) {
                                 Ok((near, far)) => {
                                     certificates[k] =
                                         Certificate::new(&fit, q, d2.sqrt(), near, far);
@@ -924,8 +937,10 @@ impl IncrementalDelaunay {
         let fit = snap.as_ref().and_then(|s| s.fit(v, cx.positions));
         self.gather_candidates(bvh, a, centre, scratch);
         for &(k, g, q, d2) in &scratch.pending {
-            let cap = radius - (q - centre).length();
-            match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size) {
+            let from_centre = (q - centre).length();
+            let cap = radius - from_centre;
+            let lead = from_centre + slack;
+            match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size, lead) {
                 Ok((near, far)) => {
                     if let Some(fit) = &fit {
                         certificates[k] = Certificate::new(fit, q, d2.sqrt(), near, far);
@@ -959,8 +974,10 @@ impl IncrementalDelaunay {
     /// (the nearest triangle, ties to the smallest id, under the hop threshold), else
     /// `Ok(((near, close), other))`: up to [`certify::MAX_CLOSE`] triangles `close` nearer
     /// than the own distance plus [`certify::CLOSE_GAP_REL`] times `size`, `near` their
-    /// smallest distance (`+∞` when none), and `other ≤ d_U` for every other triangle `U ≠ a`
-    /// (and `≤ cap`).
+    /// distances (`+∞` in empty slots), and `other ≤ d_U` for every other triangle `U ≠ a`
+    /// (and `≤ cap`). `lead` is at least the distance of `q` from the point the candidates'
+    /// box distances were measured from (plus rounding slack): once a candidate's box is
+    /// farther from that point than `lead` plus everything still needed, so are the rest.
     #[expect(
         clippy::too_many_arguments,
         reason = "one search step, all inputs named"
@@ -974,7 +991,8 @@ impl IncrementalDelaunay {
         candidates: &[(u32, DVec3, DVec3, f64)],
         cap: f64,
         size: f64,
-    ) -> Result<((f64, [u32; MAX_CLOSE]), f64), u32> {
+        lead: f64,
+    ) -> Result<(Close, f64), u32> {
         let hop = self.hop_distance;
         let d = d2.sqrt();
         let r = d - hop;
@@ -987,17 +1005,24 @@ impl IncrementalDelaunay {
         // Close competitors by distance, ascending.
         let mut close = [(f64::INFINITY, u32::MAX); MAX_CLOSE];
         let mut count = 0;
-        for &(t, lo, hi, _) in candidates {
-            let lower = (lo - q)
-                .max(q - hi)
-                .max(DVec3::ZERO)
-                .length_squared()
-                .sqrt();
+        for &(t, lo, hi, gap2) in candidates {
+            // Candidates come nearest box first: past this one, every remaining box is at
+            // least `√gap2 - lead` from `q`, and each bound below only shrinks.
             let keep = if count == MAX_CLOSE {
                 close[MAX_CLOSE - 1].0
             } else {
                 near
             };
+            let needed = far.max(keep).max(if can_hop { best.0.sqrt() } else { 0.0 });
+            let reach = lead + needed;
+            if gap2 > reach * reach {
+                break;
+            }
+            let lower = (lo - q)
+                .max(q - hi)
+                .max(DVec3::ZERO)
+                .length_squared()
+                .sqrt();
             if (!can_hop || lower * lower > best.0) && lower >= far && lower >= keep {
                 continue;
             }
@@ -1027,12 +1052,13 @@ impl IncrementalDelaunay {
         if found {
             Err(best.1)
         } else {
-            Ok(((close[0].0, close.map(|c| c.1)), far))
+            Ok(((close.map(|c| c.0), close.map(|c| c.1)), far))
         }
     }
 
     /// Exact comparison of a Gaussian's own triangle `a` (squared distance `d2`) with its
-    /// listed competitors: the hop target when one of them wins (as [`Self::exact_check`]).
+    /// listed competitors (`u32::MAX`: an empty or skipped slot): the hop target when one of
+    /// them wins (as [`Self::exact_check`]).
     fn close_check(
         &self,
         bvh: &DeformedBvh,
@@ -1048,7 +1074,7 @@ impl IncrementalDelaunay {
         }
         let mut best = if hop > 0.0 { (r * r, 0u32) } else { (d2, a) };
         let mut found = false;
-        for &t in close.iter().take_while(|&&t| t != u32::MAX) {
+        for &t in close.iter().filter(|&&t| t != u32::MAX) {
             let (du2, _) = bvh.distance_sq(q, t);
             if (du2, t) < best {
                 best = (du2, t);
@@ -1090,7 +1116,15 @@ impl IncrementalDelaunay {
     }
 
     fn members_from_assignment(&self) -> Vec<Vec<u32>> {
-        let mut members = vec![Vec::new(); self.triangles.len()];
+        // Exact capacities, allocated in chart order: the lists then lie in memory roughly in
+        // the order the hop search reads them.
+        let mut counts = vec![0usize; self.triangles.len()];
+        for &t in &self.assigned {
+            if let Some(c) = counts.get_mut(t as usize) {
+                *c += 1;
+            }
+        }
+        let mut members: Vec<Vec<u32>> = counts.into_iter().map(Vec::with_capacity).collect();
         for (i, &t) in self.assigned.iter().enumerate() {
             if let Some(list) = members.get_mut(t as usize) {
                 list.push(i as u32);
