@@ -262,6 +262,10 @@ pub struct FrameStats {
     pub millis: f64,
 }
 
+/// Room left in each chart's member and certificate lists for Gaussians hopping in, so that
+/// they are rarely moved away from their neighbours in memory.
+const SPARE_CAPACITY: usize = 4;
+
 /// Shared inputs of the per-chart hop search of one frame.
 struct SearchContext<'a> {
     bvh: &'a DeformedBvh,
@@ -699,9 +703,13 @@ impl IncrementalDelaunay {
             self.states = self
                 .members
                 .iter()
-                .map(|list| ChartState {
-                    certificates: vec![Certificate::NONE; list.len()],
-                    snapshot: None,
+                .map(|list| {
+                    let mut certificates = Vec::with_capacity(list.len() + SPARE_CAPACITY);
+                    certificates.resize(list.len(), Certificate::NONE);
+                    ChartState {
+                        certificates,
+                        snapshot: None,
+                    }
                 })
                 .collect();
             self.certified = true;
@@ -1116,15 +1124,18 @@ impl IncrementalDelaunay {
     }
 
     fn members_from_assignment(&self) -> Vec<Vec<u32>> {
-        // Exact capacities, allocated in chart order: the lists then lie in memory roughly in
-        // the order the hop search reads them.
+        // Allocated in chart order with a little room for Gaussians hopping in: the lists
+        // then lie in memory roughly in the order the hop search reads them.
         let mut counts = vec![0usize; self.triangles.len()];
         for &t in &self.assigned {
             if let Some(c) = counts.get_mut(t as usize) {
                 *c += 1;
             }
         }
-        let mut members: Vec<Vec<u32>> = counts.into_iter().map(Vec::with_capacity).collect();
+        let mut members: Vec<Vec<u32>> = counts
+            .into_iter()
+            .map(|c| Vec::with_capacity(c + SPARE_CAPACITY))
+            .collect();
         for (i, &t) in self.assigned.iter().enumerate() {
             if let Some(list) = members.get_mut(t as usize) {
                 list.push(i as u32);
