@@ -271,28 +271,32 @@ fn run_once(
             run.flipped.push(flipped_fraction(&d, &positions, template));
         }
         if keep_triangles {
-            // Only a fingerprint is kept: keeping every frame's triangle list would make each
-            // update write its list into fresh pages, which would time the page faults of
-            // this history rather than the meshing.
-            run.fingerprints.push(fingerprint(triangles));
+            run.fingerprints.push(fingerprint(&triangles));
         }
     }
     Ok(run)
 }
 
-/// A 64-bit hash of the triangles as a set (each rotated to start at its smallest vertex id,
-/// then sorted): equal sets give equal fingerprints, and different ones collide with
-/// probability about 2^-64.
-fn fingerprint(mut t: Vec<[u32; 3]>) -> u64 {
-    use std::hash::{Hash, Hasher};
-    for tri in &mut t {
+/// splitmix64's finaliser.
+fn mix(mut x: u64) -> u64 {
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^ (x >> 31)
+}
+
+/// An order-independent 64-bit fingerprint of the triangles as a set (each rotated to start
+/// at its smallest vertex id, hashed, and the hashes summed): equal sets give equal
+/// fingerprints. One streaming pass and no allocation, so that checking a frame between
+/// updates neither keeps every frame's list (fresh pages to fault in) nor evicts the mesher's
+/// state from the caches the way sorting the list would.
+fn fingerprint(t: &[[u32; 3]]) -> u64 {
+    t.iter().fold(0u64, |acc, tri| {
         let k = (0..3).min_by_key(|&k| tri[k]).unwrap_or(0);
-        tri.rotate_left(k);
-    }
-    t.sort_unstable();
-    let mut hasher = std::hash::DefaultHasher::new();
-    t.hash(&mut hasher);
-    hasher.finish()
+        let mut r = *tri;
+        r.rotate_left(k);
+        let h = mix(u64::from(r[0]) ^ mix(u64::from(r[1]) ^ mix(u64::from(r[2]))));
+        acc.wrapping_add(h)
+    })
 }
 
 /// Runs the benchmark.
