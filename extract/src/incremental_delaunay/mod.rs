@@ -28,13 +28,14 @@
 //! vertices are from following it. An exact check of a Gaussian leaves a certificate: its
 //! position pulled back to the snapshot, an upper bound of its own distance and lower bounds
 //! of every other distance, with the (up to [`MAX_CLOSE`]) competitors within
-//! [`CLOSE_GAP_REL`] of the chart size listed apart. Point-triangle distances change by at
-//! most the motion of the point and of the corners, and scale by at most the extreme
-//! singular values of the fit, so as long as the bounds keep the own triangle strictly
-//! nearest (by more than [`FILTER_MARGIN_REL`]), nothing is computed; listed competitors whose
-//! bound is inconclusive are compared with the exact distances (ties resolve as in a full
-//! search); triangles outside the snapshot are excluded by testing the frontier's boxes
-//! against the chart's reach. Gaussians whose certificate fails get the exact search (one per
+//! [`CLOSE_GAP_REL`] of the chart size listed apart, each with its own bound. Point-triangle
+//! distances change by at most the motion of the point and of the corners, and scale by at
+//! most the extreme singular values of the fit, so as long as the bounds keep the own triangle
+//! strictly nearest (by more than [`FILTER_MARGIN_REL`]), nothing is computed; otherwise the
+//! own distance is computed exactly and compared with the bounds again, and only the listed
+//! competitors whose bound is still inconclusive are compared with their exact distances
+//! (ties resolve as in a full search); triangles outside the snapshot are excluded by testing
+//! the frontier's boxes against the chart's reach. Gaussians whose certificate fails get the exact search (one per
 //! chart against the snapshot's triangles) and a new certificate; a chart where more than one
 //! in [`REFRESH_DIVISOR`] fail, or an outside triangle comes near, takes a new snapshot.
 //! Rebuilds do not compute certificates; the next update does.
@@ -71,32 +72,40 @@
 //! triangles), 99,760 bound Gaussians (10 per triangle, normal offset ±0.15 k, in-plane jitter
 //! ±0.3 k), 60 frames of a jaw-like bend plus twist (the twist shears the whole head by ~0.5%
 //! per frame, the bend's blend band stretches by up to ~5% per frame), 2 threads on the shared
-//! 2-core machine (load average 2-4 from other builds while measuring). Deforming the
-//! Gaussians (~2.4 ms/frame) is not included; the times include collecting the triangle list.
-//! At `τ = 0`, 0.33% of the Gaussians hop per frame (6.1% of the charts are redone), 5.9% get
-//! a full check (the others are settled by their certificates), and the incremental mesh
-//! equals the rebuilt one on all 60 frames. Medians over frames 1-59, five runs: update
-//! 22.5-26.1 ms vs rebuild 97.8-106.5 ms wall (x4.1-x4.4); process CPU time (all threads)
-//! 21.4-26.1 ms vs 97.3-106.8 ms (x4.1-x4.7). The x5 target at `τ = 0` is not met yet; the
-//! remaining update time is mostly the per-chart fit and frontier test, the per-Gaussian bound
-//! (random reads of the means of Gaussians that sit in a neighbour's chart), re-triangulating
-//! the ~600 touched charts and collecting the 210k output triangles. Before certificates the
-//! update took 19.7-21.7 ms vs 54.6-55.0 ms on a quieter machine (x2.5-x2.8).
+//! 2-core machine (load average 1.1-1.7 while measuring). Deforming the Gaussians
+//! (~1.3 ms/frame) is not included; the times include collecting the triangle list. At `τ = 0`,
+//! 0.33% of the Gaussians hop per frame (6.1% of the charts are redone), 5.8% get a full check
+//! (the others are settled by their certificates), and the incremental mesh equals the
+//! rebuilt one on all 60 frames. Medians over frames 1-59, nine runs: update 12.7-15.0 ms vs
+//! rebuild 50.7-56.4 ms wall (x3.8-x4.1; one run with a slow rebuild, 75.9 ms, read x5.0);
+//! process CPU time (all threads) 22.6-25.9 ms vs 94.8-103.0 ms (x4.0-x4.2; x5.1 in that
+//! run). One thread
+//! (`RAYON_NUM_THREADS=1`): 22.3-26.3 ms vs 100.2-104.5 ms (x3.9-x4.5). Side by side with the
+//! previous version (same machine, same minutes) the update needs ~10% less CPU (one thread
+//! 22.3-26.3 ms against 26.1-29.6 ms). The x5 target at `τ = 0` is not met: on two threads the
+//! update gains less from the second thread than the rebuild does (its CPU time grows from
+//! ~22-25 ms on one thread to ~25 ms, the rebuild's hardly), so the wall ratio is below the
+//! CPU ratio on an idle machine. What remains per update (one thread, ~22 ms): the
+//! per-Gaussian bound loop (~5 ms, largely waiting on loads of certificates and means), exact
+//! distances for the ~40% of Gaussians whose bound is inconclusive (own distance for ~40k,
+//! ~33k listed competitors; ~4 ms), the per-chart fit and frontier test (~2 ms each), the
+//! full checks (~3 ms), re-triangulating the ~600 touched charts (~2.5 ms) and collecting the
+//! 210k output triangles.
 //!
 //! | τ (× mean edge) | rebuild every | ms/frame (mean, rebuilds incl.) | ms/frame (median) | hopped/frame | Chamfer L1 | flipped triangles |
 //! |---:|---:|---:|---:|---:|---:|---:|
-//! | 0 | never | 27.3 | 26.1 | 0.33% | 4.468e-4 | 2.27% |
-//! | 0 | 10 | 38.5 | 23.5 | 0.30% | 4.468e-4 | 2.27% |
-//! | 0.05 | never | 13.6 | 12.6 | 0.01% | 4.454e-4 | 2.82% |
-//! | 0.05 | 10 | 27.3 | 11.0 | 0.00% | 4.470e-4 | 2.39% |
-//! | 0.1 | never | 13.3 | 12.0 | 0.01% | 4.468e-4 | 2.85% |
-//! | 0.1 | 10 | 27.3 | 10.6 | 0.00% | 4.471e-4 | 2.39% |
-//! | 0.25 | never | 12.6 | 10.2 | 0.00% | 4.459e-4 | 2.86% |
-//! | 0.25 | 10 | 24.5 | 8.7 | 0.00% | 4.469e-4 | 2.39% |
-//! | 0.5 | never | 12.0 | 10.0 | 0.00% | 4.463e-4 | 2.86% |
-//! | 0.5 | 10 | 25.5 | 8.6 | 0.00% | 4.469e-4 | 2.39% |
+//! | 0 | never | 13.4 | 12.8 | 0.33% | 4.468e-4 | 2.27% |
+//! | 0 | 10 | 22.0 | 12.2 | 0.30% | 4.468e-4 | 2.27% |
+//! | 0.05 | never | 6.0 | 5.5 | 0.01% | 4.454e-4 | 2.82% |
+//! | 0.05 | 10 | 14.5 | 4.8 | 0.00% | 4.470e-4 | 2.39% |
+//! | 0.1 | never | 5.7 | 5.0 | 0.01% | 4.468e-4 | 2.85% |
+//! | 0.1 | 10 | 14.5 | 4.6 | 0.00% | 4.471e-4 | 2.39% |
+//! | 0.25 | never | 5.5 | 4.6 | 0.00% | 4.459e-4 | 2.86% |
+//! | 0.25 | 10 | 12.7 | 4.1 | 0.00% | 4.469e-4 | 2.39% |
+//! | 0.5 | never | 4.9 | 4.2 | 0.00% | 4.463e-4 | 2.86% |
+//! | 0.5 | 10 | 13.1 | 4.1 | 0.00% | 4.469e-4 | 2.39% |
 //!
-//! (Load average 3.3-3.6 during the table; the full rebuild took 106 ms/frame in the same
+//! (Load average 1.4-1.6 during the table; the full rebuild took 53.6 ms/frame in the same
 //! run.) With a rebuild period the update after each rebuild checks every Gaussian again to
 //! issue new certificates, which is most of the difference between the mean and the median.
 //! Chamfer (surface mode, 20k samples per side, every 5th frame, against the deformed
