@@ -4,7 +4,6 @@
 mod common;
 use common::{fresh_dir, run, s};
 
-
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::topology::boundary_edges;
 
