@@ -106,21 +106,51 @@ pub(crate) fn triangulate(
             unmeshed: 0,
         };
     }
-    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> =
-        ConstrainedDelaunayTriangulation::new();
-    let mut handles = Vec::with_capacity(3);
-    for p in frame.corners {
-        match cdt.insert(Point2::new(p.x, p.y)) {
-            Ok(h) => handles.push(h),
-            Err(_) => return whole(members.len()),
-        }
+    WORK.with_borrow_mut(|work| {
+        let Work { cdt, ids } = work;
+        // `clear` keeps the allocations and resets the hint generator: the same state as a
+        // new triangulation, so the result does not depend on earlier charts.
+        cdt.clear();
+        ids.clear();
+        triangulate_with(frame, corners, members, margin, cdt, ids)
+            .unwrap_or_else(|| whole(members.len()))
+    })
+}
+
+/// A chart triangulation and its vertex-id map, reused between charts on one thread (a fresh
+/// spade triangulation per chart spent much of its time allocating).
+#[derive(Default)]
+struct Work {
+    cdt: ConstrainedDelaunayTriangulation<Point2<f64>>,
+    ids: Vec<u32>,
+}
+
+thread_local! {
+    /// This thread's triangulation buffers.
+    static WORK: std::cell::RefCell<Work> = std::cell::RefCell::default();
+}
+
+/// [`triangulate`] into the cleared `cdt` and `ids`; `None` when the chart falls back to the
+/// template triangle.
+fn triangulate_with(
+    frame: &ChartFrame,
+    corners: [u32; 3],
+    members: &[(u32, [f64; 3])],
+    margin: f64,
+    cdt: &mut ConstrainedDelaunayTriangulation<Point2<f64>>,
+    ids: &mut Vec<u32>,
+) -> Option<ChartMesh> {
+    let a = corners[0];
+    let mut handles = [spade::handles::FixedVertexHandle::from_index(0); 3];
+    for (slot, p) in handles.iter_mut().zip(frame.corners) {
+        *slot = cdt.insert(Point2::new(p.x, p.y)).ok()?;
     }
     // The corners are distinct (the frame is not degenerate), so there are three vertices.
     if cdt.num_vertices() != 3 {
-        return whole(members.len());
+        return None;
     }
     // Vertex handles are dense indices in insertion order; `ids` maps them to output ids.
-    let mut ids: Vec<u32> = vec![u32::MAX; 3];
+    ids.resize(3, u32::MAX);
     for (h, id) in handles.iter().zip(corners) {
         if let Some(slot) = ids.get_mut(h.index()) {
             *slot = id;
@@ -148,7 +178,7 @@ pub(crate) fn triangulate(
     // Every point is strictly inside, so the hull is the three corners; anything else means
     // rounding pushed a point out and the chart falls back to the template triangle.
     if cdt.convex_hull_size() != 3 || ids.len() != cdt.num_vertices() {
-        return whole(members.len());
+        return None;
     }
     let triangles = cdt
         .inner_faces()
@@ -157,8 +187,8 @@ pub(crate) fn triangulate(
                 .map(|v| ids.get(v.fix().index()).copied().unwrap_or(a))
         })
         .collect();
-    ChartMesh {
+    Some(ChartMesh {
         triangles,
         unmeshed,
-    }
+    })
 }

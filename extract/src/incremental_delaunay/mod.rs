@@ -89,8 +89,16 @@
 //! per-Gaussian bound loop (~5 ms, largely waiting on loads of certificates and means), exact
 //! distances for the ~40% of Gaussians whose bound is inconclusive (own distance for ~40k,
 //! ~33k listed competitors; ~4 ms), the per-chart fit and frontier test (~2 ms each), the
-//! full checks (~3 ms), re-triangulating the ~600 touched charts (~2.5 ms) and collecting the
-//! 210k output triangles.
+//! full checks (~3 ms), re-triangulating the ~600 touched charts (~2 ms) and collecting the
+//! 210k output triangles. Re-triangulating used not to gain from the second thread at all
+//! (2.4 ms on one thread, 2.5-2.8 ms on two: a fresh spade triangulation per chart, mostly
+//! allocation); each thread now reuses one cleared triangulation (`chart`), which takes it to
+//! ~2.0 ms on one thread and ~1.05 ms on two (stage timers, means over frames 1-59). This
+//! speeds up the rebuild's triangulation just the same, so the ratio hardly moves: side by side
+//! with the previous build (three runs each, load average 1.5-1.7), update 12.0-14.2 ms vs
+//! rebuild 48.9-53.0 ms wall (x3.6-x4.3), CPU 22.6-24.5 ms vs 91.2-92.8 ms (x3.8-x4.1), against
+//! 12.9-14.4 ms vs 54.0-60.1 ms (x4.1-x4.2) and CPU 23.3-25.3 ms vs 99.5-102.8 ms (x4.1-x4.3)
+//! before. The hop search (~10.5 ms of the ~12 ms wall on two threads) is what is left to cut.
 //!
 //! | τ (× mean edge) | rebuild every | ms/frame (mean, rebuilds incl.) | ms/frame (median) | hopped/frame | Chamfer L1 | flipped triangles |
 //! |---:|---:|---:|---:|---:|---:|---:|
