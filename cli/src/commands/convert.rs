@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::bail;
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::animation::{AnimatedTemplate, DEFAULT_FPS, GltfTemplate, MeshSequence};
+use trisplat_geometry::animation::{
+    AnimatedTemplate, DEFAULT_FPS, GltfTemplate, MeshSequence, check_topology,
+};
 use trisplat_geometry::io::{
     self, Format, ObjVertices, PlyEncoding, ReadOptions, SequenceLayout, WriteOptions,
 };
@@ -211,49 +213,5 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         io::write_mesh_sequence(&args.output, &frames, &times, SequenceLayout::MorphTargets);
     spinner.finish_and_clear();
     result?;
-    Ok(())
-}
-
-/// Checks that frame `mesh` (read from `path`) has the vertex count and triangles of the first
-/// frame, with the message of the animation module's topology check.
-fn check_topology(
-    mesh: &TriMesh,
-    first: &TriMesh,
-    path: &Path,
-    first_path: &Path,
-) -> anyhow::Result<()> {
-    let differs = |what: String| {
-        anyhow::anyhow!(
-            "{}: topology differs from {}: {what} (every frame needs the topology of the first)",
-            path.display(),
-            first_path.display()
-        )
-    };
-    if mesh.vertex_count() != first.vertex_count() {
-        return Err(differs(format!(
-            "{} vertices instead of {}",
-            mesh.vertex_count(),
-            first.vertex_count()
-        )));
-    }
-    if mesh.triangle_count() != first.triangle_count() {
-        return Err(differs(format!(
-            "{} triangles instead of {}",
-            mesh.triangle_count(),
-            first.triangle_count()
-        )));
-    }
-    if let Some(t) = mesh
-        .triangles()
-        .iter()
-        .zip(first.triangles())
-        .position(|(a, b)| a != b)
-    {
-        return Err(differs(format!(
-            "triangle {t} is {:?} instead of {:?}",
-            mesh.triangles()[t],
-            first.triangles()[t]
-        )));
-    }
     Ok(())
 }

@@ -29,7 +29,7 @@ pub use self::blendshape::{
 pub use self::error::AnimationError;
 pub use self::gltf::{Clip, GltfTemplate, VertexSkinning};
 pub use self::sampler::Interpolation;
-pub use self::sequence::{MeshSequence, natural_cmp};
+pub use self::sequence::{MeshSequence, check_topology, natural_cmp};
 use crate::TriMesh;
 
 /// Frame rate used when a source has no timing of its own (the LAM/ARKit tracks are 30 fps).

@@ -281,8 +281,12 @@ impl AnimatedTemplate for MeshSequence {
     }
 }
 
-/// Checks that `mesh` (read from `path`) has the vertex count and triangles of `reference`.
-pub(crate) fn check_topology(
+/// Checks that `mesh` (read from `path`) has the vertex count and triangles of `reference`
+/// (read from `reference_path`).
+///
+/// # Errors
+/// [`AnimationError::TopologyMismatch`] naming both files and the first difference.
+pub fn check_topology(
     mesh: &TriMesh,
     reference: &TriMesh,
     path: &Path,
