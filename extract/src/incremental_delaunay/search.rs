@@ -15,7 +15,7 @@ use obvhs::bvh2::Bvh2;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
 use obvhs::triangle::Triangle;
 use rayon::prelude::*;
-use trisplat_geometry::spatial::closest_point_on_triangle;
+use trisplat_geometry::spatial::{box_distance_sq, closest_point_on_triangle};
 
 /// Node boxes grow by this fraction of the template's bounding-box diagonal (plus the same
 /// fraction of each coordinate's magnitude), far above the f64 rounding of a point-triangle
@@ -353,11 +353,4 @@ fn gather_corners(positions: &[Vec3], tris: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
         .with_min_len(1024)
         .map(|t| t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO)))
         .collect()
-}
-
-fn box_distance_sq(aabb: &BvhAabb, q: DVec3) -> f64 {
-    let lo = Vec3::from(aabb.min).as_dvec3();
-    let hi = Vec3::from(aabb.max).as_dvec3();
-    let d = (lo - q).max(q - hi).max(DVec3::ZERO);
-    d.length_squared()
 }

@@ -333,8 +333,11 @@ impl TriangleBvh {
 }
 
 /// Squared distance from `q` to the box (0 inside), in f64.
+/// Squared distance from `q` to an obvhs box (0 inside), in f64: a lower bound of the squared
+/// distance to anything in the box.
 #[inline]
-fn box_distance_sq(aabb: &BvhAabb, q: DVec3) -> f64 {
+#[must_use]
+pub fn box_distance_sq(aabb: &BvhAabb, q: DVec3) -> f64 {
     let lo = Vec3::from(aabb.min).as_dvec3();
     let hi = Vec3::from(aabb.max).as_dvec3();
     let d = (lo - q).max(q - hi).max(DVec3::ZERO);

@@ -8,7 +8,7 @@
 pub mod bvh;
 pub mod kdtree;
 
-pub use bvh::{ClosestPoint, RayHit, TriangleBvh, closest_point_on_triangle};
+pub use bvh::{ClosestPoint, RayHit, TriangleBvh, box_distance_sq, closest_point_on_triangle};
 pub use kdtree::{Nearest, PointIndex, distance_f64};
 
 use glam::Vec3;
