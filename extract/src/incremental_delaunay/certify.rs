@@ -27,6 +27,16 @@
 //! `N`, or the chart takes a new snapshot. Gaussians whose certificate does not hold get the
 //! exact search, which renews their certificate.
 //!
+//! The drift of a neighbourhood from its snapshot only grows while the template keeps moving
+//! one way, and every bound pays it every frame. Once it exceeds [`REBASE_REL`] of the chart
+//! size, the chart *rebases*: the snapshot keeps its triangles and frontier, its coordinates
+//! are taken afresh at the current frame, and every member's certificate is issued again from
+//! the bounds it has now (exact where this frame computed them). The drift is then paid once.
+//!
+//! A certificate is kept in two parts: the position and the two numbers the test of every
+//! frame needs (own distance, and the lowest of all competitors' bounds), 20 bytes, and the
+//! competitors' bounds and ids, read only for the Gaussians that test does not settle.
+//!
 //! The slack ([`FILTER_MARGIN_REL`](super::FILTER_MARGIN_REL) of the template diagonal plus the
 //! coordinate magnitude) is far above the rounding of the computed distances, so a certified
 //! Gaussian's own triangle is strictly nearest in the computed distances too: the result is
@@ -47,6 +57,14 @@ pub const FLAT_RATIO: f64 = 1e-8;
 /// the chart's circumradius about its centroid) than its Gaussians need, so that triangles
 /// moving a little do not leave the snapshot at once.
 pub const SNAPSHOT_MARGIN_REL: f64 = 0.1;
+
+/// A chart moves its snapshot to the current frame (keeping its triangles, re-issuing every
+/// certificate from its current bounds) once its neighbourhood has drifted from the snapshot
+/// by more than this fraction of the chart's circumradius: fit residual plus the spread of
+/// the fit's singular values times the circumradius. Bounds lose that drift once, instead of
+/// carrying the growing drift of an old snapshot every frame (measured best between 0.04 and
+/// 0.08 on the `delaunay` benchmark; 0.01 and 0.02 re-issue too often).
+pub const REBASE_REL: f64 = 0.05;
 
 /// A chart checks all its Gaussians exactly and takes a new snapshot when more than one in
 /// this many fail their certificate (the errors of old certificates only grow until then).
@@ -162,23 +180,7 @@ impl Snapshot {
             .into_iter()
             .filter_map(|k| Some((k, frame.apply(positions.get(k as usize)?.as_dvec3()))))
             .collect();
-        if vertices.is_empty() {
-            return None;
-        }
-        let mean = vertices.iter().map(|v| v.1).sum::<DVec3>() / vertices.len() as f64;
-        let mut gram = DMat3::ZERO;
-        for &(_, s) in &vertices {
-            let d = s - mean;
-            gram += DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-        }
-        // The normal of the chart is the local z axis; a flat neighbourhood says nothing about
-        // how it maps, so it is tied to the chart's current unit normal with this weight.
-        let weight = (gram.x_axis.x + gram.y_axis.y + gram.z_axis.z).max(f64::MIN_POSITIVE);
-        gram.z_axis.z += weight;
-        let gram_inverse = gram.inverse();
-        if !gram_inverse.is_finite() {
-            return None;
-        }
+        let (mean, gram_inverse, weight) = Self::moments(&vertices)?;
         Some(Self {
             triangles,
             frontier,
@@ -187,6 +189,64 @@ impl Snapshot {
             gram_inverse,
             weight,
         })
+    }
+
+    /// Moves the snapshot to the current frame and returns its fit there: the same triangles
+    /// and frontier, their vertices' local coordinates taken afresh in `frame` (built from
+    /// the chart's current corners `v`). Certificates issued under the old snapshot are void
+    /// afterwards; the caller issues new ones from its current bounds. `None`, with the
+    /// snapshot unchanged, when the new Gram matrix is singular or the new fit fails. `saved`
+    /// is scratch space.
+    pub(crate) fn rebase(
+        &mut self,
+        frame: &LocalFrame,
+        v: [DVec3; 3],
+        positions: &[glam::Vec3],
+        saved: &mut Vec<(u32, DVec3)>,
+    ) -> Option<Fit> {
+        saved.clear();
+        saved.extend_from_slice(&self.vertices);
+        let before = (self.mean, self.gram_inverse, self.weight);
+        let mut moved = true;
+        for (k, s) in &mut self.vertices {
+            match positions.get(*k as usize) {
+                Some(p) => *s = frame.apply(p.as_dvec3()),
+                None => moved = false,
+            }
+        }
+        let fit = match moved.then(|| Self::moments(&self.vertices)).flatten() {
+            Some((mean, gram_inverse, weight)) => {
+                (self.mean, self.gram_inverse, self.weight) = (mean, gram_inverse, weight);
+                self.fit(v, positions)
+            }
+            None => None,
+        };
+        if fit.is_none() {
+            std::mem::swap(&mut self.vertices, saved);
+            (self.mean, self.gram_inverse, self.weight) = before;
+        }
+        fit
+    }
+
+    /// Mean, regularised inverse Gram matrix and regularisation weight of local coordinates.
+    fn moments(vertices: &[(u32, DVec3)]) -> Option<(DVec3, DMat3, f64)> {
+        if vertices.is_empty() {
+            return None;
+        }
+        let mean = vertices.iter().map(|v| v.1).sum::<DVec3>() / vertices.len() as f64;
+        let mut gram = DMat3::ZERO;
+        for &(_, s) in vertices {
+            let d = s - mean;
+            gram += DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        }
+        // The normal of the chart is the local z axis; a flat neighbourhood says nothing about
+        // how it maps, so it is tied to the chart's current unit normal with this weight.
+        let weight = (gram.x_axis.x + gram.y_axis.y + gram.z_axis.z).max(f64::MIN_POSITIVE);
+        gram.z_axis.z += weight;
+        let gram_inverse = gram.inverse();
+        gram_inverse
+            .is_finite()
+            .then_some((mean, gram_inverse, weight))
     }
 
     /// The fit for the chart's current corners `v`; `None` when the triangle is flat or the
@@ -249,6 +309,7 @@ impl Fit {
     }
 
     /// Distance between a current point and the image of snapshot point `s`.
+    #[inline]
     pub(crate) fn mismatch(&self, q: DVec3, s: DVec3) -> f64 {
         (q - (self.linear * s + self.translation)).length()
     }
@@ -267,22 +328,42 @@ pub const CLOSE_GAP_REL: f64 = 0.15;
 pub(crate) type Close = ([f64; MAX_CLOSE], [u32; MAX_CLOSE]);
 
 /// What an exact check proved about one Gaussian, pulled back to the chart's snapshot
-/// coordinates (see the module documentation). Stored in f32 (44 bytes): the bounds are
-/// rounded outward and the position's rounding is part of the measured mismatch, so the
-/// rounding never weakens the proof.
+/// coordinates (see the module documentation): the part every update reads. Stored in f32
+/// (20 bytes): the bounds are rounded outward and the position's rounding is part of the
+/// measured mismatch, so the rounding never weakens the proof. The rest of the proof, read
+/// only when this part is inconclusive, is the Gaussian's [`Competitors`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Certificate {
     /// The deformed mean in snapshot coordinates.
     local: [f32; 3],
     /// Upper bound of its distance to the chart triangle there.
     own: f32,
-    /// Lower bound of its distance to every other triangle of the snapshot not in `close`
-    /// there; `-∞`: no certificate.
+    /// Lower bound of its distance to every other triangle of the snapshot there (the
+    /// minimum of [`Competitors`]' bounds); `-∞`: no certificate.
+    lower: f32,
+}
+
+/// The competitors' side of a [`Certificate`], in the same snapshot coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Competitors {
+    /// Lower bound of the distance to every other triangle of the snapshot not in `close`.
     other: f32,
-    /// Lower bounds of its distances to the triangles in `close` there (`+∞` where none).
+    /// Lower bounds of the distances to the triangles in `close` (`+∞` where none).
     near: [f32; MAX_CLOSE],
-    /// Competitors compared exactly every frame (`u32::MAX`: none).
+    /// Competitors compared exactly when the bounds do not settle them (`u32::MAX`: none).
     pub(crate) close: [u32; MAX_CLOSE],
+}
+
+/// A certificate's bounds at the current frame (see [`Certificate::bounds`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Bounds {
+    /// Upper bound of the own distance.
+    pub(crate) own: f64,
+    /// Lower bound of every other distance.
+    pub(crate) lower: f64,
+    /// How far the Gaussian and its neighbourhood are from following the fit (what the
+    /// competitors' bounds need, see [`Competitors::other_bound`]).
+    pub(crate) error: f64,
 }
 
 impl Certificate {
@@ -290,62 +371,99 @@ impl Certificate {
     pub(crate) const NONE: Self = Self {
         local: [0.0; 3],
         own: f32::INFINITY,
+        lower: f32::NEG_INFINITY,
+    };
+
+    /// The certificate of a Gaussian at `q` with own distance at most `own`, the triangles
+    /// `close` at distances at least `near` (slot by slot) and every other triangle at
+    /// distance at least `other`, under `fit`.
+    pub(crate) fn issue(
+        fit: &Fit,
+        q: DVec3,
+        own: f64,
+        (near, close): Close,
+        other: f64,
+    ) -> (Self, Competitors) {
+        let local = fit.pull_back(q).as_vec3();
+        let error = fit.mismatch(q, local.as_dvec3()) + fit.residual;
+        let down = |x: f64| round_down((x - error) / fit.sigma_hi);
+        let mut listed = [f32::INFINITY; MAX_CLOSE];
+        for ((l, &n), &t) in listed.iter_mut().zip(&near).zip(&close) {
+            if t != u32::MAX {
+                *l = down(n);
+            }
+        }
+        let competitors = Competitors {
+            other: down(other),
+            near: listed,
+            close,
+        };
+        let lower = listed.iter().fold(competitors.other, |m, &n| m.min(n));
+        let certificate = Self {
+            local: local.to_array(),
+            own: round_up((own + error) / fit.sigma_lo),
+            lower,
+        };
+        (certificate, competitors)
+    }
+
+    /// Whether it certifies anything.
+    pub(crate) fn is_some(&self) -> bool {
+        self.lower > f32::NEG_INFINITY
+    }
+
+    /// Bounds for the Gaussian now at `q`.
+    #[inline]
+    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> Bounds {
+        let local = DVec3::new(
+            f64::from(self.local[0]),
+            f64::from(self.local[1]),
+            f64::from(self.local[2]),
+        );
+        let error = fit.mismatch(q, local) + fit.residual;
+        Bounds {
+            own: fit.sigma_hi * f64::from(self.own) + error,
+            lower: fit.sigma_lo * f64::from(self.lower) - error,
+            error,
+        }
+    }
+}
+
+impl Competitors {
+    /// No competitors (pairs with [`Certificate::NONE`]).
+    pub(crate) const NONE: Self = Self {
         other: f32::NEG_INFINITY,
         near: [f32::INFINITY; MAX_CLOSE],
         close: [u32::MAX; MAX_CLOSE],
     };
 
-    /// The certificate of a Gaussian at `q` with own distance `own`, the triangles `close`
-    /// at distances at least `near` (slot by slot) and every other triangle at distance at
-    /// least `other`, under `fit`.
-    pub(crate) fn new(fit: &Fit, q: DVec3, own: f64, (near, close): Close, other: f64) -> Self {
-        let local = fit.pull_back(q).as_vec3();
-        let error = fit.mismatch(q, local.as_dvec3()) + fit.residual;
-        Self {
-            local: local.to_array(),
-            own: round_up((own + error) / fit.sigma_lo),
-            other: round_down((other - error) / fit.sigma_hi),
-            near: near.map(|n| round_down((n - error) / fit.sigma_hi)),
-            close,
-        }
+    /// Lower bound of every unlisted distance now (`error` from [`Certificate::bounds`]).
+    #[inline]
+    pub(crate) fn other_bound(&self, fit: &Fit, error: f64) -> f64 {
+        fit.sigma_lo * f64::from(self.other) - error
     }
 
-    /// Whether it certifies anything.
-    pub(crate) fn is_some(&self) -> bool {
-        self.other > f32::NEG_INFINITY
-    }
-
-    /// Bounds `(own distance upper, listed competitors lower, other distances lower, error)`
-    /// for the Gaussian now at `q` (`error` is what [`Certificate::near_bound`] needs).
-    pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> (f64, f64, f64, f64) {
-        let local = glam::Vec3::from_array(self.local).as_dvec3();
-        let error = fit.mismatch(q, local) + fit.residual;
-        let near = self.near.iter().copied().fold(f32::INFINITY, f32::min);
-        (
-            fit.sigma_hi * f64::from(self.own) + error,
-            fit.sigma_lo * f64::from(near) - error,
-            fit.sigma_lo * f64::from(self.other) - error,
-            error,
-        )
-    }
-
-    /// Lower bound of the current distance to the listed competitor in slot `j` (`error` as
-    /// returned by [`Certificate::bounds`]; `+∞` for an empty slot).
-    pub(crate) fn near_bound(&self, fit: &Fit, error: f64, j: usize) -> f64 {
-        self.near
-            .get(j)
-            .map_or(f64::INFINITY, |&n| fit.sigma_lo * f64::from(n) - error)
+    /// Lower bounds of the listed competitors' distances now (`+∞` for empty slots).
+    #[inline]
+    pub(crate) fn near_bounds(&self, fit: &Fit, error: f64) -> [f64; MAX_CLOSE] {
+        self.near.map(|n| fit.sigma_lo * f64::from(n) - error)
     }
 }
 
-/// The smallest f32 not below `x` (NaN stays NaN).
+/// The smallest f32 not below `x`; `+∞` for NaN (an upper bound that bounds nothing).
 fn round_up(x: f64) -> f32 {
+    if x.is_nan() {
+        return f32::INFINITY;
+    }
     let y = x as f32;
     if f64::from(y) < x { y.next_up() } else { y }
 }
 
-/// The largest f32 not above `x` (NaN stays NaN).
+/// The largest f32 not above `x`; `-∞` for NaN (a lower bound that bounds nothing).
 fn round_down(x: f64) -> f32 {
+    if x.is_nan() {
+        return f32::NEG_INFINITY;
+    }
     let y = x as f32;
     if f64::from(y) > x { y.next_down() } else { y }
 }

@@ -139,10 +139,10 @@ use trisplat_geometry::spatial::MAX_COORDINATE;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
+use self::certify::{Bounds, Certificate, Close, Competitors, Fit, LocalFrame, Snapshot, is_flat};
 pub use self::certify::{
-    CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REFRESH_DIVISOR, SNAPSHOT_MARGIN_REL,
+    CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REBASE_REL, REFRESH_DIVISOR, SNAPSHOT_MARGIN_REL,
 };
-use self::certify::{Certificate, Close, LocalFrame, Snapshot, is_flat};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
 pub use self::search::BOX_PADDING_REL;
 use self::search::DeformedBvh;
@@ -306,6 +306,17 @@ struct Scratch {
     marks: Vec<u32>,
     token: u32,
     frontier: Vec<u32>,
+    /// The chart members' deformed means.
+    means: Vec<DVec3>,
+    /// A snapshot's vertices while it is rebased.
+    saved: Vec<(u32, DVec3)>,
+    /// Per member while rebasing: its current bounds (own, listed competitors, others).
+    current: Vec<(f64, [f64; MAX_CLOSE], f64)>,
+    /// Members whose certificate did not settle them at once.
+    unsettled: Vec<Unsettled>,
+    /// Members checked against their exact own distance this frame: index in the chart,
+    /// own distance, lower bounds of the listed competitors' and of every other distance.
+    exact: Vec<(usize, f64, [f64; MAX_CLOSE], f64)>,
 }
 
 impl Scratch {
@@ -331,8 +342,47 @@ thread_local! {
 struct ChartState {
     /// Certificates of the chart's members, in the order of its member list.
     certificates: Vec<Certificate>,
+    /// Their competitors' side, in the same order.
+    competitors: Vec<Competitors>,
     /// The neighbourhood snapshot the certificates refer to.
     snapshot: Option<Snapshot>,
+}
+
+impl ChartState {
+    /// `len` members without certificates and no snapshot.
+    fn empty(len: usize) -> Self {
+        let mut certificates = Vec::with_capacity(len + SPARE_CAPACITY);
+        certificates.resize(len, Certificate::NONE);
+        let mut competitors = Vec::with_capacity(len + SPARE_CAPACITY);
+        competitors.resize(len, Competitors::NONE);
+        Self {
+            certificates,
+            competitors,
+            snapshot: None,
+        }
+    }
+
+    /// Forgets every certificate (`len` members).
+    fn clear(&mut self, len: usize) {
+        self.certificates.clear();
+        self.certificates.resize(len, Certificate::NONE);
+        self.competitors.clear();
+        self.competitors.resize(len, Competitors::NONE);
+    }
+}
+
+/// A chart member whose certificate did not settle it at once (see
+/// [`IncrementalDelaunay::hops_of_chart`]).
+#[derive(Clone, Copy, Debug)]
+struct Unsettled {
+    /// Index in the chart's member list.
+    k: usize,
+    /// Deformed mean.
+    q: DVec3,
+    /// Distance of `q` from the chart's centroid.
+    from_centre: f64,
+    /// The certificate's bounds now.
+    bounds: Bounds,
 }
 
 /// The charts' part of a frame update, gathered per rayon task.
@@ -720,14 +770,7 @@ impl IncrementalDelaunay {
             self.states = self
                 .members
                 .iter()
-                .map(|list| {
-                    let mut certificates = Vec::with_capacity(list.len() + SPARE_CAPACITY);
-                    certificates.resize(list.len(), Certificate::NONE);
-                    ChartState {
-                        certificates,
-                        snapshot: None,
-                    }
-                })
+                .map(|list| ChartState::empty(list.len()))
                 .collect();
             self.certified = true;
         }
@@ -776,6 +819,7 @@ impl IncrementalDelaunay {
                 list.remove(k);
                 if let Some(state) = self.states.get_mut(a as usize) {
                     state.certificates.remove(k);
+                    state.competitors.remove(k);
                 }
             }
             if let Some(list) = self.members.get_mut(c as usize)
@@ -784,6 +828,7 @@ impl IncrementalDelaunay {
                 list.insert(k, g);
                 if let Some(state) = self.states.get_mut(c as usize) {
                     state.certificates.insert(k, Certificate::NONE);
+                    state.competitors.insert(k, Competitors::NONE);
                 }
             }
             self.assigned[i] = c;
@@ -837,59 +882,78 @@ impl IncrementalDelaunay {
         let margin = SNAPSHOT_MARGIN_REL * size;
         let slack =
             FILTER_MARGIN_REL * (f64::from(self.diagonal) + centre.abs().max_element() + size);
+        // The members' means are loaded first (independent loads, overlapping the fit).
+        scratch.means.clear();
+        scratch
+            .means
+            .extend(list.iter().map(|&g| cx.means[g as usize].as_dvec3()));
         let usable = |snap: &Snapshot| match cx.flat {
             None => true,
             Some(flat) => snap.triangles.iter().all(|&t| !flat[t as usize]),
         };
         let (moves_before, checked_close_before) = (out.moves.len(), out.checked_close);
-        let certificates = &mut state.certificates;
-        if let Some(snap) = &state.snapshot
-            && certificates.len() == list.len()
+        if let Some(snap) = state.snapshot.as_mut()
+            && state.certificates.len() == list.len()
             && usable(snap)
             && let Some(fit) = snap.fit(v, cx.positions)
         {
+            // First the bounds of every member; the few they do not settle afterwards.
             let mut reach = 0.0f64;
-            scratch.pending.clear();
-            for (k, (&g, c)) in list.iter().zip(certificates.iter()).enumerate() {
-                let q = cx.means[g as usize].as_dvec3();
+            scratch.unsettled.clear();
+            for (k, (c, &q)) in state.certificates.iter().zip(&scratch.means).enumerate() {
                 let from_centre = (q - centre).length();
-                let d2 = if c.is_some() {
-                    let (own, near, other, error) = c.bounds(&fit, q);
-                    let own_slack =
-                        slack + FILTER_MARGIN_REL * (q.abs().max_element() + from_centre + own);
-                    if near.min(other) - (own - hop) > own_slack {
-                        // Every other triangle is certainly farther.
-                        reach = reach.max(from_centre + (own - hop).max(0.0));
-                        continue;
-                    }
-                    let (d2, _) = bvh.distance_sq(q, a);
-                    let r = d2.sqrt() - hop;
+                let bounds = c.bounds(&fit, q);
+                if bounds.lower - (bounds.own - hop) > own_slack(slack, q, from_centre, bounds.own)
+                {
+                    // Every other triangle is certainly farther.
+                    reach = reach.max(from_centre + (bounds.own - hop).max(0.0));
+                } else {
+                    scratch.unsettled.push(Unsettled {
+                        k,
+                        q,
+                        from_centre,
+                        bounds,
+                    });
+                }
+            }
+            scratch.pending.clear();
+            scratch.exact.clear();
+            for u in &scratch.unsettled {
+                let (k, q, from_centre) = (u.k, u.q, u.from_centre);
+                let g = list[k];
+                let (d2, _) = bvh.distance_sq(q, a);
+                let r = d2.sqrt() - hop;
+                if state.certificates[k].is_some() {
+                    let competitors = &state.competitors[k];
+                    let other = competitors.other_bound(&fit, u.bounds.error);
+                    let own_slack = own_slack(slack, q, from_centre, u.bounds.own);
                     if other - r > own_slack {
                         // The unlisted triangles by the bound against the exact own distance;
                         // the listed competitors likewise when their bound suffices, else
                         // exactly. Triangles outside the snapshot are excluded by the test
                         // below, whatever the outcome.
                         reach = reach.max(from_centre + r.max(0.0));
-                        if near - r <= own_slack {
-                            // Only the listed competitors whose own bound is inconclusive.
-                            let mut close = c.close;
-                            for (j, t) in close.iter_mut().enumerate() {
-                                if c.near_bound(&fit, error, j) - r > own_slack {
-                                    *t = u32::MAX;
-                                }
+                        let mut near = competitors.near_bounds(&fit, u.bounds.error);
+                        let mut close = competitors.close;
+                        let mut any = false;
+                        for (t, n) in close.iter_mut().zip(&near) {
+                            if n - r > own_slack {
+                                *t = u32::MAX;
                             }
-                            if let Some(t) = self.close_check(bvh, q, a, d2, &close) {
+                            any |= *t != u32::MAX;
+                        }
+                        if any {
+                            // Only the listed competitors whose own bound is inconclusive.
+                            if let Some(t) = self.close_check(bvh, q, a, d2, &close, &mut near) {
                                 out.moves.push((g, t));
                             }
                             out.checked_close += 1;
                         }
+                        scratch.exact.push((k, d2.sqrt(), near, other));
                         continue;
                     }
-                    d2
-                } else {
-                    bvh.distance_sq(q, a).0
-                };
-                reach = reach.max(from_centre + (d2.sqrt() - hop).max(0.0));
+                }
+                reach = reach.max(from_centre + r.max(0.0));
                 scratch.pending.push((k, g, q, d2));
             }
             if scratch.pending.len() * REFRESH_DIVISOR <= list.len() {
@@ -898,9 +962,20 @@ impl IncrementalDelaunay {
                 let inside =
                     !bvh.any_within(&snap.frontier, centre, radius * radius, &mut scratch.stack);
                 if inside {
+                    // Move the snapshot to this frame when the neighbourhood has drifted
+                    // from it: the certificates are issued afresh from the bounds above.
+                    let drift = fit.residual + (fit.sigma_hi - fit.sigma_lo) * size;
+                    let fit = if drift > REBASE_REL * size {
+                        Self::rebase(cx.bvh.corners(a), cx.positions, state, scratch, &fit)
+                            .unwrap_or(fit)
+                    } else {
+                        fit
+                    };
                     if pending {
                         scratch.found.clear();
-                        scratch.found.extend_from_slice(&snap.triangles);
+                        if let Some(snap) = &state.snapshot {
+                            scratch.found.extend_from_slice(&snap.triangles);
+                        }
                         self.gather_candidates(bvh, a, centre, scratch);
                         for &(k, g, q, d2) in &scratch.pending {
                             let from_centre = (q - centre).length();
@@ -909,8 +984,8 @@ impl IncrementalDelaunay {
                             let candidates = &scratch.candidates;
                             match self.exact_check(bvh, q, a, d2, candidates, cap, size, lead) {
                                 Ok((near, far)) => {
-                                    certificates[k] =
-                                        Certificate::new(&fit, q, d2.sqrt(), near, far);
+                                    (state.certificates[k], state.competitors[k]) =
+                                        Certificate::issue(&fit, q, d2.sqrt(), near, far);
                                 }
                                 Err(t) => out.moves.push((g, t)),
                             }
@@ -927,14 +1002,12 @@ impl IncrementalDelaunay {
         out.refreshed += 1;
         scratch.pending.clear();
         let mut reach = 0.0f64;
-        for (k, &g) in list.iter().enumerate() {
-            let q = cx.means[g as usize].as_dvec3();
+        for (k, (&g, &q)) in list.iter().zip(&scratch.means).enumerate() {
             let (d2, _) = bvh.distance_sq(q, a);
             reach = reach.max((q - centre).length() + (d2.sqrt() - hop).max(0.0));
             scratch.pending.push((k, g, q, d2));
         }
-        certificates.clear();
-        certificates.resize(list.len(), Certificate::NONE);
+        state.clear(list.len());
         let radius = reach + slack + margin;
         scratch.found.clear();
         bvh.triangles_within_using(
@@ -968,7 +1041,8 @@ impl IncrementalDelaunay {
             match self.exact_check(bvh, q, a, d2, &scratch.candidates, cap, size, lead) {
                 Ok((near, far)) => {
                     if let Some(fit) = &fit {
-                        certificates[k] = Certificate::new(fit, q, d2.sqrt(), near, far);
+                        (state.certificates[k], state.competitors[k]) =
+                            Certificate::issue(fit, q, d2.sqrt(), near, far);
                     }
                 }
                 Err(t) => out.moves.push((g, t)),
@@ -976,6 +1050,52 @@ impl IncrementalDelaunay {
         }
         out.checked += list.len();
         state.snapshot = if fit.is_some() { snap } else { None };
+    }
+
+    /// Moves a chart's snapshot to this frame (the chart triangle's corners are `v`; `fit`
+    /// maps the old snapshot here) and issues every member's certificate afresh from its
+    /// current bounds: the exact ones found this frame (`scratch.exact`), else its old
+    /// certificate's. Returns the new fit, or `None` (and nothing changed) when the chart
+    /// triangle is flat or the new fit fails.
+    fn rebase(
+        v: [DVec3; 3],
+        positions: &[Vec3],
+        state: &mut ChartState,
+        scratch: &mut Scratch,
+        fit: &Fit,
+    ) -> Option<Fit> {
+        let frame = LocalFrame::of(v)?;
+        // Current bounds of every member, under the old fit.
+        scratch.current.clear();
+        let mut exact = scratch.exact.iter().peekable();
+        for (k, (&q, (c, competitors))) in scratch
+            .means
+            .iter()
+            .zip(state.certificates.iter().zip(&state.competitors))
+            .enumerate()
+        {
+            let bounds = match exact.next_if(|e| e.0 == k) {
+                Some(&(_, own, near, other)) => (own, near, other),
+                None => {
+                    let b = c.bounds(fit, q);
+                    (
+                        b.own,
+                        competitors.near_bounds(fit, b.error),
+                        competitors.other_bound(fit, b.error),
+                    )
+                }
+            };
+            scratch.current.push(bounds);
+        }
+        let snap = state.snapshot.as_mut()?;
+        let new_fit = snap.rebase(&frame, v, positions, &mut scratch.saved)?;
+        for (k, (&q, &(own, near, other))) in scratch.means.iter().zip(&scratch.current).enumerate()
+        {
+            let close = (near, state.competitors[k].close);
+            (state.certificates[k], state.competitors[k]) =
+                Certificate::issue(&new_fit, q, own, close, other);
+        }
+        Some(new_fit)
     }
 
     /// Fills `scratch.candidates` with the triangles of `scratch.found` other than `a`, with
@@ -1091,6 +1211,7 @@ impl IncrementalDelaunay {
         a: u32,
         d2: f64,
         close: &[u32; MAX_CLOSE],
+        near: &mut [f64; MAX_CLOSE],
     ) -> Option<u32> {
         let hop = self.hop_distance;
         let r = d2.sqrt() - hop;
@@ -1099,8 +1220,12 @@ impl IncrementalDelaunay {
         }
         let mut best = if hop > 0.0 { (r * r, 0u32) } else { (d2, a) };
         let mut found = false;
-        for &t in close.iter().filter(|&&t| t != u32::MAX) {
+        for (&t, n) in close.iter().zip(near.iter_mut()) {
+            if t == u32::MAX {
+                continue;
+            }
             let (du2, _) = bvh.distance_sq(q, t);
+            *n = du2.sqrt();
             if (du2, t) < best {
                 best = (du2, t);
                 found = true;
@@ -1202,6 +1327,14 @@ impl IncrementalDelaunay {
             }
         }
     }
+}
+
+/// The margin by which a Gaussian at `q` (at `from_centre` from its chart's centroid, own
+/// distance at most `own`) must be nearer its own triangle than any other to count as
+/// certainly nearer: `slack` (the chart's) plus [`FILTER_MARGIN_REL`] of the magnitudes
+/// involved, far above the rounding of the computed distances.
+fn own_slack(slack: f64, q: DVec3, from_centre: f64, own: f64) -> f64 {
+    slack + FILTER_MARGIN_REL * (q.abs().max_element() + from_centre + own)
 }
 
 /// Unit normal of a triangle (zero when it is degenerate).

@@ -255,27 +255,25 @@ impl DeformedBvh {
             let d = (b.min - p).max(p - b.max).max(Vec3A::ZERO);
             d.length_squared() <= r2
         };
-        for &root in roots {
-            let Some(node) = nodes.get(root as usize) else {
+        // Every node is tested once, before it is pushed.
+        stack.clear();
+        stack.extend(
+            roots
+                .iter()
+                .copied()
+                .filter(|&r| nodes.get(r as usize).is_some_and(near)),
+        );
+        while let Some(index) = stack.pop() {
+            let Some(node) = nodes.get(index as usize) else {
                 continue;
             };
-            if !near(node) {
-                continue;
+            if node.is_leaf() {
+                return true;
             }
-            stack.clear();
-            stack.push(root);
-            while let Some(index) = stack.pop() {
-                let Some(node) = nodes.get(index as usize) else {
-                    continue;
-                };
-                if !near(node) {
-                    continue;
+            for child in [node.first_index, node.first_index.saturating_add(1)] {
+                if nodes.get(child as usize).is_some_and(near) {
+                    stack.push(child);
                 }
-                if node.is_leaf() {
-                    return true;
-                }
-                stack.push(node.first_index);
-                stack.push(node.first_index.saturating_add(1));
             }
         }
         false
