@@ -460,12 +460,21 @@ impl std::fmt::Debug for DeformedBvh {
     }
 }
 
+/// The first point that is not finite or exceeds [`MAX_COORDINATE`] is an error. Chunks are
+/// scanned without early exit (a branch-free pass the compiler vectorises; rayon's
+/// `position_first` per point cost more than the update it guards), and the offending index
+/// is looked up only in the first bad chunk.
 fn check_coordinates(points: &[Vec3], what: &'static str) -> Result<(), DelaunayError> {
-    match points
-        .par_iter()
-        .with_min_len(4096)
-        .position_first(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
-    {
+    const CHUNK: usize = 4096;
+    // `max_element` skips NaN, hence the separate finiteness test.
+    let bad = |p: &Vec3| !(p.is_finite() & (p.abs().max_element() <= MAX_COORDINATE));
+    let chunk = points
+        .par_chunks(CHUNK)
+        .position_first(|c| c.iter().fold(false, |any, p| any | bad(p)));
+    match chunk.and_then(|c| {
+        let start = c * CHUNK;
+        points[start..].iter().position(bad).map(|i| start + i)
+    }) {
         Some(index) => Err(DelaunayError::BadCoordinate { what, index }),
         None => Ok(()),
     }
