@@ -122,19 +122,19 @@ impl LocalFrame {
 }
 
 /// A chart's neighbourhood at its last snapshot (frame `f0`), in the chart's rigid local
-/// frame then.
+/// frame then, moved so that its vertices' mean is the origin.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Snapshot {
     /// Triangles that were near the chart (sorted, the chart included).
     pub(crate) triangles: Vec<u32>,
     /// BVH nodes whose subtrees hold every other triangle (see `DeformedBvh::frontier`).
     pub(crate) frontier: Vec<u32>,
-    /// Their template vertices (each once) with local coordinates.
-    pub(crate) vertices: Vec<(u32, DVec3)>,
-    /// Mean of the vertices' local coordinates.
-    mean: DVec3,
-    /// Inverse of the regularised Gram matrix `Σ s̃ s̃ᵀ + w ẑ ẑᵀ` of the centred local
-    /// coordinates `s̃` (see [`Snapshot::fit`]).
+    /// Their template vertices, each once.
+    ids: Vec<u32>,
+    /// The vertices' snapshot coordinates: local coordinates less their mean.
+    coords: Vec<DVec3>,
+    /// Inverse of the regularised Gram matrix `Σ s sᵀ + w ẑ ẑᵀ` of `coords` (see
+    /// [`Snapshot::fit`]).
     gram_inverse: DMat3,
     /// The regularisation weight `w`.
     weight: f64,
@@ -160,7 +160,7 @@ pub(crate) struct Fit {
 impl Snapshot {
     /// The snapshot of `triangles` (sorted) whose corners are `corners` (template vertex ids)
     /// at positions `positions`, in `frame` (built from the chart triangle `v`). `None` when
-    /// the chart triangle is flat.
+    /// the vertices' Gram matrix is singular.
     pub(crate) fn new(
         frame: &LocalFrame,
         triangles: Vec<u32>,
@@ -173,96 +173,102 @@ impl Snapshot {
             .filter_map(|&t| corners.get(t as usize))
             .flatten()
             .copied()
+            .filter(|&k| (k as usize) < positions.len())
             .collect();
         ids.sort_unstable();
         ids.dedup();
-        let vertices: Vec<(u32, DVec3)> = ids
-            .into_iter()
-            .filter_map(|k| Some((k, frame.apply(positions.get(k as usize)?.as_dvec3()))))
-            .collect();
-        let (mean, gram_inverse, weight) = Self::moments(&vertices)?;
-        Some(Self {
+        let mut snapshot = Self {
             triangles,
             frontier,
-            vertices,
-            mean,
-            gram_inverse,
-            weight,
-        })
-    }
-
-    /// Moves the snapshot to the current frame and returns its fit there: the same triangles
-    /// and frontier, their vertices' local coordinates taken afresh in `frame` (built from
-    /// the chart's current corners `v`). Certificates issued under the old snapshot are void
-    /// afterwards; the caller issues new ones from its current bounds. `None`, with the
-    /// snapshot unchanged, when the new Gram matrix is singular or the new fit fails. `saved`
-    /// is scratch space.
-    pub(crate) fn rebase(
-        &mut self,
-        frame: &LocalFrame,
-        v: [DVec3; 3],
-        positions: &[glam::Vec3],
-        saved: &mut Vec<(u32, DVec3)>,
-    ) -> Option<Fit> {
-        saved.clear();
-        saved.extend_from_slice(&self.vertices);
-        let before = (self.mean, self.gram_inverse, self.weight);
-        let mut moved = true;
-        for (k, s) in &mut self.vertices {
-            match positions.get(*k as usize) {
-                Some(p) => *s = frame.apply(p.as_dvec3()),
-                None => moved = false,
-            }
-        }
-        let fit = match moved.then(|| Self::moments(&self.vertices)).flatten() {
-            Some((mean, gram_inverse, weight)) => {
-                (self.mean, self.gram_inverse, self.weight) = (mean, gram_inverse, weight);
-                self.fit(v, positions)
-            }
-            None => None,
+            coords: Vec::with_capacity(ids.len()),
+            ids,
+            gram_inverse: DMat3::ZERO,
+            weight: 0.0,
         };
-        if fit.is_none() {
-            std::mem::swap(&mut self.vertices, saved);
-            (self.mean, self.gram_inverse, self.weight) = before;
-        }
-        fit
+        snapshot
+            .take_coordinates(frame, positions)
+            .then_some(snapshot)
     }
 
-    /// Mean, regularised inverse Gram matrix and regularisation weight of local coordinates.
-    fn moments(vertices: &[(u32, DVec3)]) -> Option<(DVec3, DMat3, f64)> {
-        if vertices.is_empty() {
-            return None;
+    /// Sets `coords` to the vertices' current positions in `frame`, centred, and the
+    /// matching Gram matrix; `false` when it is singular (or a vertex is missing).
+    fn take_coordinates(&mut self, frame: &LocalFrame, positions: &[glam::Vec3]) -> bool {
+        self.coords.clear();
+        for &k in &self.ids {
+            match positions.get(k as usize) {
+                Some(p) => self.coords.push(frame.apply(p.as_dvec3())),
+                None => return false,
+            }
         }
-        let mean = vertices.iter().map(|v| v.1).sum::<DVec3>() / vertices.len() as f64;
+        if self.coords.is_empty() {
+            return false;
+        }
+        let mean = self.coords.iter().sum::<DVec3>() / self.coords.len() as f64;
         let mut gram = DMat3::ZERO;
-        for &(_, s) in vertices {
-            let d = s - mean;
-            gram += DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        for s in &mut self.coords {
+            *s -= mean;
+            gram += DMat3::from_cols(*s * s.x, *s * s.y, *s * s.z);
         }
         // The normal of the chart is the local z axis; a flat neighbourhood says nothing about
         // how it maps, so it is tied to the chart's current unit normal with this weight.
         let weight = (gram.x_axis.x + gram.y_axis.y + gram.z_axis.z).max(f64::MIN_POSITIVE);
         gram.z_axis.z += weight;
         let gram_inverse = gram.inverse();
-        gram_inverse
-            .is_finite()
-            .then_some((mean, gram_inverse, weight))
+        (self.gram_inverse, self.weight) = (gram_inverse, weight);
+        gram_inverse.is_finite()
+    }
+
+    /// Moves the snapshot to the current frame and returns its fit there: the same triangles
+    /// and frontier, their vertices' coordinates taken afresh in `frame` (built from the
+    /// chart's current corners `v`). Certificates issued under the old snapshot are void
+    /// afterwards; the caller issues new ones from its current bounds. `None`, with the
+    /// snapshot unchanged, when the new Gram matrix is singular or the new fit fails. `saved`
+    /// and `current` are scratch space.
+    pub(crate) fn rebase(
+        &mut self,
+        frame: &LocalFrame,
+        v: [DVec3; 3],
+        positions: &[glam::Vec3],
+        saved: &mut Vec<DVec3>,
+        current: &mut Vec<DVec3>,
+    ) -> Option<Fit> {
+        saved.clear();
+        saved.extend_from_slice(&self.coords);
+        let before = (self.gram_inverse, self.weight);
+        let fit = if self.take_coordinates(frame, positions) {
+            self.fit(v, positions, current)
+        } else {
+            None
+        };
+        if fit.is_none() {
+            std::mem::swap(&mut self.coords, saved);
+            (self.gram_inverse, self.weight) = before;
+        }
+        fit
     }
 
     /// The fit for the chart's current corners `v`; `None` when the triangle is flat or the
-    /// map is (nearly) singular.
-    pub(crate) fn fit(&self, v: [DVec3; 3], positions: &[glam::Vec3]) -> Option<Fit> {
+    /// map is (nearly) singular. `current` is scratch space (the vertices' positions, loaded
+    /// once for both passes).
+    pub(crate) fn fit(
+        &self,
+        v: [DVec3; 3],
+        positions: &[glam::Vec3],
+        current: &mut Vec<DVec3>,
+    ) -> Option<Fit> {
         let normal = (v[1] - v[0]).cross(v[2] - v[0]).try_normalize()?;
         let mut cross = DMat3::from_cols(DVec3::ZERO, DVec3::ZERO, normal * self.weight);
         let mut sum = DVec3::ZERO;
-        for &(k, s) in &self.vertices {
+        current.clear();
+        for (&k, &s) in self.ids.iter().zip(&self.coords) {
             let p = positions.get(k as usize)?.as_dvec3();
-            let d = s - self.mean;
-            cross += DMat3::from_cols(p * d.x, p * d.y, p * d.z);
+            cross += DMat3::from_cols(p * s.x, p * s.y, p * s.z);
             sum += p;
+            current.push(p);
         }
         let linear = cross * self.gram_inverse;
-        let translation = sum / self.vertices.len() as f64 - linear * self.mean;
+        // The coordinates are centred, so the fit maps their origin to the positions' mean.
+        let translation = sum / self.coords.len().max(1) as f64;
         // Gershgorin bounds of the eigenvalues of LᵀL.
         let c = [linear.x_axis, linear.y_axis, linear.z_axis];
         let mut lo = f64::INFINITY;
@@ -286,8 +292,7 @@ impl Snapshot {
             return None;
         }
         let mut worst = 0.0f64;
-        for &(k, s) in &self.vertices {
-            let p = positions.get(k as usize)?.as_dvec3();
+        for (&p, &s) in current.iter().zip(&self.coords) {
             worst = worst.max((p - (linear * s + translation)).length_squared());
         }
         Some(Fit {

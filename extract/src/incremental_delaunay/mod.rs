@@ -309,7 +309,9 @@ struct Scratch {
     /// The chart members' deformed means.
     means: Vec<DVec3>,
     /// A snapshot's vertices while it is rebased.
-    saved: Vec<(u32, DVec3)>,
+    saved: Vec<DVec3>,
+    /// A snapshot's vertices at their current positions (see `Snapshot::fit`).
+    vertices: Vec<DVec3>,
     /// Per member while rebasing: its current bounds (own, listed competitors, others).
     current: Vec<(f64, [f64; MAX_CLOSE], f64)>,
     /// Members whose certificate did not settle them at once.
@@ -904,7 +906,7 @@ impl IncrementalDelaunay {
         if let Some(snap) = state.snapshot.as_mut()
             && state.certificates.len() == list.len()
             && usable(snap)
-            && let Some(fit) = snap.fit(v, cx.positions)
+            && let Some(fit) = snap.fit(v, cx.positions, &mut scratch.vertices)
         {
             // First the bounds of every member; the few they do not settle afterwards.
             let mut reach = 0.0f64;
@@ -1041,7 +1043,9 @@ impl IncrementalDelaunay {
             }
             _ => None,
         };
-        let fit = snap.as_ref().and_then(|s| s.fit(v, cx.positions));
+        let fit = snap
+            .as_ref()
+            .and_then(|s| s.fit(v, cx.positions, &mut scratch.vertices));
         self.gather_candidates(bvh, a, centre, scratch);
         for &(k, g, q, d2) in &scratch.pending {
             let from_centre = (q - centre).length();
@@ -1097,7 +1101,13 @@ impl IncrementalDelaunay {
             scratch.current.push(bounds);
         }
         let snap = state.snapshot.as_mut()?;
-        let new_fit = snap.rebase(&frame, v, positions, &mut scratch.saved)?;
+        let new_fit = snap.rebase(
+            &frame,
+            v,
+            positions,
+            &mut scratch.saved,
+            &mut scratch.vertices,
+        )?;
         for (k, (&q, &(own, near, other))) in scratch.means.iter().zip(&scratch.current).enumerate()
         {
             let close = (near, state.competitors[k].close);
