@@ -410,6 +410,14 @@ impl Outcome {
     }
 }
 
+/// A chart mesh kept for when the chart holds the same Gaussians again.
+#[derive(Clone, Debug)]
+struct CachedChart {
+    /// The chart's members when the mesh was made.
+    members: Vec<u32>,
+    mesh: ChartMesh,
+}
+
 /// Per-Gaussian placement in its chart.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Anchor {
@@ -442,6 +450,8 @@ pub struct IncrementalDelaunay {
     anchors: Vec<Anchor>,
     members: Vec<Vec<u32>>,
     charts: Vec<ChartMesh>,
+    /// Per chart: its mesh before its last change and the member list it was made from.
+    previous: Vec<Option<CachedChart>>,
     bvh: Option<DeformedBvh>,
     vertices: Vec<Vec3>,
     /// Per chart: its snapshot and its members' certificates (module `certify`), in the
@@ -574,6 +584,7 @@ impl IncrementalDelaunay {
             anchors: Vec::new(),
             members: Vec::new(),
             charts: Vec::new(),
+            previous: Vec::new(),
             bvh: None,
             vertices: Vec::new(),
             states: Vec::new(),
@@ -818,10 +829,19 @@ impl IncrementalDelaunay {
         let searches = outcome.checked;
         let mut moves = outcome.moves;
         moves.sort_unstable();
-        let found = moves;
-        let mut dirty: Vec<u32> = Vec::new();
+        // The charts the moves touch, with the member lists their meshes were made from.
+        let mut dirty: Vec<u32> = moves
+            .iter()
+            .flat_map(|&(g, c)| [self.assigned.get(g as usize).copied().unwrap_or(c), c])
+            .collect();
+        dirty.sort_unstable();
+        dirty.dedup();
+        let before: Vec<Vec<u32>> = dirty
+            .iter()
+            .map(|&t| self.members.get(t as usize).cloned().unwrap_or_default())
+            .collect();
         let mut hopped = 0;
-        for (g, c) in found {
+        for (g, c) in moves {
             let i = g as usize;
             let a = self.assigned[i];
             if let Some(list) = self.members.get_mut(a as usize)
@@ -844,16 +864,9 @@ impl IncrementalDelaunay {
             }
             self.assigned[i] = c;
             self.anchors[i] = self.anchor(i, c);
-            dirty.push(a);
-            dirty.push(c);
             hopped += 1;
         }
-        dirty.sort_unstable();
-        dirty.dedup();
-        let redone = self.triangulate_charts(&dirty, &self.members);
-        for (&t, mesh) in dirty.iter().zip(redone) {
-            self.charts[t as usize] = mesh;
-        }
+        self.remesh(&dirty, before);
         self.since_rebuild += 1;
         self.lift(positions, means);
         FrameStats {
@@ -1306,20 +1319,54 @@ impl IncrementalDelaunay {
     }
 
     fn triangulate_charts(&self, charts: &[u32], members: &[Vec<u32>]) -> Vec<ChartMesh> {
-        let offset = self.vertex_count as u32;
-        let margin = self.options.interior_margin;
         charts
+            .par_iter()
+            .with_min_len(16)
+            .map(|&t| self.triangulate_chart(t as usize, &members[t as usize]))
+            .collect()
+    }
+
+    /// Triangulates chart `t` holding the Gaussians `list`.
+    fn triangulate_chart(&self, t: usize, list: &[u32]) -> ChartMesh {
+        let offset = self.vertex_count as u32;
+        let members: Vec<(u32, [f64; 3])> = list
+            .iter()
+            .map(|&g| (offset + g, self.anchors[g as usize].bary))
+            .collect();
+        let margin = self.options.interior_margin;
+        triangulate(&self.frames[t], self.triangles[t], &members, margin)
+    }
+
+    /// New meshes for the charts `dirty`, whose meshes were made from the member lists
+    /// `before`. A chart's mesh depends only on its member list (canonical coordinates depend
+    /// only on the Gaussian and the chart), so a chart whose list is back to what it was
+    /// before its last change (most hops at hop threshold 0 are a Gaussian near a tie going
+    /// back) takes its previous mesh again instead of being triangulated.
+    fn remesh(&mut self, dirty: &[u32], before: Vec<Vec<u32>>) {
+        self.previous.resize_with(self.charts.len(), || None);
+        let fresh: Vec<Option<ChartMesh>> = dirty
             .par_iter()
             .with_min_len(16)
             .map(|&t| {
                 let t = t as usize;
-                let list: Vec<(u32, [f64; 3])> = members[t]
-                    .iter()
-                    .map(|&g| (offset + g, self.anchors[g as usize].bary))
-                    .collect();
-                triangulate(&self.frames[t], self.triangles[t], &list, margin)
+                let list = &self.members[t];
+                let cached = self.previous[t]
+                    .as_ref()
+                    .is_some_and(|p| p.members == *list);
+                (!cached).then(|| self.triangulate_chart(t, list))
             })
-            .collect()
+            .collect();
+        for ((&t, members), fresh) in dirty.iter().zip(before).zip(fresh) {
+            let t = t as usize;
+            let mesh = match fresh {
+                Some(mesh) => mesh,
+                None => self.previous[t]
+                    .take()
+                    .map_or_else(ChartMesh::default, |p| p.mesh),
+            };
+            let old = std::mem::replace(&mut self.charts[t], mesh);
+            self.previous[t] = Some(CachedChart { members, mesh: old });
+        }
     }
 
     fn lift(&mut self, positions: &[Vec3], means: &[Vec3]) {
