@@ -66,10 +66,6 @@ pub const SNAPSHOT_MARGIN_REL: f64 = 0.1;
 /// 0.08 on the `delaunay` benchmark; 0.01 and 0.02 re-issue too often).
 pub const REBASE_REL: f64 = 0.05;
 
-/// A chart checks all its Gaussians exactly and takes a new snapshot when more than one in
-/// this many fail their certificate (the errors of old certificates only grow until then).
-pub const REFRESH_DIVISOR: usize = 4;
-
 /// Whether the triangle `v` is flat in the sense of [`FLAT_RATIO`] (or not finite).
 pub(crate) fn is_flat(v: [DVec3; 3]) -> bool {
     let longest = (v[1] - v[0])
@@ -320,8 +316,9 @@ impl Fit {
     }
 }
 
-/// Most close competitors a certificate lists (see [`CLOSE_GAP_REL`]).
-pub const MAX_CLOSE: usize = 3;
+/// Most close competitors a certificate lists (see [`CLOSE_GAP_REL`]); 2 measured faster than
+/// 1 or 3 on the `delaunay` benchmark.
+pub const MAX_CLOSE: usize = 2;
 
 /// A competitor triangle whose distance is within this fraction of the chart's circumradius of
 /// the Gaussian's own distance is listed in its certificate and compared exactly every frame

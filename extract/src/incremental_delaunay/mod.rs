@@ -35,9 +35,9 @@
 //! own distance is computed exactly and compared with the bounds again, and only the listed
 //! competitors whose bound is still inconclusive are compared with their exact distances
 //! (ties resolve as in a full search); triangles outside the snapshot are excluded by testing
-//! the frontier's boxes against the chart's reach. Gaussians whose certificate fails get the exact search (one per
-//! chart against the snapshot's triangles) and a new certificate; a chart where more than one
-//! in [`REFRESH_DIVISOR`] fail, or an outside triangle comes near, takes a new snapshot.
+//! the frontier's boxes against the chart's reach. Gaussians whose certificate fails get the
+//! exact search (one per chart against the snapshot's triangles) and a new certificate; a
+//! chart where an outside triangle comes near takes a new snapshot.
 //! Rebuilds do not compute certificates; the next update does.
 //!
 //! **Canonical coordinates.** In chart `T`, Gaussian `i` sits at the barycentric weights of its
@@ -140,9 +140,7 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
 use self::certify::{Bounds, Certificate, Close, Competitors, Fit, LocalFrame, Snapshot, is_flat};
-pub use self::certify::{
-    CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REBASE_REL, REFRESH_DIVISOR, SNAPSHOT_MARGIN_REL,
-};
+pub use self::certify::{CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REBASE_REL, SNAPSHOT_MARGIN_REL};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
 pub use self::search::BOX_PADDING_REL;
 use self::search::DeformedBvh;
@@ -884,8 +882,8 @@ impl IncrementalDelaunay {
     /// whose motion certificate still holds cannot have hopped (module `certify`); the others
     /// are checked exactly against the triangles of one range query per chart, which also
     /// proves that no triangle from outside the chart's snapshot came near. A chart without a
-    /// snapshot, with a newcomer in its neighbourhood, or with most certificates failing,
-    /// checks all its Gaussians and takes a new snapshot.
+    /// snapshot, or with a newcomer in its neighbourhood, checks all its Gaussians and takes a
+    /// new snapshot.
     fn hops_of_chart(
         &self,
         cx: &SearchContext<'_>,
@@ -980,44 +978,42 @@ impl IncrementalDelaunay {
                 reach = reach.max(from_centre + r.max(0.0));
                 scratch.pending.push((k, g, q, d2));
             }
-            if scratch.pending.len() * REFRESH_DIVISOR <= list.len() {
-                let pending = !scratch.pending.is_empty();
-                let radius = reach + slack + if pending { 0.5 * margin } else { 0.0 };
-                let inside =
-                    !bvh.any_within(&snap.frontier, centre, radius * radius, &mut scratch.stack);
-                if inside {
-                    // Move the snapshot to this frame when the neighbourhood has drifted
-                    // from it: the certificates are issued afresh from the bounds above.
-                    let drift = fit.residual + (fit.sigma_hi - fit.sigma_lo) * size;
-                    let fit = if drift > REBASE_REL * size {
-                        Self::rebase(cx.bvh.corners(a), cx.positions, state, scratch, &fit)
-                            .unwrap_or(fit)
-                    } else {
-                        fit
-                    };
-                    if pending {
-                        scratch.found.clear();
-                        if let Some(snap) = &state.snapshot {
-                            scratch.found.extend_from_slice(&snap.triangles);
-                        }
-                        self.gather_candidates(bvh, a, centre, scratch);
-                        for &(k, g, q, d2) in &scratch.pending {
-                            let from_centre = (q - centre).length();
-                            let cap = radius - from_centre;
-                            let lead = from_centre + slack;
-                            let candidates = &scratch.candidates;
-                            match self.exact_check(bvh, q, a, d2, candidates, cap, size, lead) {
-                                Ok((near, far)) => {
-                                    (state.certificates[k], state.competitors[k]) =
-                                        Certificate::issue(&fit, q, d2.sqrt(), near, far);
-                                }
-                                Err(t) => out.moves.push((g, t)),
+            let pending = !scratch.pending.is_empty();
+            let radius = reach + slack + if pending { 0.5 * margin } else { 0.0 };
+            let inside =
+                !bvh.any_within(&snap.frontier, centre, radius * radius, &mut scratch.stack);
+            if inside {
+                // Move the snapshot to this frame when the neighbourhood has drifted
+                // from it: the certificates are issued afresh from the bounds above.
+                let drift = fit.residual + (fit.sigma_hi - fit.sigma_lo) * size;
+                let fit = if drift > REBASE_REL * size {
+                    Self::rebase(cx.bvh.corners(a), cx.positions, state, scratch, &fit)
+                        .unwrap_or(fit)
+                } else {
+                    fit
+                };
+                if pending {
+                    scratch.found.clear();
+                    if let Some(snap) = &state.snapshot {
+                        scratch.found.extend_from_slice(&snap.triangles);
+                    }
+                    self.gather_candidates(bvh, a, centre, scratch);
+                    for &(k, g, q, d2) in &scratch.pending {
+                        let from_centre = (q - centre).length();
+                        let cap = radius - from_centre;
+                        let lead = from_centre + slack;
+                        let candidates = &scratch.candidates;
+                        match self.exact_check(bvh, q, a, d2, candidates, cap, size, lead) {
+                            Ok((near, far)) => {
+                                (state.certificates[k], state.competitors[k]) =
+                                    Certificate::issue(&fit, q, d2.sqrt(), near, far);
                             }
+                            Err(t) => out.moves.push((g, t)),
                         }
                     }
-                    out.checked += scratch.pending.len();
-                    return;
                 }
+                out.checked += scratch.pending.len();
+                return;
             }
         }
         // Check every Gaussian and take a new snapshot; forget what this chart found above.
