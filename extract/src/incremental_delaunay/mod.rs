@@ -940,6 +940,10 @@ impl IncrementalDelaunay {
             }
             scratch.pending.clear();
             scratch.exact.clear();
+            // Move the snapshot to this frame (below) when the neighbourhood has drifted from
+            // it; the certificates are then issued afresh from the bounds found here.
+            let drift = fit.residual + (fit.sigma_hi - fit.sigma_lo) * size;
+            let rebase = drift > REBASE_REL * size;
             for u in &scratch.unsettled {
                 let (k, q, from_centre) = (u.k, u.q, u.from_centre);
                 let g = list[k];
@@ -971,7 +975,9 @@ impl IncrementalDelaunay {
                             }
                             out.checked_close += 1;
                         }
-                        scratch.exact.push((k, d2.sqrt(), near, other));
+                        if rebase {
+                            scratch.exact.push((k, d2.sqrt(), near, other));
+                        }
                         continue;
                     }
                 }
@@ -983,10 +989,7 @@ impl IncrementalDelaunay {
             let inside =
                 !bvh.any_within(&snap.frontier, centre, radius * radius, &mut scratch.stack);
             if inside {
-                // Move the snapshot to this frame when the neighbourhood has drifted
-                // from it: the certificates are issued afresh from the bounds above.
-                let drift = fit.residual + (fit.sigma_hi - fit.sigma_lo) * size;
-                let fit = if drift > REBASE_REL * size {
+                let fit = if rebase {
                     Self::rebase(cx.bvh.corners(a), cx.positions, state, scratch, &fit)
                         .unwrap_or(fit)
                 } else {
