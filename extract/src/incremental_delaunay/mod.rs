@@ -139,7 +139,7 @@ use trisplat_geometry::spatial::MAX_COORDINATE;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
-use self::certify::{Bounds, Certificate, Close, Competitors, Fit, LocalFrame, Snapshot, is_flat};
+use self::certify::{Bounds, Certificate, Close, Competitors, Fit, LocalFrame, Snapshot};
 pub use self::certify::{CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REBASE_REL, SNAPSHOT_MARGIN_REL};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
 pub use self::search::BOX_PADDING_REL;
@@ -458,8 +458,6 @@ pub struct IncrementalDelaunay {
     /// Whether `states` belong to the current state (false after a
     /// rebuild, which does not compute them: the next update does).
     certified: bool,
-    /// Per deformed triangle: flat in the sense of [`certify::FLAT_RATIO`] (reused buffer).
-    flat: Vec<bool>,
     updates: usize,
     since_rebuild: usize,
 }
@@ -587,7 +585,6 @@ impl IncrementalDelaunay {
             vertices: Vec::new(),
             states: Vec::new(),
             certified: false,
-            flat: Vec::new(),
             updates: 0,
             since_rebuild: 0,
         })
@@ -795,18 +792,11 @@ impl IncrementalDelaunay {
             self.certified = true;
         }
         let mut states = std::mem::take(&mut self.states);
-        let mut flat = std::mem::take(&mut self.flat);
-        flat.resize(self.triangles.len(), false);
-        flat.par_iter_mut()
-            .enumerate()
-            .with_min_len(1024)
-            .for_each(|(t, f)| *f = is_flat(bvh.corners(t as u32)));
-        let any_flat = flat.contains(&true);
         let context = SearchContext {
             bvh: &bvh,
             positions,
             means,
-            flat: any_flat.then_some(flat.as_slice()),
+            flat: bvh.flat(),
         };
         let outcome = self
             .members
@@ -821,7 +811,6 @@ impl IncrementalDelaunay {
                 acc
             })
             .reduce(Outcome::default, Outcome::merge);
-        self.flat = flat;
         self.bvh = Some(bvh);
         self.states = states;
         let searches = outcome.checked;

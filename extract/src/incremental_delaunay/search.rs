@@ -17,6 +17,8 @@ use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 use trisplat_geometry::spatial::{box_distance_sq, closest_point_on_triangle};
 
+use super::certify::is_flat;
+
 /// Node boxes grow by this fraction of the template's bounding-box diagonal (plus the same
 /// fraction of each coordinate's magnitude), far above the f64 rounding of a point-triangle
 /// distance, so a box is only skipped when every triangle in it is certainly farther than the
@@ -35,12 +37,16 @@ pub(crate) struct DeformedBvh {
     leaf_of: Vec<u32>,
     /// Parent of each node (`u32::MAX` for the root).
     parent: Vec<u32>,
+    /// Per triangle: flat in the sense of `certify::FLAT_RATIO`.
+    flat: Vec<bool>,
+    /// Whether any triangle is flat.
+    any_flat: bool,
 }
 
 impl DeformedBvh {
     /// Builds a tree over the triangles `tris` of `positions` (indices already checked).
     pub(crate) fn build(positions: &[Vec3], tris: &[[u32; 3]], diagonal: f32) -> Self {
-        let corners = gather_corners(positions, tris);
+        let (corners, flat) = gather_corners(positions, tris);
         let triangles: Vec<Triangle> = corners
             .par_iter()
             .map(|&[a, b, c]| Triangle {
@@ -83,11 +89,14 @@ impl DeformedBvh {
                 }
             }
         }
+        let any_flat = flat.contains(&true);
         let mut out = Self {
             bvh,
             corners,
             leaf_of,
             parent,
+            flat,
+            any_flat,
         };
         out.set_leaf_boxes(diagonal);
         out.bvh.refit_all();
@@ -96,29 +105,45 @@ impl DeformedBvh {
 
     /// Moves the triangles to `positions` and refits the boxes (same tree).
     pub(crate) fn refit(&mut self, positions: &[Vec3], tris: &[[u32; 3]], diagonal: f32) {
-        self.corners = gather_corners(positions, tris);
+        (self.corners, self.flat) = gather_corners(positions, tris);
+        self.any_flat = self.flat.contains(&true);
         self.set_leaf_boxes(diagonal);
         self.bvh.refit_all();
     }
 
+    /// The flat triangles (see [`DeformedBvh::flat`]'s field), or `None` when there are none.
+    pub(crate) fn flat(&self) -> Option<&[bool]> {
+        self.any_flat.then_some(self.flat.as_slice())
+    }
+
+    /// Sets every leaf's box to the union of its triangles' padded boxes (in parallel over
+    /// the nodes; inner boxes are left to `refit_all`).
     fn set_leaf_boxes(&mut self, diagonal: f32) {
-        for node in &mut self.bvh.nodes {
-            if node.is_leaf() {
-                node.set_aabb(BvhAabb::empty());
-            }
-        }
-        for (t, c) in self.corners.iter().enumerate() {
-            let Some(node) = self.bvh.nodes.get_mut(self.leaf_of[t] as usize) else {
-                continue;
-            };
-            let lo = c[0].min(c[1]).min(c[2]);
-            let hi = c[0].max(c[1]).max(c[2]);
-            let pad =
-                Vec3::splat(diagonal * BOX_PADDING_REL) + lo.abs().max(hi.abs()) * BOX_PADDING_REL;
-            let b = BvhAabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad));
-            let merged = node.aabb().union(&b);
-            node.set_aabb(merged);
-        }
+        let corners = &self.corners;
+        let primitives = &self.bvh.primitive_indices;
+        self.bvh
+            .nodes
+            .par_iter_mut()
+            .with_min_len(1024)
+            .filter(|node| node.is_leaf())
+            .for_each(|node| {
+                let first = node.first_index as usize;
+                let slots = first..first.saturating_add(node.prim_count as usize);
+                let mut aabb = BvhAabb::empty();
+                for c in primitives
+                    .get(slots)
+                    .unwrap_or(&[])
+                    .iter()
+                    .filter_map(|&t| corners.get(t as usize))
+                {
+                    let lo = c[0].min(c[1]).min(c[2]);
+                    let hi = c[0].max(c[1]).max(c[2]);
+                    let pad = Vec3::splat(diagonal * BOX_PADDING_REL)
+                        + lo.abs().max(hi.abs()) * BOX_PADDING_REL;
+                    aabb = aabb.union(&BvhAabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad)));
+                }
+                node.set_aabb(aabb);
+            });
     }
 
     /// Squared distance from `q` to triangle `t` (as [`closest_point_on_triangle`]), and the
@@ -346,9 +371,13 @@ impl DeformedBvh {
     }
 }
 
-fn gather_corners(positions: &[Vec3], tris: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
+/// The corners of every triangle and whether it is flat (`certify::is_flat`).
+fn gather_corners(positions: &[Vec3], tris: &[[u32; 3]]) -> (Vec<[Vec3; 3]>, Vec<bool>) {
     tris.par_iter()
         .with_min_len(1024)
-        .map(|t| t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO)))
-        .collect()
+        .map(|t| {
+            let c = t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO));
+            (c, is_flat(c.map(Vec3::as_dvec3)))
+        })
+        .unzip()
 }
