@@ -121,7 +121,8 @@ impl LocalFrame {
 /// frame then, moved so that its vertices' mean is the origin.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Snapshot {
-    /// Triangles that were near the chart (sorted, the chart included).
+    /// Triangles that were near the chart: the chart, then the others by their boxes'
+    /// distances from its centroid then, nearest first.
     pub(crate) triangles: Vec<u32>,
     /// BVH nodes whose subtrees hold every other triangle (see `DeformedBvh::frontier`).
     pub(crate) frontier: Vec<u32>,

@@ -985,11 +985,15 @@ impl IncrementalDelaunay {
                     fit
                 };
                 if pending {
-                    scratch.found.clear();
+                    // The snapshot's triangles, nearest first when it was taken: close to the
+                    // order a sort would give now, without sorting (see `exact_check`).
+                    scratch.candidates.clear();
                     if let Some(snap) = &state.snapshot {
-                        scratch.found.extend_from_slice(&snap.triangles);
+                        for &t in snap.triangles.iter().filter(|&&t| t != a) {
+                            let (lo, hi) = bvh.leaf_box(t);
+                            scratch.candidates.push((t, lo, hi, 0.0));
+                        }
                     }
-                    self.gather_candidates(bvh, a, centre, scratch);
                     for &(k, g, q, d2) in &scratch.pending {
                         let from_centre = (q - centre).length();
                         let cap = radius - from_centre;
@@ -1031,12 +1035,13 @@ impl IncrementalDelaunay {
         let no_flat = cx
             .flat
             .is_none_or(|flat| scratch.found.iter().all(|&t| !flat[t as usize]));
+        self.gather_candidates(bvh, a, centre, scratch);
         let snap = match LocalFrame::of(v) {
             Some(frame) if no_flat => {
-                let mut triangles = scratch.found.clone();
+                // The chart, then the others nearest first (the order later checks use).
+                let mut triangles = Vec::with_capacity(scratch.candidates.len() + 1);
                 triangles.push(a);
-                triangles.sort_unstable();
-                triangles.dedup();
+                triangles.extend(scratch.candidates.iter().map(|c| c.0));
                 let token = scratch.next_token(bvh.node_count());
                 bvh.frontier(&triangles, &mut scratch.marks, token, &mut scratch.frontier);
                 let frontier = scratch.frontier.clone();
@@ -1047,7 +1052,6 @@ impl IncrementalDelaunay {
         let fit = snap
             .as_ref()
             .and_then(|s| s.fit(v, cx.positions, &mut scratch.vertices));
-        self.gather_candidates(bvh, a, centre, scratch);
         for &(k, g, q, d2) in &scratch.pending {
             let from_centre = (q - centre).length();
             let cap = radius - from_centre;
@@ -1140,9 +1144,10 @@ impl IncrementalDelaunay {
     /// `Ok(((near, close), other))`: up to [`certify::MAX_CLOSE`] triangles `close` nearer
     /// than the own distance plus [`certify::CLOSE_GAP_REL`] times `size`, `near` their
     /// distances (`+∞` in empty slots), and `other ≤ d_U` for every other triangle `U ≠ a`
-    /// (and `≤ cap`). `lead` is at least the distance of `q` from the point the candidates'
-    /// box distances were measured from (plus rounding slack): once a candidate's box is
+    /// (and `≤ cap`). Candidates sorted by their boxes' squared distances `gap2` from a point
+    /// at most `lead` (plus rounding slack) from `q` end the search early: once a box is
     /// farther from that point than `lead` plus everything still needed, so are the rest.
+    /// Candidates in any other order carry `gap2 = 0` and are each tested by their box.
     #[expect(
         clippy::too_many_arguments,
         reason = "one search step, all inputs named"
