@@ -277,6 +277,10 @@ pub struct FrameStats {
     pub millis: f64,
 }
 
+/// Meshes each chart keeps of the member lists it held before (see
+/// `IncrementalDelaunay::remesh`).
+const CACHED_MESHES: usize = 3;
+
 /// Room left in each chart's member and certificate lists for Gaussians hopping in, so that
 /// they are rarely moved away from their neighbours in memory.
 const SPARE_CAPACITY: usize = 4;
@@ -448,8 +452,9 @@ pub struct IncrementalDelaunay {
     anchors: Vec<Anchor>,
     members: Vec<Vec<u32>>,
     charts: Vec<ChartMesh>,
-    /// Per chart: its mesh before its last change and the member list it was made from.
-    previous: Vec<Option<CachedChart>>,
+    /// Per chart: its last [`CACHED_MESHES`] meshes before the current one, most recent
+    /// first, with the member lists they were made from.
+    previous: Vec<Vec<CachedChart>>,
     bvh: Option<DeformedBvh>,
     vertices: Vec<Vec3>,
     /// Per chart: its snapshot and its members' certificates (module `certify`), in the
@@ -1333,32 +1338,33 @@ impl IncrementalDelaunay {
     /// New meshes for the charts `dirty`, whose meshes were made from the member lists
     /// `before`. A chart's mesh depends only on its member list (canonical coordinates depend
     /// only on the Gaussian and the chart), so a chart whose list is back to what it was
-    /// before its last change (most hops at hop threshold 0 are a Gaussian near a tie going
-    /// back) takes its previous mesh again instead of being triangulated.
+    /// before one of its last changes (most hops at hop threshold 0 are a Gaussian near a tie going
+    /// back) takes that mesh again instead of being triangulated.
     fn remesh(&mut self, dirty: &[u32], before: Vec<Vec<u32>>) {
-        self.previous.resize_with(self.charts.len(), || None);
-        let fresh: Vec<Option<ChartMesh>> = dirty
+        self.previous.resize_with(self.charts.len(), Vec::new);
+        let fresh: Vec<Result<usize, ChartMesh>> = dirty
             .par_iter()
             .with_min_len(16)
             .map(|&t| {
                 let t = t as usize;
                 let list = &self.members[t];
-                let cached = self.previous[t]
-                    .as_ref()
-                    .is_some_and(|p| p.members == *list);
-                (!cached).then(|| self.triangulate_chart(t, list))
+                match self.previous[t].iter().position(|p| p.members == *list) {
+                    Some(slot) => Ok(slot),
+                    None => Err(self.triangulate_chart(t, list)),
+                }
             })
             .collect();
         for ((&t, members), fresh) in dirty.iter().zip(before).zip(fresh) {
             let t = t as usize;
+            let cache = &mut self.previous[t];
             let mesh = match fresh {
-                Some(mesh) => mesh,
-                None => self.previous[t]
-                    .take()
-                    .map_or_else(ChartMesh::default, |p| p.mesh),
+                Ok(slot) => cache.remove(slot).mesh,
+                Err(mesh) => mesh,
             };
             let old = std::mem::replace(&mut self.charts[t], mesh);
-            self.previous[t] = Some(CachedChart { members, mesh: old });
+            // Most recent first; the oldest falls out.
+            cache.insert(0, CachedChart { members, mesh: old });
+            cache.truncate(CACHED_MESHES);
         }
     }
 
