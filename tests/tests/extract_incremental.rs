@@ -609,3 +609,62 @@ fn a_sheet_coming_close_takes_over_gaussians() {
     );
     assert!(certified > 0, "some frames must be settled by certificates");
 }
+
+#[test]
+fn gaussians_going_back_and_forth_reuse_meshes_exactly() {
+    // Charts whose member lists return to earlier ones take their earlier meshes from a cache
+    // instead of triangulating again; sequences of frames that revisit member sets (one and
+    // two steps back, and with two groups of Gaussians moving independently) must still give
+    // exactly the from-scratch mesh every frame.
+    let n = 6;
+    let rest = two_sheets(n, 5.0);
+    let mut rng = Rng::new(9);
+    let canonical: Vec<Vec3> = (0..400)
+        .map(|_| {
+            Vec3::new(
+                rng.uniform_f32(),
+                rng.uniform_f32(),
+                0.01 + 0.05 * rng.uniform_f32(),
+            )
+        })
+        .collect();
+    let cell = 1.0 / n as f32;
+    // A: at rest; B: every third Gaussian a third of a cell along x; C: every fifth one along
+    // -y; D: both.
+    let shifted = |b: bool, c: bool| -> Vec<Vec3> {
+        canonical
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let mut p = *p;
+                if b && i % 3 == 0 {
+                    p.x += cell / 3.0;
+                }
+                if c && i % 5 == 0 {
+                    p.y -= cell / 3.0;
+                }
+                p
+            })
+            .collect()
+    };
+    let pattern = [
+        (false, false),
+        (true, false),
+        (false, false),
+        (true, false),
+        (false, true),
+        (false, false),
+        (true, true),
+        (false, true),
+        (true, false),
+        (false, false),
+        (true, true),
+        (false, false),
+    ];
+    let frames: Vec<(Vec<Vec3>, Vec<Vec3>)> = pattern
+        .iter()
+        .map(|&(b, c)| (rest.positions().to_vec(), shifted(b, c)))
+        .collect();
+    let (hops, _) = assert_matches_scratch(&rest, &canonical, &frames);
+    assert!(hops > 100, "the shifts must make Gaussians hop: {hops}");
+}
