@@ -281,6 +281,9 @@ pub struct FrameStats {
 /// `IncrementalDelaunay::remesh`).
 const CACHED_MESHES: usize = 3;
 
+/// Charts per task of the hop search (their means are loaded together).
+const CHART_BATCH: usize = 64;
+
 /// Room left in each chart's member and certificate lists for Gaussians hopping in, so that
 /// they are rarely moved away from their neighbours in memory.
 const SPARE_CAPACITY: usize = 4;
@@ -289,7 +292,6 @@ const SPARE_CAPACITY: usize = 4;
 struct SearchContext<'a> {
     bvh: &'a DeformedBvh,
     positions: &'a [Vec3],
-    means: &'a [Vec3],
     /// Flat triangles (see [`FLAT_RATIO`]); `None` when there are none.
     flat: Option<&'a [bool]>,
 }
@@ -310,6 +312,8 @@ struct Scratch {
     frontier: Vec<u32>,
     /// The chart members' deformed means.
     means: Vec<DVec3>,
+    /// The deformed means of a batch of charts' members.
+    gathered: Vec<DVec3>,
     /// A snapshot's vertices while it is rebased.
     saved: Vec<DVec3>,
     /// A snapshot's vertices at their current positions (see `Snapshot::fit`).
@@ -800,18 +804,38 @@ impl IncrementalDelaunay {
         let context = SearchContext {
             bvh: &bvh,
             positions,
-            means,
             flat: bvh.flat(),
         };
         let outcome = self
             .members
-            .par_iter()
-            .zip(states.par_iter_mut())
+            .par_chunks(CHART_BATCH)
+            .zip(states.par_chunks_mut(CHART_BATCH))
             .enumerate()
-            .with_min_len(64)
-            .fold(Outcome::default, |mut acc, (a, (list, state))| {
+            .fold(Outcome::default, |mut acc, (batch, (lists, states))| {
                 SCRATCH.with_borrow_mut(|scratch| {
-                    self.hops_of_chart(&context, a as u32, list, state, scratch, &mut acc);
+                    // The batch's means in one pass: the ids mostly follow the charts, so
+                    // this streams through memory instead of missing the cache per chart.
+                    let mut gathered = std::mem::take(&mut scratch.gathered);
+                    gathered.clear();
+                    for list in lists {
+                        gathered.extend(list.iter().map(|&g| means[g as usize].as_dvec3()));
+                    }
+                    let mut start = 0;
+                    for (j, (list, state)) in lists.iter().zip(states).enumerate() {
+                        let a = (batch * CHART_BATCH + j) as u32;
+                        let chart_means = &gathered[start..start + list.len()];
+                        start += list.len();
+                        self.hops_of_chart(
+                            &context,
+                            a,
+                            list,
+                            chart_means,
+                            state,
+                            scratch,
+                            &mut acc,
+                        );
+                    }
+                    scratch.gathered = gathered;
                 });
                 acc
             })
@@ -878,11 +902,16 @@ impl IncrementalDelaunay {
     /// proves that no triangle from outside the chart's snapshot came near. A chart without a
     /// snapshot, or with a newcomer in its neighbourhood, checks all its Gaussians and takes a
     /// new snapshot.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one chart's step of the hop search, all inputs named"
+    )]
     fn hops_of_chart(
         &self,
         cx: &SearchContext<'_>,
         a: u32,
         list: &[u32],
+        means: &[DVec3],
         state: &mut ChartState,
         scratch: &mut Scratch,
         out: &mut Outcome,
@@ -898,11 +927,8 @@ impl IncrementalDelaunay {
         let margin = SNAPSHOT_MARGIN_REL * size;
         let slack =
             FILTER_MARGIN_REL * (f64::from(self.diagonal) + centre.abs().max_element() + size);
-        // The members' means are loaded first (independent loads, overlapping the fit).
         scratch.means.clear();
-        scratch
-            .means
-            .extend(list.iter().map(|&g| cx.means[g as usize].as_dvec3()));
+        scratch.means.extend_from_slice(means);
         let usable = |snap: &Snapshot| match cx.flat {
             None => true,
             Some(flat) => snap.triangles.iter().all(|&t| !flat[t as usize]),
