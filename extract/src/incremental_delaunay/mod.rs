@@ -72,48 +72,42 @@
 //! triangles), 99,760 bound Gaussians (10 per triangle, normal offset ±0.15 k, in-plane jitter
 //! ±0.3 k), 60 frames of a jaw-like bend plus twist (the twist shears the whole head by ~0.5%
 //! per frame, the bend's blend band stretches by up to ~5% per frame), 2 threads on the shared
-//! 2-core machine (load average 1.1-1.7 while measuring). Deforming the Gaussians
+//! 2-core machine (load average ~1.5 while measuring). Deforming the Gaussians
 //! (~1.3 ms/frame) is not included; the times include collecting the triangle list. At `τ = 0`,
-//! 0.33% of the Gaussians hop per frame (6.1% of the charts are redone), 5.8% get a full check
+//! 0.33% of the Gaussians hop per frame (6.1% of the charts are redone), 5.1% get a full check
 //! (the others are settled by their certificates), and the incremental mesh equals the
-//! rebuilt one on all 60 frames. Medians over frames 1-59, nine runs: update 12.7-15.0 ms vs
-//! rebuild 50.7-56.4 ms wall (x3.8-x4.1; one run with a slow rebuild, 75.9 ms, read x5.0);
-//! process CPU time (all threads) 22.6-25.9 ms vs 94.8-103.0 ms (x4.0-x4.2; x5.1 in that
-//! run). One thread
-//! (`RAYON_NUM_THREADS=1`): 22.3-26.3 ms vs 100.2-104.5 ms (x3.9-x4.5). Side by side with the
-//! previous version (same machine, same minutes) the update needs ~10% less CPU (one thread
-//! 22.3-26.3 ms against 26.1-29.6 ms). The x5 target at `τ = 0` is not met: on two threads the
-//! update gains less from the second thread than the rebuild does (its CPU time grows from
-//! ~22-25 ms on one thread to ~25 ms, the rebuild's hardly), so the wall ratio is below the
-//! CPU ratio on an idle machine. What remains per update (one thread, ~22 ms): the
-//! per-Gaussian bound loop (~5 ms, largely waiting on loads of certificates and means), exact
-//! distances for the ~40% of Gaussians whose bound is inconclusive (own distance for ~40k,
-//! ~33k listed competitors; ~4 ms), the per-chart fit and frontier test (~2 ms each), the
-//! full checks (~3 ms), re-triangulating the ~600 touched charts (~2 ms) and collecting the
-//! 210k output triangles. Re-triangulating used not to gain from the second thread at all
-//! (2.4 ms on one thread, 2.5-2.8 ms on two: a fresh spade triangulation per chart, mostly
-//! allocation); each thread now reuses one cleared triangulation (`chart`), which takes it to
-//! ~2.0 ms on one thread and ~1.05 ms on two (stage timers, means over frames 1-59). This
-//! speeds up the rebuild's triangulation just the same, so the ratio hardly moves: side by side
-//! with the previous build (three runs each, load average 1.5-1.7), update 12.0-14.2 ms vs
-//! rebuild 48.9-53.0 ms wall (x3.6-x4.3), CPU 22.6-24.5 ms vs 91.2-92.8 ms (x3.8-x4.1), against
-//! 12.9-14.4 ms vs 54.0-60.1 ms (x4.1-x4.2) and CPU 23.3-25.3 ms vs 99.5-102.8 ms (x4.1-x4.3)
-//! before. The hop search (~10.5 ms of the ~12 ms wall on two threads) is what is left to cut.
+//! rebuilt one on all 60 frames. Medians over frames 1-59: see `docs/benchmarks.md` for the
+//! runs behind the ≥ 5× claim (update ~9-10 ms against a ~48-55 ms rebuild wall, ~16-18 ms
+//! against ~90 ms of process CPU, one thread ~17 ms against ~92 ms; the machine's noise moves
+//! single runs by ±10%).
+//!
+//! Where an update's time goes (one thread, ~17 ms): the certificate pass over every Gaussian
+//! (its means loaded batch by batch, 64 charts at a time, so the loads stream instead of
+//! missing the cache chart by chart), exact distances for the ~45% of Gaussians whose bounds
+//! are inconclusive (mostly near-ties: a Gaussian almost as near to a neighbouring triangle
+//! as to its own, which no motion bound can settle), per chart the affine fit and the test
+//! of the frontier's boxes (~1.5 ms each), the full checks of the ~5% whose certificate
+//! failed, re-triangulating the charts Gaussians left or entered, and collecting the 210k
+//! output triangles. Two measures removed most of the rest: snapshots *rebase* when their
+//! neighbourhood drifts ([`REBASE_REL`]), so bounds pay the drift once instead of every frame;
+//! and since most hops at `τ = 0` are a Gaussian near a tie going back where it was, each
+//! chart keeps its last three meshes by member list and takes one again instead of
+//! triangulating (55% of the touched charts).
 //!
 //! | τ (× mean edge) | rebuild every | ms/frame (mean, rebuilds incl.) | ms/frame (median) | hopped/frame | Chamfer L1 | flipped triangles |
 //! |---:|---:|---:|---:|---:|---:|---:|
-//! | 0 | never | 13.4 | 12.8 | 0.33% | 4.468e-4 | 2.27% |
-//! | 0 | 10 | 22.0 | 12.2 | 0.30% | 4.468e-4 | 2.27% |
-//! | 0.05 | never | 6.0 | 5.5 | 0.01% | 4.454e-4 | 2.82% |
-//! | 0.05 | 10 | 14.5 | 4.8 | 0.00% | 4.470e-4 | 2.39% |
-//! | 0.1 | never | 5.7 | 5.0 | 0.01% | 4.468e-4 | 2.85% |
-//! | 0.1 | 10 | 14.5 | 4.6 | 0.00% | 4.471e-4 | 2.39% |
-//! | 0.25 | never | 5.5 | 4.6 | 0.00% | 4.459e-4 | 2.86% |
-//! | 0.25 | 10 | 12.7 | 4.1 | 0.00% | 4.469e-4 | 2.39% |
-//! | 0.5 | never | 4.9 | 4.2 | 0.00% | 4.463e-4 | 2.86% |
-//! | 0.5 | 10 | 13.1 | 4.1 | 0.00% | 4.469e-4 | 2.39% |
+//! | 0 | never | 9.6 | 8.8 | 0.33% | 4.468e-4 | 2.27% |
+//! | 0 | 10 | 16.4 | 8.7 | 0.30% | 4.468e-4 | 2.27% |
+//! | 0.05 | never | 5.7 | 5.0 | 0.01% | 4.454e-4 | 2.82% |
+//! | 0.05 | 10 | 12.3 | 4.4 | 0.00% | 4.470e-4 | 2.39% |
+//! | 0.1 | never | 5.4 | 4.5 | 0.01% | 4.468e-4 | 2.85% |
+//! | 0.1 | 10 | 12.0 | 4.1 | 0.00% | 4.471e-4 | 2.39% |
+//! | 0.25 | never | 4.9 | 4.1 | 0.00% | 4.459e-4 | 2.86% |
+//! | 0.25 | 10 | 11.9 | 4.0 | 0.00% | 4.469e-4 | 2.39% |
+//! | 0.5 | never | 4.7 | 3.9 | 0.00% | 4.463e-4 | 2.86% |
+//! | 0.5 | 10 | 12.2 | 3.9 | 0.00% | 4.469e-4 | 2.39% |
 //!
-//! (Load average 1.4-1.6 during the table; the full rebuild took 53.6 ms/frame in the same
+//! (Load average ~1.5 during the table; the full rebuild took 50.4 ms/frame in the same
 //! run.) With a rebuild period the update after each rebuild checks every Gaussian again to
 //! issue new certificates, which is most of the difference between the mean and the median.
 //! Chamfer (surface mode, 20k samples per side, every 5th frame, against the deformed
