@@ -565,6 +565,17 @@ fn two_sheets(n: usize, gap: f32) -> TriMesh {
     TriMesh::try_new(positions, triangles).expect("sheets")
 }
 
+/// `count` random points over the unit square at heights `low + [0, spread)` (seeded).
+fn above_the_lower_sheet(count: usize, seed: u64, low: f32, spread: f32) -> Vec<Vec3> {
+    let mut rng = Rng::new(seed);
+    (0..count)
+        .map(|_| {
+            let (x, y) = (rng.uniform_f32(), rng.uniform_f32());
+            Vec3::new(x, y, low + spread * rng.uniform_f32())
+        })
+        .collect()
+}
+
 #[test]
 fn a_sheet_coming_close_takes_over_gaussians() {
     // Gaussians float above the lower sheet; the upper sheet, first far away, comes down
@@ -573,16 +584,7 @@ fn a_sheet_coming_close_takes_over_gaussians() {
     // so only the test that no outside triangle came near catches the hops.
     let n = 12;
     let rest = two_sheets(n, 2.0);
-    let mut rng = Rng::new(5);
-    let canonical: Vec<Vec3> = (0..600)
-        .map(|_| {
-            Vec3::new(
-                rng.uniform_f32(),
-                rng.uniform_f32(),
-                0.02 + 0.3 * rng.uniform_f32(),
-            )
-        })
-        .collect();
+    let canonical = above_the_lower_sheet(600, 5, 0.02, 0.3);
     let split = (n + 1) * (n + 1);
     let mut frames = Vec::new();
     for f in 0..24 {
@@ -618,16 +620,7 @@ fn gaussians_going_back_and_forth_reuse_meshes_exactly() {
     // exactly the from-scratch mesh every frame.
     let n = 6;
     let rest = two_sheets(n, 5.0);
-    let mut rng = Rng::new(9);
-    let canonical: Vec<Vec3> = (0..400)
-        .map(|_| {
-            Vec3::new(
-                rng.uniform_f32(),
-                rng.uniform_f32(),
-                0.01 + 0.05 * rng.uniform_f32(),
-            )
-        })
-        .collect();
+    let canonical = above_the_lower_sheet(400, 9, 0.01, 0.05);
     let cell = 1.0 / n as f32;
     // A: at rest; B: every third Gaussian a third of a cell along x; C: every fifth one along
     // -y; D: both.
