@@ -259,7 +259,8 @@ pub struct FrameStats {
     pub rebuilt: bool,
     /// Gaussians that changed chart (all assigned Gaussians on a rebuild are not counted).
     pub hopped: usize,
-    /// Charts triangulated.
+    /// Charts whose mesh was replaced: triangulated, or (on an update) taken back from the
+    /// chart's last meshes when its members are again what they were then.
     pub charts_redone: usize,
     /// Gaussians whose full nearest-triangle check ran (the others were settled by their
     /// motion certificate, possibly with an exact comparison against a few listed close
