@@ -155,9 +155,9 @@ pub(crate) struct Fit {
 }
 
 impl Snapshot {
-    /// The snapshot of `triangles` (sorted) whose corners are `corners` (template vertex ids)
-    /// at positions `positions`, in `frame` (built from the chart triangle `v`). `None` when
-    /// the vertices' Gram matrix is singular.
+    /// The snapshot of `triangles` (the chart first) whose corners are `corners` (template
+    /// vertex ids) at positions `positions`, in `frame` (built from the chart triangle).
+    /// `None` when a vertex is missing or the vertices' Gram matrix is singular.
     pub(crate) fn new(
         frame: &LocalFrame,
         triangles: Vec<u32>,
@@ -170,7 +170,6 @@ impl Snapshot {
             .filter_map(|&t| corners.get(t as usize))
             .flatten()
             .copied()
-            .filter(|&k| (k as usize) < positions.len())
             .collect();
         ids.sort_unstable();
         ids.dedup();
@@ -418,11 +417,7 @@ impl Certificate {
     /// Bounds for the Gaussian now at `q`.
     #[inline]
     pub(crate) fn bounds(&self, fit: &Fit, q: DVec3) -> Bounds {
-        let local = DVec3::new(
-            f64::from(self.local[0]),
-            f64::from(self.local[1]),
-            f64::from(self.local[2]),
-        );
+        let local = glam::Vec3::from_array(self.local).as_dvec3();
         let error = fit.mismatch(q, local) + fit.residual;
         Bounds {
             own: fit.sigma_hi * f64::from(self.own) + error,

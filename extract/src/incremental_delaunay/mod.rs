@@ -305,8 +305,6 @@ struct Scratch {
     marks: Vec<u32>,
     token: u32,
     frontier: Vec<u32>,
-    /// The chart members' deformed means.
-    means: Vec<DVec3>,
     /// The deformed means of a batch of charts' members.
     gathered: Vec<DVec3>,
     /// A snapshot's vertices while it is rebased.
@@ -362,6 +360,22 @@ impl ChartState {
             certificates,
             competitors,
             snapshot: None,
+        }
+    }
+
+    /// Drops member `k`'s certificate (the member left the chart).
+    fn remove(&mut self, k: usize) {
+        if k < self.certificates.len() {
+            self.certificates.remove(k);
+            self.competitors.remove(k);
+        }
+    }
+
+    /// Makes room for a member without a certificate at `k` (a Gaussian hopped in).
+    fn insert_empty(&mut self, k: usize) {
+        if k <= self.certificates.len() {
+            self.certificates.insert(k, Certificate::NONE);
+            self.competitors.insert(k, Competitors::NONE);
         }
     }
 
@@ -851,7 +865,7 @@ impl IncrementalDelaunay {
             .iter()
             .map(|&t| self.members.get(t as usize).cloned().unwrap_or_default())
             .collect();
-        let mut hopped = 0;
+        let hopped = moves.len();
         for (g, c) in moves {
             let i = g as usize;
             let a = self.assigned[i];
@@ -860,8 +874,7 @@ impl IncrementalDelaunay {
             {
                 list.remove(k);
                 if let Some(state) = self.states.get_mut(a as usize) {
-                    state.certificates.remove(k);
-                    state.competitors.remove(k);
+                    state.remove(k);
                 }
             }
             if let Some(list) = self.members.get_mut(c as usize)
@@ -869,13 +882,11 @@ impl IncrementalDelaunay {
             {
                 list.insert(k, g);
                 if let Some(state) = self.states.get_mut(c as usize) {
-                    state.certificates.insert(k, Certificate::NONE);
-                    state.competitors.insert(k, Competitors::NONE);
+                    state.insert_empty(k);
                 }
             }
             self.assigned[i] = c;
             self.anchors[i] = self.anchor(i, c);
-            hopped += 1;
         }
         self.remesh(&dirty, before);
         self.since_rebuild += 1;
@@ -922,8 +933,6 @@ impl IncrementalDelaunay {
         let margin = SNAPSHOT_MARGIN_REL * size;
         let slack =
             FILTER_MARGIN_REL * (f64::from(self.diagonal) + centre.abs().max_element() + size);
-        scratch.means.clear();
-        scratch.means.extend_from_slice(means);
         let usable = |snap: &Snapshot| match cx.flat {
             None => true,
             Some(flat) => snap.triangles.iter().all(|&t| !flat[t as usize]),
@@ -937,7 +946,7 @@ impl IncrementalDelaunay {
             // First the bounds of every member; the few they do not settle afterwards.
             let mut reach = 0.0f64;
             scratch.unsettled.clear();
-            for (k, (c, &q)) in state.certificates.iter().zip(&scratch.means).enumerate() {
+            for (k, (c, &q)) in state.certificates.iter().zip(means).enumerate() {
                 let from_centre = (q - centre).length();
                 let bounds = c.bounds(&fit, q);
                 if bounds.lower - (bounds.own - hop) > own_slack(slack, q, from_centre, bounds.own)
@@ -1005,8 +1014,7 @@ impl IncrementalDelaunay {
                 !bvh.any_within(&snap.frontier, centre, radius * radius, &mut scratch.stack);
             if inside {
                 let fit = if rebase {
-                    Self::rebase(cx.bvh.corners(a), cx.positions, state, scratch, &fit)
-                        .unwrap_or(fit)
+                    Self::rebase(v, cx.positions, means, state, scratch, &fit).unwrap_or(fit)
                 } else {
                     fit
                 };
@@ -1044,7 +1052,7 @@ impl IncrementalDelaunay {
         out.refreshed += 1;
         scratch.pending.clear();
         let mut reach = 0.0f64;
-        for (k, (&g, &q)) in list.iter().zip(&scratch.means).enumerate() {
+        for (k, (&g, &q)) in list.iter().zip(means).enumerate() {
             let (d2, _) = bvh.distance_sq(q, a);
             reach = reach.max((q - centre).length() + (d2.sqrt() - hop).max(0.0));
             scratch.pending.push((k, g, q, d2));
@@ -1096,14 +1104,16 @@ impl IncrementalDelaunay {
         state.snapshot = if fit.is_some() { snap } else { None };
     }
 
-    /// Moves a chart's snapshot to this frame (the chart triangle's corners are `v`; `fit`
-    /// maps the old snapshot here) and issues every member's certificate afresh from its
+    /// Moves a chart's snapshot to this frame (the chart triangle's corners are `v`, its
+    /// members' means `means`; `fit` maps the old snapshot here) and issues every member's
+    /// certificate afresh from its
     /// current bounds: the exact ones found this frame (`scratch.exact`), else its old
     /// certificate's. Returns the new fit, or `None` (and nothing changed) when the chart
     /// triangle is flat or the new fit fails.
     fn rebase(
         v: [DVec3; 3],
         positions: &[Vec3],
+        means: &[DVec3],
         state: &mut ChartState,
         scratch: &mut Scratch,
         fit: &Fit,
@@ -1112,8 +1122,7 @@ impl IncrementalDelaunay {
         // Current bounds of every member, under the old fit.
         scratch.current.clear();
         let mut exact = scratch.exact.iter().peekable();
-        for (k, (&q, (c, competitors))) in scratch
-            .means
+        for (k, (&q, (c, competitors))) in means
             .iter()
             .zip(state.certificates.iter().zip(&state.competitors))
             .enumerate()
@@ -1139,8 +1148,7 @@ impl IncrementalDelaunay {
             &mut scratch.saved,
             &mut scratch.vertices,
         )?;
-        for (k, (&q, &(own, near, other))) in scratch.means.iter().zip(&scratch.current).enumerate()
-        {
+        for (k, (&q, &(own, near, other))) in means.iter().zip(&scratch.current).enumerate() {
             let close = (near, state.competitors[k].close);
             (state.certificates[k], state.competitors[k]) =
                 Certificate::issue(&new_fit, q, own, close, other);

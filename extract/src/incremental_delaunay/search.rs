@@ -39,8 +39,6 @@ pub(crate) struct DeformedBvh {
     parent: Vec<u32>,
     /// Per triangle: flat in the sense of `certify::FLAT_RATIO`.
     flat: Vec<bool>,
-    /// Whether any triangle is flat.
-    any_flat: bool,
 }
 
 impl DeformedBvh {
@@ -89,14 +87,12 @@ impl DeformedBvh {
                 }
             }
         }
-        let any_flat = flat.contains(&true);
         let mut out = Self {
             bvh,
             corners,
             leaf_of,
             parent,
             flat,
-            any_flat,
         };
         out.set_leaf_boxes(diagonal);
         out.bvh.refit_all();
@@ -106,14 +102,13 @@ impl DeformedBvh {
     /// Moves the triangles to `positions` and refits the boxes (same tree).
     pub(crate) fn refit(&mut self, positions: &[Vec3], tris: &[[u32; 3]], diagonal: f32) {
         (self.corners, self.flat) = gather_corners(positions, tris);
-        self.any_flat = self.flat.contains(&true);
         self.set_leaf_boxes(diagonal);
         self.bvh.refit_all();
     }
 
-    /// The flat triangles (see [`DeformedBvh::flat`]'s field), or `None` when there are none.
+    /// Per triangle whether it is flat (`certify::FLAT_RATIO`), or `None` when none is.
     pub(crate) fn flat(&self) -> Option<&[bool]> {
-        self.any_flat.then_some(self.flat.as_slice())
+        self.flat.contains(&true).then_some(self.flat.as_slice())
     }
 
     /// Sets every leaf's box to the union of its triangles' padded boxes (in parallel over
