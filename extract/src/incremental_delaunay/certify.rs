@@ -465,3 +465,65 @@ fn round_down(x: f64) -> f32 {
     let y = x as f32;
     if f64::from(y) > x { y.next_down() } else { y }
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+
+    use super::{LocalFrame, Snapshot};
+
+    /// Two triangles of a unit square in z = 0.
+    fn square() -> (Vec<[u32; 3]>, Vec<Vec3>) {
+        let positions = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        (vec![[0, 1, 2], [0, 2, 3]], positions)
+    }
+
+    fn corners(positions: &[Vec3], t: [u32; 3]) -> [DVec3; 3] {
+        t.map(|k| positions[k as usize].as_dvec3())
+    }
+
+    #[test]
+    fn rebase_maps_a_moved_neighbourhood_exactly_and_fails_without_change() {
+        let (triangles, rest) = square();
+        let v = corners(&rest, triangles[0]);
+        let frame = LocalFrame::of(v).expect("frame");
+        let mut snap =
+            Snapshot::new(&frame, vec![0, 1], Vec::new(), &triangles, &rest).expect("snapshot");
+        let (mut saved, mut current) = (Vec::new(), Vec::new());
+        // Stretched by 20% along x: the old fit follows it with no residual.
+        let moved: Vec<Vec3> = rest
+            .iter()
+            .map(|p| Vec3::new(1.2 * p.x, p.y, p.z))
+            .collect();
+        let v_moved = corners(&moved, triangles[0]);
+        let old = snap.fit(v_moved, &moved, &mut current).expect("fit");
+        assert!(old.residual < 1e-12 && old.sigma_hi > 1.15, "{old:?}");
+        // Rebased there, the map is a rotation again (singular values 1).
+        let frame_moved = LocalFrame::of(v_moved).expect("frame");
+        let new = snap
+            .rebase(&frame_moved, v_moved, &moved, &mut saved, &mut current)
+            .expect("rebase");
+        assert!(new.residual < 1e-12, "{new:?}");
+        assert!((new.sigma_lo - 1.0).abs() < 1e-9 && (new.sigma_hi - 1.0).abs() < 1e-9);
+        // Every vertex in one point: no fit, and the snapshot stays as it was.
+        let before = snap.clone();
+        let collapsed = vec![Vec3::splat(0.5); 4];
+        let v_collapsed = corners(&collapsed, triangles[0]);
+        assert!(
+            snap.rebase(
+                &frame_moved,
+                v_collapsed,
+                &collapsed,
+                &mut saved,
+                &mut current
+            )
+            .is_none()
+        );
+        assert_eq!(snap, before);
+    }
+}
