@@ -216,7 +216,11 @@ fn run_once(
     deform_ms: &mut Vec<f64>,
 ) -> anyhow::Result<Run> {
     let deformer = Deformer::new(template, DeformMode::Binding);
-    let mut d = IncrementalDelaunay::from_bound(template, set, DeformMode::Binding, options)?;
+    let mut d = IncrementalDelaunay::new(
+        template,
+        &deformer.means(set, template.positions())?,
+        options,
+    )?;
     let mut geometry = WorldGeometry::default();
     let n = set.len() as f64;
     let charts = template.triangle_count() as f64;

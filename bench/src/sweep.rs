@@ -105,6 +105,8 @@ struct Frame {
 struct Prepared {
     template: TriMesh,
     set: GaussianSet,
+    /// The Gaussians' means on the rest template.
+    rest_means: Vec<Vec3>,
     mode: DeformMode,
     options: ExtractOptions,
     /// Working scale: radius and mean spacing (the pipeline's, unless the animation's scale
@@ -185,6 +187,7 @@ impl Prepared {
         Ok(Self {
             template,
             set,
+            rest_means: rest.means,
             mode,
             options: config.options,
             resolved,
@@ -247,7 +250,7 @@ fn run_stateless(
     resolved: &Resolved,
     every: u64,
 ) -> anyhow::Result<(Summary, f64)> {
-    let mut mesher = Mesher::new(method, &p.options, resolved, &p.template, &p.set, p.mode, 0)?;
+    let mut mesher = Mesher::new(method, &p.options, resolved, &p.template, &p.rest_means, 0)?;
     let deformer = Deformer::new(&p.template, p.mode);
     let mut records = Vec::new();
     let mut render_ms = Vec::new();
@@ -300,7 +303,7 @@ fn run_delaunay(
         rebuild_every,
         ..DelaunayOptions::default()
     };
-    let mut d = IncrementalDelaunay::from_bound(&p.template, &p.set, p.mode, options)?;
+    let mut d = IncrementalDelaunay::new(&p.template, &p.rest_means, options)?;
     // The pipeline's own mesher for the setting it can express.
     let mut pipeline = if hop_threshold == 0.0 && rebuild_every == 0 {
         let o = ExtractOptions {
@@ -312,8 +315,7 @@ fn run_delaunay(
             &o,
             &p.resolved,
             &p.template,
-            &p.set,
-            p.mode,
+            &p.rest_means,
             0,
         )?)
     } else {

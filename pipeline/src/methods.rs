@@ -27,7 +27,6 @@ use trisplat_geometry::TriMesh;
 use trisplat_geometry::camera::sphere_rig;
 use trisplat_geometry::spatial::PointIndex;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::DeformMode;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
@@ -293,7 +292,8 @@ pub enum Mesher {
 }
 
 impl Mesher {
-    /// A mesher for `method` on the rest template `rest` and the bound Gaussians `set`.
+    /// A mesher for `method` on the rest template `rest` and the Gaussians' rest-pose means
+    /// `rest_means` (deformed once by the caller).
     /// `first_frame` only labels errors.
     ///
     /// # Errors
@@ -303,8 +303,7 @@ impl Mesher {
         options: &ExtractOptions,
         resolved: &Resolved,
         rest: &TriMesh,
-        set: &GaussianSet,
-        mode: DeformMode,
+        rest_means: &[Vec3],
         first_frame: usize,
     ) -> Result<Self, PipelineError> {
         Ok(match method {
@@ -319,12 +318,13 @@ impl Mesher {
                     hop_threshold: options.hop_threshold,
                     ..DelaunayOptions::default()
                 };
-                let d = IncrementalDelaunay::from_bound(rest, set, mode, d_options).map_err(
-                    |source| PipelineError::Delaunay {
-                        frame: first_frame,
-                        cause: source,
-                    },
-                )?;
+                let d =
+                    IncrementalDelaunay::new(rest, rest_means, d_options).map_err(|source| {
+                        PipelineError::Delaunay {
+                            frame: first_frame,
+                            cause: source,
+                        }
+                    })?;
                 Self::Delaunay(Box::new(d))
             }
             Method::Alpha => Self::Alpha(resolved.alpha),

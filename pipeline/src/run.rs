@@ -264,8 +264,7 @@ fn run_inner(
             o,
             &resolved,
             template,
-            &set,
-            mode,
+            &rest.means,
             frames.start,
         )?);
     }

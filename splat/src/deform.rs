@@ -279,6 +279,17 @@ impl Deformer {
         Ok(GaussianSet::new_unchecked(parts))
     }
 
+    /// The world-space means of `set` with the template at `positions`; with the template's
+    /// rest positions, the canonical means that incremental Delaunay meshes from.
+    ///
+    /// # Errors
+    /// As [`Deformer::deform`].
+    pub fn means(&self, set: &GaussianSet, positions: &[Vec3]) -> Result<Vec<Vec3>, DeformError> {
+        let mut geometry = WorldGeometry::default();
+        self.deform_geometry(set, positions, &mut geometry)?;
+        Ok(geometry.means)
+    }
+
     /// Deforms only the geometry (means, rotations, log-scales) into reusable buffers: the
     /// per-frame hot path.
     ///

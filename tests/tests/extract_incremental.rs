@@ -104,8 +104,8 @@ fn every_frame_equals_a_fresh_triangulation_and_is_watertight() {
     let deformer = Deformer::new(&spot, DeformMode::Binding);
     let mut geometry = WorldGeometry::default();
     let options = DelaunayOptions::default();
-    let mut inc =
-        IncrementalDelaunay::from_bound(&spot, &set, DeformMode::Binding, options).expect("mesher");
+    let rest_means = deformer.means(&set, spot.positions()).expect("rest means");
+    let mut inc = IncrementalDelaunay::new(&spot, &rest_means, options).expect("mesher");
     let (mut hops, mut partial) = (0, 0);
     for f in 0..FRAMES {
         let positions = animate(&spot, f);
@@ -120,8 +120,7 @@ fn every_frame_equals_a_fresh_triangulation_and_is_watertight() {
         }
         assert!(stats.charts_redone <= 2 * stats.hopped || stats.rebuilt);
         let got = inc.triangles();
-        let mut fresh = IncrementalDelaunay::from_bound(&spot, &set, DeformMode::Binding, options)
-            .expect("mesher");
+        let mut fresh = IncrementalDelaunay::new(&spot, &rest_means, options).expect("mesher");
         fresh.update(&positions, &geometry.means).expect("fresh");
         assert_eq!(
             inc.assignment(),
@@ -152,10 +151,9 @@ fn hysteresis_and_rebuild_period_match_scratch_of_current_assignment() {
     let mut geometry = WorldGeometry::default();
     let mut hops = [0usize; 2];
     for (k, tau) in [0.0, 0.3].into_iter().enumerate() {
-        let mut inc = IncrementalDelaunay::from_bound(
+        let mut inc = IncrementalDelaunay::new(
             &spot,
-            &set,
-            DeformMode::Binding,
+            &deformer.means(&set, spot.positions()).expect("rest means"),
             DelaunayOptions {
                 hop_threshold: tau,
                 rebuild_every: 4,

@@ -130,8 +130,6 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::spatial::MAX_COORDINATE;
-use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 
 use self::certify::{Bounds, Certificate, Close, Competitors, Fit, LocalFrame, Snapshot};
 pub use self::certify::{CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REBASE_REL, SNAPSHOT_MARGIN_REL};
@@ -245,9 +243,6 @@ pub enum DelaunayError {
         /// Vertices needed.
         count: usize,
     },
-    /// Deforming the bound Gaussians failed.
-    #[error("deformation: {0}")]
-    Deform(#[from] DeformError),
 }
 
 /// What one update did.
@@ -608,23 +603,6 @@ impl IncrementalDelaunay {
         })
     }
 
-    /// A mesher for bound Gaussians (`set`, local parameters) on `rest`: their canonical means
-    /// are those of `set` deformed by `mode` with the template at rest.
-    ///
-    /// # Errors
-    /// [`DelaunayError::Deform`] when `set` cannot be deformed with `rest`, else as
-    /// [`IncrementalDelaunay::new`].
-    pub fn from_bound(
-        rest: &TriMesh,
-        set: &GaussianSet,
-        mode: DeformMode,
-        options: DelaunayOptions,
-    ) -> Result<Self, DelaunayError> {
-        let mut geometry = WorldGeometry::default();
-        Deformer::new(rest, mode).deform_geometry(set, rest.positions(), &mut geometry)?;
-        Self::new(rest, &geometry.means, options)
-    }
-
     /// The options.
     #[must_use]
     pub fn options(&self) -> &DelaunayOptions {
@@ -704,7 +682,7 @@ impl IncrementalDelaunay {
     }
 
     /// Moves to a new frame: `positions` are the deformed template vertices, `means` the
-    /// deformed Gaussian means (e.g. from [`Deformer::deform_geometry`]). The first update, and
+    /// deformed Gaussian means (e.g. from `trisplat_splat::deform::Deformer::deform_geometry`). The first update, and
     /// every [`DelaunayOptions::rebuild_every`]-th, rebuilds from scratch; the others
     /// re-triangulate only the charts that Gaussians left or entered.
     ///
