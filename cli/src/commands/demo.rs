@@ -1,15 +1,30 @@
 //! `trisplat demo [-o DIR]`: the main job on the bundled avatar fixture.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::bail;
+use anyhow::Context as _;
+use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method};
 
 use super::Context;
 use super::extract::{print_summary, run_with_progress};
 
-/// The bundled avatar: Khronos' CesiumMan (CC BY 4.0, © Cesium), a skinned walk cycle.
-pub const DEMO_FIXTURE: &str = "anim/CesiumMan.glb";
+/// File name of the bundled avatar, written into the output folder: Khronos' CesiumMan
+/// (CC BY 4.0, © Cesium), a skinned walk cycle.
+pub const DEMO_FIXTURE: &str = "CesiumMan.glb";
+
+/// The bundled avatar's bytes, embedded in the binary so that the demo runs anywhere (also
+/// after `cargo install`, away from the source checkout).
+const DEMO_GLB: &[u8] = include_bytes!("../../../fixtures/data/anim/CesiumMan.glb");
+
+/// Its licence and attribution, written beside it.
+const DEMO_LICENCE: &str = "CesiumMan.glb: Khronos glTF sample model, unchanged \
+(https://github.com/KhronosGroup/glTF-Sample-Assets).\n\
+Licence: CC BY 4.0 International (https://creativecommons.org/licenses/by/4.0/legalcode), \
+(c) Cesium. Attribution: Cesium; the Cesium trademark is not licensed.\n";
+
+/// File name of the licence written beside the avatar.
+pub const DEMO_LICENCE_FILE: &str = "CesiumMan_LICENSE.txt";
 
 /// Frames per second at which the demo samples the walk cycle (a handful of frames).
 pub const DEMO_FPS: f64 = 3.0;
@@ -17,18 +32,19 @@ pub const DEMO_FPS: f64 = 3.0;
 /// Arguments of `trisplat demo`.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = "\
-Runs the main job on the bundled avatar (fixtures/data/anim/CesiumMan.glb: Khronos glTF sample \
-model, CC BY 4.0, (c) Cesium; 3,273 vertices, 2,338 once the UV seams are welded, 4,672 \
+Runs the main job on the bundled avatar (CesiumMan.glb, embedded in the binary: Khronos glTF \
+sample model, CC BY 4.0, (c) Cesium; 3,273 vertices, 2,338 once the UV seams are welded, 4,672 \
 triangles, a skinned walk cycle). It is \
 the same as
 
-  trisplat extract --template fixtures/data/anim/CesiumMan.glb --fps 3 \\
+  trisplat extract --template DIR/CesiumMan.glb --fps 3 \\
       --method tsdf,delaunay,alpha --gt template -o DIR
 
 binding 4 Gaussians per triangle itself, meshing the walk cycle sampled at 3 frames per second \
 with all three methods, and measuring each frame against the deformed template. It prints a \
 table (method, ms/frame, Chamfer L1) and where the outputs are (see `trisplat extract --help`). \
-The fixture is found in the source checkout the binary was built from.")]
+The avatar and its licence are written to DIR/CesiumMan.glb and DIR/CesiumMan_LICENSE.txt \
+first, so the demo needs no file beside the binary.")]
 pub struct DemoArgs {
     /// Output folder (created if missing).
     #[arg(
@@ -43,16 +59,9 @@ pub struct DemoArgs {
 /// Runs `trisplat demo`.
 ///
 /// # Errors
-/// A missing fixture (a binary moved away from its checkout), or whatever the pipeline reports.
+/// An output folder that cannot be written, or whatever the pipeline reports.
 pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
-    let template = trisplat_fixtures::path(DEMO_FIXTURE);
-    if !template.is_file() {
-        bail!(
-            "{}: the demo's fixture is missing (the demo reads it from the source checkout the \
-             binary was built from); run `trisplat extract --template YOUR.glb ...` instead",
-            template.display()
-        );
-    }
+    let template = write_avatar(&args.output)?;
     let config = ExtractConfig {
         template,
         animation: None,
@@ -67,11 +76,26 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
         },
     };
     println!(
-        "trisplat demo: {} (CC BY 4.0, (c) Cesium), methods tsdf, delaunay, alpha, ground truth: \
-         the deformed template",
+        "trisplat demo: {} (bundled; CC BY 4.0, (c) Cesium), methods tsdf, delaunay, alpha, \
+         ground truth: the deformed template",
         config.template.display()
     );
     let report = run_with_progress(&config, ctx)?;
     print_summary(&report, &config.output);
     Ok(())
+}
+
+/// Writes the embedded avatar and its licence into `dir` (created if missing); returns the
+/// avatar's path.
+fn write_avatar(dir: &Path) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let write = |name: &str, bytes: &[u8]| -> anyhow::Result<PathBuf> {
+        let path = dir.join(name);
+        write_atomically(&path, |w| {
+            w.write_all(bytes).map_err(|e| IoError::os(&path, e))
+        })?;
+        Ok(path)
+    };
+    write(DEMO_LICENCE_FILE, DEMO_LICENCE.as_bytes())?;
+    write(DEMO_FIXTURE, DEMO_GLB)
 }
