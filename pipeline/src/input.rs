@@ -600,14 +600,6 @@ impl WeldedTemplate {
     }
 }
 
-/// Reads a static ground-truth mesh.
-///
-/// # Errors
-/// An unreadable file.
-pub fn read_gt(path: &Path) -> Result<TriMesh, PipelineError> {
-    Ok(read_mesh(path)?)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

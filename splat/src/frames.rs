@@ -27,7 +27,6 @@
 //! Every output is finite for finite input.
 
 use glam::{DMat3, DVec3, Vec3};
-use rayon::prelude::*;
 
 /// Default relative tolerance below which a triangle counts as degenerate (see the module
 /// documentation). Relative to the triangle's own longest edge; far below the `f32` precision
@@ -104,14 +103,6 @@ pub struct TriangleFrame {
     pub scale: f64,
     /// Whether the degenerate fallback was used.
     pub degenerate: bool,
-}
-
-impl TriangleFrame {
-    /// Maps a local point to the world.
-    #[must_use]
-    pub fn to_world(&self, local: DVec3) -> DVec3 {
-        self.scale * (self.rotation * local) + self.origin
-    }
 }
 
 /// The three corners in `f64`.
@@ -325,22 +316,6 @@ pub fn transform_normal(j: DMat3, n: DVec3) -> Option<DVec3> {
     let m = cofactor(j) * n;
     let m = if j.determinant() < 0.0 { -m } else { m };
     m.try_normalize()
-}
-
-/// Frames of every triangle of `positions`/`triangles`, in parallel. Triangles with a vertex
-/// index past `positions` get the degenerate frame of a point at the origin (callers validate
-/// indices first; see [`crate::deform::Deformer::new`]).
-#[must_use]
-pub fn triangle_frames(
-    positions: &[Vec3],
-    triangles: &[[u32; 3]],
-    convention: Convention,
-    o: &FrameOptions,
-) -> Vec<TriangleFrame> {
-    triangles
-        .par_iter()
-        .map(|t| frame(convention, corners_of(positions, *t), o))
-        .collect()
 }
 
 /// The corners of triangle `t` in `f64` (0 for an index past `positions`).

@@ -1273,14 +1273,6 @@ pub fn read_ply_mesh(path: &Path) -> Result<(TriMesh, PlyExtras), IoError> {
     ply_to_mesh(path, &read_ply_document(path)?)
 }
 
-/// Reads the `vertex` element of a PLY file as a point cloud, with everything else it holds.
-///
-/// # Errors
-/// See [`read_ply_document`] and [`ply_to_points`].
-pub fn read_ply_points(path: &Path) -> Result<(PointCloud, PlyExtras), IoError> {
-    ply_to_points(path, &read_ply_document(path)?)
-}
-
 fn f32_column(values: impl Iterator<Item = f32>) -> PropertyData {
     PropertyData::Scalar(ScalarColumn::F32(values.collect()))
 }

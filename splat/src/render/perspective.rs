@@ -186,28 +186,6 @@ pub struct ProjectedPerspective {
     pub box_radius: DVec2,
 }
 
-/// Projects one Gaussian given in camera space (`mean`, covariance `cov` = `W Σ Wᵀ`) with
-/// activated `opacity`; `None` when culled (centre not in `(near, far)`, opacity below 1/255,
-/// box off the image, non-finite values).
-#[must_use]
-pub fn project_camera_space(
-    camera: &Camera,
-    mean: DVec3,
-    cov: DMat3,
-    opacity: f64,
-    (near, far): (f64, f64),
-    antialiased: bool,
-) -> Option<ProjectedPerspective> {
-    project_with(
-        &view_of(camera),
-        mean,
-        cov,
-        opacity,
-        (near, far),
-        antialiased,
-    )
-}
-
 fn view_of(camera: &Camera) -> View {
     View {
         w2c: camera.world_to_camera_rotation(),
