@@ -130,13 +130,20 @@ pub struct Shape<'a> {
     pub points: &'a PointCloud,
     /// The mesh, when the side is one: the target of surface-mode distances.
     pub mesh: Option<&'a TriMesh>,
+    /// A BVH already built over `mesh` (see [`Shape::indexed_mesh`]); `None`: surface mode
+    /// builds one per call.
+    pub bvh: Option<&'a TriangleBvh>,
 }
 
 impl<'a> Shape<'a> {
     /// A point set.
     #[must_use]
     pub fn points(points: &'a PointCloud) -> Self {
-        Self { points, mesh: None }
+        Self {
+            points,
+            mesh: None,
+            bvh: None,
+        }
     }
 
     /// A mesh and points sampled on it (e.g. by [`crate::sampling::sample_uniform`]).
@@ -145,6 +152,18 @@ impl<'a> Shape<'a> {
         Self {
             points: samples,
             mesh: Some(mesh),
+            bvh: None,
+        }
+    }
+
+    /// A mesh, points sampled on it, and a BVH built over it (`TriangleBvh::new(mesh)`):
+    /// a side measured against several others builds its index once.
+    #[must_use]
+    pub fn indexed_mesh(mesh: &'a TriMesh, samples: &'a PointCloud, bvh: &'a TriangleBvh) -> Self {
+        Self {
+            points: samples,
+            mesh: Some(mesh),
+            bvh: Some(bvh),
         }
     }
 }
@@ -285,7 +304,14 @@ fn one_way(
     let spatial = |side: Side| move |source: SpatialError| MetricsError::Spatial { side, source };
     match (options.surface, to.mesh) {
         (true, Some(mesh)) if mesh.triangle_count() > 0 => {
-            let bvh = TriangleBvh::new(mesh).map_err(spatial(to_side))?;
+            let built;
+            let bvh = match to.bvh {
+                Some(bvh) => bvh,
+                None => {
+                    built = TriangleBvh::new(mesh).map_err(spatial(to_side))?;
+                    &built
+                }
+            };
             let found = &bvh.closest_points(queries).map_err(spatial(from_side))?;
             let face_normals = query_normals.map(|_| mesh.face_normals());
             Ok(accumulate(

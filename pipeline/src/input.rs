@@ -107,17 +107,14 @@ pub fn clip_of(clip: Option<&str>) -> Clip {
     }
 }
 
-/// Opens a glTF with `clip` sampled at `fps`; a file without animations plays its stored scene
-/// unless a clip was asked for.
+/// Opens a glTF (parsed once) with `clip` sampled at `fps`; without `clip`, its first clip, or
+/// its stored scene when it has none.
 ///
 /// # Errors
 /// An unreadable file or a clip it does not have.
 pub fn open_gltf(path: &Path, clip: Option<&str>, fps: f64) -> Result<GltfTemplate, PipelineError> {
-    let first = GltfTemplate::open(path, &Clip::None)?;
-    if first.clip_names().is_empty() && clip.is_none() {
-        return Ok(first.with_fps(fps));
-    }
-    Ok(GltfTemplate::open(path, &clip_of(clip))?.with_fps(fps))
+    let clip = clip.map_or(Clip::FirstIfAny, |c| clip_of(Some(c)));
+    Ok(GltfTemplate::open(path, &clip)?.with_fps(fps))
 }
 
 /// Where an animation comes from (`trisplat deform --animation` and `trisplat extract

@@ -15,6 +15,7 @@ use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::metrics::{MetricsError, MetricsOptions, Shape, evaluate};
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
+use trisplat_geometry::spatial::TriangleBvh;
 use trisplat_geometry::{PointCloud, TriMesh};
 
 use crate::config::Method;
@@ -24,24 +25,41 @@ use crate::methods::Resolved;
 /// `trisplat eval`'s default.
 pub const SAMPLE_SEED: u64 = 0;
 
-/// A ground-truth mesh with its samples (drawn once per frame, shared by the methods).
-#[derive(Clone, Debug)]
+/// A ground-truth mesh with its samples and its BVH (made once per frame, shared by the
+/// methods).
+#[derive(Debug)]
 pub struct GtSamples {
     /// The mesh.
     pub mesh: TriMesh,
     /// Its area-uniform samples with face normals.
     pub samples: PointCloud,
+    /// The BVH the predictions' samples are measured against; `None` when the mesh cannot
+    /// be indexed (then [`measure`] reports the reason).
+    bvh: Option<TriangleBvh>,
 }
 
 impl GtSamples {
-    /// Samples `mesh`; `None` when it has no area.
+    /// Samples and indexes `mesh`; `None` when it has no area.
     #[must_use]
     pub fn new(mesh: TriMesh, samples: usize) -> Option<Self> {
         let points = sample_uniform(&mesh, samples, splitmix64(SAMPLE_SEED));
-        (!points.is_empty()).then_some(Self {
+        if points.is_empty() {
+            return None;
+        }
+        let bvh = TriangleBvh::new(&mesh).ok();
+        Some(Self {
             mesh,
             samples: points,
+            bvh,
         })
+    }
+
+    /// The ground truth as one side of a comparison.
+    fn shape(&self) -> Shape<'_> {
+        match &self.bvh {
+            Some(bvh) => Shape::indexed_mesh(&self.mesh, &self.samples, bvh),
+            None => Shape::mesh(&self.mesh, &self.samples),
+        }
     }
 }
 
@@ -87,11 +105,7 @@ pub fn measure(
         taus: vec![tau],
         surface: true,
     };
-    let m = evaluate(
-        Shape::mesh(pred, &points),
-        Shape::mesh(&gt.mesh, &gt.samples),
-        &options,
-    )?;
+    let m = evaluate(Shape::mesh(pred, &points), gt.shape(), &options)?;
     let t = m.thresholds.first().copied();
     Ok(Some(FrameMetrics {
         chamfer_l1: m.chamfer_l1,

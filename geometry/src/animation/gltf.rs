@@ -45,6 +45,8 @@ pub enum Clip {
     Index(usize),
     /// The first animation with this name.
     Name(String),
+    /// The first animation when the file has one, else the scene as stored.
+    FirstIfAny,
 }
 
 /// The local transform of a node.
@@ -659,6 +661,10 @@ impl GltfTemplate {
         };
         let anim = match clip {
             Clip::None => return Ok(None),
+            Clip::FirstIfAny => match doc.animations().next() {
+                Some(a) => a,
+                None => return Ok(None),
+            },
             Clip::Index(i) => doc
                 .animations()
                 .nth(*i)
