@@ -1,4 +1,4 @@
-"""scipy/trimesh side of `trisplat-bench eval`: SPEC §8 metrics on two point files.
+"""scipy/trimesh side of `trisplat-bench eval`: docs/conventions.md §8 metrics on two point files.
 
 Usage:
     eval_scipy.py points PRED.ply GT.ply TAU [TAU ...]

@@ -1,4 +1,4 @@
-//! `eval`: point-set metrics (SPEC §8) between two N-point sets against scipy's cKDTree, and
+//! `eval`: point-set metrics (docs/conventions.md §8) between two N-point sets against scipy's cKDTree, and
 //! exact point-to-surface distances against trimesh.
 //!
 //! Inputs: two independent N-point area-uniform samplings (seeds 1 and 2, with face normals) of

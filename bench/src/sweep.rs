@@ -24,18 +24,17 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use glam::Vec3;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelaunay};
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::io::read_mesh;
 use trisplat_pipeline::config::DEFAULT_SAMPLES;
-use trisplat_pipeline::input::{WeldedTemplate, deform_mode, gaussians, open_animation};
-use trisplat_pipeline::methods::{FrameInput, Mesher, Resolved, bounding_sphere, mean_spacing};
+use trisplat_pipeline::input::deform_mode;
+use trisplat_pipeline::methods::{FrameInput, Mesher, Resolved};
 use trisplat_pipeline::report::{FrameRecord, GtSamples, Summary, is_watertight, measure};
-use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method};
+use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
+use trisplat_splat::deform::{DeformMode, Deformer};
 
 /// TSDF voxels as fractions of the bounding radius: radius / this.
 const VOXELS_PER_RADIUS: [f64; 3] = [64.0, 128.0, 256.0];
@@ -45,9 +44,6 @@ const HOP_THRESHOLDS: [f64; 3] = [0.0, 0.1, 0.5];
 const REBUILD_PERIODS: [usize; 3] = [0, 10, 1];
 /// Alpha radii in multiples of the mean nearest-neighbour spacing of the Gaussian means.
 const ALPHA_SPACINGS: [f64; 3] = [1.5, 3.0, 6.0];
-/// Largest ratio between the animation's scale and the template file's before the bench
-/// derives its parameters from the animation's first frame instead (see [`Prepared::new`]).
-const SCALE_MISMATCH: f64 = 2.0;
 
 /// Options of the sweep benchmark.
 #[derive(Debug, clap::Args)]
@@ -121,76 +117,46 @@ impl Prepared {
             template: case.template.clone(),
             animation: case.animation.as_ref().map(|p| p.display().to_string()),
             gaussians: None,
-            methods: Method::ALL.to_vec(),
+            methods: Vec::new(),
             output: std::env::temp_dir(),
             frames: None,
             gt: None,
             options,
         };
-        let stored = read_mesh(&config.template)
-            .with_context(|| format!("reading {}", config.template.display()))?;
-        let (animation, _) = open_animation(&config, &stored)?;
-        let anim = animation.get();
-        // As `trisplat extract`: every stage sees the template welded at its seams.
-        let welded = WeldedTemplate::new(&stored);
-        let template = welded.mesh.clone();
-        let (set, _) = gaussians(&config, &template)?;
-        let mode = deform_mode(config.options.mode);
-        let deformer = Deformer::new(&template, mode);
-        let mut rest = WorldGeometry::default();
-        deformer.deform_geometry(&set, template.positions(), &mut rest)?;
-        let mut resolved = Resolved::new(&config.options, &template, &rest.means)?;
-
-        let count = case.frames.unwrap_or(usize::MAX).min(anim.frame_count());
+        // The pipeline's own session: the template welded and in world space, its frames
+        // checked against its scale, the Gaussians bound and the rest pose deformed as
+        // `trisplat extract` does; no mesher is built (no method), the sweep builds its own.
+        let mut session = Session::open(&config)?;
+        let count = case
+            .frames
+            .unwrap_or(usize::MAX)
+            .min(session.frames().len());
         let mut frames = Vec::with_capacity(count);
         for f in 0..count {
-            let Some(positions) = welded.positions(anim.frame(f)?) else {
-                bail!(
-                    "{}: frame {f} does not have the template's vertices",
-                    case.name
-                );
-            };
-            let mut g = WorldGeometry::default();
-            deformer.deform_geometry(&set, &positions, &mut g)?;
-            let mesh = TriMesh::new_unchecked(positions.clone(), template.triangles().to_vec());
+            let (positions, means) = session.deform(f)?;
+            let means = means.to_vec();
+            let mesh =
+                TriMesh::new_unchecked(positions.clone(), session.template().triangles().to_vec());
             let Some(gt) = GtSamples::new(mesh, config.options.samples) else {
                 bail!("{}: frame {f} has no area", case.name);
             };
             frames.push(Frame {
                 index: f,
                 positions,
-                means: g.means,
+                means,
                 gt,
             });
         }
-        let Some(first) = frames.first() else {
+        if frames.is_empty() {
             bail!("{}: no frames", case.name);
-        };
-        // The pipeline derives its defaults from the template file's positions; a glTF whose
-        // frames live in another space (LAM's skin: mesh-local millimetre-sized positions, frames
-        // in metres) would get a voxel and an alpha a hundred times too small.
-        let frame_radius = bounding_sphere(&[&first.positions]).map_or(0.0, |(_, r)| r);
-        let ratio = frame_radius / resolved.template_radius;
-        if !(1.0 / SCALE_MISMATCH..=SCALE_MISMATCH).contains(&ratio) {
-            let spacing = mean_spacing(&first.means).unwrap_or(resolved.mean_spacing * ratio);
-            println!(
-                "note: the template file's bounding radius is {:.4e} but the animation's first \
-                 frame's is {frame_radius:.4e} (x{ratio:.1}); the pipeline's scale-derived \
-                 defaults would be x{ratio:.0} too small, so this sweep derives its voxel and \
-                 alpha from the first frame (radius {frame_radius:.4e}, mean spacing \
-                 {spacing:.4e})",
-                resolved.template_radius
-            );
-            resolved.template_radius = frame_radius;
-            resolved.mean_spacing = spacing;
         }
         Ok(Self {
-            template,
-            set,
-            rest_means: rest.means,
-            mode,
+            template: session.template().clone(),
+            set: session.gaussians().clone(),
+            rest_means: session.rest_means().to_vec(),
+            mode: deform_mode(config.options.mode),
+            resolved: *session.resolved(),
             options: config.options,
-            resolved,
             frames,
         })
     }

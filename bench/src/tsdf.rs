@@ -12,10 +12,10 @@
 //! default: 2 x the scene radius). Timed: ours = allocation + integration + marching cubes +
 //! 2DGS clean-up (`tsdf::fuse`); Open3D = `compute_unique_block_coordinates` + `integrate` per
 //! frame + `extract_triangle_mesh` (its default weight threshold 3 and block resolution 16).
-//! Open3D's VoxelBlockGrid differs from the legacy rules we follow (SPEC §6): z-difference sdf,
+//! Open3D's VoxelBlockGrid differs from the legacy rules we follow (docs/conventions.md §6): z-difference sdf,
 //! floored pixel lookup, integer voxel positions.
 //!
-//! Chamfer: SPEC §8 surface mode (exact point-to-triangle distances both ways, as `trisplat
+//! Chamfer: docs/conventions.md §8 surface mode (exact point-to-triangle distances both ways, as `trisplat
 //! eval --surface`) with [`SAMPLES`] area-uniform samples per mesh, both meshes measured by the
 //! same Rust code against the scaled Spot.
 

@@ -1,5 +1,5 @@
 //! `trisplat render` through the real binary: cameras.json and transforms.json, every mode, the
-//! files of SPEC §10, and the refusals (bound Gaussians, bad lists, overwriting an input).
+//! files of docs/conventions.md §10, and the refusals (bound Gaussians, bad lists, overwriting an input).
 
 mod common;
 use common::{fixture, fresh_dir, one_error_line, run, s};

@@ -1,4 +1,4 @@
-//! Mesh extraction for trisplat (SPEC §6): TSDF fusion of depth maps with marching cubes
+//! Mesh extraction for trisplat (docs/conventions.md §6): TSDF fusion of depth maps with marching cubes
 //! ([`tsdf`], [`marching_cubes`]), incremental Delaunay meshing of triangle-bound Gaussians that
 //! only re-triangulates what moved ([`incremental_delaunay`]), and alpha shapes over our own
 //! exact 3D Delaunay tetrahedralisation ([`delaunay3d`], [`alpha_shape`]).

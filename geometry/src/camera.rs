@@ -2,7 +2,7 @@
 //! NeRF `transforms.json` formats, and camera rigs around an object.
 //!
 //! Pixel (row i, column j) is sampled at (j + 0.5, i + 0.5); a camera-space point (x, y, z)
-//! projects to u = fx x / z + cx, v = fy y / z + cy (gsplat's convention, SPEC §2).
+//! projects to u = fx x / z + cx, v = fy y / z + cy (gsplat's convention, docs/conventions.md §2).
 
 use std::path::Path;
 

@@ -1,5 +1,5 @@
 //! Depth, normal and mask maps of a triangle mesh seen by a [`Camera`], by ray casting through a
-//! [`TriangleBvh`] (ground-truth supervision for the splatting renderer, SPEC §2 and §5).
+//! [`TriangleBvh`] (ground-truth supervision for the splatting renderer, docs/conventions.md §2 and §5).
 //!
 //! Conventions are the renderer's: pixel (row i, column j) is sampled at (j + 0.5, i + 0.5);
 //! depth is z-depth (distance along the camera's +z axis, not along the ray), 0 where no triangle

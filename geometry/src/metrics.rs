@@ -1,4 +1,4 @@
-//! Geometry metrics between a prediction P and a ground truth G (SPEC §8).
+//! Geometry metrics between a prediction P and a ground truth G (docs/conventions.md §8).
 //!
 //! With `d(x, S)` the Euclidean distance from `x` to the nearest point of `S`:
 //! - accuracy = mean over p of d(p, G); completeness = mean over g of d(g, P);
@@ -96,7 +96,7 @@ pub struct ThresholdScore {
     pub fscore: f64,
 }
 
-/// The metrics of SPEC §8; serialises to the `trisplat eval --json` object of SPEC §10.
+/// The metrics of docs/conventions.md §8; serialises to the `trisplat eval --json` object of docs/conventions.md §10.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Metrics {
     /// Mean d(p, G).

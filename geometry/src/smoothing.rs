@@ -1,4 +1,4 @@
-//! Mesh smoothing with Open3D's and trimesh's semantics (SPEC §7).
+//! Mesh smoothing with Open3D's and trimesh's semantics (docs/conventions.md §7).
 //!
 //! Every method is a Jacobi iteration: all vertices move from the previous iterate, never from
 //! values updated in the same pass, so the result does not depend on vertex order or thread

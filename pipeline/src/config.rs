@@ -86,7 +86,7 @@ impl fmt::Display for Method {
     }
 }
 
-/// How bound Gaussians follow the template (SPEC §4).
+/// How bound Gaussians follow the template (docs/conventions.md §4).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]

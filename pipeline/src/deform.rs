@@ -1,5 +1,5 @@
-//! Deforming bound Gaussians to the frames of an animation: the engine shared by
-//! `trisplat deform` and the main job.
+//! Deforming bound Gaussians to the frames of an animation: the one engine of the main job
+//! and `trisplat deform` (both through [`crate::session::Session`]).
 
 use std::path::{Path, PathBuf};
 
@@ -7,12 +7,12 @@ use glam::Vec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::Deformer;
+use trisplat_splat::deform::{Deformer, WorldGeometry};
 use trisplat_splat::lbs::LbsDeformer;
-use trisplat_splat::ply::read_gaussians;
 
+use crate::config::Mode;
 use crate::error::PipelineError;
-use crate::input::Animation;
+use crate::input::{Animation, WeldedTemplate, check_set, deform_mode};
 
 /// Largest difference between the template's positions and a skinned animation's rest pose
 /// that `lbs` accepts, relative to the template's bounding-box diagonal (f32 storage of both).
@@ -27,7 +27,109 @@ pub enum Engine {
     Lbs(Box<LbsDeformer>),
 }
 
+/// What an [`Engine`] is built from.
+#[derive(Clone, Copy, Debug)]
+pub struct EngineInputs<'a> {
+    /// The deformation mode.
+    pub mode: Mode,
+    /// The template as stored (`lbs` checks it against the skinned rest pose).
+    pub stored: &'a TriMesh,
+    /// The template the Gaussians are deformed on (welded at its seams in the main job).
+    pub welded: &'a WeldedTemplate,
+    /// The template file, for messages.
+    pub template_path: &'a Path,
+    /// The Gaussians file, for messages (empty when bound here).
+    pub gaussians_path: &'a Path,
+    /// The animation's label, for messages.
+    pub label: &'a str,
+    /// Scale Gaussians by √(area ratio) of their triangle (binding and lbs).
+    pub adaptive_scale: bool,
+}
+
 impl Engine {
+    /// The engine of `inputs.mode` for `set` on the welded template; `lbs` checks the stored
+    /// template against the animation's skinned rest pose and skins each welded vertex with
+    /// its first copy.
+    ///
+    /// # Errors
+    /// Gaussians that do not fit the template (bindings, local parameters), `lbs` without a
+    /// skinned glTF animation, `--adaptive-scale` with `jacobian`.
+    pub fn build(
+        inputs: &EngineInputs<'_>,
+        animation: &Animation,
+        set: &GaussianSet,
+    ) -> Result<Self, PipelineError> {
+        let template = &inputs.welded.mesh;
+        if inputs.mode != Mode::Lbs {
+            if inputs.adaptive_scale && inputs.mode == Mode::Jacobian {
+                return Err(PipelineError::BadCombination {
+                    problem: "--adaptive-scale: jacobian mode already carries the area change \
+                              in J; use it with binding or lbs",
+                });
+            }
+            let mut d = Deformer::new(template, deform_mode(inputs.mode));
+            if inputs.adaptive_scale {
+                d = d.with_adaptive_scale(template);
+            }
+            check_set(&d, set, inputs.gaussians_path, inputs.template_path)?;
+            return Ok(Self::Frames(d));
+        }
+        let a_path = PathBuf::from(inputs.label);
+        let g = skinned_gltf(animation, inputs.stored, inputs.template_path, inputs.label)?;
+        let palette = g.palette_at(None)?;
+        let skinning = inputs
+            .welded
+            .skinning(&g.skinning())
+            .ok_or(PipelineError::Lbs {
+                path: a_path.clone(),
+                problem: "the skin's vertex count differs from the template's".to_owned(),
+            })?;
+        let rig = LbsDeformer::new(set, template, &skinning, &palette).map_err(|source| {
+            PipelineError::Skinning {
+                path: a_path,
+                frame: 0,
+                cause: source,
+            }
+        })?;
+        Ok(Self::Lbs(Box::new(if inputs.adaptive_scale {
+            rig.with_adaptive_scale(template)
+        } else {
+            rig
+        })))
+    }
+
+    /// The deformed means of animation frame `frame` (template positions `positions`) into
+    /// `scratch`, reused from frame to frame: only the geometry is computed in `binding` and
+    /// `jacobian` modes (no SH copied); `lbs` deforms the whole set.
+    ///
+    /// # Errors
+    /// As [`Engine::deform`].
+    pub fn deform_means(
+        &self,
+        animation: &Animation,
+        set: &GaussianSet,
+        positions: &[Vec3],
+        frame: usize,
+        label: &str,
+        scratch: &mut WorldGeometry,
+    ) -> Result<(), PipelineError> {
+        match self {
+            Self::Frames(d) => d
+                .deform_geometry(set, positions, scratch)
+                .map_err(|source| PipelineError::Deform {
+                    path: label.to_owned(),
+                    frame,
+                    cause: source,
+                }),
+            Self::Lbs(_) => {
+                let world = self.deform(animation, set, positions, frame, label)?;
+                scratch.means.clear();
+                scratch.means.extend_from_slice(world.means());
+                Ok(())
+            }
+        }
+    }
+
     /// The world-space Gaussians of animation frame `frame`, whose template positions are
     /// `positions` (used by `lbs` only for its adaptive scale); `label` names the animation
     /// in errors.
@@ -127,55 +229,4 @@ pub fn skinned_gltf<'a>(
         ));
     }
     Ok(g)
-}
-
-/// Reads bound Gaussians from `path` and checks them against `template` (read from
-/// `template_path`): they must carry a triangle binding and pass their validity report
-/// (finite values, bindings within the template's triangles).
-///
-/// # Errors
-/// An unreadable file, [`PipelineError::NotBound`], [`PipelineError::GaussianIssue`].
-pub fn read_bound(
-    path: &Path,
-    template: &TriMesh,
-    template_path: &Path,
-) -> Result<GaussianSet, PipelineError> {
-    let set = read_gaussians(path)?;
-    if set.binding().is_none() {
-        return Err(PipelineError::NotBound {
-            path: path.to_path_buf(),
-        });
-    }
-    if let Some(issue) = set
-        .report(Some(template.triangle_count()))
-        .issues
-        .into_iter()
-        .next()
-    {
-        return Err(PipelineError::GaussianIssue {
-            path: path.to_path_buf(),
-            template: template_path.to_path_buf(),
-            issue: issue.to_string(),
-        });
-    }
-    Ok(set)
-}
-
-/// Checks that `deformer` can deform `set` (bindings within its template, local parameters).
-///
-/// # Errors
-/// [`PipelineError::Gaussians`] naming both files.
-pub fn check_set(
-    deformer: &Deformer,
-    set: &GaussianSet,
-    path: &Path,
-    template_path: &Path,
-) -> Result<(), PipelineError> {
-    deformer
-        .check(set)
-        .map_err(|source| PipelineError::Gaussians {
-            path: path.to_path_buf(),
-            template: template_path.to_path_buf(),
-            cause: source,
-        })
 }

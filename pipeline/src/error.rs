@@ -64,6 +64,12 @@ pub enum PipelineError {
         /// What it must be.
         expected: &'static str,
     },
+    /// Two options that do not go together.
+    #[error("{problem}")]
+    BadCombination {
+        /// What is wrong, naming the options.
+        problem: &'static str,
+    },
     /// `--frames` does not parse or selects no frame of the animation.
     #[error("--frames {spec}: {problem}")]
     Frames {

@@ -16,9 +16,9 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::bind::{BindOptions, init_bound};
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::frames::Convention;
+use trisplat_splat::ply::read_gaussians;
 
 use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, ExtractConfig, Mode};
-use crate::deform::{check_set, read_bound};
 use crate::error::PipelineError;
 use crate::methods::bounding_sphere;
 
@@ -81,7 +81,8 @@ fn extension(path: &Path) -> String {
         .unwrap_or_default()
 }
 
-fn is_gltf(path: &Path) -> bool {
+/// Whether `path` names a glTF/GLB file (by extension).
+pub(crate) fn is_gltf(path: &Path) -> bool {
     matches!(extension(path).as_str(), "gltf" | "glb")
 }
 
@@ -439,47 +440,84 @@ pub enum GaussianSource {
     Bound(u32),
 }
 
-/// Reads the bound Gaussians of `config`, or binds new ones (opaque, flat discs: see
-/// [`BIND_OPACITY`] and [`BIND_NORMAL_SCALE`]); checks they fit the template.
+/// Reads bound Gaussians from `path` and checks them against `template` (read from
+/// `template_path`): they must carry a triangle binding and pass their validity report
+/// (finite values, bindings within the template's triangles).
 ///
 /// # Errors
-/// Unreadable or unbound files, bindings past the template's triangles, parameters in world
-/// space, a failed binding.
-pub fn gaussians(
-    config: &ExtractConfig,
+/// An unreadable file, [`PipelineError::NotBound`], [`PipelineError::GaussianIssue`].
+pub fn read_bound(
+    path: &Path,
     template: &TriMesh,
-) -> Result<(GaussianSet, GaussianSource), PipelineError> {
-    let mode = config.options.mode;
-    let (set, source) = match &config.gaussians {
-        Some(path) => (
-            read_bound(path, template, &config.template)?,
-            GaussianSource::File(path.clone()),
-        ),
-        None => {
-            let convention = if mode == Mode::Jacobian {
-                Convention::SurfHead
-            } else {
-                Convention::GaussianAvatars
-            };
-            let options = BindOptions {
-                per_triangle: config.options.per_triangle as usize,
-                convention,
-                opacity: BIND_OPACITY,
-            };
-            let set = init_bound(template, &options).map_err(|source| PipelineError::Bind {
-                path: config.template.clone(),
-                cause: source,
-            })?;
-            (
-                flatten(set, convention),
-                GaussianSource::Bound(config.options.per_triangle),
-            )
-        }
+    template_path: &Path,
+) -> Result<GaussianSet, PipelineError> {
+    let set = read_gaussians(path)?;
+    if set.binding().is_none() {
+        return Err(PipelineError::NotBound {
+            path: path.to_path_buf(),
+        });
+    }
+    if let Some(issue) = set
+        .report(Some(template.triangle_count()))
+        .issues
+        .into_iter()
+        .next()
+    {
+        return Err(PipelineError::GaussianIssue {
+            path: path.to_path_buf(),
+            template: template_path.to_path_buf(),
+            issue: issue.to_string(),
+        });
+    }
+    Ok(set)
+}
+
+/// Checks that `deformer` can deform `set` (bindings within its template, local parameters).
+///
+/// # Errors
+/// [`PipelineError::Gaussians`] naming both files.
+pub fn check_set(
+    deformer: &Deformer,
+    set: &GaussianSet,
+    path: &Path,
+    template_path: &Path,
+) -> Result<(), PipelineError> {
+    deformer
+        .check(set)
+        .map_err(|source| PipelineError::Gaussians {
+            path: path.to_path_buf(),
+            template: template_path.to_path_buf(),
+            cause: source,
+        })
+}
+
+/// Binds new Gaussians to `template` (read from `template_path`) for `mode`:
+/// `per_triangle` per triangle, opaque flat discs (see [`BIND_OPACITY`] and
+/// [`BIND_NORMAL_SCALE`]), in the GaussianAvatars convention, or SurFhead's for `jacobian`.
+///
+/// # Errors
+/// [`PipelineError::Bind`] naming the template.
+pub fn bind_here(
+    template: &TriMesh,
+    template_path: &Path,
+    mode: Mode,
+    per_triangle: u32,
+) -> Result<GaussianSet, PipelineError> {
+    let convention = if mode == Mode::Jacobian {
+        Convention::SurfHead
+    } else {
+        Convention::GaussianAvatars
     };
-    let path = config.gaussians.clone().unwrap_or_default();
-    let deformer = Deformer::new(template, deform_mode(mode));
-    check_set(&deformer, &set, &path, &config.template)?;
-    Ok((set, source))
+    let options = BindOptions {
+        per_triangle: per_triangle as usize,
+        convention,
+        opacity: BIND_OPACITY,
+    };
+    let set = init_bound(template, &options).map_err(|source| PipelineError::Bind {
+        path: template_path.to_path_buf(),
+        cause: source,
+    })?;
+    Ok(flatten(set, convention))
 }
 
 /// Multiplies the local scale along the triangle normal by [`BIND_NORMAL_SCALE`] (local y for
@@ -548,6 +586,18 @@ impl WeldedTemplate {
         }
     }
 
+    /// `template` as stored, nothing welded (`trisplat deform` writes Gaussians deformed on
+    /// the stored template).
+    #[must_use]
+    pub fn unwelded(template: &TriMesh) -> Self {
+        let n = u32::try_from(template.vertex_count()).unwrap_or(u32::MAX);
+        Self {
+            mesh: template.clone(),
+            first: (0..n).collect(),
+            stored_vertices: template.vertex_count(),
+        }
+    }
+
     /// Whether welding merged any vertex.
     #[must_use]
     pub fn merged(&self) -> bool {
@@ -600,7 +650,6 @@ impl WeldedTemplate {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{ExtractOptions, Method};
 
     fn square() -> TriMesh {
         let p = vec![
@@ -612,28 +661,11 @@ mod tests {
         TriMesh::new(p, vec![[0, 1, 2], [0, 2, 3]])
     }
 
-    fn config(mode: Mode) -> ExtractConfig {
-        ExtractConfig {
-            template: PathBuf::from("square.ply"),
-            animation: None,
-            gaussians: None,
-            methods: vec![Method::Delaunay],
-            output: PathBuf::from("out"),
-            frames: None,
-            gt: None,
-            options: ExtractOptions {
-                mode,
-                ..ExtractOptions::default()
-            },
-        }
-    }
-
     #[test]
     fn self_bound_gaussians_are_flat_along_the_normal() {
         let mesh = square();
         for mode in [Mode::Binding, Mode::Jacobian] {
-            let (set, source) = gaussians(&config(mode), &mesh).expect("bound");
-            assert_eq!(source, GaussianSource::Bound(4));
+            let set = bind_here(&mesh, Path::new("square"), mode, 4).expect("bound");
             let world = Deformer::new(&mesh, deform_mode(mode))
                 .deform(&set, mesh.positions())
                 .expect("deformed");

@@ -2,7 +2,7 @@
 //! Gaussians bound to its triangles in, one mesh per frame and method out, with timings,
 //! metrics against a ground truth, a report and a plot.
 //!
-//! # Stages (SPEC §1)
+//! # Stages (docs/conventions.md §1)
 //! A run does only the stages its arguments need; [`Plan`] lists them with the reason each
 //! runs or is skipped (`--explain` prints it):
 //!
@@ -25,7 +25,7 @@
 //! 3. **deform**: every frame, `binding`, `jacobian` or `lbs` (as `trisplat deform`).
 //! 4. **render** (only for `tsdf`): expected depth from a sphere rig around each frame.
 //! 5. **mesh**: `tsdf`, `delaunay` and/or `alpha` (module [`methods`] for their defaults).
-//! 6. **metrics** (only with a ground truth): SPEC §8 in surface mode against each frame's
+//! 6. **metrics** (only with a ground truth): docs/conventions.md §8 in surface mode against each frame's
 //!    deformed template (`--gt template`) or one static mesh (`--gt FILE`).
 //! 7. **write**: `DIR/<method>/frame_NNNNNN.ply` (NNNNNN = animation frame index) and
 //!    `DIR/<method>.glb`, the animated sequence.
@@ -65,9 +65,11 @@ pub mod plan;
 pub mod plot;
 pub mod report;
 pub mod run;
+pub mod session;
 
 pub use config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode};
 pub use error::PipelineError;
 pub use plan::{Plan, Stage, StagePlan};
 pub use report::Report;
 pub use run::{Progress, run};
+pub use session::{FrameResult, MethodFrame, Session, SessionOptions};

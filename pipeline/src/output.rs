@@ -1,4 +1,4 @@
-//! Output files: never over an input, and removed again when a run fails (SPEC §10).
+//! Output files: never over an input, and removed again when a run fails (docs/conventions.md §10).
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};

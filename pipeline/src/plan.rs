@@ -7,7 +7,7 @@ use crate::config::{
     DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
 };
 
-/// A stage of the main job (SPEC §1), in the order they run.
+/// A stage of the main job (docs/conventions.md §1), in the order they run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
     /// Read the template and open its animation.
@@ -175,6 +175,11 @@ impl Plan {
                 Stage::Metrics,
                 false,
                 "no --gt: nothing to compare against".to_owned(),
+            ),
+            Some(_) if methods.is_empty() => push(
+                Stage::Metrics,
+                false,
+                "no method: no mesh to measure".to_owned(),
             ),
             Some(gt) => {
                 let against = match gt {

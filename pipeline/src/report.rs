@@ -1,6 +1,6 @@
 //! Per-frame records, per-method means, and the two report files (report.json, report.md).
 //!
-//! Metrics follow SPEC §8 as `trisplat eval --surface` computes them: both meshes sampled
+//! Metrics follow docs/conventions.md §8 as `trisplat eval --surface` computes them: both meshes sampled
 //! area-uniformly (`samples` points each, seed 0 for the prediction and `splitmix64(0)` for the
 //! ground truth, as `eval`'s defaults), distances exact to the other side's triangles. So a
 //! frame's numbers equal `trisplat eval DIR/<method>/frame_NNNNNN.ply GT --surface --samples N
@@ -421,7 +421,7 @@ impl Report {
                 let _ = writeln!(
                     s,
                     "- ground truth: `{gt}`; {} samples per mesh, exact point-to-triangle \
-                     distances (SPEC §8), F-score at tau {}",
+                     distances (docs/conventions.md §8), F-score at tau {}",
                     self.samples, self.tau
                 );
             }

@@ -1,34 +1,23 @@
-//! The frame loop: per frame, deform once, then per method mesh (timed), measure, write.
+//! The main job's outputs: a [`Session`] per run, each frame's meshes written as the session
+//! returns them, then the animated glTFs, the reports and the plot.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-use glam::Vec3;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::io::{
-    SequenceLayout, WriteOptions, read_mesh, write_mesh, write_mesh_sequence,
-};
-use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{Deformer, WorldGeometry};
-use trisplat_splat::lbs::LbsDeformer;
+use trisplat_geometry::io::{SequenceLayout, WriteOptions, write_mesh, write_mesh_sequence};
 
 pub use crate::output::frame_file;
 
-use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
-use crate::deform::{Engine, skinned_gltf};
+use crate::config::{ExtractConfig, GroundTruth, Method};
 use crate::error::PipelineError;
-use crate::input::{
-    Animation, GaussianSource, WeldedTemplate, animation_label, check_scale, check_topology,
-    deform_mode, gaussians, open_animation, parse_frames, read_template,
-};
-use crate::methods::{FrameInput, Mesher, Resolved};
+use crate::input::GaussianSource;
 use crate::output::{Created, Inputs};
 use crate::plot;
 use crate::report::{
-    DelaunayFrame, DelaunayStats, FrameRecord, GtSamples, MethodReport, Report, Summary,
-    is_watertight, measure,
+    DelaunayFrame, DelaunayStats, FrameRecord, MethodReport, Report, Summary, is_watertight,
 };
+use crate::session::{MethodFrame, Session};
 
 /// File name of the JSON report in the output folder.
 pub const REPORT_JSON: &str = "report.json";
@@ -56,75 +45,6 @@ pub enum Progress {
     Finishing,
 }
 
-/// A deformed frame: the world set when the tsdf method needs it, and the means.
-struct Deformed {
-    world: Option<GaussianSet>,
-    means: Vec<Vec3>,
-}
-
-/// The deformer of `config`'s mode on the welded template; `lbs` checks the stored template
-/// against the animation's rest pose and skins each welded vertex with its first copy.
-fn build_engine(
-    config: &ExtractConfig,
-    stored: &TriMesh,
-    welded: &WeldedTemplate,
-    animation: &Animation,
-    set: &GaussianSet,
-) -> Result<Engine, PipelineError> {
-    let mode = config.options.mode;
-    let template = &welded.mesh;
-    if mode != Mode::Lbs {
-        return Ok(Engine::Frames(Deformer::new(template, deform_mode(mode))));
-    }
-    let label = animation_label(config);
-    let a_path = PathBuf::from(&label);
-    let g = skinned_gltf(animation, stored, &config.template, &label)?;
-    let palette = g.palette_at(None)?;
-    let skinning = welded.skinning(&g.skinning()).ok_or(PipelineError::Lbs {
-        path: a_path.clone(),
-        problem: "the skin's vertex count differs from the template's".to_owned(),
-    })?;
-    let rig = LbsDeformer::new(set, template, &skinning, &palette).map_err(|source| {
-        PipelineError::Skinning {
-            path: a_path.clone(),
-            frame: 0,
-            cause: source,
-        }
-    })?;
-    Ok(Engine::Lbs(Box::new(rig)))
-}
-
-/// Deforms one frame: the world set when `need_world`, else (binding/jacobian) only the means.
-fn deform_frame(
-    engine: &Engine,
-    animation: &Animation,
-    set: &GaussianSet,
-    positions: &[Vec3],
-    frame: usize,
-    need_world: bool,
-    label: &str,
-) -> Result<Deformed, PipelineError> {
-    if let (Engine::Frames(d), false) = (engine, need_world) {
-        let mut geometry = WorldGeometry::default();
-        d.deform_geometry(set, positions, &mut geometry)
-            .map_err(|source| PipelineError::Deform {
-                path: label.to_owned(),
-                frame,
-                cause: source,
-            })?;
-        return Ok(Deformed {
-            world: None,
-            means: geometry.means,
-        });
-    }
-    let world = engine.deform(animation, set, positions, frame, label)?;
-    let means = world.means().to_vec();
-    Ok(Deformed {
-        world: need_world.then_some(world),
-        means,
-    })
-}
-
 /// The per-frame meshes of each method, kept for the animated glTF.
 pub type Sequences = BTreeMap<Method, Vec<TriMesh>>;
 
@@ -146,10 +66,6 @@ pub fn run(
     result
 }
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "the frame loop reads best as one sequence of stages"
-)]
 fn run_inner(
     config: &ExtractConfig,
     progress: &mut dyn FnMut(Progress),
@@ -160,116 +76,11 @@ fn run_inner(
     if methods.is_empty() {
         return Err(PipelineError::NoMethod);
     }
-    if !(o.tau.is_finite() && o.tau > 0.0) {
-        return Err(PipelineError::BadOption {
-            name: "tau",
-            value: o.tau,
-            expected: "a finite positive distance",
-        });
-    }
-    if !(o.hop_threshold.is_finite() && o.hop_threshold >= 0.0) {
-        return Err(PipelineError::BadOption {
-            name: "hop-threshold",
-            value: o.hop_threshold,
-            expected: "a finite number >= 0 (multiples of the mean template edge)",
-        });
-    }
-    if o.samples == 0 {
-        return Err(PipelineError::BadOption {
-            name: "samples",
-            value: 0.0,
-            expected: "at least one sample",
-        });
-    }
-    // Inputs: the template in world space, as its animation poses it (see `read_template`).
-    let stored = read_template(&config.template)?;
-    if stored.triangle_count() == 0 {
-        return Err(PipelineError::EmptyTemplate {
-            path: config.template.clone(),
-        });
-    }
-    let (animation, mut input_files) = open_animation(config, &stored)?;
-    let anim = animation.get();
-    check_topology(&stored, &config.template, anim, &animation_label(config))?;
-    // Every later stage sees the template welded at its seams (see `WeldedTemplate`).
-    let welded = WeldedTemplate::new(&stored);
-    let template = &welded.mesh;
-    let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
-    // The scale-derived defaults come from the template: its frames must share its scale.
-    let label = animation_label(config);
-    let first_positions = anim.frame(frames.start)?;
-    check_scale(
-        &stored,
-        &config.template,
-        &first_positions,
-        frames.start,
-        &label,
-    )?;
-    let mut first_positions = Some(first_positions);
-    let static_gt = match &config.gt {
-        Some(GroundTruth::Mesh(path)) => {
-            input_files.push(path.clone());
-            let mesh = read_mesh(path)?;
-            Some(GtSamples::new(mesh, o.samples).ok_or_else(|| {
-                PipelineError::EmptyGroundTruth {
-                    gt: path.display().to_string(),
-                    frame: frames.start,
-                }
-            })?)
-        }
-        _ => None,
-    };
-    let (set, source) = gaussians(config, template)?;
-    let engine = build_engine(config, &stored, &welded, &animation, &set)?;
-    let mode = deform_mode(o.mode);
-    let mut rest = WorldGeometry::default();
-    Deformer::new(template, mode)
-        .deform_geometry(&set, template.positions(), &mut rest)
-        .map_err(|source| PipelineError::Gaussians {
-            path: config.gaussians.clone().unwrap_or_default(),
-            template: config.template.clone(),
-            cause: source,
-        })?;
-    let resolved = Resolved::new(o, template, &rest.means)?;
+    let mut session = Session::open(config)?;
+    let frames = session.frames();
+    check_outputs(config, &methods, frames.clone(), session.input_files())?;
 
-    // Outputs: never over an input.
-    input_files.push(config.template.clone());
-    if let Some(g) = &config.gaussians {
-        input_files.push(g.clone());
-    }
-    let inputs = Inputs::new(&input_files);
     let out = &config.output;
-    for m in &methods {
-        let dir = out.join(m.name());
-        for f in frames.clone() {
-            inputs.check(&dir.join(frame_file(f)))?;
-        }
-        inputs.check(&out.join(format!("{}.glb", m.name())))?;
-    }
-    for name in [REPORT_JSON, REPORT_MD, PLOT_PNG] {
-        inputs.check(&out.join(name))?;
-    }
-    for m in &methods {
-        let dir = out.join(m.name());
-        std::fs::create_dir_all(&dir).map_err(|source| PipelineError::OutputDir {
-            path: dir,
-            cause: source,
-        })?;
-    }
-
-    let mut meshers = Vec::with_capacity(methods.len());
-    for &m in &methods {
-        meshers.push(Mesher::new(
-            m,
-            o,
-            &resolved,
-            template,
-            &rest.means,
-            frames.start,
-        )?);
-    }
-
-    let need_world = methods.contains(&Method::Tsdf);
     let total = frames.len();
     progress(Progress::Started { frames: total });
     let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
@@ -278,80 +89,33 @@ fn run_inner(
     let mut frame_times = Vec::with_capacity(total);
     let mut deform_ms = Vec::with_capacity(total);
     for (done, f) in frames.clone().enumerate() {
-        let stored_positions = match first_positions.take() {
-            Some(p) => p,
-            None => anim.frame(f)?,
-        };
-        let stored_count = stored_positions.len();
-        let positions =
-            welded
-                .positions(stored_positions)
-                .ok_or_else(|| PipelineError::Topology {
-                    animation: label.clone(),
-                    problem: format!(
-                        "frame {f} has {stored_count} vertices, the template {} has {}",
-                        config.template.display(),
-                        welded.stored_vertices
-                    ),
-                })?;
-        let time = anim.frame_time(f).unwrap_or(f as f64 / o.fps);
-        let start = Instant::now();
-        let deformed = deform_frame(&engine, &animation, &set, &positions, f, need_world, &label)?;
-        deform_ms.push(start.elapsed().as_secs_f64() * 1e3);
-        frame_times.push(time);
-        let frame_gt = match &config.gt {
-            Some(GroundTruth::Template) => {
-                let mesh = TriMesh::new_unchecked(positions.clone(), template.triangles().to_vec());
-                Some(
-                    GtSamples::new(mesh, o.samples).ok_or(PipelineError::EmptyGroundTruth {
-                        gt: "template".to_owned(),
-                        frame: f,
-                    })?,
-                )
-            }
-            _ => None,
-        };
-        let gt = frame_gt.as_ref().or(static_gt.as_ref());
-        let input = FrameInput {
-            frame: f,
-            positions: &positions,
-            means: &deformed.means,
-            world: deformed.world.as_ref(),
-        };
-        for (mesher, &m) in meshers.iter_mut().zip(&methods) {
-            let result = mesher.mesh(&input)?;
-            let metrics = match gt {
-                Some(gt) => measure(&result.mesh, gt, o.samples, o.tau).map_err(|source| {
-                    PipelineError::Metrics {
-                        gt: config
-                            .gt
-                            .as_ref()
-                            .map_or_else(String::new, GroundTruth::label),
-                        frame: f,
-                        method: m,
-                        cause: source,
-                    }
-                })?,
-                None => None,
-            };
-            if let Some(stats) = &result.delaunay {
+        let result = session.frame(f)?;
+        deform_ms.push(result.deform_ms);
+        frame_times.push(result.time);
+        for MethodFrame {
+            method: m,
+            output,
+            metrics,
+        } in result.methods
+        {
+            if let Some(stats) = &output.delaunay {
                 delaunay_frames.push(DelaunayFrame::new(f, stats));
             }
             let path = out.join(m.name()).join(frame_file(f));
             let existed = path.exists();
-            write_mesh(&path, &result.mesh, WriteOptions::default())?;
+            write_mesh(&path, &output.mesh, WriteOptions::default())?;
             created.note(&path, existed);
             records.entry(m).or_default().push(FrameRecord {
                 frame: f,
-                time,
-                ms: result.ms,
-                render_ms: result.render_ms,
-                vertices: result.mesh.vertex_count(),
-                faces: result.mesh.triangle_count(),
-                watertight: is_watertight(&result.mesh),
+                time: result.time,
+                ms: output.ms,
+                render_ms: output.render_ms,
+                vertices: output.mesh.vertex_count(),
+                faces: output.mesh.triangle_count(),
+                watertight: is_watertight(&output.mesh),
                 metrics,
             });
-            sequences.entry(m).or_default().push(result.mesh);
+            sequences.entry(m).or_default().push(output.mesh);
         }
         progress(Progress::Frame {
             done: done + 1,
@@ -360,6 +124,7 @@ fn run_inner(
     }
     progress(Progress::Finishing);
 
+    let resolved = *session.resolved();
     let mut method_reports = BTreeMap::new();
     for (m, frames_of) in records {
         let mut parameters = BTreeMap::new();
@@ -389,8 +154,8 @@ fn run_inner(
                 glb: format!("{}.glb", m.name()),
                 delaunay: (m == Method::Delaunay).then(|| {
                     DelaunayStats::new(
-                        template.triangle_count(),
-                        set.len(),
+                        session.template().triangle_count(),
+                        session.gaussians().len(),
                         std::mem::take(&mut delaunay_frames),
                     )
                 }),
@@ -400,14 +165,14 @@ fn run_inner(
     let report = Report {
         version: env!("CARGO_PKG_VERSION").to_owned(),
         template: config.template.display().to_string(),
-        template_vertices: welded.stored_vertices,
-        welded_vertices: welded.mesh.vertex_count(),
-        animation: label,
-        gaussians: match source {
+        template_vertices: session.welded().stored_vertices,
+        welded_vertices: session.template().vertex_count(),
+        animation: session.label().to_owned(),
+        gaussians: match session.source() {
             GaussianSource::File(p) => p.display().to_string(),
             GaussianSource::Bound(n) => format!("bound here: {n} per triangle"),
         },
-        gaussian_count: set.len(),
+        gaussian_count: session.gaussians().len(),
         mode: o.mode.name().to_owned(),
         frames: frames.collect(),
         frame_times,
@@ -420,6 +185,35 @@ fn run_inner(
     };
     write_outputs(out, &report, &sequences, created)?;
     Ok(report)
+}
+
+/// Refuses outputs that would replace an input, then creates the method folders.
+fn check_outputs(
+    config: &ExtractConfig,
+    methods: &[Method],
+    frames: std::ops::Range<usize>,
+    input_files: &[PathBuf],
+) -> Result<(), PipelineError> {
+    let inputs = Inputs::new(input_files);
+    let out = &config.output;
+    for m in methods {
+        let dir = out.join(m.name());
+        for f in frames.clone() {
+            inputs.check(&dir.join(frame_file(f)))?;
+        }
+        inputs.check(&out.join(format!("{}.glb", m.name())))?;
+    }
+    for name in [REPORT_JSON, REPORT_MD, PLOT_PNG] {
+        inputs.check(&out.join(name))?;
+    }
+    for m in methods {
+        let dir = out.join(m.name());
+        std::fs::create_dir_all(&dir).map_err(|source| PipelineError::OutputDir {
+            path: dir,
+            cause: source,
+        })?;
+    }
+    Ok(())
 }
 
 /// Writes one animated glTF per method, the report files and the plot.

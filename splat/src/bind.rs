@@ -1,4 +1,4 @@
-//! Binding Gaussians to the triangles of a template (SPEC §4): initialising bound Gaussians on a
+//! Binding Gaussians to the triangles of a template (docs/conventions.md §4): initialising bound Gaussians on a
 //! mesh, and attaching existing world-space Gaussians to their nearest triangle, which turns any
 //! 3DGS file plus a template into a bound avatar.
 //!
@@ -83,7 +83,7 @@ fn sample_uv(j: usize, n: usize) -> (f64, f64) {
     }
 }
 
-/// Bound Gaussians on every triangle of `mesh` (SPEC §4 init): `per_triangle` per triangle (the
+/// Bound Gaussians on every triangle of `mesh` (docs/conventions.md §4 init): `per_triangle` per triangle (the
 /// centroid for one, spread points otherwise), local scale 1 (log-scale `-½ ln per_triangle`
 /// so the set covers the same area), identity rotation, the given opacity, grey SH degree 0.
 ///

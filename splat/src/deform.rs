@@ -1,4 +1,4 @@
-//! Deformation of triangle-bound Gaussians by a moving template (SPEC §4), to world space.
+//! Deformation of triangle-bound Gaussians by a moving template (docs/conventions.md §4), to world space.
 //!
 //! Input: a [`GaussianSet`] with a [`crate::Binding`] and parameters in local triangle frames
 //! ([`ParameterSpace::Local`]), the template's triangles (fixed topology) and the deformed vertex

@@ -1,4 +1,4 @@
-//! Densification and pruning with binding inheritance (SPEC §4, GaussianAvatars' rules), and the
+//! Densification and pruning with binding inheritance (docs/conventions.md §4, GaussianAvatars' rules), and the
 //! selection criteria that do not need a renderer: the Wasserstein gate, outlier and
 //! normal-consistency pruning.
 //!
@@ -32,7 +32,7 @@ pub const DEFAULT_SPLIT_SHRINK: f64 = 0.8;
 /// Default number of children of a split (3DGS `N = 2`).
 pub const DEFAULT_SPLIT_CHILDREN: usize = 2;
 
-/// Default neighbour count of outlier and normal-consistency pruning (SPEC §4: k = 5).
+/// Default neighbour count of outlier and normal-consistency pruning (docs/conventions.md §4: k = 5).
 pub const DEFAULT_NEIGHBOURS: usize = 5;
 
 /// Errors of densification and pruning.
@@ -376,7 +376,7 @@ pub fn w2_to_nearest(set: &GaussianSet) -> Result<Vec<f64>, DensifyError> {
 }
 
 /// The Wasserstein gate (GSDHuman): Gaussian `i` may densify only if `w2[i]` exceeds
-/// `threshold × scale[i]` (thresholds relative to the triangle scale `k_f`, SPEC §4). Returns
+/// `threshold × scale[i]` (thresholds relative to the triangle scale `k_f`, docs/conventions.md §4). Returns
 /// the mask of Gaussians allowed to densify; combine it with the caller's selection.
 ///
 /// # Errors

@@ -1,4 +1,4 @@
-//! Triangle frames for the two binding conventions of SPEC §4, computed in `f64`.
+//! Triangle frames for the two binding conventions of docs/conventions.md §4, computed in `f64`.
 //!
 //! **GaussianAvatars** ([`gaussian_avatars_frame`]), from the posed triangle `(v0, v1, v2)`:
 //! `a0 = normalize(v1 - v0)`, `a1 = normalize(a0 × (v2 - v0))` (the normal, local y),

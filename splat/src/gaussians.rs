@@ -1,7 +1,7 @@
 //! [`GaussianSet`]: Gaussians as a structure of arrays, in the raw (pre-activation) form of the
 //! INRIA 3DGS files, with activation helpers.
 //!
-//! Stored values are raw, as in the files (SPEC §3): log-scales, opacity logits, and rotations as
+//! Stored values are raw, as in the files (docs/conventions.md §3): log-scales, opacity logits, and rotations as
 //! un-normalised quaternions with **w first**. Activation happens on read: scale = exp(log-scale),
 //! opacity = sigmoid(logit), rotation = normalize(quaternion). A set may be bound to the triangles
 //! of a template mesh ([`Binding`]), in which case its parameters are usually in the triangle's
@@ -552,7 +552,7 @@ impl GaussianSet {
         m * m.transpose()
     }
 
-    /// Colour of Gaussian `i` seen from `camera_centre` (SPEC §3), see [`crate::sh::eval_rgb`].
+    /// Colour of Gaussian `i` seen from `camera_centre` (docs/conventions.md §3), see [`crate::sh::eval_rgb`].
     ///
     /// # Panics
     /// If `i >= self.len()`.

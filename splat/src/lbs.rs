@@ -1,4 +1,4 @@
-//! Linear-blend-skinning deformation of bound Gaussians (SPEC §4 `lbs` mode, for bodies with a
+//! Linear-blend-skinning deformation of bound Gaussians (docs/conventions.md §4 `lbs` mode, for bodies with a
 //! glTF skin).
 //!
 //! Each Gaussian takes the skinning weights of its triangle: the barycentric blend, at the

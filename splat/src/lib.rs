@@ -3,7 +3,7 @@
 //! triangle frames for the GaussianAvatars and SurFhead conventions ([`frames`]) and deformation
 //! of bound Gaussians with a moving template ([`deform`]).
 //!
-//! Conventions follow `SPEC.md` §3 (files) and §4 (binding).
+//! Conventions follow `docs/conventions.md` §3 (files) and §4 (binding).
 
 /// The math types of this crate's API (glam 0.34), re-exported so callers use the same version.
 pub use glam;

@@ -1,4 +1,4 @@
-//! INRIA 3DGS PLY files: reading and writing [`GaussianSet`]s (SPEC §3).
+//! INRIA 3DGS PLY files: reading and writing [`GaussianSet`]s (docs/conventions.md §3).
 //!
 //! Reading finds properties by name in any order: `x y z`, `scale_0..2` (or only `scale_0..1`:
 //! a 2DGS file), `rot_0..3` (w first), `opacity`, `f_dc_0..2` and `f_rest_*` (0, 9, 24 or 45 of

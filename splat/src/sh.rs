@@ -1,5 +1,5 @@
 //! Real spherical harmonics of degree 0..=3 with the constants of the 3DGS reference code and
-//! gsplat, and colour evaluation (SPEC §3).
+//! gsplat, and colour evaluation (docs/conventions.md §3).
 //!
 //! Basis order within a degree follows 3DGS `eval_sh`: for degree 1 `(-C1 y, C1 z, -C1 x)`, and so
 //! on. Colour: `rgb = max(Σ_k sh_k Y_k(dir) + 0.5, 0)` with `dir = normalize(mean - camera)`.

@@ -1,4 +1,4 @@
-//! The 2-Wasserstein distance between Gaussians in the residual (Procrustes) form (SPEC §4,
+//! The 2-Wasserstein distance between Gaussians in the residual (Procrustes) form (docs/conventions.md §4,
 //! the GSDHuman densification gate).
 //!
 //! `W2² = |mu1 - mu2|² + B²`, `B² = min over orthogonal U of ‖L1 - L2 U‖_F²` with covariance

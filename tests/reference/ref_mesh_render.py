@@ -1,7 +1,7 @@
 """Mesh rendering reference: z-depth and hit-triangle maps of Spot by Open3D's RaycastingScene.
 
 Open3D and trisplat read the same positions-only PLY (`reference/smoothing/spot.ply`, written by
-ref_smoothing.py from the OBJ's `v`/`f` lines). Cameras use trisplat's conventions (SPEC §2):
+ref_smoothing.py from the OBJ's `v`/`f` lines). Cameras use trisplat's conventions (docs/conventions.md §2):
 3DGS `cameras.json` layout, OpenCV axes, pixel (i, j) sampled at (j + 0.5, i + 0.5). Rays are
 built here (not with `create_rays_pinhole`) from those conventions, with unit directions, and
 Open3D's `t_hit` (distance along the unit ray) is turned into z-depth: z = t_hit * (d . z_cam).

@@ -1,4 +1,4 @@
-"""Metrics references (SPEC §8): scipy cKDTree point-set metrics and trimesh exact
+"""Metrics references (docs/conventions.md §8): scipy cKDTree point-set metrics and trimesh exact
 point-to-surface distances, on point sets sampled from Spot.
 
 Inputs written here (float32 binary little-endian PLY, `x y z nx ny nz`), and every reference
@@ -11,7 +11,7 @@ what trisplat reads:
 
 Outputs in fixtures/data/reference/metrics/metrics.json:
 
-  point     SPEC §8 metrics of pred vs gt, cKDTree (float64) both ways
+  point     docs/conventions.md §8 metrics of pred vs gt, cKDTree (float64) both ways
   surface   pred vs Spot's triangles: exact per-point distances and closest triangle ids by
             brute force over all triangles with trimesh.triangles.closest_point (float64), and
             the surface-mode metrics with gt.ply as the mesh side's samples (accuracy from the
@@ -106,7 +106,7 @@ def one_way(d, cos):
 
 
 def combine(d_p, cos_p, d_g, cos_g):
-    """SPEC §8 from per-point distances and |cos| in both directions."""
+    """docs/conventions.md §8 from per-point distances and |cos| in both directions."""
     fw, bw = one_way(d_p, cos_p), one_way(d_g, cos_g)
     thresholds = []
     for tau in TAUS:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference renders of the 3DGS splatting renderer with gsplat 1.5.3 (SPEC §5).
+"""Reference renders of the 3DGS splatting renderer with gsplat 1.5.3 (docs/conventions.md §5).
 
 Projection and colours come from gsplat's own torch functions, which run on the CPU:
 `gsplat.cuda._torch_impl._quat_scale_to_covar_preci`, `_fully_fused_projection` (EWA Jacobian
@@ -11,7 +11,7 @@ tile units), each tile's Gaussians sorted by depth (stable: ties keep the index 
 front to back at (j + 0.5, i + 0.5): sigma = 0.5(a dx^2 + c dy^2) + b dx dy with d = mean - pixel;
 alpha = min(0.999, opacity exp(-sigma)); skip if sigma < 0 or alpha < 1/255; stop when
 next_T <= 1e-4; expected depth sum(w z) / max(alpha, 1e-10) (gsplat "ED"); median depth = z of the
-Gaussian at which T first drops below 0.5 (SPEC §5; not a gsplat output).
+Gaussian at which T first drops below 0.5 (docs/conventions.md §5; not a gsplat output).
 
 Scenes (written to fixtures/data/render/, references to fixtures/data/reference/render/):
 - `random_deg3.ply`: 1000 seeded Gaussians with degree-3 SH in front of three cameras

@@ -1,4 +1,4 @@
-"""TSDF references (SPEC §6): Open3D 0.20's legacy UniformTSDFVolume on depth maps of Spot.
+"""TSDF references (docs/conventions.md §6): Open3D 0.20's legacy UniformTSDFVolume on depth maps of Spot.
 
 Spot (positions-only `fixtures/data/reference/smoothing/spot.ply`, closed, about 1.8 units
 tall) is seen by 30 cameras of 48 x 48 pixels on a sphere (the Fibonacci lattice of trisplat's
@@ -13,7 +13,7 @@ Its pixel centres are at integers, so its principal point is (cx - 1/2, cy - 1/2
 post-processed as 2DGS does (clusters at least as large as the largest, unreferenced vertices,
 degenerate triangles).
 
-Chamfer (SPEC §8, surface mode, like `trisplat eval --surface`): N_SAMPLES area-uniform samples
+Chamfer (docs/conventions.md §8, surface mode, like `trisplat eval --surface`): N_SAMPLES area-uniform samples
 on each mesh (numpy, seed 0), d(x, S) the exact distance to the other mesh's triangles
 (RaycastingScene.compute_distance), chamfer_l1 = (mean d(p, GT) + mean d(g, P)) / 2.
 

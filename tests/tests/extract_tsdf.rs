@@ -2,7 +2,7 @@
 //! the same 30 depth maps (48 x 48) of Spot, the same voxel (0.02), truncation (0.1) and
 //! depth truncation (2DGS default, 2 x the scene radius).
 //!
-//! Chamfer (SPEC §8, surface mode, as `trisplat eval --surface`): [`SAMPLES`] area-uniform
+//! Chamfer (docs/conventions.md §8, surface mode, as `trisplat eval --surface`): [`SAMPLES`] area-uniform
 //! samples on each mesh, d(x, S) the exact distance to the other mesh's triangles,
 //! chamfer_l1 = (accuracy + completeness) / 2. Open3D's value was computed the same way in
 //! Python (numpy samples, RaycastingScene.compute_distance); only the random samples differ,

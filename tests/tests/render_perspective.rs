@@ -1,4 +1,4 @@
-//! Perspective-aware mode (SPEC §5, TGA): equal to 3DGS mode at a narrow field of view, and
+//! Perspective-aware mode (docs/conventions.md §5, TGA): equal to 3DGS mode at a narrow field of view, and
 //! closer than 3DGS mode to a float64 ray-marched reference at a wide one.
 //!
 //! One elongated Gaussian (scales 0.45, 0.05, 0.08) is kept at the same pixel position and size

@@ -11,7 +11,7 @@ use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 
 use super::{Context, refuse_to_overwrite};
 
-/// Triangle frame conventions (SPEC §4).
+/// Triangle frame conventions (docs/conventions.md §4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ConventionArg {
     /// GaussianAvatars: frame of the posed triangle (edge, normal, in-plane); for
@@ -36,7 +36,7 @@ impl From<ConventionArg> for Convention {
     after_long_help = "Bind Gaussians to the triangles of a template mesh and write them as \
     a GaussianAvatars-style PLY: local, pre-activation parameters in each triangle's frame plus \
     the float property `binding_0` (the triangle index).\n\n\
-    Without --gaussians, new Gaussians are initialised (SPEC §4): N per triangle, identity \
+    Without --gaussians, new Gaussians are initialised (docs/conventions.md §4): N per triangle, identity \
     rotation, opacity 0.1, grey colour (SH degree 0). With N = 1 the Gaussian sits at the \
     centroid with local scale 1 (log-scale 0). With N > 1 the points are the first N points of \
     the R2 low-discrepancy sequence folded into the triangle (deterministic, evenly spread, the \

@@ -3,27 +3,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context as _, bail};
-use trisplat_pipeline::deform::{Engine, check_set, read_bound, skinned_gltf};
-use trisplat_pipeline::input::read_template;
-use trisplat_pipeline::input::{AnimationSource, check_topology, parse_frames};
+use anyhow::Context as _;
 use trisplat_pipeline::output::{Created, Inputs, frame_file};
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::lbs::LbsDeformer;
+use trisplat_pipeline::{ExtractConfig, ExtractOptions, Mode, Session, SessionOptions};
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
 use super::Context;
-
-/// Deformation modes (SPEC §4).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModeArg {
-    /// GaussianAvatars: rigid frame of the posed triangle plus its scale.
-    Binding,
-    /// SurFhead/TGA: per-triangle deformation gradient J (anisotropic stretch).
-    Jacobian,
-    /// Linear blend skinning with the glTF skin's weights (bodies).
-    Lbs,
-}
 
 /// Arguments of `trisplat deform`.
 #[derive(Debug, clap::Args)]
@@ -67,8 +52,8 @@ pub struct DeformArgs {
     #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: PathBuf,
     /// Deformation mode.
-    #[arg(long, value_enum, default_value_t = ModeArg::Binding)]
-    pub mode: ModeArg,
+    #[arg(long, value_enum, default_value_t = Mode::Binding)]
+    pub mode: Mode,
     /// Frames to write: `A..B` (B excluded), `A..=B`, `A..`, `..B` or one frame `A`.
     #[arg(long, value_name = "A..B")]
     pub frames: Option<String>,
@@ -88,62 +73,41 @@ pub struct DeformArgs {
 
 /// Runs `trisplat deform`.
 ///
-/// The inputs are read and checked, the animation opened and each frame deformed by the same
-/// functions as the main job (`trisplat_pipeline`): one rule for every input format, frame
-/// range and mode.
+/// A [`Session`] opens the inputs (the template as stored, not welded) and deforms each frame
+/// with the same engine as the main job: one rule for every input format, frame range and
+/// mode.
 ///
 /// # Errors
 /// Unreadable or mismatched inputs (named), a failed write (files of this run removed).
 pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
-    let template = read_template(&args.template)?;
-    let set = read_bound(&args.gaussians, &template, &args.template)?;
-    if args.adaptive_scale && args.mode == ModeArg::Jacobian {
-        bail!(
-            "--adaptive-scale: jacobian mode already carries the area change in J; use it with binding or lbs"
-        );
-    }
-    let source = AnimationSource {
-        spec: &args.animation,
-        template: &args.template,
-        clip: args.clip.as_deref(),
-        fps: args.fps,
-        targets: args.targets.as_deref(),
+    let config = ExtractConfig {
+        template: args.template.clone(),
+        animation: Some(args.animation.clone()),
+        gaussians: Some(args.gaussians.clone()),
+        methods: Vec::new(),
+        output: args.output.clone(),
+        frames: args.frames.clone(),
+        gt: None,
+        options: ExtractOptions {
+            mode: args.mode,
+            clip: args.clip.clone(),
+            fps: args.fps,
+            ..ExtractOptions::default()
+        },
     };
-    let (animation, mut input_files) = source.open()?;
-    let anim = animation.get();
-    check_topology(&template, &args.template, anim, &args.animation)?;
-    let frames = parse_frames(args.frames.as_deref(), anim.frame_count())?;
-    let engine = match args.mode {
-        ModeArg::Binding | ModeArg::Jacobian => {
-            let mode = if args.mode == ModeArg::Binding {
-                DeformMode::Binding
-            } else {
-                DeformMode::Jacobian
-            };
-            let mut d = Deformer::new(&template, mode);
-            if args.adaptive_scale {
-                d = d.with_adaptive_scale(&template);
-            }
-            check_set(&d, &set, &args.gaussians, &args.template)?;
-            Engine::Frames(d)
-        }
-        ModeArg::Lbs => {
-            let g = skinned_gltf(&animation, &template, &args.template, &args.animation)?;
-            let rig = LbsDeformer::new(&set, &template, &g.skinning(), &g.palette_at(None)?)
-                .with_context(|| args.gaussians.display().to_string())?;
-            Engine::Lbs(Box::new(if args.adaptive_scale {
-                rig.with_adaptive_scale(&template)
-            } else {
-                rig
-            }))
-        }
-    };
+    let mut session = Session::open_with(
+        &config,
+        &SessionOptions {
+            weld: false,
+            targets: args.targets.clone(),
+            adaptive_scale: args.adaptive_scale,
+        },
+    )?;
+    let frames = session.frames();
     // Never write over an input.
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("{}: cannot create the output folder", args.output.display()))?;
-    input_files.extend([args.template.clone(), args.gaussians.clone()]);
-    input_files.extend(args.targets.clone());
-    let inputs = Inputs::new(&input_files);
+    let inputs = Inputs::new(session.input_files());
     for f in frames.clone() {
         inputs.check(&args.output.join(frame_file(f)))?;
     }
@@ -153,8 +117,7 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
         for f in frames.clone() {
             let out = args.output.join(frame_file(f));
             let existed = out.exists();
-            let positions = anim.frame(f)?;
-            let world = engine.deform(&animation, &set, &positions, f, &args.animation)?;
+            let world = session.world(f)?;
             write_gaussians(&out, &world, &PlyWriteOptions::default())?;
             created.note(&out, existed);
             bar.inc(1);

@@ -1,4 +1,4 @@
-//! `trisplat eval`: geometry metrics of a prediction against a ground truth (SPEC §8, §10).
+//! `trisplat eval`: geometry metrics of a prediction against a ground truth (docs/conventions.md §8, §10).
 
 use std::path::{Path, PathBuf};
 

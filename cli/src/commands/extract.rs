@@ -47,7 +47,7 @@ and whether the frame was rebuilt.
 nearest-neighbour spacing of the rest-pose means (3 x leaves holes on real templates).
 
 --gt GT: a mesh file (a static ground truth for every frame) or the word `template`: each \
-frame's deformed template. Metrics as `trisplat eval --surface` (SPEC 8): --samples points per \
+frame's deformed template. Metrics as `trisplat eval --surface` (docs/conventions.md §8): --samples points per \
 mesh, exact point-to-triangle distances, Chamfer L1/L2, normal consistency, F-score at --tau.
 
 Outputs in DIR: <method>/frame_NNNNNN.ply (NNNNNN = the animation's frame index), <method>.glb \

@@ -45,7 +45,7 @@ pub enum FrameArg {
     nothing), _median_depth.npy, _normal.npy [H,W,3] (alpha-composited unit normals facing the \
     camera) as float32, each with a PNG picture (depths colour-mapped with turbo over each \
     image's own depth range, near = red; normals as (n+1)/2).\n\n\
-    3dgs mode follows gsplat 1.5.3 (SPEC §5); --compat-3dgs switches to the original 3DGS \
+    3dgs mode follows gsplat 1.5.3 (docs/conventions.md §5); --compat-3dgs switches to the original 3DGS \
     rasterizer's rules (alpha clamp 0.99, strict stop test, integer pixel centres, near 0.2, one \
     3-sigma radius). Bound GaussianAvatars files (local parameters) must be baked to world space \
     first with `trisplat deform`.\n\n\

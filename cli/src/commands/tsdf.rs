@@ -1,5 +1,5 @@
 //! `trisplat tsdf --cameras CAMS.json --depth DIR [--voxel V] [--trunc T] [--depth-trunc D]
-//! [--keep-clusters K] -o MESH.ply`: fuse depth maps into a mesh (SPEC §6).
+//! [--keep-clusters K] -o MESH.ply`: fuse depth maps into a mesh (docs/conventions.md §6).
 
 use std::path::{Path, PathBuf};
 

@@ -1,5 +1,5 @@
 //! Helpers shared by the CLI integration tests: run the real binary, fresh output folders,
-//! fixture paths and the one-line error contract of SPEC §10.
+//! fixture paths and the one-line error contract of docs/conventions.md §10.
 // Each test file uses a different subset of these helpers.
 #![allow(dead_code)]
 

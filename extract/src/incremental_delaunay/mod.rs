@@ -1,4 +1,4 @@
-//! Incremental Delaunay meshing of triangle-bound Gaussians (SPEC §6).
+//! Incremental Delaunay meshing of triangle-bound Gaussians (docs/conventions.md §6).
 //!
 //! # Design
 //! A bound Gaussian has a fixed place on the template, so a triangulation made in the

@@ -1,4 +1,4 @@
-//! Depth and colour images for fusion, and reading them from a folder (SPEC §2).
+//! Depth and colour images for fusion, and reading them from a folder (docs/conventions.md §2).
 //!
 //! A depth map is z-depth (distance along the camera's +z axis) in the scene's unit, 0 where
 //! nothing was seen. Values that are NaN, infinite or negative are treated as 0 (invalid), as

@@ -1,8 +1,8 @@
-//! TSDF fusion of depth maps into a sparse voxel-block grid (SPEC §6).
+//! TSDF fusion of depth maps into a sparse voxel-block grid (docs/conventions.md §6).
 //!
 //! Per-voxel rules are Open3D's legacy integrator
 //! (`UniformTSDFVolume::IntegrateWithDepthToCameraDistanceMultiplier`), in trisplat's pixel
-//! convention (pixel (i, j) centred at (j + ½, i + ½), SPEC §2):
+//! convention (pixel (i, j) centred at (j + ½, i + ½), docs/conventions.md §2):
 //! - voxel `g` is centred at `(g + ½) · voxel` (world);
 //! - its camera-space point `q` (skipped when `q.z ≤ 0`) projects to `(u, v) = (fx q.x / q.z +
 //!   cx, fy q.y / q.z + cy)`; voxels with `u` or `v` outside `[1e-4, size − 1e-4)` are skipped

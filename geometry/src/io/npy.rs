@@ -1,5 +1,5 @@
 //! NumPy `.npy` arrays of floats (format versions 1-3, little- and big-endian `f4`/`f8`,
-//! C order), the image format of depth, alpha and normal maps (SPEC §2).
+//! C order), the image format of depth, alpha and normal maps (docs/conventions.md §2).
 
 use std::path::Path;
 

@@ -1,5 +1,5 @@
 //! Front-to-back alpha compositing of tile-sorted splats, generic over the mode's
-//! [`SplatKernel`] (SPEC §5).
+//! [`SplatKernel`] (docs/conventions.md §5).
 //!
 //! Each 16×16 tile is composited on its own, splat by splat in depth order, over the pixels of
 //! the splat's box (or of the whole tile); every pixel sees its splats in the same order as in
@@ -31,7 +31,7 @@ pub const MEDIAN_TRANSMITTANCE: f32 = 0.5;
 /// Which splat gives a pixel its median depth.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MedianRule {
-    /// SPEC §5 (3DGS): the splat at which the transmittance first drops below 0.5; 0 where it
+    /// docs/conventions.md §5 (3DGS): the splat at which the transmittance first drops below 0.5; 0 where it
     /// never does.
     #[default]
     FirstBelowHalf,

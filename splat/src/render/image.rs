@@ -1,5 +1,5 @@
 //! Output images of a render ([`RenderImages`]) and writing them as `.npy` (float32) and PNG
-//! pictures (SPEC §2, §10).
+//! pictures (docs/conventions.md §2, §10).
 //!
 //! Files, for an image stem `NAME` in folder `DIR`: `NAME_rgb.npy` `[H, W, 3]`, `NAME_alpha.npy`
 //! `[H, W]`, `NAME_depth.npy` `[H, W]` (expected z-depth), `NAME_median_depth.npy` `[H, W]`,

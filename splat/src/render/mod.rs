@@ -1,4 +1,4 @@
-//! The CPU splatting renderer (SPEC §5): 3DGS EWA splatting with gsplat's rules, 2DGS surfels,
+//! The CPU splatting renderer (docs/conventions.md §5): 3DGS EWA splatting with gsplat's rules, 2DGS surfels,
 //! and perspective-aware evaluation; rgb, alpha, expected/median depth and normal maps.
 //!
 //! The pipeline has three stages, timed separately in [`RenderStats`]:

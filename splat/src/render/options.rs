@@ -21,7 +21,7 @@ pub enum RenderMode {
     Perspective,
 }
 
-/// Which compositing and projection rules a 3DGS render follows (SPEC §5).
+/// Which compositing and projection rules a 3DGS render follows (docs/conventions.md §5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Rules {
     /// gsplat 1.5.3: alpha clamp 0.999, stop when `next_T <= 1e-4`, pixel centres at

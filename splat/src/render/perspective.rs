@@ -1,4 +1,4 @@
-//! Perspective-aware evaluation (TGA, SPEC §5): each Gaussian is evaluated at its maximum along
+//! Perspective-aware evaluation (TGA, docs/conventions.md §5): each Gaussian is evaluated at its maximum along
 //! the pixel ray in 3D instead of through the affine (EWA) approximation of the projection.
 //!
 //! # The kernel

@@ -1,4 +1,4 @@
-//! 2DGS surfels after hbb1's `diff-surfel-rasterization` (SPEC §5): ray-splat intersection
+//! 2DGS surfels after hbb1's `diff-surfel-rasterization` (docs/conventions.md §5): ray-splat intersection
 //! through two planes, the screen-space low-pass filter, per-pixel intersection depth.
 //!
 //! A surfel is the disc of a Gaussian in the plane of its first two axes: centre `μ`, tangent
@@ -25,7 +25,7 @@
 //! hbb1 samples integer pixel centres with the principal point at `(W − 1)/2`; this module uses
 //! the same geometry in trisplat's convention by shifting the principal point by −0.5 and
 //! sampling integer pixel coordinates, so pixel (i, j) sees the ray through `(j + 0.5, i + 0.5)`
-//! of SPEC §2. Normals are the surfel's third axis in camera space turned so that its z
+//! of docs/conventions.md §2. Normals are the surfel's third axis in camera space turned so that its z
 //! component is negative (hbb1's `DUAL_VISIABLE`), reported in the requested frame.
 //! All per-surfel and per-pixel arithmetic is `f64`.
 

@@ -1,0 +1,594 @@
+//! The one frame loop: [`Session::open`] reads every input once, [`Session::frame`] deforms
+//! and meshes one animation frame, and the caller writes what it returns.
+//!
+//! `trisplat extract` ([`crate::run`]), `trisplat deform` ([`Session::world`]) and the bench
+//! sweep all go through a session. It owns what lives for the whole run: the template (read
+//! and welded once), the animation (a glTF parsed once), the Gaussians, the deformation
+//! engine, the rest-pose means (deformed once), the meshers with their state, a static ground
+//! truth's samples and BVH, and the buffers a frame reuses.
+//!
+//! The [`Plan`] decides what a session does: it is made from the same [`Plan::new`] that
+//! `--explain` prints, and every stage the session runs is asked of the plan first
+//! ([`Plan::runs`]) and recorded ([`Session::executed`]), so the printed plan and the run
+//! cannot disagree. A frame deforms only the geometry (means, no SH) unless the plan renders
+//! (tsdf) or the caller asks for the world-space set ([`Session::world`]).
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::Vec3;
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::animation::AnimatedTemplate;
+use trisplat_geometry::io::read_mesh;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::deform::WorldGeometry;
+
+use crate::config::{ExtractConfig, GroundTruth, Method};
+use crate::deform::{Engine, EngineInputs};
+use crate::error::PipelineError;
+use crate::input::{
+    Animation, AnimationSource, GaussianSource, WeldedTemplate, animation_label, bind_here,
+    check_scale, check_topology, open_animation, open_gltf, parse_frames, read_bound,
+    read_template,
+};
+use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
+use crate::plan::{Plan, Stage};
+use crate::report::{FrameMetrics, GtSamples, measure};
+
+/// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
+#[derive(Clone, Debug)]
+pub struct SessionOptions {
+    /// Weld the template's vertices split at seams ([`WeldedTemplate`]); `trisplat deform`
+    /// deforms on the template as stored.
+    pub weld: bool,
+    /// Folder of blendshape targets (a weights JSON with an OBJ/PLY template).
+    pub targets: Option<PathBuf>,
+    /// Scale Gaussians by √(area ratio) of their triangle (binding and lbs).
+    pub adaptive_scale: bool,
+}
+
+impl Default for SessionOptions {
+    fn default() -> Self {
+        Self {
+            weld: true,
+            targets: None,
+            adaptive_scale: false,
+        }
+    }
+}
+
+/// One method's result on one frame.
+#[derive(Clone, Debug)]
+pub struct MethodFrame {
+    /// The method.
+    pub method: Method,
+    /// Its mesh and timings.
+    pub output: MethodOutput,
+    /// Metrics against the ground truth (when the plan measures and the mesh has area).
+    pub metrics: Option<FrameMetrics>,
+}
+
+/// Everything one frame produced.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Its time in seconds.
+    pub time: f64,
+    /// Milliseconds spent deforming the Gaussians.
+    pub deform_ms: f64,
+    /// One entry per method, in report order.
+    pub methods: Vec<MethodFrame>,
+}
+
+/// An opened run: inputs read once, then one [`Session::frame`] per frame (see the module
+/// documentation).
+pub struct Session {
+    plan: Plan,
+    template_path: PathBuf,
+    label: String,
+    welded: WeldedTemplate,
+    animation: Animation,
+    frames: Range<usize>,
+    /// The first frame's positions, read while checking the scale.
+    first_positions: Option<Vec<Vec3>>,
+    set: GaussianSet,
+    /// `set` without SH beyond degree 0 and without extras: what rendering depth needs.
+    render_set: Option<GaussianSet>,
+    source: GaussianSource,
+    engine: Engine,
+    rest_means: Vec<Vec3>,
+    resolved: Resolved,
+    meshers: Vec<(Method, Mesher)>,
+    gt: Option<GroundTruth>,
+    static_gt: Option<GtSamples>,
+    samples: usize,
+    tau: f64,
+    fps: f64,
+    input_files: Vec<PathBuf>,
+    scratch: WorldGeometry,
+    executed: Vec<Stage>,
+}
+
+impl std::fmt::Debug for Session {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Session")
+            .field("template", &self.template_path)
+            .field("animation", &self.label)
+            .field("frames", &self.frames)
+            .field("gaussians", &self.set.len())
+            .field("executed", &self.executed)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Session {
+    /// Opens the run of `config` (see [`Session::open_with`]).
+    ///
+    /// # Errors
+    /// As [`Session::open_with`].
+    pub fn open(config: &ExtractConfig) -> Result<Self, PipelineError> {
+        Self::open_with(config, &SessionOptions::default())
+    }
+
+    /// Reads and checks every input of `config` once: the template in world space (welded
+    /// unless `options.weld` is false), its animation, the frame range, a static ground
+    /// truth, the Gaussians (read, or bound here when the plan binds); builds the
+    /// deformation engine, deforms the rest pose once, resolves the scale-derived defaults
+    /// and builds the meshers the plan runs.
+    ///
+    /// # Errors
+    /// Bad options, unreadable or mismatched inputs (named), a mesher that cannot be built.
+    pub fn open_with(
+        config: &ExtractConfig,
+        options: &SessionOptions,
+    ) -> Result<Self, PipelineError> {
+        let o = &config.options;
+        check_options(config)?;
+        let plan = Plan::new(config);
+        let mut executed = vec![Stage::Animate];
+        let label = animation_label(config);
+
+        // The template and its animation; a glTF playing its own clip is parsed once.
+        let (stored, animation, mut input_files) = match (&config.animation, &options.targets) {
+            (None, None) if crate::input::is_gltf(&config.template) => {
+                let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
+                let stored = g.rest().clone();
+                (stored, Animation::Gltf(Box::new(g)), Vec::new())
+            }
+            (Some(spec), targets) => {
+                let stored = read_template(&config.template)?;
+                let (animation, files) = AnimationSource {
+                    spec,
+                    template: &config.template,
+                    clip: o.clip.as_deref(),
+                    fps: o.fps,
+                    targets: targets.as_deref(),
+                }
+                .open()?;
+                (stored, animation, files)
+            }
+            _ => {
+                let stored = read_template(&config.template)?;
+                let (animation, files) = open_animation(config, &stored)?;
+                (stored, animation, files)
+            }
+        };
+        if stored.triangle_count() == 0 {
+            return Err(PipelineError::EmptyTemplate {
+                path: config.template.clone(),
+            });
+        }
+        let anim = animation.get();
+        check_topology(&stored, &config.template, anim, &label)?;
+        let welded = if options.weld {
+            WeldedTemplate::new(&stored)
+        } else {
+            WeldedTemplate::unwelded(&stored)
+        };
+        let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
+        // The scale-derived defaults come from the template: its frames must share its scale.
+        let first_positions = anim.frame(frames.start)?;
+        check_scale(
+            &stored,
+            &config.template,
+            &first_positions,
+            frames.start,
+            &label,
+        )?;
+
+        let static_gt = match (&config.gt, plan.runs(Stage::Metrics)) {
+            (Some(GroundTruth::Mesh(path)), true) => {
+                input_files.push(path.clone());
+                let mesh = read_mesh(path)?;
+                Some(GtSamples::new(mesh, o.samples).ok_or_else(|| {
+                    PipelineError::EmptyGroundTruth {
+                        gt: path.display().to_string(),
+                        frame: frames.start,
+                    }
+                })?)
+            }
+            _ => None,
+        };
+
+        let template = &welded.mesh;
+        let gaussians_path = config.gaussians.clone().unwrap_or_default();
+        let (set, source) = if plan.runs(Stage::Bind) {
+            executed.push(Stage::Bind);
+            let set = bind_here(template, &config.template, o.mode, o.per_triangle)?;
+            (set, GaussianSource::Bound(o.per_triangle))
+        } else {
+            let set = read_bound(&gaussians_path, template, &config.template)?;
+            (set, GaussianSource::File(gaussians_path.clone()))
+        };
+        let engine = Engine::build(
+            &EngineInputs {
+                mode: o.mode,
+                stored: &stored,
+                welded: &welded,
+                template_path: &config.template,
+                gaussians_path: &gaussians_path,
+                label: &label,
+                adaptive_scale: options.adaptive_scale,
+            },
+            &animation,
+            &set,
+        )?;
+        // The rest pose, deformed once: the meshers' canonical means and the defaults' scale.
+        let mut scratch = WorldGeometry::default();
+        engine.deform_means(
+            &animation,
+            &set,
+            template.positions(),
+            frames.start,
+            &label,
+            &mut scratch,
+        )?;
+        let rest_means = scratch.means.clone();
+        let resolved = Resolved::new(o, template, &rest_means)?;
+        let mut meshers = Vec::new();
+        for m in Method::ALL {
+            if plan.runs(Stage::Mesh(m)) {
+                meshers.push((
+                    m,
+                    Mesher::new(m, o, &resolved, template, &rest_means, frames.start)?,
+                ));
+            }
+        }
+        let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
+
+        input_files.push(config.template.clone());
+        input_files.extend(config.gaussians.clone());
+        input_files.extend(options.targets.clone());
+        Ok(Self {
+            plan,
+            template_path: config.template.clone(),
+            label,
+            welded,
+            animation,
+            frames,
+            first_positions: Some(first_positions),
+            set,
+            render_set,
+            source,
+            engine,
+            rest_means,
+            resolved,
+            meshers,
+            gt: config.gt.clone(),
+            static_gt,
+            samples: o.samples,
+            tau: o.tau,
+            fps: o.fps,
+            input_files,
+            scratch,
+            executed,
+        })
+    }
+
+    /// The plan this session follows.
+    #[must_use]
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// The stages this session has run so far, each once, in the order first run.
+    #[must_use]
+    pub fn executed(&self) -> &[Stage] {
+        &self.executed
+    }
+
+    /// The animation frames of the run.
+    #[must_use]
+    pub fn frames(&self) -> Range<usize> {
+        self.frames.clone()
+    }
+
+    /// The template the Gaussians are deformed on (welded unless opened otherwise).
+    #[must_use]
+    pub fn template(&self) -> &TriMesh {
+        &self.welded.mesh
+    }
+
+    /// The template with its weld map.
+    #[must_use]
+    pub fn welded(&self) -> &WeldedTemplate {
+        &self.welded
+    }
+
+    /// The bound Gaussians (local parameters).
+    #[must_use]
+    pub fn gaussians(&self) -> &GaussianSet {
+        &self.set
+    }
+
+    /// Where the Gaussians came from.
+    #[must_use]
+    pub fn source(&self) -> &GaussianSource {
+        &self.source
+    }
+
+    /// The Gaussians' means on the rest template.
+    #[must_use]
+    pub fn rest_means(&self) -> &[Vec3] {
+        &self.rest_means
+    }
+
+    /// The scale-derived parameters.
+    #[must_use]
+    pub fn resolved(&self) -> &Resolved {
+        &self.resolved
+    }
+
+    /// The animation's label (its argument, or the template file).
+    #[must_use]
+    pub fn label(&self) -> &str {
+        &self.label
+    }
+
+    /// Every file the run reads: outputs must not replace them.
+    #[must_use]
+    pub fn input_files(&self) -> &[PathBuf] {
+        &self.input_files
+    }
+
+    /// The template file.
+    #[must_use]
+    pub fn template_path(&self) -> &Path {
+        &self.template_path
+    }
+
+    /// The time of animation frame `frame` in seconds.
+    #[must_use]
+    pub fn frame_time(&self, frame: usize) -> f64 {
+        self.animation
+            .get()
+            .frame_time(frame)
+            .unwrap_or(frame as f64 / self.fps)
+    }
+
+    fn record(&mut self, stage: Stage) {
+        if !self.executed.contains(&stage) {
+            self.executed.push(stage);
+        }
+    }
+
+    /// The template's positions at animation frame `frame` (welded).
+    ///
+    /// # Errors
+    /// An animation error, or a frame without the template's vertices.
+    pub fn positions(&mut self, frame: usize) -> Result<Vec<Vec3>, PipelineError> {
+        let stored = match self.first_positions.take() {
+            Some(p) if frame == self.frames.start => p,
+            _ => self.animation.get().frame(frame)?,
+        };
+        let count = stored.len();
+        self.welded
+            .positions(stored)
+            .ok_or_else(|| PipelineError::Topology {
+                animation: self.label.clone(),
+                problem: format!(
+                    "frame {frame} has {count} vertices, the template {} has {}",
+                    self.template_path.display(),
+                    self.welded.stored_vertices
+                ),
+            })
+    }
+
+    /// The world-space Gaussians of animation frame `frame` (every attribute, SH included):
+    /// what `trisplat deform` writes.
+    ///
+    /// # Errors
+    /// As [`Session::positions`]; a failed deformation naming the frame.
+    pub fn world(&mut self, frame: usize) -> Result<GaussianSet, PipelineError> {
+        let positions = self.positions(frame)?;
+        self.record(Stage::Deform);
+        self.engine
+            .deform(&self.animation, &self.set, &positions, frame, &self.label)
+    }
+
+    /// The template's positions and the Gaussians' deformed means at animation frame
+    /// `frame` (geometry only: no SH copied, buffers reused from frame to frame).
+    ///
+    /// # Errors
+    /// As [`Session::positions`]; a failed deformation naming the frame.
+    pub fn deform(&mut self, frame: usize) -> Result<(Vec<Vec3>, &[Vec3]), PipelineError> {
+        let positions = self.positions(frame)?;
+        self.record(Stage::Deform);
+        self.engine.deform_means(
+            &self.animation,
+            &self.set,
+            &positions,
+            frame,
+            &self.label,
+            &mut self.scratch,
+        )?;
+        Ok((positions, &self.scratch.means))
+    }
+
+    /// Deforms frame `frame` for the meshers: the means into the scratch buffers, and the
+    /// world-space set (geometry and opacity only) when the plan renders. Returns the
+    /// positions, that set and the milliseconds spent deforming.
+    fn deform_frame(
+        &mut self,
+        frame: usize,
+    ) -> Result<(Vec<Vec3>, Option<GaussianSet>, f64), PipelineError> {
+        let positions = self.positions(frame)?;
+        self.record(Stage::Deform);
+        let start = Instant::now();
+        let world = match &self.render_set {
+            None => {
+                self.engine.deform_means(
+                    &self.animation,
+                    &self.set,
+                    &positions,
+                    frame,
+                    &self.label,
+                    &mut self.scratch,
+                )?;
+                None
+            }
+            Some(render_set) => {
+                let world = self.engine.deform(
+                    &self.animation,
+                    render_set,
+                    &positions,
+                    frame,
+                    &self.label,
+                )?;
+                self.scratch.means.clear();
+                self.scratch.means.extend_from_slice(world.means());
+                Some(world)
+            }
+        };
+        Ok((positions, world, start.elapsed().as_secs_f64() * 1e3))
+    }
+
+    /// Deforms and meshes animation frame `frame` with every method of the plan, and measures
+    /// each mesh when the plan measures (the ground truth sampled and indexed once for all
+    /// methods).
+    ///
+    /// # Errors
+    /// As [`Session::positions`]; a failed deformation, method or metric, naming the frame.
+    pub fn frame(&mut self, frame: usize) -> Result<FrameResult, PipelineError> {
+        let time = self.frame_time(frame);
+        let (positions, world, deform_ms) = self.deform_frame(frame)?;
+        let frame_gt = match (&self.gt, self.plan.runs(Stage::Metrics)) {
+            (Some(GroundTruth::Template), true) => {
+                let mesh =
+                    TriMesh::new_unchecked(positions.clone(), self.template().triangles().to_vec());
+                Some(
+                    GtSamples::new(mesh, self.samples).ok_or(PipelineError::EmptyGroundTruth {
+                        gt: "template".to_owned(),
+                        frame,
+                    })?,
+                )
+            }
+            _ => None,
+        };
+        let input = FrameInput {
+            frame,
+            positions: &positions,
+            means: &self.scratch.means,
+            world: world.as_ref(),
+        };
+        let mut methods = Vec::with_capacity(self.meshers.len());
+        let mut ran = Vec::new();
+        for (method, mesher) in &mut self.meshers {
+            if *method == Method::Tsdf {
+                ran.push(Stage::Render);
+            }
+            ran.push(Stage::Mesh(*method));
+            let output = mesher.mesh(&input)?;
+            let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
+            let metrics = match gt {
+                Some(gt) => {
+                    measure(&output.mesh, gt, self.samples, self.tau).map_err(|source| {
+                        PipelineError::Metrics {
+                            gt: self
+                                .gt
+                                .as_ref()
+                                .map_or_else(String::new, GroundTruth::label),
+                            frame,
+                            method: *method,
+                            cause: source,
+                        }
+                    })?
+                }
+                None => None,
+            };
+            if gt.is_some() {
+                ran.push(Stage::Metrics);
+            }
+            methods.push(MethodFrame {
+                method: *method,
+                output,
+                metrics,
+            });
+        }
+        for stage in ran {
+            self.record(stage);
+        }
+        Ok(FrameResult {
+            frame,
+            time,
+            deform_ms,
+            methods,
+        })
+    }
+}
+
+/// Checks the options a session uses before any file is read.
+fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
+    let o = &config.options;
+    if !(o.tau.is_finite() && o.tau > 0.0) {
+        return Err(PipelineError::BadOption {
+            name: "tau",
+            value: o.tau,
+            expected: "a finite positive distance",
+        });
+    }
+    if !(o.hop_threshold.is_finite() && o.hop_threshold >= 0.0) {
+        return Err(PipelineError::BadOption {
+            name: "hop-threshold",
+            value: o.hop_threshold,
+            expected: "a finite number >= 0 (multiples of the mean template edge)",
+        });
+    }
+    if !(o.fps.is_finite() && o.fps > 0.0) {
+        return Err(PipelineError::BadOption {
+            name: "fps",
+            value: o.fps,
+            expected: "a positive number of frames per second",
+        });
+    }
+    if o.samples == 0 {
+        return Err(PipelineError::BadOption {
+            name: "samples",
+            value: 0.0,
+            expected: "at least one sample",
+        });
+    }
+    Ok(())
+}
+
+/// `set` with only the SH degree-0 coefficients and no extra properties: the geometry and
+/// opacity rendering depth needs, so a frame copies 3 SH values per Gaussian instead of up
+/// to 48.
+fn geometry_only(set: &GaussianSet) -> GaussianSet {
+    let mut parts = set.clone().into_parts();
+    if parts.sh_degree > 0 {
+        // Per Gaussian, `f_dc_0..2` come first (see `GaussianParts::sh`).
+        let stride = parts.sh.len() / parts.means.len().max(1);
+        parts.sh = parts
+            .sh
+            .chunks_exact(stride.max(3))
+            .flat_map(|c| [c[0], c[1], c[2]])
+            .collect();
+        parts.sh_degree = 0;
+    }
+    parts.extras.clear();
+    parts.property_order = None;
+    GaussianSet::new_unchecked(parts)
+}
