@@ -7,7 +7,7 @@ use glam::Vec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{Deformer, WorldGeometry};
+use trisplat_splat::deform::{DeformError, Deformer, WorldGeometry};
 use trisplat_splat::lbs::LbsDeformer;
 
 use crate::config::Mode;
@@ -116,11 +116,7 @@ impl Engine {
         match self {
             Self::Frames(d) => d
                 .deform_geometry(set, positions, scratch)
-                .map_err(|source| PipelineError::Deform {
-                    path: label.to_owned(),
-                    frame,
-                    cause: source,
-                }),
+                .map_err(deform_error(label, frame)),
             Self::Lbs(_) => {
                 let world = self.deform(animation, set, positions, frame, label)?;
                 scratch.means.clear();
@@ -146,13 +142,7 @@ impl Engine {
         label: &str,
     ) -> Result<GaussianSet, PipelineError> {
         match self {
-            Self::Frames(d) => d
-                .deform(set, positions)
-                .map_err(|source| PipelineError::Deform {
-                    path: label.to_owned(),
-                    frame,
-                    cause: source,
-                }),
+            Self::Frames(d) => d.deform(set, positions).map_err(deform_error(label, frame)),
             Self::Lbs(rig) => {
                 let Animation::Gltf(g) = animation else {
                     return Err(PipelineError::Internal {
@@ -169,6 +159,15 @@ impl Engine {
                     })
             }
         }
+    }
+}
+
+/// A deformation error of frame `frame` of the animation `label`.
+fn deform_error(label: &str, frame: usize) -> impl FnOnce(DeformError) -> PipelineError + '_ {
+    move |cause| PipelineError::Deform {
+        path: label.to_owned(),
+        frame,
+        cause,
     }
 }
 

@@ -416,15 +416,24 @@ impl Session {
     pub fn deform(&mut self, frame: usize) -> Result<(Vec<Vec3>, &[Vec3]), PipelineError> {
         let positions = self.positions(frame)?;
         self.record(Stage::Deform);
+        self.means_into_scratch(frame, &positions)?;
+        Ok((positions, &self.scratch.means))
+    }
+
+    /// The deformed means of frame `frame` (template at `positions`) into the scratch buffers.
+    fn means_into_scratch(
+        &mut self,
+        frame: usize,
+        positions: &[Vec3],
+    ) -> Result<(), PipelineError> {
         self.engine.deform_means(
             &self.animation,
             &self.set,
-            &positions,
+            positions,
             frame,
             &self.label,
             &mut self.scratch,
-        )?;
-        Ok((positions, &self.scratch.means))
+        )
     }
 
     /// Deforms frame `frame` for the meshers: the means into the scratch buffers, and the
@@ -437,30 +446,16 @@ impl Session {
         let positions = self.positions(frame)?;
         self.record(Stage::Deform);
         let start = Instant::now();
-        let world = match &self.render_set {
-            None => {
-                self.engine.deform_means(
-                    &self.animation,
-                    &self.set,
-                    &positions,
-                    frame,
-                    &self.label,
-                    &mut self.scratch,
-                )?;
-                None
-            }
-            Some(render_set) => {
-                let world = self.engine.deform(
-                    &self.animation,
-                    render_set,
-                    &positions,
-                    frame,
-                    &self.label,
-                )?;
-                self.scratch.means.clear();
-                self.scratch.means.extend_from_slice(world.means());
-                Some(world)
-            }
+        let world = if let Some(render_set) = &self.render_set {
+            let world =
+                self.engine
+                    .deform(&self.animation, render_set, &positions, frame, &self.label)?;
+            self.scratch.means.clear();
+            self.scratch.means.extend_from_slice(world.means());
+            Some(world)
+        } else {
+            self.means_into_scratch(frame, &positions)?;
+            None
         };
         Ok((positions, world, start.elapsed().as_secs_f64() * 1e3))
     }

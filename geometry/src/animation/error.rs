@@ -193,3 +193,46 @@ pub enum AnimationError {
         targets: String,
     },
 }
+
+impl From<crate::io::gltf_data::GltfDataError> for AnimationError {
+    fn from(e: crate::io::gltf_data::GltfDataError) -> Self {
+        use crate::io::gltf_data::GltfDataErrorKind as K;
+        let path = e.path;
+        match e.kind {
+            K::Os(error) => Self::Os { path, error },
+            K::Document(error) => Self::Gltf { path, error },
+            K::Attribute {
+                mesh,
+                primitive,
+                message,
+            } => Self::Primitive {
+                path,
+                mesh,
+                primitive,
+                message,
+            },
+            K::MissingBuffer {
+                buffer,
+                uri,
+                resolved,
+                error,
+            } => Self::MissingBuffer {
+                path,
+                buffer,
+                uri,
+                resolved,
+                error,
+            },
+            K::Buffer { buffer, message } => Self::Buffer {
+                path,
+                buffer,
+                message,
+            },
+            K::Accessor { accessor, message } => Self::Accessor {
+                path,
+                accessor,
+                message,
+            },
+        }
+    }
+}

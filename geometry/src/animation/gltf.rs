@@ -27,10 +27,10 @@ use std::path::{Path, PathBuf};
 use glam::{DMat4, DQuat, DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::accessor::Buffers;
 use super::sampler::{Interpolation, Sampler};
 use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS};
 use crate::TriMesh;
+use crate::io::gltf_data::GltfData;
 
 /// Slack (in frames) when counting the frames of a clip, so that a clip end that falls on a
 /// frame boundary (2.0 s at 30 fps) is not lost to rounding.
@@ -225,33 +225,14 @@ impl GltfTemplate {
     /// [`AnimationError`] naming the file and the buffer, accessor, node, mesh, skin or
     /// animation at fault; [`AnimationError::ClipNotFound`] when `clip` does not exist.
     pub fn open(path: &Path, clip: &Clip) -> Result<Self, AnimationError> {
-        let bytes = std::fs::read(path).map_err(|error| AnimationError::Os {
-            path: path.to_path_buf(),
-            error,
-        })?;
-        let gltf_err = |error| AnimationError::Gltf {
-            path: path.to_path_buf(),
-            error,
-        };
-        let (json_bytes, blob): (Vec<u8>, Option<Vec<u8>>) = if bytes.starts_with(b"glTF") {
-            let glb = gltf::binary::Glb::from_slice(&bytes).map_err(gltf_err)?;
-            (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
-        } else {
-            (bytes, None)
-        };
-        let document = gltf::Gltf::from_slice(&json_bytes)
-            .map_err(gltf_err)?
-            .document;
-        let raw: serde_json::Value =
-            serde_json::from_slice(&json_bytes).unwrap_or(serde_json::Value::Null);
-        let buffers = Buffers::load(path, &document, blob)?;
-        Self::build(path, &document, &buffers, &target_names(&raw), clip)
+        let data = GltfData::open(path)?;
+        Self::build(path, &data.document, &data, &target_names(&data.json), clip)
     }
 
     fn build(
         path: &Path,
         doc: &gltf::Document,
-        buffers: &Buffers,
+        buffers: &GltfData,
         names: &[Vec<String>],
         clip: &Clip,
     ) -> Result<Self, AnimationError> {
@@ -480,7 +461,7 @@ impl GltfTemplate {
 
     fn read_mesh(
         path: &Path,
-        buffers: &Buffers,
+        buffers: &GltfData,
         mesh: &gltf::Mesh,
         names: Option<&Vec<String>>,
     ) -> Result<MeshData, AnimationError> {
@@ -579,7 +560,7 @@ impl GltfTemplate {
     /// Reads every `JOINTS_n`/`WEIGHTS_n` pair, drops zero weights and normalises by the sum.
     /// The inner `Ok(String)` error is a message for the caller to attach to the primitive.
     fn read_influences(
-        buffers: &Buffers,
+        buffers: &GltfData,
         prim: &gltf::Primitive,
         n: usize,
     ) -> Result<Option<Influences>, Result<String, AnimationError>> {
@@ -590,8 +571,8 @@ impl GltfTemplate {
             match (j, w) {
                 (None, None) => break,
                 (Some(j), Some(w)) => {
-                    let joints = buffers.read_unsigned(&j).map_err(Err)?;
-                    let weights = buffers.read_dims(&w, 4).map_err(Err)?;
+                    let joints = buffers.read_unsigned(&j).map_err(|e| Err(e.into()))?;
+                    let weights = buffers.read_dims(&w, 4).map_err(|e| Err(e.into()))?;
                     if joints.len() != 4 * n || weights.len() != 4 * n {
                         return Err(Ok(format!(
                             "JOINTS_{set}/WEIGHTS_{set} must be VEC4 with {n} elements"
@@ -645,7 +626,7 @@ impl GltfTemplate {
     fn read_clip(
         &self,
         doc: &gltf::Document,
-        buffers: &Buffers,
+        buffers: &GltfData,
         clip: &Clip,
     ) -> Result<Option<ClipData>, AnimationError> {
         let not_found = |what: String| AnimationError::ClipNotFound {

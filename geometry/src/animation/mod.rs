@@ -14,7 +14,6 @@
 //! Evaluation runs in f64; positions are stored as f32. Frames always have the topology of
 //! [`AnimatedTemplate::rest`].
 
-mod accessor;
 mod blendshape;
 mod error;
 mod gltf;

@@ -75,3 +75,32 @@ impl IoError {
         }
     }
 }
+
+impl From<super::gltf_data::GltfDataError> for IoError {
+    fn from(e: super::gltf_data::GltfDataError) -> Self {
+        use super::gltf_data::GltfDataErrorKind as K;
+        let path = e.path;
+        match e.kind {
+            K::Os(error) => Self::Os { path, error },
+            K::Document(error) => Self::malformed(path, "document", error.to_string()),
+            K::Attribute {
+                mesh,
+                primitive,
+                message,
+            } => Self::malformed(path, format!("mesh {mesh} primitive {primitive}"), message),
+            K::MissingBuffer {
+                resolved, error, ..
+            } => Self::MissingReference {
+                path,
+                reference: resolved,
+                error,
+            },
+            K::Buffer { buffer, message } => {
+                Self::malformed(path, format!("buffer {buffer}"), message)
+            }
+            K::Accessor { accessor, message } => {
+                Self::malformed(path, format!("accessor {accessor}"), message)
+            }
+        }
+    }
+}

@@ -13,342 +13,32 @@
 //! - skins and morph targets are ignored: a skinned mesh comes out in its bind pose with its
 //!   node's transform applied, morph targets at weight zero (trimesh does the same).
 //!
-//! Accessors are decoded here rather than with the crate's readers so that every offset,
-//! stride and count is checked against the bytes present (sparse accessors included) and a
-//! bad file gives an error naming the accessor instead of a panic.
+//! Accessors are decoded by [`super::gltf_data`] (shared with the animation reader) rather than
+//! with the `gltf` crate's readers, so that every offset, stride and count is checked against
+//! the bytes present (sparse accessors included) and a bad file gives an error naming the
+//! accessor instead of a panic.
 //!
 //! Writing: one scene, one node, one mesh with one TRIANGLES primitive: `POSITION` (with `min`
 //! and `max`), `NORMAL`, `TEXCOORD_0` and `COLOR_0` (float RGBA) when present, `u32` indices.
 //! `.glb` holds the buffer in its binary chunk; `.gltf` embeds it as a base64 data URI, so the
 //! output is one self-contained file that can be written atomically.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use base64::Engine as _;
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
-use gltf::accessor::{DataType, Dimensions};
+use gltf::accessor::Dimensions;
 use gltf::mesh::{Mode, Semantic};
 use serde_json::json;
 
 use super::IoError;
+use super::gltf_data::GltfData;
 use crate::TriMesh;
 use crate::mesh::Rgba;
 
-/// Accessors may describe at most this many times the bytes of all buffers (plus a MiB): an
-/// accessor without a buffer view is zeros and is not backed by data, so its count needs a cap.
-const UNBACKED_ACCESSOR_FACTOR: usize = 4;
-
-/// Loads the document and its buffers.
-fn load(path: &Path) -> Result<(gltf::Document, Vec<Vec<u8>>), IoError> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::os(path, e))?;
-    let bad_doc = |e: gltf::Error| IoError::malformed(path, "document", e.to_string());
-    // gltf-json 1.4's validation indexes the accessor array with a primitive's POSITION index
-    // unchecked (a panic on a bad index): check those indices before validating.
-    let unchecked = gltf::Gltf::from_slice_without_validation(&bytes).map_err(bad_doc)?;
-    let json = unchecked.document.as_json();
-    for (m, mesh) in json.meshes.iter().enumerate() {
-        for (k, prim) in mesh.primitives.iter().enumerate() {
-            for (semantic, index) in &prim.attributes {
-                if index.value() >= json.accessors.len() {
-                    return Err(IoError::malformed(
-                        path,
-                        format!("mesh {m} primitive {k}"),
-                        format!(
-                            "attribute {semantic:?} refers to accessor {}, which does not exist",
-                            index.value()
-                        ),
-                    ));
-                }
-            }
-        }
-    }
-    drop(unchecked);
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(bad_doc)?;
-    let gltf::Gltf { document, mut blob } = gltf;
-    let base = path.parent().unwrap_or_else(|| Path::new("."));
-    let mut buffers = Vec::new();
-    for buffer in document.buffers() {
-        let element = format!("buffer {}", buffer.index());
-        let data = match buffer.source() {
-            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
-                IoError::malformed(
-                    path,
-                    &element,
-                    "refers to a GLB binary chunk that is missing",
-                )
-            })?,
-            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
-                let (_, payload) = uri
-                    .split_once(";base64,")
-                    .ok_or_else(|| IoError::malformed(path, &element, "data URI is not base64"))?;
-                base64::engine::general_purpose::STANDARD
-                    .decode(payload)
-                    .map_err(|e| {
-                        IoError::malformed(path, &element, format!("bad base64 data URI: {e}"))
-                    })?
-            }
-            gltf::buffer::Source::Uri(uri) => {
-                let file = base.join(percent_decode(uri));
-                std::fs::read(&file).map_err(|error| IoError::MissingReference {
-                    path: path.to_path_buf(),
-                    reference: file.clone(),
-                    error,
-                })?
-            }
-        };
-        if data.len() < buffer.length() {
-            return Err(IoError::malformed(
-                path,
-                element,
-                format!(
-                    "declares {} bytes but holds {} (truncated?)",
-                    buffer.length(),
-                    data.len()
-                ),
-            ));
-        }
-        buffers.push(data);
-    }
-    Ok((document, buffers))
-}
-
-/// Decodes `%xx` escapes of a relative URI.
-fn percent_decode(uri: &str) -> PathBuf {
-    let bytes = uri.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        if bytes[i] == b'%'
-            && let Some(h) = bytes
-                .get(i + 1..i + 3)
-                .and_then(|h| std::str::from_utf8(h).ok())
-                .and_then(|h| u8::from_str_radix(h, 16).ok())
-        {
-            out.push(h);
-            i += 3;
-            continue;
-        }
-        out.push(bytes[i]);
-        i += 1;
-    }
-    PathBuf::from(String::from_utf8_lossy(&out).into_owned())
-}
-
-/// Where one buffer view's bytes are.
-fn view_bytes<'a>(
-    path: &Path,
-    element: &str,
-    view: &gltf::buffer::View<'_>,
-    buffers: &'a [Vec<u8>],
-) -> Result<&'a [u8], IoError> {
-    let buffer = buffers
-        .get(view.buffer().index())
-        .ok_or_else(|| IoError::malformed(path, element, "buffer view refers to no buffer"))?;
-    view.offset()
-        .checked_add(view.length())
-        .and_then(|end| buffer.get(view.offset()..end))
-        .ok_or_else(|| {
-            IoError::malformed(
-                path,
-                element,
-                format!(
-                    "buffer view {} reaches past the end of its buffer",
-                    view.index()
-                ),
-            )
-        })
-}
-
-fn component(data: &[u8], ty: DataType, normalized: bool) -> f64 {
-    let b = |n: usize| {
-        let mut a = [0u8; 4];
-        a[..n].copy_from_slice(&data[..n]);
-        a
-    };
-    let raw = match ty {
-        DataType::I8 => f64::from(i8::from_le_bytes([data[0]])),
-        DataType::U8 => f64::from(data[0]),
-        DataType::I16 => f64::from(i16::from_le_bytes([data[0], data[1]])),
-        DataType::U16 => f64::from(u16::from_le_bytes([data[0], data[1]])),
-        DataType::U32 => f64::from(u32::from_le_bytes(b(4))),
-        DataType::F32 => f64::from(f32::from_le_bytes(b(4))),
-    };
-    if !normalized {
-        return raw;
-    }
-    match ty {
-        DataType::I8 => (raw / 127.0).max(-1.0),
-        DataType::U8 => raw / 255.0,
-        DataType::I16 => (raw / 32767.0).max(-1.0),
-        DataType::U16 => raw / 65535.0,
-        DataType::U32 => raw / f64::from(u32::MAX),
-        DataType::F32 => raw,
-    }
-}
-
-/// Byte offset of component `c` inside one element (matrix columns are padded to 4 bytes).
-fn component_offset(dims: Dimensions, size: usize, c: usize) -> usize {
-    let rows = match dims {
-        Dimensions::Mat2 => 2,
-        Dimensions::Mat3 => 3,
-        Dimensions::Mat4 => 4,
-        _ => return c * size,
-    };
-    let column_stride = (rows * size).div_ceil(4) * 4;
-    (c / rows) * column_stride + (c % rows) * size
-}
-
-fn element_size(dims: Dimensions, size: usize) -> usize {
-    let n = dims.multiplicity();
-    component_offset(dims, size, n - 1) + size
-}
-
-/// Reads `count` elements of `n` components from `view` at `offset` with the view's stride.
-#[expect(clippy::too_many_arguments, reason = "the fields of an accessor")]
-fn read_strided(
-    path: &Path,
-    element: &str,
-    bytes: &[u8],
-    offset: usize,
-    stride: Option<usize>,
-    count: usize,
-    dims: Dimensions,
-    ty: DataType,
-    normalized: bool,
-) -> Result<Vec<f64>, IoError> {
-    let size = ty.size();
-    let elem = element_size(dims, size);
-    let stride = stride.unwrap_or(elem).max(elem);
-    let needed = if count == 0 {
-        Some(0)
-    } else {
-        (count - 1)
-            .checked_mul(stride)
-            .and_then(|x| x.checked_add(elem))
-            .and_then(|x| x.checked_add(offset))
-    };
-    match needed {
-        Some(n) if n <= bytes.len() => {}
-        _ => {
-            return Err(IoError::malformed(
-                path,
-                element,
-                format!(
-                    "{count} elements do not fit in the {} bytes of its buffer view",
-                    bytes.len()
-                ),
-            ));
-        }
-    }
-    let n = dims.multiplicity();
-    let mut out = Vec::with_capacity(count * n);
-    for i in 0..count {
-        let base = offset + i * stride;
-        for c in 0..n {
-            let at = base + component_offset(dims, size, c);
-            out.push(component(&bytes[at..at + size], ty, normalized));
-        }
-    }
-    Ok(out)
-}
-
-/// Decodes an accessor into `count * components` f64 values (normalised integers scaled,
-/// sparse substitutions applied).
-fn read_accessor(
-    path: &Path,
-    accessor: &gltf::Accessor<'_>,
-    buffers: &[Vec<u8>],
-) -> Result<Vec<f64>, IoError> {
-    let element = format!("accessor {}", accessor.index());
-    let dims = accessor.dimensions();
-    let n = dims.multiplicity();
-    let count = accessor.count();
-    let mut values = match accessor.view() {
-        Some(view) => read_strided(
-            path,
-            &element,
-            view_bytes(path, &element, &view, buffers)?,
-            accessor.offset(),
-            view.stride(),
-            count,
-            dims,
-            accessor.data_type(),
-            accessor.normalized(),
-        )?,
-        None => {
-            let total: usize = buffers.iter().map(Vec::len).sum();
-            let cap = total.saturating_mul(UNBACKED_ACCESSOR_FACTOR) + (1 << 20);
-            if count
-                .saturating_mul(n)
-                .saturating_mul(accessor.data_type().size())
-                > cap
-            {
-                return Err(IoError::malformed(
-                    path,
-                    element,
-                    format!("count {count} is far larger than the file's data"),
-                ));
-            }
-            vec![0.0; count * n]
-        }
-    };
-    if let Some(sparse) = accessor.sparse() {
-        let k = sparse.count();
-        let indices = sparse.indices();
-        let index_type = match indices.index_type() {
-            gltf::accessor::sparse::IndexType::U8 => DataType::U8,
-            gltf::accessor::sparse::IndexType::U16 => DataType::U16,
-            gltf::accessor::sparse::IndexType::U32 => DataType::U32,
-        };
-        let ib = view_bytes(path, &element, &indices.view(), buffers)?;
-        let idx = read_strided(
-            path,
-            &element,
-            ib,
-            indices.offset(),
-            None,
-            k,
-            Dimensions::Scalar,
-            index_type,
-            false,
-        )?;
-        let sv = sparse.values();
-        let vb = view_bytes(path, &element, &sv.view(), buffers)?;
-        let vals = read_strided(
-            path,
-            &element,
-            vb,
-            sv.offset(),
-            None,
-            k,
-            dims,
-            accessor.data_type(),
-            accessor.normalized(),
-        )?;
-        for (j, &i) in idx.iter().enumerate() {
-            #[expect(
-                clippy::cast_possible_truncation,
-                clippy::cast_sign_loss,
-                reason = "unsigned integer indices read exactly into f64"
-            )]
-            let i = i as usize;
-            if i >= count {
-                return Err(IoError::malformed(
-                    path,
-                    element,
-                    format!("sparse index {i} is out of range (count {count})"),
-                ));
-            }
-            values[i * n..(i + 1) * n].copy_from_slice(&vals[j * n..(j + 1) * n]);
-        }
-    }
-    Ok(values)
-}
-
 fn read_vec<const N: usize>(
-    path: &Path,
+    data: &GltfData,
     accessor: &gltf::Accessor<'_>,
-    buffers: &[Vec<u8>],
     what: &str,
 ) -> Result<Vec<[f64; N]>, IoError> {
     let n = accessor.dimensions().multiplicity();
@@ -359,12 +49,12 @@ fn read_vec<const N: usize>(
         )
     {
         return Err(IoError::malformed(
-            path,
+            data.path(),
             format!("accessor {}", accessor.index()),
             format!("{what} needs {N} components, it has {n}"),
         ));
     }
-    let values = read_accessor(path, accessor, buffers)?;
+    let values = data.read(accessor)?;
     Ok(values
         .chunks_exact(n)
         .map(|c| {
@@ -399,7 +89,7 @@ fn add_primitive(
     mesh: &gltf::Mesh<'_>,
     prim: &gltf::Primitive<'_>,
     world: &DMat4,
-    buffers: &[Vec<u8>],
+    data: &GltfData,
 ) -> Result<(), IoError> {
     let element = format!("mesh {} primitive {}", mesh.index(), prim.index());
     let mode = prim.mode();
@@ -412,7 +102,7 @@ fn add_primitive(
     let Some(pos) = prim.get(&Semantic::Positions) else {
         return Ok(());
     };
-    let positions = read_vec::<3>(path, &pos, buffers, "POSITION")?;
+    let positions = read_vec::<3>(data, &pos, "POSITION")?;
     let n = positions.len();
     let base = out.positions.len();
     let too_many = || IoError::malformed(path, &element, "more vertices than u32 indices hold");
@@ -432,7 +122,7 @@ fn add_primitive(
     let normal_matrix = DMat3::from_mat4(*world).inverse().transpose();
     match prim.get(&Semantic::Normals) {
         Some(acc) if acc.count() == n && out.all_normals => {
-            for v in read_vec::<3>(path, &acc, buffers, "NORMAL")? {
+            for v in read_vec::<3>(data, &acc, "NORMAL")? {
                 let m = (normal_matrix * DVec3::from(v)).normalize_or_zero();
                 out.normals.push(m.as_vec3());
             }
@@ -441,7 +131,7 @@ fn add_primitive(
     }
     match prim.get(&Semantic::TexCoords(0)) {
         Some(acc) if acc.count() == n && out.all_uvs => {
-            for v in read_vec::<2>(path, &acc, buffers, "TEXCOORD_0")? {
+            for v in read_vec::<2>(data, &acc, "TEXCOORD_0")? {
                 out.uvs.push(Vec2::new(v[0] as f32, v[1] as f32));
             }
         }
@@ -457,7 +147,7 @@ fn add_primitive(
                     "COLOR_0 must be VEC3 or VEC4",
                 ));
             }
-            for c in read_accessor(path, &acc, buffers)?.chunks_exact(comps) {
+            for c in data.read(&acc)?.chunks_exact(comps) {
                 let alpha = if comps == 4 { c[3] as f32 } else { 1.0 };
                 out.colors
                     .push([c[0] as f32, c[1] as f32, c[2] as f32, alpha]);
@@ -467,7 +157,7 @@ fn add_primitive(
     }
     let indices: Vec<u32> = match prim.indices() {
         Some(acc) => {
-            let values = read_accessor(path, &acc, buffers)?;
+            let values = data.read(&acc)?;
             let mut idx = Vec::with_capacity(values.len());
             for (k, &v) in values.iter().enumerate() {
                 #[expect(clippy::cast_sign_loss, reason = "checked in range first")]
@@ -520,7 +210,7 @@ fn visit(
     out: &mut Gathered,
     node: &gltf::Node<'_>,
     parent: &DMat4,
-    buffers: &[Vec<u8>],
+    data: &GltfData,
     depth: usize,
     max_depth: usize,
 ) -> Result<(), IoError> {
@@ -535,11 +225,11 @@ fn visit(
     let world = *parent * local;
     if let Some(mesh) = node.mesh() {
         for prim in mesh.primitives() {
-            add_primitive(path, out, &mesh, &prim, &world, buffers)?;
+            add_primitive(path, out, &mesh, &prim, &world, data)?;
         }
     }
     for child in node.children() {
-        visit(path, out, &child, &world, buffers, depth + 1, max_depth)?;
+        visit(path, out, &child, &world, data, depth + 1, max_depth)?;
     }
     Ok(())
 }
@@ -550,7 +240,8 @@ fn visit(
 /// [`IoError::Os`] when the file cannot be read, [`IoError::MissingReference`] when an external
 /// buffer is missing, [`IoError::Malformed`] naming the accessor, primitive or node at fault.
 pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
-    let (doc, buffers) = load(path)?;
+    let data = GltfData::open(path)?;
+    let doc = &data.document;
     let mut out = Gathered {
         all_normals: true,
         all_uvs: true,
@@ -573,15 +264,7 @@ pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
     };
     let max_depth = doc.nodes().len();
     for root in &roots {
-        visit(
-            path,
-            &mut out,
-            root,
-            &DMat4::IDENTITY,
-            &buffers,
-            0,
-            max_depth,
-        )?;
+        visit(path, &mut out, root, &DMat4::IDENTITY, &data, 0, max_depth)?;
     }
     let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
     let has = out.primitives > 0;

@@ -11,6 +11,7 @@
 mod atomic;
 mod error;
 pub mod gltf;
+pub(crate) mod gltf_data;
 pub mod gltf_sequence;
 mod npy;
 pub mod obj;
