@@ -312,6 +312,46 @@ fn gltf_accessor_past_its_view() {
     assert!(message.contains("do not fit"), "{message}");
 }
 
+/// Both glTF readers (static mesh and animation) read through one data module: an attribute
+/// naming an accessor the file does not have is an error naming the primitive in both (the
+/// animation reader used to panic in the `gltf` crate's validation), and so is an accessor
+/// that runs past its buffer view.
+#[test]
+fn both_gltf_readers_refuse_bad_accessors_alike() {
+    use trisplat_geometry::animation::{AnimationError, Clip, GltfTemplate};
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(&dir, "mesh.bin", &[0; 36]);
+    let bad_attribute = gltf_with_buffer("mesh.bin").replace(r#""POSITION":0"#, r#""POSITION":7"#);
+    let p = write(&dir, "attribute.gltf", bad_attribute.as_bytes());
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "mesh 0 primitive 0");
+    assert!(message.contains("accessor 7"), "{message}");
+    match GltfTemplate::open(&p, &Clip::None) {
+        Err(AnimationError::Primitive {
+            path,
+            mesh: 0,
+            primitive: 0,
+            message,
+        }) => {
+            assert_eq!(path, p);
+            assert!(message.contains("accessor 7"), "{message}");
+        }
+        other => panic!("expected a primitive error, got {other:?}"),
+    }
+    let past = gltf_with_buffer("mesh.bin").replace(r#""count":3"#, r#""count":4"#);
+    let p = write(&dir, "past.gltf", past.as_bytes());
+    let (element, _) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "accessor 0");
+    match GltfTemplate::open(&p, &Clip::None) {
+        Err(AnimationError::Accessor {
+            accessor: 0,
+            message,
+            ..
+        }) => assert!(message.contains("do not fit"), "{message}"),
+        other => panic!("expected an accessor error, got {other:?}"),
+    }
+}
+
 #[test]
 fn unknown_extension() {
     let p = Path::new("mesh.stl");
