@@ -1,7 +1,7 @@
 //! The one frame loop: [`Session::open`] reads every input once, [`Session::frame`] deforms
 //! and meshes one animation frame, and the caller writes what it returns.
 //!
-//! `trisplat extract` ([`crate::run`]), `trisplat deform` ([`Session::world`]) and the bench
+//! `trisplat extract` ([`crate::run()`]), `trisplat deform` ([`Session::world`]) and the bench
 //! sweep all go through a session. It owns what lives for the whole run: the template (read
 //! and welded once), the animation (a glTF parsed once), the Gaussians, the deformation
 //! engine, the rest-pose means (deformed once), the meshers with their state, a static ground

@@ -13,7 +13,7 @@
 //! - skins and morph targets are ignored: a skinned mesh comes out in its bind pose with its
 //!   node's transform applied, morph targets at weight zero (trimesh does the same).
 //!
-//! Accessors are decoded by [`super::gltf_data`] (shared with the animation reader) rather than
+//! Accessors are decoded by `io::gltf_data` (shared with the animation reader) rather than
 //! with the `gltf` crate's readers, so that every offset, stride and count is checked against
 //! the bytes present (sparse accessors included) and a bad file gives an error naming the
 //! accessor instead of a panic.

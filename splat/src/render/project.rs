@@ -189,7 +189,7 @@ pub fn exp_f32(x: f32) -> f32 {
 /// Four lanes of `e^(−sigma)` with the same range reduction and polynomial as [`exp_f32`], in
 /// `glam::Vec4` (SSE2) arithmetic. `sigma` is clamped to `[−88, 30]`: beyond 30 the result
 /// (`≈ 9e-14`) is far below any alpha threshold, and negative inputs are only ever discarded.
-/// The power of two is assembled in the vector unit ([`pow2_neg4`]), so no lane leaves it.
+/// The power of two is assembled in the vector unit (`pow2_neg4`), so no lane leaves it.
 #[inline(always)]
 #[must_use]
 pub fn exp_neg4(sigma: Vec4) -> Vec4 {
