@@ -81,8 +81,7 @@ fn extension(path: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// Whether `path` names a glTF/GLB file (by extension).
-pub(crate) fn is_gltf(path: &Path) -> bool {
+fn is_gltf(path: &Path) -> bool {
     matches!(extension(path).as_str(), "gltf" | "glb")
 }
 
@@ -234,41 +233,52 @@ impl AnimationSource<'_> {
     }
 }
 
-/// Opens the animation of `config` (see [`crate::config::ExtractConfig::animation`]) and lists
-/// the files it reads (never to be overwritten).
+/// The template (in world space, see [`read_template`]), its animation and the files they
+/// read (never to be overwritten), each file parsed once: without an animation, a glTF
+/// template plays its own clip (`clip`, default its first, or its stored scene) and its posed
+/// rest is the template; any other template is one still frame. `targets`: blendshape meshes
+/// for a weights JSON with an OBJ/PLY template.
 ///
 /// # Errors
-/// Unreadable files (named), a bad `--fps`, a weights file without a glTF template.
-pub fn open_animation(
+/// Unreadable files (named), a bad `fps`, `clip` or `targets` for an animation that has none,
+/// a weights file without morph targets.
+pub fn open_template_and_animation(
     config: &ExtractConfig,
-    template: &TriMesh,
-) -> Result<(Animation, Vec<PathBuf>), PipelineError> {
+    targets: Option<&Path>,
+) -> Result<(TriMesh, Animation, Vec<PathBuf>), PipelineError> {
     let o = &config.options;
-    let Some(a) = &config.animation else {
-        if !(o.fps.is_finite() && o.fps > 0.0) {
-            return Err(PipelineError::BadOption {
-                name: "fps",
-                value: o.fps,
-                expected: "a positive number of frames per second",
-            });
+    if let Some(spec) = &config.animation {
+        let stored = read_template(&config.template)?;
+        let (animation, files) = AnimationSource {
+            spec,
+            template: &config.template,
+            clip: o.clip.as_deref(),
+            fps: o.fps,
+            targets,
         }
-        if is_gltf(&config.template) {
-            let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
-            return Ok((Animation::Gltf(Box::new(g)), Vec::new()));
-        }
-        let still = Still {
-            mesh: template.clone(),
-        };
-        return Ok((Animation::Other(Box::new(still)), Vec::new()));
-    };
-    AnimationSource {
-        spec: a,
-        template: &config.template,
-        clip: o.clip.as_deref(),
-        fps: o.fps,
-        targets: None,
+        .open()?;
+        return Ok((stored, animation, files));
     }
-    .open()
+    if let Some(dir) = targets {
+        return Err(PipelineError::BadAnimation {
+            path: dir.to_path_buf(),
+            problem: "--targets needs a weights JSON animation".to_owned(),
+        });
+    }
+    if is_gltf(&config.template) {
+        let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
+        let stored = g.rest().clone();
+        return Ok((stored, Animation::Gltf(Box::new(g)), Vec::new()));
+    }
+    if let Some(clip) = &o.clip {
+        return Err(PipelineError::BadAnimation {
+            path: config.template.clone(),
+            problem: format!("--clip {clip} needs a glTF template or animation"),
+        });
+    }
+    let mesh = read_template(&config.template)?;
+    let still = Still { mesh: mesh.clone() };
+    Ok((mesh, Animation::Other(Box::new(still)), Vec::new()))
 }
 
 /// Reads the template in world space, as the animation evaluates it.

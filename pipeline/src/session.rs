@@ -19,7 +19,6 @@ use std::time::Instant;
 
 use glam::Vec3;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::animation::AnimatedTemplate;
 use trisplat_geometry::io::read_mesh;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::WorldGeometry;
@@ -28,9 +27,8 @@ use crate::config::{ExtractConfig, GroundTruth, Method};
 use crate::deform::{Engine, EngineInputs};
 use crate::error::PipelineError;
 use crate::input::{
-    Animation, AnimationSource, GaussianSource, WeldedTemplate, animation_label, bind_here,
-    check_scale, check_topology, open_animation, open_gltf, parse_frames, read_bound,
-    read_template,
+    Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
+    check_topology, open_template_and_animation, parse_frames, read_bound,
 };
 use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
 use crate::plan::{Plan, Stage};
@@ -150,31 +148,8 @@ impl Session {
         let mut executed = vec![Stage::Animate];
         let label = animation_label(config);
 
-        // The template and its animation; a glTF playing its own clip is parsed once.
-        let (stored, animation, mut input_files) = match (&config.animation, &options.targets) {
-            (None, None) if crate::input::is_gltf(&config.template) => {
-                let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
-                let stored = g.rest().clone();
-                (stored, Animation::Gltf(Box::new(g)), Vec::new())
-            }
-            (Some(spec), targets) => {
-                let stored = read_template(&config.template)?;
-                let (animation, files) = AnimationSource {
-                    spec,
-                    template: &config.template,
-                    clip: o.clip.as_deref(),
-                    fps: o.fps,
-                    targets: targets.as_deref(),
-                }
-                .open()?;
-                (stored, animation, files)
-            }
-            _ => {
-                let stored = read_template(&config.template)?;
-                let (animation, files) = open_animation(config, &stored)?;
-                (stored, animation, files)
-            }
-        };
+        let (stored, animation, mut input_files) =
+            open_template_and_animation(config, options.targets.as_deref())?;
         if stored.triangle_count() == 0 {
             return Err(PipelineError::EmptyTemplate {
                 path: config.template.clone(),

@@ -12,7 +12,7 @@
 //!   rest triangle, `J = E(deformed) E(canonical)⁻¹`; `mu = J (k_c R_c mu_local) + c_f(deformed)`,
 //!   covariance axes `L = J R_c R_local k_c diag(exp(log_s))`, so `Σ' = L Lᵀ`. The output rotation
 //!   and scales come from the SVD `L = U Σ Vᵀ` (`R = U` with `det U = +1`, `s = σ`), so the file
-//!   means exactly `Σ'`: one-sided Jacobi, eight Gaussians at a time in `f32` lanes
+//!   means exactly `Σ'`: one-sided Jacobi, `LANES` (32) Gaussians at a time in `f32` lanes
 //!   ([`crate::lanes`]), warm-started by the polar rotation of each triangle's `M`, and
 //!   [`rotation_and_scales`] in `f64` for Gaussians on ill-conditioned triangles or with axes
 //!   too unequal for `f32`. A singular value of 0 (a
