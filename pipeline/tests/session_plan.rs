@@ -120,3 +120,37 @@ fn deform_only_sessions_return_world_space_gaussians() {
         &[Stage::Animate, Stage::Bind, Stage::Deform]
     );
 }
+
+#[test]
+fn options_nothing_takes_are_refused_before_anything_runs() {
+    // `--clip` with an OBJ template and no animation: there is no clip to pick.
+    let mut config = config(&[Method::Delaunay], None, None);
+    config.template = trisplat_fixtures::path("spot_triangulated.obj");
+    config.options.clip = Some("walk".to_owned());
+    let err = Session::open(&config).expect_err("clip without a glTF");
+    assert!(err.to_string().contains("--clip walk"), "{err}");
+    // `--targets` without a weights animation.
+    config.options.clip = None;
+    let options = trisplat_pipeline::SessionOptions {
+        targets: Some(PathBuf::from("targets")),
+        ..trisplat_pipeline::SessionOptions::default()
+    };
+    let err = Session::open_with(&config, &options).expect_err("targets without weights");
+    assert!(err.to_string().contains("--targets"), "{err}");
+    // `--adaptive-scale` in jacobian mode (J already carries the area change).
+    let mut config = config_for_jacobian();
+    let options = trisplat_pipeline::SessionOptions {
+        adaptive_scale: true,
+        ..trisplat_pipeline::SessionOptions::default()
+    };
+    let err = Session::open_with(&config, &options).expect_err("adaptive scale in jacobian");
+    assert!(err.to_string().contains("--adaptive-scale"), "{err}");
+    config.options.mode = Mode::Binding;
+    assert!(Session::open_with(&config, &options).is_ok());
+}
+
+fn config_for_jacobian() -> ExtractConfig {
+    let mut c = config(&[Method::Delaunay], None, None);
+    c.options.mode = Mode::Jacobian;
+    c
+}
