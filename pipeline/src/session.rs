@@ -21,14 +21,14 @@ use glam::Vec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::read_mesh;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::WorldGeometry;
+use trisplat_splat::deform::{Deformer, WorldGeometry};
 
 use crate::config::{ExtractConfig, GroundTruth, Method};
 use crate::deform::{Engine, EngineInputs};
 use crate::error::PipelineError;
 use crate::input::{
     Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
-    check_topology, open_template_and_animation, parse_frames, read_bound,
+    check_topology, deform_mode, open_template_and_animation, parse_frames, read_bound,
 };
 use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
 use crate::plan::{Plan, Stage};
@@ -211,16 +211,16 @@ impl Session {
             &set,
         )?;
         // The rest pose, deformed once: the meshers' canonical means and the defaults' scale.
-        let mut scratch = WorldGeometry::default();
-        engine.deform_means(
-            &animation,
-            &set,
-            template.positions(),
-            frames.start,
-            &label,
-            &mut scratch,
-        )?;
-        let rest_means = scratch.means.clone();
+        // Local parameters are in the rest triangles' frames in every mode (`lbs` bakes its
+        // rest pose in binding mode), so the rest means come from the template itself, not
+        // from a frame of the animation.
+        let rest_means = Deformer::new(template, deform_mode(o.mode))
+            .means(&set, template.positions())
+            .map_err(|cause| PipelineError::Gaussians {
+                path: gaussians_path.clone(),
+                template: config.template.clone(),
+                cause,
+            })?;
         let resolved = Resolved::new(o, template, &rest_means)?;
         let mut meshers = Vec::new();
         for m in Method::ALL {
@@ -257,7 +257,7 @@ impl Session {
             tau: o.tau,
             fps: o.fps,
             input_files,
-            scratch,
+            scratch: WorldGeometry::default(),
             executed,
         })
     }

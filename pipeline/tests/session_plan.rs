@@ -154,3 +154,23 @@ fn config_for_jacobian() -> ExtractConfig {
     c.options.mode = Mode::Jacobian;
     c
 }
+
+#[test]
+fn rest_means_come_from_the_rest_template_in_every_mode() {
+    // The canonical means the Delaunay mesher takes are the Gaussians on the rest template,
+    // whatever frame the run starts at (lbs included: its engine poses frames, not the rest).
+    for mode in [Mode::Binding, Mode::Jacobian, Mode::Lbs] {
+        let mut config = config(&[Method::Delaunay], None, None);
+        config.options.mode = mode;
+        config.frames = Some("5..6".to_owned());
+        let session = Session::open(&config).expect("open");
+        let deform_mode = trisplat_pipeline::input::deform_mode(mode);
+        let expected = trisplat_splat::deform::Deformer::new(session.template(), deform_mode)
+            .means(session.gaussians(), session.template().positions())
+            .expect("rest means");
+        assert_eq!(session.rest_means(), expected.as_slice(), "{mode:?}");
+        let mut moved = Session::open(&config).expect("open");
+        let (_, frame_means) = moved.deform(5).expect("frame 5");
+        assert_ne!(frame_means, expected.as_slice(), "{mode:?}: frame 5 moves");
+    }
+}
