@@ -112,7 +112,7 @@ pub fn clip_of(clip: Option<&str>) -> Clip {
 ///
 /// # Errors
 /// An unreadable file or a clip it does not have.
-pub fn open_gltf(path: &Path, clip: Option<&str>, fps: f64) -> Result<GltfTemplate, PipelineError> {
+fn open_gltf(path: &Path, clip: Option<&str>, fps: f64) -> Result<GltfTemplate, PipelineError> {
     let clip = clip.map_or(Clip::FirstIfAny, |c| clip_of(Some(c)));
     Ok(GltfTemplate::open(path, &clip)?.with_fps(fps))
 }

@@ -4,7 +4,9 @@
 //!
 //! # Stages (docs/conventions.md §1)
 //! A run does only the stages its arguments need; [`Plan`] lists them with the reason each
-//! runs or is skipped (`--explain` prints it):
+//! runs or is skipped (`--explain` prints it). One [`Session`] per run reads the inputs once
+//! and asks the same plan before every stage, then meshes frame by frame ([`Session::frame`]);
+//! [`run()`] writes what each frame returns:
 //!
 //! 1. **animate**: read the template T and open the animation A: a glTF clip (`--clip`,
 //!    sampled at `--fps`), a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
