@@ -327,6 +327,64 @@ impl ScalarColumn {
         }
     }
 
+    /// Appends `rows` values read from a row-major binary block: the value of row `r` starts
+    /// at byte `offset + r * stride` of `block` (the caller checked the block holds them all).
+    fn extend_strided(
+        &mut self,
+        block: &[u8],
+        offset: usize,
+        stride: usize,
+        rows: usize,
+        big_endian: bool,
+    ) {
+        macro_rules! extend {
+            ($v:ident, $t:ty) => {{
+                const SIZE: usize = std::mem::size_of::<$t>();
+                let values = (0..rows).map(|r| {
+                    let at = offset + r * stride;
+                    let mut a = [0u8; SIZE];
+                    a.copy_from_slice(&block[at..at + SIZE]);
+                    a
+                });
+                if big_endian {
+                    $v.extend(values.map(<$t>::from_be_bytes));
+                } else {
+                    $v.extend(values.map(<$t>::from_le_bytes));
+                }
+            }};
+        }
+        match self {
+            Self::I8(v) => extend!(v, i8),
+            Self::U8(v) => extend!(v, u8),
+            Self::I16(v) => extend!(v, i16),
+            Self::U16(v) => extend!(v, u16),
+            Self::I32(v) => extend!(v, i32),
+            Self::U32(v) => extend!(v, u32),
+            Self::F32(v) => extend!(v, f32),
+            Self::F64(v) => extend!(v, f64),
+        }
+    }
+
+    /// Writes values `first..first + rows` into a row-major binary block: value `first + r` goes
+    /// to byte `offset + r * stride` of `block` (the caller sized the block).
+    fn write_strided(
+        &self,
+        first: usize,
+        rows: usize,
+        block: &mut [u8],
+        offset: usize,
+        stride: usize,
+        big_endian: bool,
+    ) {
+        each_column!(self, v => {
+            for (r, x) in v[first..first + rows].iter().enumerate() {
+                let bytes = if big_endian { x.to_be_bytes() } else { x.to_le_bytes() };
+                let at = offset + r * stride;
+                block[at..at + bytes.len()].copy_from_slice(&bytes);
+            }
+        });
+    }
+
     fn write_binary(&self, i: usize, out: &mut Vec<u8>, big_endian: bool) {
         each_column!(self, v => {
             let x = v[i];
@@ -339,11 +397,27 @@ impl ScalarColumn {
     }
 
     fn write_ascii(&self, i: usize, out: &mut Vec<u8>) {
-        // `Display` of Rust floats is the shortest string that round-trips.
-        each_column!(self, v => {
-            let _ = write!(out, "{}", v[i]);
-        });
+        // Rust's `Display` and `LowerExp` of floats give the shortest digits that round-trip.
+        match self {
+            Self::F32(v) => write_float(out, f64::from(v[i]), v[i]),
+            Self::F64(v) => write_float(out, v[i], v[i]),
+            other => each_column!(other, v => {
+                let _ = write!(out, "{}", v[i]);
+            }),
+        }
     }
+}
+
+/// Writes a float in positional notation for ordinary magnitudes and in exponent notation for
+/// tiny or huge ones (`1e-30`, not thirty zeros); both are the shortest digits that read back
+/// to the same value.
+fn write_float<T: fmt::Display + fmt::LowerExp>(out: &mut Vec<u8>, magnitude: f64, x: T) {
+    let a = magnitude.abs();
+    let _ = if a == 0.0 || !a.is_finite() || (1e-5..1e16).contains(&a) {
+        write!(out, "{x}")
+    } else {
+        write!(out, "{x:e}")
+    };
 }
 
 #[expect(
@@ -482,6 +556,10 @@ struct Header {
     elements: Vec<ElementDef>,
     body_start: usize,
 }
+
+/// Rows of fixed-size elements are read and written in blocks of about this many bytes, so
+/// that each block stays in cache while it is decoded or encoded column by column.
+const BLOCK_BYTES: usize = 1 << 18;
 
 /// Longest header we accept (real headers are a few kilobytes at most).
 const MAX_HEADER_BYTES: usize = 1 << 20;
@@ -669,6 +747,31 @@ fn read_binary_body(
         }
         let capacity = if min_row == 0 { 0 } else { def.count };
         let mut data: Vec<PropertyData> = def.props.iter().map(|p| new_data(p, capacity)).collect();
+        if def
+            .props
+            .iter()
+            .all(|p| matches!(p.kind, PropKind::Scalar(_)))
+        {
+            // Fixed-size rows (checked above to fit): decoded block by block, column by column.
+            let stride = min_row;
+            let block_rows = (BLOCK_BYTES / stride.max(1)).max(1);
+            let mut first = 0;
+            while first < def.count && stride > 0 {
+                let rows = block_rows.min(def.count - first);
+                let block = &body[pos..pos + rows * stride];
+                let mut offset = 0;
+                for column in &mut data {
+                    if let PropertyData::Scalar(c) = column {
+                        c.extend_strided(block, offset, stride, rows, big_endian);
+                        offset += c.scalar_type().size();
+                    }
+                }
+                pos += rows * stride;
+                first += rows;
+            }
+            elements.push(finish_element(def, data));
+            continue;
+        }
         let truncated = |row: usize| {
             IoError::malformed(
                 path,
@@ -920,6 +1023,22 @@ pub fn write_ply_document(
     let ascii = encoding == PlyEncoding::Ascii;
     let mut buf = Vec::with_capacity(1 << 16);
     for e in &doc.elements {
+        if !ascii {
+            let scalars: Option<Vec<&ScalarColumn>> = e
+                .properties
+                .iter()
+                .map(|p| match &p.data {
+                    PropertyData::Scalar(c) => Some(c),
+                    PropertyData::List { .. } => None,
+                })
+                .collect();
+            if let Some(columns) = scalars {
+                out.write_all(&buf).map_err(os)?;
+                buf.clear();
+                write_fixed_rows(out, &columns, e.count, big).map_err(os)?;
+                continue;
+            }
+        }
         for row in 0..e.count {
             for (k, p) in e.properties.iter().enumerate() {
                 if ascii && k > 0 {
@@ -962,6 +1081,35 @@ pub fn write_ply_document(
         }
     }
     out.write_all(&buf).map_err(os)?;
+    Ok(())
+}
+
+/// Writes `count` binary rows of scalar columns (each checked to hold `count` values), block by
+/// block, column by column.
+fn write_fixed_rows(
+    out: &mut dyn Write,
+    columns: &[&ScalarColumn],
+    count: usize,
+    big: bool,
+) -> std::io::Result<()> {
+    let stride: usize = columns.iter().map(|c| c.scalar_type().size()).sum();
+    if stride == 0 {
+        return Ok(());
+    }
+    let block_rows = (BLOCK_BYTES / stride).max(1);
+    let mut block = vec![0u8; block_rows.min(count) * stride];
+    let mut first = 0;
+    while first < count {
+        let rows = block_rows.min(count - first);
+        let bytes = &mut block[..rows * stride];
+        let mut offset = 0;
+        for c in columns {
+            c.write_strided(first, rows, bytes, offset, stride, big);
+            offset += c.scalar_type().size();
+        }
+        out.write_all(bytes)?;
+        first += rows;
+    }
     Ok(())
 }
 
