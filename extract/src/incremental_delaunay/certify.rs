@@ -124,7 +124,7 @@ pub(crate) struct Snapshot {
     /// Triangles that were near the chart: the chart, then the others by their boxes'
     /// distances from its centroid then, nearest first.
     pub(crate) triangles: Vec<u32>,
-    /// BVH nodes whose subtrees hold every other triangle (see `DeformedBvh::frontier`).
+    /// BVH nodes whose subtrees hold every other triangle (see `TriangleBvh::frontier`).
     pub(crate) frontier: Vec<u32>,
     /// Their template vertices, each once.
     ids: Vec<u32>,

@@ -12,7 +12,7 @@
 //!
 //! **Assignment.** At every frame each Gaussian is assigned to the deformed template triangle
 //! nearest to its deformed mean (exact point-triangle distance, ties to the smallest triangle
-//! id, found with an obvhs BVH over the deformed triangles). A Gaussian *hops* when that
+//! id, found with geometry's `TriangleBvh` over the deformed triangles, refitted per frame). A Gaussian *hops* when that
 //! triangle is no longer its chart; only the charts it leaves and enters are re-triangulated.
 //! With a hop threshold `τ > 0` ([`DelaunayOptions::hop_threshold`]) a Gaussian stays in its
 //! chart until another triangle is nearer by more than `τ` times the mean template edge length
@@ -122,20 +122,18 @@
 
 mod certify;
 mod chart;
-mod search;
 
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::spatial::MAX_COORDINATE;
+use trisplat_geometry::spatial::{MAX_COORDINATE, SpatialError, TriangleBvh};
 
+use self::certify::is_flat;
 use self::certify::{Bounds, Certificate, Close, Competitors, Fit, LocalFrame, Snapshot};
 pub use self::certify::{CLOSE_GAP_REL, FLAT_RATIO, MAX_CLOSE, REBASE_REL, SNAPSHOT_MARGIN_REL};
 use self::chart::{ChartFrame, ChartMesh, triangulate};
-pub use self::search::BOX_PADDING_REL;
-use self::search::DeformedBvh;
 
 /// Default hop threshold (relative to the mean template edge length): 0, every change of
 /// nearest triangle is a hop, and the result equals a from-scratch triangulation of the frame.
@@ -243,6 +241,9 @@ pub enum DelaunayError {
         /// Vertices needed.
         count: usize,
     },
+    /// The triangle BVH refused the deformed template (not expected after the checks above).
+    #[error("deformed template: {0}")]
+    Bvh(#[from] SpatialError),
 }
 
 /// What one update did.
@@ -280,7 +281,7 @@ const SPARE_CAPACITY: usize = 4;
 
 /// Shared inputs of the per-chart hop search of one frame.
 struct SearchContext<'a> {
-    bvh: &'a DeformedBvh,
+    bvh: &'a TriangleBvh,
     positions: &'a [Vec3],
     /// Flat triangles (see [`FLAT_RATIO`]); `None` when there are none.
     flat: Option<&'a [bool]>,
@@ -453,7 +454,7 @@ pub struct IncrementalDelaunay {
     rest_nearest: Vec<u32>,
     /// Hop threshold in world units.
     hop_distance: f64,
-    /// Bounding-box diagonal of the rest template (BVH padding).
+    /// Bounding-box diagonal of the rest template (margins of the motion filter).
     diagonal: f32,
     // State after the last update.
     assigned: Vec<u32>,
@@ -463,7 +464,10 @@ pub struct IncrementalDelaunay {
     /// Per chart: its last [`CACHED_MESHES`] meshes before the current one, most recent
     /// first, with the member lists they were made from.
     previous: Vec<Vec<CachedChart>>,
-    bvh: Option<DeformedBvh>,
+    /// The deformed template's triangles, refitted every frame, rebuilt with the charts.
+    bvh: Option<TriangleBvh>,
+    /// Per triangle of the deformed template: flat in the sense of [`FLAT_RATIO`].
+    flat: Vec<bool>,
     vertices: Vec<Vec3>,
     /// Per chart: its snapshot and its members' certificates (module `certify`), in the
     /// order of `members`; valid only while `certified`.
@@ -473,12 +477,6 @@ pub struct IncrementalDelaunay {
     certified: bool,
     updates: usize,
     since_rebuild: usize,
-}
-
-impl std::fmt::Debug for DeformedBvh {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DeformedBvh").finish_non_exhaustive()
-    }
 }
 
 /// The first point that is not finite or exceeds [`MAX_COORDINATE`] is an error. Chunks are
@@ -499,6 +497,18 @@ fn check_coordinates(points: &[Vec3], what: &'static str) -> Result<(), Delaunay
         Some(index) => Err(DelaunayError::BadCoordinate { what, index }),
         None => Ok(()),
     }
+}
+
+/// Per triangle of the BVH: flat in the sense of [`FLAT_RATIO`] (see `certify::is_flat`).
+fn flat_triangles(bvh: &TriangleBvh) -> Vec<bool> {
+    (0..bvh.triangle_count())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|t| {
+            bvh.corners(t)
+                .is_none_or(|c| is_flat(c.map(Vec3::as_dvec3)))
+        })
+        .collect()
 }
 
 impl IncrementalDelaunay {
@@ -567,7 +577,7 @@ impl IncrementalDelaunay {
             .sum();
         let mean_edge = edge_sum / (3 * triangles.len()) as f64;
         let diagonal = rest.bounds().map_or(0.0, |b| b.diagonal());
-        let rest_bvh = DeformedBvh::build(positions, &triangles, diagonal);
+        let rest_bvh = TriangleBvh::from_triangles(positions, &triangles)?;
         let canonical: Vec<DVec3> = canonical_means.iter().map(|p| p.as_dvec3()).collect();
         let rest_nearest = canonical
             .par_iter()
@@ -595,6 +605,7 @@ impl IncrementalDelaunay {
             charts: Vec::new(),
             previous: Vec::new(),
             bvh: None,
+            flat: Vec::new(),
             vertices: Vec::new(),
             states: Vec::new(),
             certified: false,
@@ -698,9 +709,9 @@ impl IncrementalDelaunay {
         self.check_frame(positions, means)?;
         let period = self.options.rebuild_every;
         let mut stats = if self.bvh.is_none() || (period > 0 && self.since_rebuild >= period) {
-            self.rebuild_now(positions, means)
+            self.rebuild_now(positions, means)?
         } else {
-            self.step(positions, means)
+            self.step(positions, means)?
         };
         stats.frame = self.updates;
         self.updates += 1;
@@ -741,8 +752,13 @@ impl IncrementalDelaunay {
         check_coordinates(means, "deformed mean")
     }
 
-    fn rebuild_now(&mut self, positions: &[Vec3], means: &[Vec3]) -> FrameStats {
-        let bvh = DeformedBvh::build(positions, &self.triangles, self.diagonal);
+    fn rebuild_now(
+        &mut self,
+        positions: &[Vec3],
+        means: &[Vec3],
+    ) -> Result<FrameStats, DelaunayError> {
+        let bvh = TriangleBvh::from_triangles(positions, &self.triangles)?;
+        self.flat = flat_triangles(&bvh);
         let seeds = &self.rest_nearest;
         self.assigned = means
             .par_iter()
@@ -766,19 +782,20 @@ impl IncrementalDelaunay {
         self.certified = false;
         self.since_rebuild = 1;
         self.lift(positions, means);
-        FrameStats {
+        Ok(FrameStats {
             rebuilt: true,
             charts_redone: all.len(),
             searches: means.len(),
             ..FrameStats::default()
-        }
+        })
     }
 
-    fn step(&mut self, positions: &[Vec3], means: &[Vec3]) -> FrameStats {
+    fn step(&mut self, positions: &[Vec3], means: &[Vec3]) -> Result<FrameStats, DelaunayError> {
         let Some(mut bvh) = self.bvh.take() else {
             return self.rebuild_now(positions, means);
         };
-        bvh.refit(positions, &self.triangles, self.diagonal);
+        bvh.refit(positions)?;
+        self.flat = flat_triangles(&bvh);
         if !self.certified {
             self.states = self
                 .members
@@ -791,7 +808,7 @@ impl IncrementalDelaunay {
         let context = SearchContext {
             bvh: &bvh,
             positions,
-            flat: bvh.flat(),
+            flat: self.flat.contains(&true).then_some(self.flat.as_slice()),
         };
         let outcome = self
             .members
@@ -869,13 +886,13 @@ impl IncrementalDelaunay {
         self.remesh(&dirty, before);
         self.since_rebuild += 1;
         self.lift(positions, means);
-        FrameStats {
+        Ok(FrameStats {
             rebuilt: false,
             hopped,
             charts_redone: dirty.len(),
             searches,
             ..FrameStats::default()
-        }
+        })
     }
 
     /// Hop targets of the Gaussians of chart `a` at this frame, new certificates, and the
@@ -905,7 +922,9 @@ impl IncrementalDelaunay {
         }
         let bvh = cx.bvh;
         let hop = self.hop_distance;
-        let v = bvh.corners(a);
+        let v = bvh
+            .corners(a as usize)
+            .map_or([DVec3::ZERO; 3], |c| c.map(Vec3::as_dvec3));
         let centre = (v[0] + v[1] + v[2]) / 3.0;
         let size = v.iter().map(|p| (*p - centre).length()).fold(0.0, f64::max);
         let margin = SNAPSHOT_MARGIN_REL * size;
@@ -1038,7 +1057,7 @@ impl IncrementalDelaunay {
         state.clear(list.len());
         let radius = reach + slack + margin;
         scratch.found.clear();
-        bvh.triangles_within_using(
+        bvh.triangles_within(
             centre,
             radius * radius,
             &mut scratch.found,
@@ -1136,7 +1155,7 @@ impl IncrementalDelaunay {
 
     /// Fills `scratch.candidates` with the triangles of `scratch.found` other than `a`, with
     /// their padded boxes, nearest box to `centre` first.
-    fn gather_candidates(&self, bvh: &DeformedBvh, a: u32, centre: DVec3, scratch: &mut Scratch) {
+    fn gather_candidates(&self, bvh: &TriangleBvh, a: u32, centre: DVec3, scratch: &mut Scratch) {
         scratch.candidates.clear();
         for &t in &scratch.found {
             if t != a {
@@ -1166,7 +1185,7 @@ impl IncrementalDelaunay {
     )]
     fn exact_check(
         &self,
-        bvh: &DeformedBvh,
+        bvh: &TriangleBvh,
         q: DVec3,
         a: u32,
         d2: f64,
@@ -1243,7 +1262,7 @@ impl IncrementalDelaunay {
     /// them wins (as [`Self::exact_check`]).
     fn close_check(
         &self,
-        bvh: &DeformedBvh,
+        bvh: &TriangleBvh,
         q: DVec3,
         a: u32,
         d2: f64,

@@ -1,20 +1,35 @@
-//! A BVH over a mesh's triangles (obvhs 0.4) with exact closest-point and closest-hit queries.
+//! A BVH over a mesh's triangles (obvhs 0.4) with exact closest-point and closest-hit queries,
+//! refittable when the triangles move.
 //!
-//! One PLOC-built binary tree (`Bvh2`, one triangle per leaf) serves the closest-point query,
+//! One PLOC-built binary tree (`Bvh2`, one triangle per leaf) serves the closest-point queries,
 //! which obvhs does not have: a depth-first search over its public nodes, nearer child first,
 //! pruning boxes whose f64 distance exceeds the best squared distance found so far, with
 //! Ericson's closest point on a triangle in f64 at the leaves. The same tree converted to a
-//! compressed wide BVH (`CwBvh`) serves ray casting: obvhs' `Bvh2` ray traversal missed hits
-//! for rays with an exactly-zero direction component, the `CwBvh` one does not (tested below).
+//! compressed wide BVH (`CwBvh`, built on the first ray) serves ray casting: obvhs' `Bvh2` ray
+//! traversal missed hits for rays with an exactly-zero direction component, the `CwBvh` one
+//! does not (tested below).
 //!
-//! Node boxes are padded by [`BOX_PADDING`] times the mesh's bounding-box diagonal, so that
-//! f32 rounding in obvhs' slab tests cannot cull a ray that grazes a box face (rays along an
-//! edge, through a vertex, or axis-aligned in the plane of a face). The padding only makes
-//! the culling more conservative; the answers are computed exactly (f64) from the triangles.
+//! Leaf boxes are padded by [`BOX_PADDING`] times the mesh's bounding-box diagonal plus the same
+//! fraction of each coordinate's magnitude, so that f32 rounding in obvhs' slab tests, and in
+//! the f32 range tests below, can never cull a triangle that is within reach (rays along an
+//! edge, through a vertex, or axis-aligned in the plane of a face; a query whose bound ties a
+//! triangle's distance). The padding only makes the culling more conservative; the answers are
+//! computed exactly (f64) from the triangles.
+//!
+//! A mesh that moves keeps its tree: [`TriangleBvh::refit`] moves the corners and recomputes the
+//! boxes bottom-up, which is what an animated template needs per frame (the incremental Delaunay
+//! mesher searches the deformed template this way). Besides the closest point, the tree answers
+//! the queries such a mesher needs: the nearest triangle below a bound
+//! ([`TriangleBvh::nearest_below`]), every triangle within a radius
+//! ([`TriangleBvh::triangles_within`]), and the *frontier* of a set of triangles, the subtrees
+//! holding every other triangle ([`TriangleBvh::frontier`], [`TriangleBvh::any_within`]).
+
+use std::sync::OnceLock;
 
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::aabb::Aabb as BvhAabb;
 use obvhs::bvh2::Bvh2;
+use obvhs::bvh2::node::Bvh2Node;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
@@ -26,8 +41,9 @@ use rayon::prelude::*;
 use super::{SpatialError, check_points, morton_order};
 use crate::mesh::TriMesh;
 
-/// Node boxes grow by this fraction of the mesh's bounding-box diagonal (see the module docs).
-/// Rays whose origin lies within about 100 diagonals of the mesh keep f32 slab errors below it.
+/// Leaf boxes grow by this fraction of the mesh's bounding-box diagonal, plus this fraction of
+/// each coordinate's magnitude (see the module docs). Rays whose origin lies within about 100
+/// diagonals of the mesh keep f32 slab errors below it.
 pub const BOX_PADDING: f32 = 1e-5;
 
 /// A triangle is treated as degenerate (a segment or a point) when its squared doubled area
@@ -44,6 +60,9 @@ pub const RAY_EDGE_TOLERANCE: f64 = 1e-12;
 /// world units behind their true origin, so that hits near `t = 0` are found; the hits
 /// themselves are computed from the true origin.
 const RAY_BACKOFF: f32 = 2e-4;
+
+/// `parent` of the root node.
+const NO_NODE: u32 = u32::MAX;
 
 /// The closest point of a mesh's surface to a query.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,13 +89,26 @@ pub struct RayHit {
     pub barycentric: [f64; 3],
 }
 
-/// A BVH over the triangles of a [`TriMesh`] (it copies the triangle corners; the mesh is not
+/// A candidate of [`TriangleBvh::nearest_below`]: squared distance and triangle id, ordered
+/// lexicographically (ties go to the smaller id).
+pub type Candidate = (f64, u32);
+
+/// A BVH over the triangles of a mesh (it copies the triangle corners; the mesh is not
 /// borrowed). An empty mesh gives an empty BVH whose queries return `None`.
 pub struct TriangleBvh {
     bvh2: Bvh2,
-    cwbvh: CwBvh,
+    /// The ray-casting tree, converted from `bvh2` on the first ray (and again after a refit).
+    cwbvh: OnceLock<CwBvh>,
+    /// Vertex indices of every triangle (kept for [`TriangleBvh::refit`]).
+    triangles: Vec<[u32; 3]>,
     /// Corners of every triangle, indexed by the mesh's triangle id.
     corners: Vec<[Vec3; 3]>,
+    /// Leaf node of each triangle.
+    leaf_of: Vec<u32>,
+    /// Parent of each node ([`NO_NODE`] for the root).
+    parent: Vec<u32>,
+    /// Absolute part of the box padding: [`BOX_PADDING`] times the diagonal at build time.
+    padding: f32,
     /// Ray back-off in world units (see [`RAY_BACKOFF`]).
     backoff: f32,
 }
@@ -91,60 +123,88 @@ impl std::fmt::Debug for TriangleBvh {
 }
 
 impl TriangleBvh {
-    /// Builds the BVH (PLOC with reinsertion optimisation, as obvhs' `medium_build`, without
-    /// spatial splits).
+    /// Builds the BVH over a mesh's triangles (PLOC with reinsertion optimisation, as obvhs'
+    /// `medium_build`, without spatial splits).
     ///
     /// # Errors
     /// [`SpatialError::TooLarge`] when a vertex exceeds [`super::MAX_COORDINATE`] in
     /// magnitude ([`TriMesh`] positions are already finite), [`SpatialError::TooMany`] past
     /// `u32::MAX` triangles.
     pub fn new(mesh: &TriMesh) -> Result<Self, SpatialError> {
-        check_points(mesh.positions())?;
-        let n = mesh.triangle_count();
+        Self::from_triangles(mesh.positions(), mesh.triangles())
+    }
+
+    /// Builds the BVH over `triangles` (vertex indices into `positions`).
+    ///
+    /// # Errors
+    /// [`SpatialError::NonFinite`] or [`SpatialError::TooLarge`] naming the first bad vertex,
+    /// [`SpatialError::BadIndex`] for a triangle naming a vertex past the end,
+    /// [`SpatialError::TooMany`] past `u32::MAX` triangles.
+    pub fn from_triangles(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+    ) -> Result<Self, SpatialError> {
+        check_points(positions)?;
+        check_indices(positions.len(), triangles)?;
+        let n = triangles.len();
         if u32::try_from(n).is_err() {
             return Err(SpatialError::TooMany { count: n });
         }
-        let corners: Vec<[Vec3; 3]> = (0..n).into_par_iter().map(|t| mesh.corners(t)).collect();
-        let diagonal = mesh.bounds().map_or(0.0, |b| b.diagonal());
+        let corners = gather_corners(positions, triangles);
+        let diagonal = crate::mesh::Aabb::from_points(positions).map_or(0.0, |b| b.diagonal());
         let padding = diagonal * BOX_PADDING;
-        let backoff = RAY_BACKOFF.max(2.0 * padding);
-        if n == 0 {
-            return Ok(Self {
-                bvh2: Bvh2::default(),
-                cwbvh: CwBvh::default(),
-                corners,
-                backoff,
-            });
-        }
-        let triangles: Vec<Triangle> = corners
-            .par_iter()
-            .map(|&[a, b, c]| Triangle {
-                v0: a.into(),
-                v1: b.into(),
-                v2: c.into(),
-            })
-            .collect();
-        let indices: Vec<u32> = (0..n as u32).collect();
-        let mut bvh2 = PlocBuilder::with_capacity(n).build(
-            PlocSearchDistance::Medium,
-            &triangles,
-            indices,
-            SortPrecision::U64,
-            3,
-        );
-        ReinsertionOptimizer::default().run(&mut bvh2, 0.05, None);
-        let pad = Vec3A::splat(padding);
-        for node in &mut bvh2.nodes {
-            let aabb = *node.aabb();
-            node.set_aabb(BvhAabb::new(aabb.min - pad, aabb.max + pad));
-        }
-        let cwbvh = bvh2_to_cwbvh(&bvh2, 3, true, false);
+        let mut bvh2 = if n == 0 {
+            Bvh2::default()
+        } else {
+            let primitives: Vec<Triangle> = corners
+                .par_iter()
+                .map(|&[a, b, c]| Triangle {
+                    v0: a.into(),
+                    v1: b.into(),
+                    v2: c.into(),
+                })
+                .collect();
+            let mut bvh2 = PlocBuilder::with_capacity(n).build(
+                PlocSearchDistance::Medium,
+                &primitives,
+                (0..n as u32).collect(),
+                SortPrecision::U64,
+                3,
+            );
+            ReinsertionOptimizer::default().run(&mut bvh2, 0.05, None);
+            bvh2
+        };
+        let (leaf_of, parent) = links(&bvh2, n);
+        set_leaf_boxes(&mut bvh2, &corners, padding);
+        bvh2.refit_all();
         Ok(Self {
             bvh2,
-            cwbvh,
+            cwbvh: OnceLock::new(),
+            triangles: triangles.to_vec(),
             corners,
-            backoff,
+            leaf_of,
+            parent,
+            padding,
+            backoff: RAY_BACKOFF.max(2.0 * padding),
         })
+    }
+
+    /// Moves the triangles to new vertex `positions` (same vertex count and triangles) and
+    /// refits the boxes bottom-up; the tree's shape is kept, so queries stay exact but may get
+    /// slower when the mesh moves far from the pose it was built in.
+    ///
+    /// # Errors
+    /// [`SpatialError::NonFinite`] or [`SpatialError::TooLarge`] naming the first bad vertex,
+    /// [`SpatialError::BadIndex`] when `positions` is shorter than the triangles need; the tree
+    /// is unchanged then.
+    pub fn refit(&mut self, positions: &[Vec3]) -> Result<(), SpatialError> {
+        check_points(positions)?;
+        check_indices(positions.len(), &self.triangles)?;
+        self.corners = gather_corners(positions, &self.triangles);
+        set_leaf_boxes(&mut self.bvh2, &self.corners, self.padding);
+        self.bvh2.refit_all();
+        self.cwbvh = OnceLock::new();
+        Ok(())
     }
 
     /// Number of triangles.
@@ -153,10 +213,43 @@ impl TriangleBvh {
         self.corners.len()
     }
 
+    /// Number of tree nodes (node ids of [`TriangleBvh::frontier`] are below it).
+    #[must_use]
+    pub fn node_count(&self) -> usize {
+        self.bvh2.nodes.len()
+    }
+
     /// The corners of triangle `t` as stored (mesh order), if it exists.
     #[must_use]
     pub fn corners(&self, t: usize) -> Option<[Vec3; 3]> {
         self.corners.get(t).copied()
+    }
+
+    /// Squared distance from `q` to triangle `t` (as [`closest_point_on_triangle`], f64) and the
+    /// barycentric weights of the closest point; infinite for a triangle past the end.
+    #[must_use]
+    pub fn distance_sq(&self, q: DVec3, t: u32) -> (f64, [f64; 3]) {
+        match self.corners.get(t as usize) {
+            Some(&[a, b, c]) => {
+                let (p, bary) =
+                    closest_point_on_triangle(q, a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+                ((p - q).length_squared(), bary)
+            }
+            None => (f64::INFINITY, [1.0 / 3.0; 3]),
+        }
+    }
+
+    /// The padded box of triangle `t`'s leaf as `(min, max)` in f64 (its squared distance
+    /// from a point is a lower bound of the triangle's); an infinite box past the end.
+    #[must_use]
+    pub fn leaf_box(&self, t: u32) -> (DVec3, DVec3) {
+        self.leaf_of
+            .get(t as usize)
+            .and_then(|&l| self.bvh2.nodes.get(l as usize))
+            .map_or((DVec3::NEG_INFINITY, DVec3::INFINITY), |n| {
+                let b = n.aabb();
+                (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3())
+            })
     }
 
     /// The closest point of the surface to `query`; `None` for an empty mesh or a query that is
@@ -164,16 +257,36 @@ impl TriangleBvh {
     /// of [`closest_point_on_triangle`].
     #[must_use]
     pub fn closest_point(&self, query: Vec3) -> Option<ClosestPoint> {
-        if self.bvh2.nodes.is_empty() || !query.is_finite() {
+        if !query.is_finite() {
             return None;
         }
         let q = query.as_dvec3();
+        let (d2, triangle) = self.nearest_below(q, (f64::INFINITY, u32::MAX))?;
+        let [a, b, c] = self.corners.get(triangle as usize)?.map(Vec3::as_dvec3);
+        let (point, barycentric) = closest_point_on_triangle(q, a, b, c);
+        Some(ClosestPoint {
+            distance: d2.sqrt(),
+            point,
+            triangle,
+            barycentric,
+        })
+    }
+
+    /// The lexicographically smallest `(squared distance, triangle)` over all triangles that
+    /// is smaller than `bound`, or `None`. With `bound = (d², t)` for a triangle `t` already
+    /// known, a result means that another triangle is strictly nearer (or as near with a
+    /// smaller id); only boxes nearer than the bound are opened, so a good bound makes the
+    /// search cheap.
+    #[must_use]
+    pub fn nearest_below(&self, q: DVec3, bound: Candidate) -> Option<Candidate> {
         let nodes = &self.bvh2.nodes;
-        let mut best: Option<(f64, ClosestPoint)> = None;
+        let root = nodes.first()?;
+        let mut best = bound;
+        let mut found = false;
         let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
-        stack.push((0, box_distance_sq(nodes[0].aabb(), q)));
+        stack.push((0, box_distance_sq(root.aabb(), q)));
         while let Some((index, lower)) = stack.pop() {
-            if best.is_some_and(|(d2, _)| lower > d2) {
+            if lower > best.0 {
                 continue;
             }
             let Some(node) = nodes.get(index as usize) else {
@@ -181,55 +294,141 @@ impl TriangleBvh {
             };
             if node.is_leaf() {
                 for slot in node.first_index..node.first_index.saturating_add(node.prim_count) {
-                    let Some(&tri) = self.bvh2.primitive_indices.get(slot as usize) else {
+                    let Some(&t) = self.bvh2.primitive_indices.get(slot as usize) else {
                         continue;
                     };
-                    let Some(&[a, b, c]) = self.corners.get(tri as usize) else {
-                        continue;
-                    };
-                    let (point, barycentric) =
-                        closest_point_on_triangle(q, a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
-                    let d2 = (point - q).length_squared();
-                    let better = match best {
-                        None => true,
-                        Some((b2, ref cp)) => d2 < b2 || (d2 == b2 && tri < cp.triangle),
-                    };
-                    if better {
-                        best = Some((
-                            d2,
-                            ClosestPoint {
-                                distance: d2.sqrt(),
-                                point,
-                                triangle: tri,
-                                barycentric,
-                            },
-                        ));
+                    let (d2, _) = self.distance_sq(q, t);
+                    if (d2, t) < best {
+                        best = (d2, t);
+                        found = true;
                     }
                 }
                 continue;
             }
             let left = node.first_index;
-            let right = left + 1;
+            let right = left.saturating_add(1);
             let (Some(ln), Some(rn)) = (nodes.get(left as usize), nodes.get(right as usize)) else {
                 continue;
             };
             let dl = box_distance_sq(ln.aabb(), q);
             let dr = box_distance_sq(rn.aabb(), q);
-            let bound = best.map_or(f64::INFINITY, |(d2, _)| d2);
             // Push the farther child first so the nearer one is searched first.
             let (near, dn, far, df) = if dl <= dr {
                 (left, dl, right, dr)
             } else {
                 (right, dr, left, dl)
             };
-            if df <= bound {
+            if df <= best.0 {
                 stack.push((far, df));
             }
-            if dn <= bound {
+            if dn <= best.0 {
                 stack.push((near, dn));
             }
         }
-        best.map(|(_, cp)| cp)
+        found.then_some(best)
+    }
+
+    /// Appends to `out` every triangle whose padded leaf box is within squared distance `r2`
+    /// of `q` (a superset of the triangles within distance `√r2`), with a caller-owned
+    /// traversal stack (no allocation once it has grown). The boxes are tested in f32: their
+    /// padding ([`BOX_PADDING`]) is far above the f32 rounding of the test, so a triangle
+    /// within `√r2` is never left out.
+    pub fn triangles_within(&self, q: DVec3, r2: f64, out: &mut Vec<u32>, stack: &mut Vec<u32>) {
+        let nodes = &self.bvh2.nodes;
+        stack.clear();
+        if nodes.is_empty() {
+            return;
+        }
+        let near = near_test(q, r2);
+        stack.push(0);
+        while let Some(index) = stack.pop() {
+            let Some(node) = nodes.get(index as usize) else {
+                continue;
+            };
+            if !near(node) {
+                continue;
+            }
+            if node.is_leaf() {
+                for slot in node.first_index..node.first_index.saturating_add(node.prim_count) {
+                    if let Some(&t) = self.bvh2.primitive_indices.get(slot as usize) {
+                        out.push(t);
+                    }
+                }
+            } else {
+                stack.push(node.first_index);
+                stack.push(node.first_index.saturating_add(1));
+            }
+        }
+    }
+
+    /// Fills `out` with the *frontier* of the triangles `inside`: nodes whose subtrees hold no
+    /// triangle of `inside` and together hold every other triangle (the children, off the
+    /// paths from the root to `inside`'s leaves, of nodes on those paths). `marks` is a
+    /// per-node scratch array of at least [`TriangleBvh::node_count`] entries; `token` marks
+    /// this call and must differ from every earlier token written to it.
+    pub fn frontier(&self, inside: &[u32], marks: &mut [u32], token: u32, out: &mut Vec<u32>) {
+        out.clear();
+        let nodes = &self.bvh2.nodes;
+        if nodes.is_empty() {
+            return;
+        }
+        for &t in inside {
+            let mut n = self.leaf_of.get(t as usize).copied().unwrap_or(NO_NODE);
+            while let Some(m) = marks.get_mut(n as usize) {
+                if *m == token {
+                    break;
+                }
+                *m = token;
+                n = self.parent.get(n as usize).copied().unwrap_or(NO_NODE);
+            }
+        }
+        if marks.first() != Some(&token) {
+            out.push(0);
+            return;
+        }
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let Some(node) = nodes.get(n as usize) else {
+                continue;
+            };
+            if node.is_leaf() {
+                continue;
+            }
+            for child in [node.first_index, node.first_index.saturating_add(1)] {
+                if marks.get(child as usize) == Some(&token) {
+                    stack.push(child);
+                } else {
+                    out.push(child);
+                }
+            }
+        }
+    }
+
+    /// Whether a triangle under one of the nodes `roots` (ids from
+    /// [`TriangleBvh::frontier`]) has its padded leaf box within squared distance `r2` of `q`
+    /// (tested in f32 as [`TriangleBvh::triangles_within`]).
+    #[must_use]
+    pub fn any_within(&self, roots: &[u32], q: DVec3, r2: f64, stack: &mut Vec<u32>) -> bool {
+        let nodes = &self.bvh2.nodes;
+        let near = near_test(q, r2);
+        let near = |i: u32| nodes.get(i as usize).is_some_and(&near);
+        // Every node is tested once, before it is pushed.
+        stack.clear();
+        stack.extend(roots.iter().copied().filter(|&r| near(r)));
+        while let Some(index) = stack.pop() {
+            let Some(node) = nodes.get(index as usize) else {
+                continue;
+            };
+            if node.is_leaf() {
+                return true;
+            }
+            for child in [node.first_index, node.first_index.saturating_add(1)] {
+                if near(child) {
+                    stack.push(child);
+                }
+            }
+        }
+        false
     }
 
     /// [`TriangleBvh::closest_point`] for every query, in parallel (Morton order for cache
@@ -267,7 +466,7 @@ impl TriangleBvh {
     /// `t` is in units of its length.
     #[must_use]
     pub fn cast_ray(&self, origin: Vec3, direction: Vec3, t_max: f64) -> Option<RayHit> {
-        if self.cwbvh.nodes.is_empty()
+        if self.corners.is_empty()
             || !origin.is_finite()
             || !direction.is_finite()
             || direction == Vec3::ZERO
@@ -292,8 +491,11 @@ impl TriangleBvh {
         );
         let mut best: Option<RayHit> = None;
         let mut hit = ObvhsRayHit::none();
-        self.cwbvh.ray_traverse(ray, &mut hit, |_, slot| {
-            let Some(&tri) = self.cwbvh.primitive_indices.get(slot) else {
+        let cwbvh = self
+            .cwbvh
+            .get_or_init(|| bvh2_to_cwbvh(&self.bvh2, 3, true, false));
+        cwbvh.ray_traverse(ray, &mut hit, |_, slot| {
+            let Some(&tri) = cwbvh.primitive_indices.get(slot) else {
                 return f32::INFINITY;
             };
             let Some(&[a, b, c]) = self.corners.get(tri as usize) else {
@@ -332,7 +534,93 @@ impl TriangleBvh {
     }
 }
 
-/// Squared distance from `q` to the box (0 inside), in f64.
+/// Checks that every triangle names vertices below `vertex_count`.
+fn check_indices(vertex_count: usize, triangles: &[[u32; 3]]) -> Result<(), SpatialError> {
+    match triangles
+        .par_iter()
+        .with_min_len(4096)
+        .position_first(|t| t.iter().any(|&v| v as usize >= vertex_count))
+    {
+        None => Ok(()),
+        Some(triangle) => Err(SpatialError::BadIndex {
+            triangle,
+            vertex_count,
+        }),
+    }
+}
+
+/// The corners of every triangle (indices already checked).
+fn gather_corners(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
+    triangles
+        .par_iter()
+        .with_min_len(4096)
+        .map(|t| t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO)))
+        .collect()
+}
+
+/// The leaf of each of `n` triangles and the parent of each node.
+fn links(bvh2: &Bvh2, n: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut leaf_of = vec![NO_NODE; n];
+    let mut parent = vec![NO_NODE; bvh2.nodes.len()];
+    for (index, node) in bvh2.nodes.iter().enumerate() {
+        if node.is_leaf() {
+            for slot in node.first_index..node.first_index.saturating_add(node.prim_count) {
+                if let Some(&t) = bvh2.primitive_indices.get(slot as usize)
+                    && let Some(l) = leaf_of.get_mut(t as usize)
+                {
+                    *l = index as u32;
+                }
+            }
+        } else {
+            for child in [node.first_index, node.first_index.saturating_add(1)] {
+                if let Some(p) = parent.get_mut(child as usize) {
+                    *p = index as u32;
+                }
+            }
+        }
+    }
+    (leaf_of, parent)
+}
+
+/// Sets every leaf's box to the union of its triangles' padded boxes (in parallel over the
+/// nodes; inner boxes are left to `refit_all`).
+fn set_leaf_boxes(bvh2: &mut Bvh2, corners: &[[Vec3; 3]], padding: f32) {
+    let primitives = &bvh2.primitive_indices;
+    bvh2.nodes
+        .par_iter_mut()
+        .with_min_len(1024)
+        .filter(|node| node.is_leaf())
+        .for_each(|node| {
+            let first = node.first_index as usize;
+            let slots = first..first.saturating_add(node.prim_count as usize);
+            let mut aabb = BvhAabb::empty();
+            for c in primitives
+                .get(slots)
+                .unwrap_or(&[])
+                .iter()
+                .filter_map(|&t| corners.get(t as usize))
+            {
+                let lo = c[0].min(c[1]).min(c[2]);
+                let hi = c[0].max(c[1]).max(c[2]);
+                let pad = Vec3::splat(padding) + lo.abs().max(hi.abs()) * BOX_PADDING;
+                aabb = aabb.union(&BvhAabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad)));
+            }
+            node.set_aabb(aabb);
+        });
+}
+
+/// Whether a node's box is within squared distance `r2` of `q`, tested in f32 with the radius
+/// rounded up (f32 keeps 24 bits; the box padding covers the rest).
+fn near_test(q: DVec3, r2: f64) -> impl Fn(&Bvh2Node) -> bool {
+    let p = Vec3A::from(q.as_vec3());
+    let r2 = (r2 * (1.0 + 1e-6)) as f32;
+    move |node| {
+        let b = node.aabb();
+        let d = (b.min - p).max(p - b.max).max(Vec3A::ZERO);
+        d.length_squared() <= r2
+    }
+}
+
 /// Squared distance from `q` to an obvhs box (0 inside), in f64: a lower bound of the squared
 /// distance to anything in the box.
 #[inline]
@@ -781,5 +1069,144 @@ mod tests {
             bvh.cast_ray(Vec3::new(1.0, 1.0, 0.0), Vec3::NEG_Y, 10.0),
             None
         );
+    }
+
+    /// Squared distance from `q` to triangle `t` of `mesh`, brute force in f64.
+    fn brute_d2(mesh: &TriMesh, q: DVec3, t: usize) -> f64 {
+        let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+        (closest_point_on_triangle(q, a, b, c).0 - q).length_squared()
+    }
+
+    /// The mesh moved far from its build pose: every vertex displaced, the whole mesh
+    /// stretched and sent away from the origin.
+    fn moved(mesh: &TriMesh, seed: u64) -> Vec<Vec3> {
+        let mut rng = Rng::new(seed);
+        mesh.positions()
+            .iter()
+            .map(|&p| p * Vec3::new(3.0, 0.5, 1.0) + rand_vec(&mut rng, 0.3) + Vec3::splat(50.0))
+            .collect()
+    }
+
+    #[test]
+    fn refit_answers_as_a_fresh_build() {
+        let mesh = random_mesh(600, 21);
+        let mut bvh = TriangleBvh::new(&mesh).expect("valid");
+        // Rays go through the converted tree: build it before the refit so the refit must
+        // drop it.
+        assert!(
+            bvh.cast_ray(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 10.0)
+                .is_some()
+        );
+        let positions = moved(&mesh, 22);
+        bvh.refit(&positions).expect("same size");
+        let moved_mesh = TriMesh::new(positions.clone(), mesh.triangles().to_vec());
+        let fresh = TriangleBvh::new(&moved_mesh).expect("valid");
+        let mut rng = Rng::new(23);
+        for _ in 0..300 {
+            let q = Vec3::splat(50.0) + rand_vec(&mut rng, 4.0);
+            let (a, b) = (bvh.closest_point(q), fresh.closest_point(q));
+            assert_eq!(a, b);
+            let (d, t) = brute_closest(&moved_mesh, q);
+            let a = a.expect("not empty");
+            assert_eq!(a.triangle, t);
+            assert!((a.distance - d).abs() <= 1e-12 * d.max(1.0));
+            let (o, dir) = (q + Vec3::Z * 10.0, Vec3::NEG_Z);
+            assert_eq!(
+                bvh.cast_ray(o, dir, 20.0).map(|h| h.triangle),
+                fresh.cast_ray(o, dir, 20.0).map(|h| h.triangle)
+            );
+        }
+        // Wrong vertex count or a bad coordinate: refused, tree unchanged.
+        let before = bvh.closest_point(Vec3::splat(50.0));
+        assert!(matches!(
+            bvh.refit(&positions[..10]),
+            Err(SpatialError::BadIndex { .. })
+        ));
+        let mut bad = positions.clone();
+        bad[7] = Vec3::NAN;
+        assert_eq!(bvh.refit(&bad), Err(SpatialError::NonFinite { index: 7 }));
+        assert_eq!(bvh.closest_point(Vec3::splat(50.0)), before);
+        assert!(matches!(
+            TriangleBvh::from_triangles(&positions[..2], &[[0, 1, 2]]),
+            Err(SpatialError::BadIndex {
+                triangle: 0,
+                vertex_count: 2
+            })
+        ));
+    }
+
+    #[test]
+    fn nearest_below_and_range_queries_match_brute_force() {
+        let mesh = random_mesh(500, 31);
+        let mut bvh = TriangleBvh::new(&mesh).expect("valid");
+        let positions = moved(&mesh, 32);
+        bvh.refit(&positions).expect("same size");
+        let moved_mesh = TriMesh::new(positions, mesh.triangles().to_vec());
+        let n = moved_mesh.triangle_count();
+        let mut rng = Rng::new(33);
+        let (mut found, mut stack) = (Vec::new(), Vec::new());
+        for _ in 0..200 {
+            let q = (Vec3::splat(50.0) + rand_vec(&mut rng, 4.0)).as_dvec3();
+            let all: Vec<(f64, u32)> = (0..n)
+                .map(|t| (brute_d2(&moved_mesh, q, t), t as u32))
+                .collect();
+            let best = all
+                .iter()
+                .copied()
+                .fold((f64::INFINITY, u32::MAX), |a, b| if b < a { b } else { a });
+            // Seeded with a triangle: the answer is the best one when it is below the seed.
+            let seed = rng.below(n as u32);
+            let bound = all[seed as usize];
+            assert_eq!(bvh.nearest_below(q, bound), (best < bound).then_some(best));
+            assert_eq!(bvh.nearest_below(q, best), None);
+            // Every triangle within the radius is listed (a superset is allowed).
+            let r2 = all[seed as usize].0;
+            found.clear();
+            bvh.triangles_within(q, r2, &mut found, &mut stack);
+            for &(d2, t) in &all {
+                if d2 <= r2 {
+                    assert!(found.contains(&t), "triangle {t} at {d2} <= {r2} missing");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_frontier_holds_every_other_triangle() {
+        let mesh = random_mesh(400, 41);
+        let bvh = TriangleBvh::new(&mesh).expect("valid");
+        let n = mesh.triangle_count() as u32;
+        let mut marks = vec![0u32; bvh.node_count()];
+        let (mut frontier, mut stack) = (Vec::new(), Vec::new());
+        let mut rng = Rng::new(42);
+        for token in 1..=40u32 {
+            let inside: Vec<u32> = (0..rng.below(6)).map(|_| rng.below(n)).collect();
+            bvh.frontier(&inside, &mut marks, token, &mut frontier);
+            // The triangles under the frontier, each once: exactly those not inside.
+            let mut under: Vec<u32> = Vec::new();
+            let mut todo = frontier.clone();
+            while let Some(i) = todo.pop() {
+                let node = &bvh.bvh2.nodes[i as usize];
+                if node.is_leaf() {
+                    let first = node.first_index as usize;
+                    under.extend(
+                        &bvh.bvh2.primitive_indices[first..first + node.prim_count as usize],
+                    );
+                } else {
+                    todo.extend([node.first_index, node.first_index + 1]);
+                }
+            }
+            under.sort_unstable();
+            let want: Vec<u32> = (0..n).filter(|t| !inside.contains(t)).collect();
+            assert_eq!(under, want);
+            // `any_within` over the frontier sees exactly the outside triangles' boxes.
+            let q = rand_vec(&mut rng, 1.5).as_dvec3();
+            let r2 = 0.01;
+            let near_outside = want.iter().any(|&t| {
+                let (lo, hi) = bvh.leaf_box(t);
+                (lo - q).max(q - hi).max(DVec3::ZERO).length_squared() <= r2
+            });
+            assert_eq!(bvh.any_within(&frontier, q, r2, &mut stack), near_outside);
+        }
     }
 }

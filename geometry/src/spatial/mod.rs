@@ -8,7 +8,9 @@
 pub mod bvh;
 pub mod kdtree;
 
-pub use bvh::{ClosestPoint, RayHit, TriangleBvh, box_distance_sq, closest_point_on_triangle};
+pub use bvh::{
+    Candidate, ClosestPoint, RayHit, TriangleBvh, box_distance_sq, closest_point_on_triangle,
+};
 pub use kdtree::{Nearest, PointIndex, distance_f64};
 
 use glam::Vec3;
@@ -19,7 +21,7 @@ use rayon::prelude::*;
 pub const MAX_COORDINATE: f32 = 1e18;
 
 /// Why a spatial index could not be built or queried.
-#[derive(Debug, thiserror::Error, PartialEq)]
+#[derive(Clone, Debug, thiserror::Error, PartialEq)]
 #[non_exhaustive]
 pub enum SpatialError {
     /// A point index needs at least one point.
@@ -36,6 +38,14 @@ pub enum SpatialError {
     TooLarge {
         /// Index of the point (or query, or vertex).
         index: usize,
+    },
+    /// A triangle names a vertex past the end of the positions.
+    #[error("triangle {triangle} names a vertex past the {vertex_count} vertices")]
+    BadIndex {
+        /// Index of the triangle.
+        triangle: usize,
+        /// Number of vertices.
+        vertex_count: usize,
     },
     /// More points than `u32` indices can address.
     #[error("{count} points do not fit in u32 indices")]
