@@ -459,3 +459,34 @@ fn obj_modes() {
     assert_eq!(m.triangles(), &[[0, 1, 2]]);
     assert_eq!(m.uvs().expect("uvs")[1], Vec2::new(1.0, 0.0));
 }
+
+/// VOCA exports write `f v/vt/vn` corners in files with no `vt` or `vn` lines at all: the
+/// references are dropped (as trimesh does). A reference made before such lines exist, in a
+/// file that has them later, is still an error naming the face and line.
+#[test]
+fn obj_faces_naming_attributes_the_file_lacks() {
+    let dir = tempfile::tempdir().unwrap();
+    for text in [
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1/1/1 2/2/2 3/3/3\nf 2/2/2 4/4/4 3/3/3\n",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1//1 2//2 3//3\nf 2//2 4//4 3//3\n",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nf 1/1/1 2/2/2 3/3/3\nf 2/2/2 4/4/4 3/3/3\n",
+    ] {
+        let path = write_bytes(&dir, "voca.obj", text.as_bytes());
+        let mesh = io::read_mesh(&path).unwrap();
+        assert_eq!(mesh.vertex_count(), 4, "{text}");
+        assert_eq!(mesh.triangles(), &[[0, 1, 2], [1, 3, 2]], "{text}");
+        assert!(mesh.normals().is_none(), "{text}");
+    }
+    let late = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//1 2//1 3//1\nvn 0 0 1\n";
+    let path = write_bytes(&dir, "late.obj", late.as_bytes());
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(err.contains("face 0 (line 4)"), "{err}");
+    assert!(err.contains("`1//1`"), "{err}");
+    let beyond = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//2 3//1\n";
+    let path = write_bytes(&dir, "beyond.obj", beyond.as_bytes());
+    let err = io::read_mesh(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("face 0 (line 5)") && err.contains("`2//2`"),
+        "{err}"
+    );
+}

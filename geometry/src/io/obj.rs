@@ -7,6 +7,9 @@
 //! `f` with `v`, `v/vt`, `v//vn`, `v/vt/vn` corners and negative (relative) indices, polygons
 //! fan-triangulated (`0 1 2`, `0 2 3`, ...; as tobj and trimesh), `usemtl`. Materials are not
 //! loaded, so a missing `.mtl` is not an error. Lines, points, `o`, `g`, `s`, `mtllib` are ignored.
+//! Corners that name texture coordinates or normals in a file that has no `vt` (or no `vn`) lines
+//! at all, as VOCA's `f v/vt/vn` exports do, read with those references dropped (as trimesh);
+//! any other reference to something that does not exist is an error naming the face and line.
 //!
 //! Two ways to turn the corners into vertices ([`ObjVertices`]):
 //! - [`ObjVertices::Positions`] (default): one vertex per `v` line, in file order, unreferenced
@@ -88,12 +91,18 @@ fn resolve(token: &str, len: usize) -> Option<u32> {
     }
 }
 
+/// The first face corner that named a `vt` (or `vn`) while the file had none yet:
+/// `(face, line, corner text)`.
+type Dangling = Option<(usize, usize, String)>;
+
 fn parse(path: &Path, text: &str) -> Result<ObjData, IoError> {
     let mut d = ObjData::default();
     let mut material_ids: HashMap<String, u32> = HashMap::new();
     let mut group = 0u32;
     let mut face_count = 0usize;
     let mut corners: Vec<Corner> = Vec::new();
+    let mut dangling_vt: Dangling = None;
+    let mut dangling_vn: Dangling = None;
     for (line_index, line) in text.lines().enumerate() {
         let line_no = line_index + 1;
         let at = |what: String, msg: &str| {
@@ -157,28 +166,23 @@ fn parse(path: &Path, text: &str) -> Result<ObjData, IoError> {
                 for word in words {
                     let mut parts = word.split('/');
                     let v = parts.next().and_then(|t| resolve(t, d.positions.len()));
-                    let vt = match parts.next() {
-                        None | Some("") => Some(NONE),
-                        Some(t) => resolve(t, d.texcoords.len()),
-                    };
-                    let vn = match parts.next() {
-                        None | Some("") => Some(NONE),
-                        Some(t) => resolve(t, d.normals.len()),
-                    };
+                    // A file with no `vt` (or no `vn`) lines at all whose faces still name them
+                    // (VOCA's `f v/vt/vn` exports): the references are dropped, as trimesh
+                    // does, unless such lines come later (checked at the end of the file).
+                    let attribute =
+                        |token: Option<&str>, len: usize, first: &mut Dangling| match token {
+                            None | Some("") => Some(NONE),
+                            Some(_) if len == 0 => {
+                                first.get_or_insert((face, line_no, word.to_owned()));
+                                Some(NONE)
+                            }
+                            Some(t) => resolve(t, len),
+                        };
+                    let vt = attribute(parts.next(), d.texcoords.len(), &mut dangling_vt);
+                    let vn = attribute(parts.next(), d.normals.len(), &mut dangling_vn);
                     match (v, vt, vn) {
                         (Some(v), Some(vt), Some(vn)) => corners.push(Corner { v, vt, vn }),
-                        _ => {
-                            return Err(at(
-                                format!("face {face}"),
-                                &format!(
-                                    "corner `{word}` refers to a vertex, texture coordinate or \
-                                     normal that does not exist (so far {} v, {} vt, {} vn)",
-                                    d.positions.len(),
-                                    d.texcoords.len(),
-                                    d.normals.len()
-                                ),
-                            ));
-                        }
+                        _ => return Err(missing_corner(&at, face, word, &d)),
                     }
                 }
                 for k in 2..corners.len() {
@@ -192,7 +196,41 @@ fn parse(path: &Path, text: &str) -> Result<ObjData, IoError> {
     if !d.colors.is_empty() && d.colors.len() != d.positions.len() {
         d.colors.clear();
     }
+    // A reference made before any `vt`/`vn` line existed is only forgiven when none ever came.
+    for (first, count) in [
+        (dangling_vt, d.texcoords.len()),
+        (dangling_vn, d.normals.len()),
+    ] {
+        if let Some((face, line_no, word)) = first
+            && count > 0
+        {
+            let at = |what: String, msg: &str| {
+                IoError::malformed(path, format!("{what} (line {line_no})"), msg.to_owned())
+            };
+            return Err(missing_corner(&at, face, &word, &d));
+        }
+    }
     Ok(d)
+}
+
+/// The error for a face corner naming a vertex, texture coordinate or normal that does not
+/// exist.
+fn missing_corner(
+    at: &impl Fn(String, &str) -> IoError,
+    face: usize,
+    word: &str,
+    d: &ObjData,
+) -> IoError {
+    at(
+        format!("face {face}"),
+        &format!(
+            "corner `{word}` refers to a vertex, texture coordinate or normal that does not exist \
+             (so far {} v, {} vt, {} vn)",
+            d.positions.len(),
+            d.texcoords.len(),
+            d.normals.len()
+        ),
+    )
 }
 
 /// One value per vertex when every corner of each vertex agrees, else `None`.
