@@ -424,3 +424,57 @@ fn hop_threshold_is_recorded_with_the_delaunay_statistics() {
         assert!(line.contains("--hop-threshold"), "{line}");
     }
 }
+
+/// A weights track whose channels match no morph target (ARKit's `tongueOut` on LAM's head):
+/// listed once on stderr and in the report, refused with `--strict` (exit 1, one line,
+/// nothing written).
+#[test]
+fn weights_channels_that_drive_nothing_are_listed_or_refused() {
+    let dir = fresh_dir("unused_channels");
+    let weights = dir.join("weights.json");
+    // SyntheticFeatures: mesh 0 has targets "widen", "dents"; mesh 1 "a", "b".
+    std::fs::write(
+        &weights,
+        r#"{"names": ["dents", "tongueOut", "b"], "frames": [
+            {"weights": [0.0, 0.3, 0.5]}, {"weights": [1.0, 0.3, 0.5]}]}"#,
+    )
+    .expect("write weights");
+    let template = fixture("anim/SyntheticFeatures.gltf");
+    let out = dir.join("out");
+    let args = [
+        "extract",
+        "--template",
+        &template,
+        "--animation",
+        s(&weights),
+        "--method",
+        "delaunay",
+        "-q",
+        "-o",
+        s(&out),
+    ];
+    let ran = run_ok(&args);
+    let stderr = String::from_utf8_lossy(&ran.stderr);
+    let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("tongueOut")).collect();
+    assert_eq!(warnings.len(), 1, "{stderr}");
+    assert!(warnings[0].starts_with("warning: ") && warnings[0].contains("--strict"));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("json"))
+            .expect("parse");
+    assert_eq!(r["unused_channels"], serde_json::json!(["tongueOut"]));
+    let md = std::fs::read_to_string(out.join("report.md")).expect("md");
+    assert!(
+        md.contains("drive no morph target (ignored): tongueOut"),
+        "{md}"
+    );
+
+    let strict_out = dir.join("strict");
+    let mut strict = args[..args.len() - 1].to_vec();
+    strict.extend([s(&strict_out), "--strict"]);
+    let line = one_error_line(&run(&strict));
+    assert!(
+        line.contains("tongueOut") && line.contains("--strict"),
+        "{line}"
+    );
+    assert!(!strict_out.exists(), "nothing written");
+}

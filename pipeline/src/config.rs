@@ -194,6 +194,10 @@ pub struct ExtractOptions {
     /// F-score threshold of the report, scene units.
     #[cfg_attr(feature = "cli", arg(long, value_name = "T", default_value_t = DEFAULT_TAU))]
     pub tau: f64,
+    /// Refuse a weights track with channels that drive nothing (without it they are listed
+    /// once on stderr and in the report, and ignored).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub strict: bool,
 }
 
 impl Default for ExtractOptions {
@@ -211,6 +215,7 @@ impl Default for ExtractOptions {
             hop_threshold: DEFAULT_HOP_THRESHOLD,
             samples: DEFAULT_SAMPLES,
             tau: DEFAULT_TAU,
+            strict: false,
         }
     }
 }

@@ -343,6 +343,9 @@ pub struct Report {
     pub welded_vertices: usize,
     /// Animation source (the template itself when it carries its clip).
     pub animation: String,
+    /// Channels of a weights track that match no morph target and move nothing (empty for
+    /// other animations).
+    pub unused_channels: Vec<String>,
     /// Gaussian file, or `bound here: N per triangle`.
     pub gaussians: String,
     /// Number of Gaussians.
@@ -428,6 +431,13 @@ impl Report {
             None => {
                 let _ = writeln!(s, "- ground truth: none (no metrics)");
             }
+        }
+        if !self.unused_channels.is_empty() {
+            let _ = writeln!(
+                s,
+                "- channels of the animation that drive no morph target (ignored): {}",
+                self.unused_channels.join(", ")
+            );
         }
         let deform = mean(self.deform_ms.iter().copied()).unwrap_or(0.0);
         let _ = writeln!(
@@ -710,6 +720,7 @@ mod tests {
             template_vertices: 4,
             welded_vertices: 4,
             animation: "t.glb".to_owned(),
+            unused_channels: Vec::new(),
             gaussians: "bound here: 4 per triangle".to_owned(),
             gaussian_count: 40,
             mode: "binding".to_owned(),

@@ -27,7 +27,7 @@ pub const REPORT_MD: &str = "report.md";
 pub const PLOT_PNG: &str = "error_vs_time.png";
 
 /// Progress of a run, for a progress bar.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Progress {
     /// Inputs read; `frames` frames will be meshed.
     Started {
@@ -43,6 +43,9 @@ pub enum Progress {
     },
     /// Writing the sequences, reports and plot.
     Finishing,
+    /// Something the user should know before the frames run, told once (a weights track's
+    /// channels that drive nothing).
+    Notice(String),
 }
 
 /// The per-frame meshes of each method, kept for the animated glTF.
@@ -82,6 +85,14 @@ fn run_inner(
 
     let out = &config.output;
     let total = frames.len();
+    if !session.unused_channels().is_empty() {
+        progress(Progress::Notice(format!(
+            "{}: {} channel(s) drive no morph target and are ignored: {} (--strict refuses)",
+            session.label(),
+            session.unused_channels().len(),
+            session.unused_channels().join(", ")
+        )));
+    }
     progress(Progress::Started { frames: total });
     let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
     let mut delaunay_frames: Vec<DelaunayFrame> = Vec::new();
@@ -177,6 +188,7 @@ fn run_inner(
         frames: frames.collect(),
         frame_times,
         deform_ms,
+        unused_channels: session.unused_channels().to_vec(),
         ground_truth: config.gt.as_ref().map(GroundTruth::label),
         samples: o.samples,
         tau: o.tau,

@@ -105,6 +105,9 @@ pub struct Session {
     tau: f64,
     fps: f64,
     input_files: Vec<PathBuf>,
+    /// Channels of the driving track that move nothing (reported, see
+    /// [`Session::unused_channels`]).
+    unused_channels: Vec<String>,
     scratch: WorldGeometry,
     executed: Vec<Stage>,
 }
@@ -156,6 +159,21 @@ impl Session {
             });
         }
         let anim = animation.get();
+        let unused_channels: Vec<String> = anim
+            .unused_channels()
+            .into_iter()
+            .map(str::to_owned)
+            .collect();
+        if o.strict && !unused_channels.is_empty() {
+            return Err(PipelineError::BadAnimation {
+                path: PathBuf::from(&label),
+                problem: format!(
+                    "{} channel(s) drive no morph target: {} (--strict)",
+                    unused_channels.len(),
+                    unused_channels.join(", ")
+                ),
+            });
+        }
         check_topology(&stored, &config.template, anim, &label)?;
         let welded = if options.weld {
             WeldedTemplate::new(&stored)
@@ -257,9 +275,17 @@ impl Session {
             tau: o.tau,
             fps: o.fps,
             input_files,
+            unused_channels,
             scratch: WorldGeometry::default(),
             executed,
         })
+    }
+
+    /// Channels of the driving weights track that match no morph target or blendshape and so
+    /// move nothing (empty for other animations); `--strict` refuses such a track instead.
+    #[must_use]
+    pub fn unused_channels(&self) -> &[String] {
+        &self.unused_channels
     }
 
     /// The plan this session follows.

@@ -69,6 +69,10 @@ pub struct DeformArgs {
     /// Scale Gaussians by √(area ratio) of their triangle (binding and lbs modes).
     #[arg(long)]
     pub adaptive_scale: bool,
+    /// Refuse a weights JSON with channels that drive no morph target (without it they are
+    /// listed once on stderr and ignored).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// Runs `trisplat deform`.
@@ -92,6 +96,7 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
             mode: args.mode,
             clip: args.clip.clone(),
             fps: args.fps,
+            strict: args.strict,
             ..ExtractOptions::default()
         },
     };
@@ -103,6 +108,15 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
             adaptive_scale: args.adaptive_scale,
         },
     )?;
+    if !session.unused_channels().is_empty() {
+        eprintln!(
+            "warning: {}: {} channel(s) drive no morph target and are ignored: {} (--strict \
+             refuses)",
+            args.animation,
+            session.unused_channels().len(),
+            session.unused_channels().join(", ")
+        );
+    }
     let frames = session.frames();
     // Never write over an input.
     std::fs::create_dir_all(&args.output)

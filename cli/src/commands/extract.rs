@@ -149,6 +149,7 @@ pub fn run_with_progress(config: &ExtractConfig, ctx: &Context) -> anyhow::Resul
                 b.set_message("extract: writing sequences and report");
             }
         }
+        Progress::Notice(message) => spinner.suspend(|| eprintln!("warning: {message}")),
     });
     spinner.finish_and_clear();
     if let Some(b) = bar {

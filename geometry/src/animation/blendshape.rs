@@ -463,12 +463,6 @@ impl BlendshapeAnimation {
             .collect()
     }
 
-    /// Channels of the track that drive no target.
-    #[must_use]
-    pub fn unused_channels(&self) -> Vec<&str> {
-        unused(&self.track, self.mapping.iter())
-    }
-
     /// The weight of every target at `frame`.
     fn target_weights(&self, frame: usize) -> Result<Vec<f64>, AnimationError> {
         let w = self
@@ -521,6 +515,10 @@ impl AnimatedTemplate for BlendshapeAnimation {
     fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError> {
         self.set.evaluate(&self.target_weights(frame)?)
     }
+
+    fn unused_channels(&self) -> Vec<&str> {
+        unused(&self.track, self.mapping.iter())
+    }
 }
 
 /// glTF morph targets (named by `extras.targetNames`) played by a [`WeightsTrack`]; the
@@ -559,17 +557,15 @@ impl GltfMorphAnimation {
     pub fn template(&self) -> &GltfTemplate {
         &self.template
     }
-
-    /// Channels of the track that drive no morph target.
-    #[must_use]
-    pub fn unused_channels(&self) -> Vec<&str> {
-        unused(&self.track, self.mapping.iter().flatten())
-    }
 }
 
 impl AnimatedTemplate for GltfMorphAnimation {
     fn frame_count(&self) -> usize {
         self.track.frame_count()
+    }
+
+    fn unused_channels(&self) -> Vec<&str> {
+        unused(&self.track, self.mapping.iter().flatten())
     }
 
     fn frame_time(&self, frame: usize) -> Option<f64> {

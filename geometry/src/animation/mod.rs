@@ -55,6 +55,13 @@ pub trait AnimatedTemplate: Send + Sync {
     /// or mismatched frame file) naming the file.
     fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError>;
 
+    /// Channels of the driving track that move nothing (a weights track's names that match no
+    /// morph target or blendshape, such as ARKit's `tongueOut` on a head without a tongue
+    /// target); empty for every other animation.
+    fn unused_channels(&self) -> Vec<&str> {
+        Vec::new()
+    }
+
     /// `frame` as a mesh with the template's topology.
     ///
     /// # Errors
