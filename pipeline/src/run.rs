@@ -4,8 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use trisplat_geometry::TriMesh;
-use trisplat_geometry::io::{SequenceLayout, WriteOptions, write_mesh, write_mesh_sequence};
+use trisplat_geometry::io::{FrameFiles, SequenceLayout, WriteOptions, write_mesh, write_sequence};
 
 pub use crate::output::frame_file;
 
@@ -48,8 +47,9 @@ pub enum Progress {
     Notice(String),
 }
 
-/// The per-frame meshes of each method, kept for the animated glTF.
-pub type Sequences = BTreeMap<Method, Vec<TriMesh>>;
+/// The per-frame mesh files of each method, in frame order: the animated glTF is assembled
+/// from them at the end, one frame at a time (no frame's mesh stays in memory).
+type FrameFilesByMethod = BTreeMap<Method, Vec<PathBuf>>;
 
 /// Runs the main job and writes every output (see the crate docs); returns the report.
 /// `progress` is told when frames are done.
@@ -96,7 +96,7 @@ fn run_inner(
     progress(Progress::Started { frames: total });
     let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
     let mut delaunay_frames: Vec<DelaunayFrame> = Vec::new();
-    let mut sequences: Sequences = BTreeMap::new();
+    let mut frame_files: FrameFilesByMethod = BTreeMap::new();
     let mut frame_times = Vec::with_capacity(total);
     let mut deform_ms = Vec::with_capacity(total);
     for (done, f) in frames.clone().enumerate() {
@@ -126,7 +126,7 @@ fn run_inner(
                 watertight: is_watertight(&output.mesh),
                 metrics,
             });
-            sequences.entry(m).or_default().push(output.mesh);
+            frame_files.entry(m).or_default().push(path);
         }
         progress(Progress::Frame {
             done: done + 1,
@@ -195,7 +195,7 @@ fn run_inner(
         resolved,
         methods: method_reports,
     };
-    write_outputs(out, &report, &sequences, created)?;
+    write_outputs(out, &report, &frame_files, created)?;
     Ok(report)
 }
 
@@ -232,13 +232,18 @@ fn check_outputs(
 fn write_outputs(
     out: &Path,
     report: &Report,
-    sequences: &Sequences,
+    frame_files: &FrameFilesByMethod,
     created: &mut Created,
 ) -> Result<(), PipelineError> {
-    for (m, meshes) in sequences {
+    for (m, files) in frame_files {
         let glb = out.join(format!("{}.glb", m.name()));
         let existed = glb.exists();
-        write_mesh_sequence(&glb, meshes, &report.frame_times, SequenceLayout::Auto)?;
+        write_sequence(
+            &glb,
+            &FrameFiles(files),
+            &report.frame_times,
+            SequenceLayout::Auto,
+        )?;
         created.note(&glb, existed);
     }
     let json = out.join(REPORT_JSON);

@@ -10,7 +10,10 @@ use glam::Vec3;
 use serde_json::Value;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate};
-use trisplat_geometry::io::{IoError, SequenceLayout, read_mesh, write_mesh_sequence};
+use trisplat_geometry::io::{
+    FrameFiles, IoError, SequenceLayout, WriteOptions, read_mesh, write_mesh, write_mesh_sequence,
+    write_sequence,
+};
 
 /// Largest allowed difference between an evaluated and an input coordinate (metre-sized
 /// meshes; positions are f32 and the morph deltas f32, so a few 1e-7 are expected).
@@ -650,5 +653,46 @@ fn structure_check_catches_broken_files() {
         std::fs::write(&bad, serde_json::to_vec(&broken).expect("json")).expect("write");
         let caught = std::panic::catch_unwind(|| check_structure(&bad));
         assert!(caught.is_err(), "{what}: the check passed a broken file");
+    }
+}
+
+/// Frames read one at a time from files (how the main job assembles its `.glb` without holding
+/// the frames) give the same bytes as the frames in memory, for both layouts and containers;
+/// a frame file that goes missing is an error naming it, and nothing is written.
+#[test]
+fn frames_from_files_write_the_same_bytes_as_frames_in_memory() {
+    let dir = out_dir();
+    for (name, frames) in [("wave", wave_frames(5, true)), ("mixed", mixed_frames())] {
+        let files: Vec<PathBuf> = frames
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let path = dir.path().join(format!("{name}_{k:03}.ply"));
+                write_mesh(&path, f, WriteOptions::default()).expect("write frame");
+                path
+            })
+            .collect();
+        let times = times_at(24.0, frames.len());
+        for ext in ["glb", "gltf"] {
+            for layout in [SequenceLayout::Auto, SequenceLayout::NodePerFrame] {
+                let from_memory = dir.path().join(format!("{name}_memory.{ext}"));
+                let from_files = dir.path().join(format!("{name}_files.{ext}"));
+                write_mesh_sequence(&from_memory, &frames, &times, layout).expect("memory");
+                write_sequence(&from_files, &FrameFiles(&files), &times, layout).expect("files");
+                let (a, b) = (
+                    std::fs::read(&from_memory).expect("read"),
+                    std::fs::read(&from_files).expect("read"),
+                );
+                assert!(a == b, "{name} {ext} {layout:?}: bytes differ");
+                check_structure(&from_files);
+            }
+        }
+        let missing = dir.path().join(format!("{name}_gone.glb"));
+        let mut gone = files.clone();
+        gone[1] = dir.path().join("no_such_frame.ply");
+        let err = write_sequence(&missing, &FrameFiles(&gone), &times, SequenceLayout::Auto)
+            .expect_err("missing frame");
+        assert!(err.to_string().contains("no_such_frame.ply"), "{err}");
+        assert!(!missing.exists());
     }
 }

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use rayon::prelude::*;
-use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
     AnimatedTemplate, DEFAULT_FPS, GltfTemplate, MeshSequence, check_topology,
 };
@@ -182,35 +181,35 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
             files[0].display()
         );
     }
-    let bar = ctx
-        .progress
-        .bar(files.len() as u64, &format!("reading frames of {input}"));
-    // Read in parallel; report the first bad frame in file order.
+    let bar = ctx.progress.bar(
+        files.len().saturating_sub(1) as u64,
+        &format!("checking frames of {input}"),
+    );
+    // Check in parallel (the first bad frame in file order is reported, naming its file); the
+    // writer then reads the frames one at a time, so memory does not grow with their number.
     let first = sequence.rest();
-    let read: Vec<anyhow::Result<TriMesh>> = files
+    let checked: Vec<anyhow::Result<()>> = files[1..]
         .par_iter()
-        .enumerate()
-        .map(|(k, file)| {
-            let mesh = if k == 0 {
-                first.clone()
-            } else {
-                let mesh = io::read_mesh(file)?;
-                check_topology(&mesh, first, file, &files[0])?;
-                mesh
-            };
+        .map(|file| {
+            let mesh = io::read_mesh(file)?;
+            check_topology(&mesh, first, file, &files[0])?;
             bar.inc(1);
-            Ok(mesh)
+            Ok(())
         })
         .collect();
     bar.finish_and_clear();
-    let frames = read.into_iter().collect::<anyhow::Result<Vec<_>>>()?;
+    checked.into_iter().collect::<anyhow::Result<Vec<()>>>()?;
     let fps = args.fps.unwrap_or(DEFAULT_FPS);
-    let times: Vec<f64> = (0..frames.len()).map(|k| k as f64 / fps).collect();
+    let times: Vec<f64> = (0..files.len()).map(|k| k as f64 / fps).collect();
     let spinner = ctx
         .progress
         .spinner(&format!("writing {}", args.output.display()));
-    let result =
-        io::write_mesh_sequence(&args.output, &frames, &times, SequenceLayout::MorphTargets);
+    let result = io::write_sequence(
+        &args.output,
+        &io::FrameFiles(files),
+        &times,
+        SequenceLayout::MorphTargets,
+    );
     spinner.finish_and_clear();
     result?;
     Ok(())

@@ -24,6 +24,16 @@
 //!   with the number of frames. In the static scene (no animation applied) frame 0 has scale
 //!   1 and the others 0. A frame without triangles is a child node without a mesh.
 //!
+//! **Streaming.** The writer takes its frames from a [`FrameSource`] one at a time: in memory
+//! ([`write_mesh_sequence`]) or read from one mesh file per frame ([`FrameFiles`],
+//! [`write_sequence`]). It reads every frame up to three times: once to check it and choose
+//! the layout, once to lay the buffer out (lengths and `min`/`max`, nothing kept), once to
+//! stream the bytes into the `.glb`, so it holds only the first frame, the previous frame's
+//! triangles and the frame at hand, whatever the length of the sequence (`.gltf` holds its
+//! base64 buffer in memory). Both readings must agree (a frame file changed in between is an
+//! error). The main job writes its per-frame PLY files first and assembles each method's
+//! `.glb` from them this way.
+//!
 //! Both layouts put everything in one animation named `sequence` whose duration is the last
 //! frame time; a one-frame sequence gets a single-key scale channel so that every file has
 //! that animation. Key times are `f32` in glTF: each time is stored as the largest `f32` not
@@ -43,8 +53,9 @@
 //! share the accessor). 100 frames of a 20,000-vertex, 39,402-triangle grid without normals
 //! make a 24.5 MB `.glb` as morph targets (measured), and about 71 MB as one node per frame
 //! if every frame had other triangles (100 × (240,000 + 472,824) bytes);
-//! `trisplat convert` reads those 100 PLY frames and writes the `.glb` in about 0.4 s (2
-//! cores, 115 MB peak memory).
+//! `trisplat convert` checks those 100 PLY frames and streams the `.glb` in 1.15-1.17 s
+//! (2 cores) with 15 MB peak memory; holding the frames in memory instead, it took about
+//! 0.4 s and 115 MB, a peak that grew with every frame.
 //!
 //! Validity: outputs of both layouts (`.glb` and `.gltf`, with and without normals, one and
 //! many frames) were checked with the Khronos glTF-Validator 2.0.0-dev.3.10 (npm
@@ -56,7 +67,9 @@
 //! their views, exact `min`/`max` where required, view targets, index ranges, unit normals,
 //! morph target counts, the node tree, key times and sampler output sizes.
 
-use std::path::Path;
+use std::borrow::Cow;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
 use glam::Vec3;
@@ -89,9 +102,53 @@ pub enum SequenceLayout {
     NodePerFrame,
 }
 
+/// The frames of a sequence, handed to the writer one at a time: the writer reads each frame
+/// up to three times (checks, sizes, bytes) and never holds more than the first frame, the
+/// previous frame's triangles and the frame at hand, so a sequence read from files is written
+/// in memory independent of its length.
+pub trait FrameSource {
+    /// Number of frames.
+    fn frame_count(&self) -> usize;
+
+    /// Frame `k` (`k < frame_count()`).
+    ///
+    /// # Errors
+    /// The source's own (an unreadable frame file, named).
+    fn frame(&self, k: usize) -> Result<Cow<'_, TriMesh>, IoError>;
+}
+
+impl FrameSource for &[TriMesh] {
+    fn frame_count(&self) -> usize {
+        self.len()
+    }
+
+    fn frame(&self, k: usize) -> Result<Cow<'_, TriMesh>, IoError> {
+        self.get(k)
+            .map(Cow::Borrowed)
+            .ok_or_else(|| IoError::malformed(Path::new(""), format!("frame {k}"), "no such frame"))
+    }
+}
+
+/// Frames stored one per mesh file (any format [`super::read_mesh`] reads), read when needed.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameFiles<'a>(pub &'a [PathBuf]);
+
+impl FrameSource for FrameFiles<'_> {
+    fn frame_count(&self) -> usize {
+        self.0.len()
+    }
+
+    fn frame(&self, k: usize) -> Result<Cow<'_, TriMesh>, IoError> {
+        let path = self.0.get(k).ok_or_else(|| {
+            IoError::malformed(Path::new(""), format!("frame {k}"), "no such frame file")
+        })?;
+        super::read_mesh(path).map(Cow::Owned)
+    }
+}
+
 /// Writes `frames` (shown at `frame_times` seconds, strictly increasing, same length) as one
 /// animated glTF/GLB (format from the extension), atomically. See the module docs for the
-/// layouts.
+/// layouts; [`write_sequence`] does the same for frames read one at a time.
 ///
 /// # Errors
 /// [`IoError::UnknownFormat`] or [`IoError::Unsupported`] for a path that is not `.glb` or
@@ -107,6 +164,21 @@ pub fn write_mesh_sequence(
     frame_times: &[f64],
     layout: SequenceLayout,
 ) -> Result<(), IoError> {
+    write_sequence(path, &frames, frame_times, layout)
+}
+
+/// [`write_mesh_sequence`] for frames handed over one at a time by `frames` (for example
+/// [`FrameFiles`]): a `.glb` is streamed to disk, so memory does not grow with the number of
+/// frames (a `.gltf` embeds its buffer as base64 text and holds it in memory).
+///
+/// # Errors
+/// As [`write_mesh_sequence`], and the source's errors.
+pub fn write_sequence(
+    path: &Path,
+    frames: &dyn FrameSource,
+    frame_times: &[f64],
+    layout: SequenceLayout,
+) -> Result<(), IoError> {
     let format = Format::from_path(path)?;
     if !matches!(format, Format::Glb | Format::Gltf) {
         return Err(IoError::Unsupported {
@@ -114,44 +186,84 @@ pub fn write_mesh_sequence(
             what: "a mesh sequence is written as .glb or .gltf".into(),
         });
     }
-    let keys = key_times(path, frames.len(), frame_times)?;
-    check_finite(path, frames)?;
-    let morph = match layout {
-        SequenceLayout::Auto => {
-            frames[0].triangle_count() > 0
-                && frames[1..]
-                    .iter()
-                    .all(|f| topology_difference(&frames[0], f).is_none())
+    let keys = key_times(path, frames.frame_count(), frame_times)?;
+    let survey = Survey::of(path, frames, layout)?;
+    let build = |sink: &mut dyn Sink| -> Result<Value, IoError> {
+        if survey.morph {
+            build_morph_targets(path, frames, &keys, survey.normals, sink)
+        } else {
+            build_node_per_frame(path, frames, &keys, sink)
         }
-        SequenceLayout::MorphTargets => {
-            if frames[0].triangle_count() == 0 {
+    };
+    match format {
+        Format::Glb => {
+            // Pass 1 lays the buffer out (lengths only), pass 2 streams its bytes.
+            let mut counted = Counted(0);
+            let doc = build(&mut counted)?;
+            write_glb(path, &doc, counted.0, |sink| build(sink).map(|_| ()))
+        }
+        _ => {
+            let mut bin = Vec::new();
+            let doc = build(&mut bin)?;
+            write_gltf(path, doc, &bin)
+        }
+    }
+}
+
+/// What one read of every frame tells before anything is written.
+struct Survey {
+    /// Whether the morph-target layout is used.
+    morph: bool,
+    /// Morph targets carry normal deltas (every frame has normals).
+    normals: bool,
+}
+
+impl Survey {
+    /// Checks every frame (finite positions; for morph targets the topology of frame 0) and
+    /// decides the layout.
+    fn of(path: &Path, frames: &dyn FrameSource, layout: SequenceLayout) -> Result<Self, IoError> {
+        let base = frames.frame(0)?;
+        let mut same = base.triangle_count() > 0;
+        if layout == SequenceLayout::MorphTargets && !same {
+            return Err(IoError::malformed(
+                path,
+                "frame 0",
+                "has no triangles (morph targets need a base mesh)",
+            ));
+        }
+        let mut normals = base.normals().is_some();
+        for k in 0..frames.frame_count() {
+            let frame = if k == 0 {
+                Cow::Borrowed(base.as_ref())
+            } else {
+                frames.frame(k)?
+            };
+            if let Some(v) = frame.positions().iter().position(|p| !p.is_finite()) {
                 return Err(IoError::malformed(
                     path,
-                    "frame 0",
-                    "has no triangles (morph targets need a base mesh)",
+                    format!("frame {k} vertex {v}"),
+                    "position is not finite",
                 ));
             }
-            for (k, frame) in frames.iter().enumerate().skip(1) {
-                if let Some(message) = topology_difference(&frames[0], frame) {
+            normals &= frame.normals().is_some();
+            if layout == SequenceLayout::NodePerFrame || !same || k == 0 {
+                continue;
+            }
+            if let Some(message) = topology_difference(&base, &frame) {
+                if layout == SequenceLayout::MorphTargets {
                     return Err(IoError::malformed(
                         path,
                         format!("frame {k}"),
                         format!("{message} (morph targets need the topology of frame 0)"),
                     ));
                 }
+                same = false;
             }
-            true
         }
-        SequenceLayout::NodePerFrame => false,
-    };
-    let (doc, bin) = if morph {
-        build_morph_targets(path, frames, &keys)?
-    } else {
-        build_node_per_frame(frames, &keys)
-    };
-    match format {
-        Format::Glb => write_glb(path, &doc, bin),
-        _ => write_gltf(path, doc, &bin),
+        Ok(Self {
+            morph: layout != SequenceLayout::NodePerFrame && same,
+            normals,
+        })
     }
 }
 
@@ -209,24 +321,6 @@ fn key_times(path: &Path, frames: usize, times: &[f64]) -> Result<Vec<f32>, IoEr
         keys.push(key);
     }
     Ok(keys)
-}
-
-/// Rejects non-finite positions (a mesh built unchecked can hold them).
-fn check_finite(path: &Path, frames: &[TriMesh]) -> Result<(), IoError> {
-    let bad = frames.par_iter().enumerate().find_map_first(|(k, f)| {
-        f.positions()
-            .iter()
-            .position(|p| !p.is_finite())
-            .map(|v| (k, v))
-    });
-    match bad {
-        Some((k, v)) => Err(IoError::malformed(
-            path,
-            format!("frame {k} vertex {v}"),
-            "position is not finite",
-        )),
-        None => Ok(()),
-    }
 }
 
 /// What differs between the topology of `frame` and `base`, if anything.
@@ -332,20 +426,69 @@ fn unit_normals(normals: &[Vec3]) -> Vec<Vec3> {
         .collect()
 }
 
-/// The buffer, buffer views and accessors under construction (one buffer, 4-byte aligned
-/// views: every component is 4 bytes).
-#[derive(Default)]
-struct Builder {
-    bin: Vec<u8>,
+/// Where the buffer's bytes go: nowhere (the layout pass), a vector, or the output file.
+trait Sink {
+    /// Appends `bytes`.
+    fn put(&mut self, bytes: &[u8]) -> Result<(), IoError>;
+}
+
+/// Counts the bytes (the layout pass).
+struct Counted(usize);
+
+impl Sink for Counted {
+    fn put(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.0 += bytes.len();
+        Ok(())
+    }
+}
+
+impl Sink for Vec<u8> {
+    fn put(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.extend_from_slice(bytes);
+        Ok(())
+    }
+}
+
+/// Writes straight into the output (the byte pass of a `.glb`).
+struct Stream<'a> {
+    out: &'a mut dyn Write,
+    path: &'a Path,
+    written: usize,
+}
+
+impl Sink for Stream<'_> {
+    fn put(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.written += bytes.len();
+        self.out
+            .write_all(bytes)
+            .map_err(|e| IoError::os(self.path, e))
+    }
+}
+
+/// The buffer views and accessors under construction (one buffer, 4-byte aligned views: every
+/// component is 4 bytes); the bytes go to a [`Sink`].
+struct Builder<'s> {
+    sink: &'s mut dyn Sink,
+    len: usize,
     views: Vec<Value>,
     accessors: Vec<Value>,
 }
 
-impl Builder {
+impl<'s> Builder<'s> {
+    fn new(sink: &'s mut dyn Sink) -> Self {
+        Self {
+            sink,
+            len: 0,
+            views: Vec::new(),
+            accessors: Vec::new(),
+        }
+    }
+
     /// Appends `block` as a buffer view and an accessor; returns the accessor index.
-    fn push(&mut self, block: Block) -> usize {
-        let offset = self.bin.len();
-        self.bin.extend_from_slice(&block.bytes);
+    fn push(&mut self, block: Block) -> Result<usize, IoError> {
+        let offset = self.len;
+        self.sink.put(&block.bytes)?;
+        self.len += block.bytes.len();
         let mut view = json!({
             "buffer": 0, "byteOffset": offset, "byteLength": block.bytes.len(),
         });
@@ -364,7 +507,7 @@ impl Builder {
             accessor["max"] = json!(max);
         }
         self.accessors.push(accessor);
-        self.accessors.len() - 1
+        Ok(self.accessors.len() - 1)
     }
 
     /// Appends the attributes of `mesh` and its indices (unless `shared_indices` names an
@@ -375,21 +518,21 @@ impl Builder {
         mesh: &TriMesh,
         with_normals: bool,
         shared_indices: Option<usize>,
-    ) -> (Value, usize) {
+    ) -> Result<(Value, usize), IoError> {
         let mut attributes = Map::new();
-        let position = self.push(vec3_block(mesh.positions(), Some(ARRAY_BUFFER), true));
+        let position = self.push(vec3_block(mesh.positions(), Some(ARRAY_BUFFER), true))?;
         attributes.insert("POSITION".into(), json!(position));
         if with_normals && let Some(normals) = mesh.normals() {
             let normal = self.push(vec3_block(
                 &unit_normals(normals),
                 Some(ARRAY_BUFFER),
                 false,
-            ));
+            ))?;
             attributes.insert("NORMAL".into(), json!(normal));
         }
         if let Some(uvs) = mesh.uvs() {
             let flat: Vec<f32> = uvs.iter().flat_map(|v| v.to_array()).collect();
-            let uv = self.push(float_block(&flat, 2, Some(ARRAY_BUFFER), false));
+            let uv = self.push(float_block(&flat, 2, Some(ARRAY_BUFFER), false))?;
             attributes.insert("TEXCOORD_0".into(), json!(uv));
         }
         if let Some(colors) = mesh.colors() {
@@ -397,31 +540,34 @@ impl Builder {
                 .iter()
                 .flat_map(|c| c.map(|x| x.clamp(0.0, 1.0)))
                 .collect();
-            let color = self.push(float_block(&flat, 4, Some(ARRAY_BUFFER), false));
+            let color = self.push(float_block(&flat, 4, Some(ARRAY_BUFFER), false))?;
             attributes.insert("COLOR_0".into(), json!(color));
         }
-        let indices = shared_indices.unwrap_or_else(|| self.push(index_block(mesh.triangles())));
-        (
+        let indices = match shared_indices {
+            Some(i) => i,
+            None => self.push(index_block(mesh.triangles()))?,
+        };
+        Ok((
             json!({"attributes": attributes, "indices": indices, "mode": TRIANGLES}),
             indices,
-        )
+        ))
     }
 
     /// Appends an animation sampler's key times and values; returns the sampler's JSON.
-    fn sampler(&mut self, keys: &[f32], values: &[f32], width: usize) -> Value {
-        let input = self.push(float_block(keys, 1, None, true));
-        let output = self.push(float_block(values, width, None, false));
-        json!({"input": input, "output": output, "interpolation": "STEP"})
+    fn sampler(&mut self, keys: &[f32], values: &[f32], width: usize) -> Result<Value, IoError> {
+        let input = self.push(float_block(keys, 1, None, true))?;
+        let output = self.push(float_block(values, width, None, false))?;
+        Ok(json!({"input": input, "output": output, "interpolation": "STEP"}))
     }
 
-    /// The document around `scene_nodes`, `nodes`, `meshes` and one animation.
+    /// The document around `nodes`, `meshes` and one animation.
     fn document(
         self,
         nodes: Vec<Value>,
         meshes: Vec<Value>,
         samplers: Vec<Value>,
         channels: Vec<Value>,
-    ) -> (Value, Vec<u8>) {
+    ) -> Value {
         let mut doc = json!({
             "asset": {"version": "2.0", "generator": "trisplat"},
             "scene": 0,
@@ -430,82 +576,75 @@ impl Builder {
             "animations": [{"name": SEQUENCE_NAME, "samplers": samplers, "channels": channels}],
             "accessors": self.accessors,
             "bufferViews": self.views,
-            "buffers": [{"byteLength": self.bin.len()}],
+            "buffers": [{"byteLength": self.len}],
         });
         if !meshes.is_empty() {
             doc["meshes"] = json!(meshes);
         }
-        (doc, self.bin)
+        doc
     }
 }
 
-/// The morph-target layout (topology already checked).
+/// The morph-target layout (topology already checked), frame by frame.
 fn build_morph_targets(
     path: &Path,
-    frames: &[TriMesh],
+    frames: &dyn FrameSource,
     keys: &[f32],
-) -> Result<(Value, Vec<u8>), IoError> {
-    let base = &frames[0];
-    let with_normals = frames.iter().all(|f| f.normals().is_some());
-    let mut builder = Builder::default();
-    let (mut primitive, _) = builder.primitive(base, with_normals, None);
+    with_normals: bool,
+    sink: &mut dyn Sink,
+) -> Result<Value, IoError> {
+    let base = frames.frame(0)?;
+    let mut builder = Builder::new(sink);
+    let (mut primitive, _) = builder.primitive(&base, with_normals, None)?;
     let base_normals = if with_normals {
         base.normals().map(unit_normals)
     } else {
         None
     };
-    // Deltas of every later frame, computed in parallel, appended in frame order.
-    let deltas: Vec<(Block, Option<Block>)> = frames[1..]
-        .par_iter()
-        .enumerate()
-        .map(|(j, frame)| {
-            let k = j + 1;
-            let mut flat = Vec::with_capacity(3 * base.vertex_count());
-            for (v, (p, q)) in frame.positions().iter().zip(base.positions()).enumerate() {
-                for c in 0..3 {
+    let count = frames.frame_count();
+    let targets_n = count - 1;
+    let mut targets = Vec::with_capacity(targets_n);
+    for k in 1..count {
+        let frame = frames.frame(k)?;
+        let flat: Vec<f32> = frame
+            .positions()
+            .par_iter()
+            .zip(base.positions())
+            .flat_map_iter(|(p, q)| {
+                (0..3).map(move |c| {
                     #[expect(
                         clippy::cast_possible_truncation,
-                        reason = "f32 storage; overflow is checked"
+                        reason = "f32 storage; overflow is checked below"
                     )]
                     let d = (f64::from(p[c]) - f64::from(q[c])) as f32;
-                    if !d.is_finite() {
-                        return Err(IoError::malformed(
-                            path,
-                            format!("frame {k} vertex {v}"),
-                            "the offset from frame 0 overflows f32",
-                        ));
-                    }
-                    flat.push(d);
-                }
-            }
-            let positions = float_block(&flat, 3, Some(ARRAY_BUFFER), true);
-            let normals = match (&base_normals, frame.normals()) {
-                (Some(n0), Some(nk)) => {
-                    let d: Vec<Vec3> = unit_normals(nk)
-                        .iter()
-                        .zip(n0)
-                        .map(|(a, b)| *a - *b)
-                        .collect();
-                    Some(vec3_block(&d, Some(ARRAY_BUFFER), false))
-                }
-                _ => None,
-            };
-            Ok((positions, normals))
-        })
-        .collect::<Result<_, IoError>>()?;
-    let targets_n = frames.len() - 1;
-    let mut targets = Vec::with_capacity(targets_n);
-    for (positions, normals) in deltas {
+                    d
+                })
+            })
+            .collect();
+        if let Some(i) = flat.iter().position(|d| !d.is_finite()) {
+            return Err(IoError::malformed(
+                path,
+                format!("frame {k} vertex {}", i / 3),
+                "the offset from frame 0 overflows f32",
+            ));
+        }
         let mut target = Map::new();
-        target.insert("POSITION".into(), json!(builder.push(positions)));
-        if let Some(normals) = normals {
-            target.insert("NORMAL".into(), json!(builder.push(normals)));
+        let positions = builder.push(float_block(&flat, 3, Some(ARRAY_BUFFER), true))?;
+        target.insert("POSITION".into(), json!(positions));
+        if let (Some(n0), Some(nk)) = (&base_normals, frame.normals()) {
+            let d: Vec<Vec3> = unit_normals(nk)
+                .iter()
+                .zip(n0)
+                .map(|(a, b)| *a - *b)
+                .collect();
+            let normals = builder.push(vec3_block(&d, Some(ARRAY_BUFFER), false))?;
+            target.insert("NORMAL".into(), json!(normals));
         }
         targets.push(Value::Object(target));
     }
     let mut mesh = json!({"name": SEQUENCE_NAME});
     let (sampler, channel) = if targets_n == 0 {
-        let sampler = builder.sampler(keys, &[1.0; 3], 3);
+        let sampler = builder.sampler(keys, &[1.0; 3], 3)?;
         (
             sampler,
             json!({"sampler": 0, "target": {"node": 0, "path": "scale"}}),
@@ -513,14 +652,13 @@ fn build_morph_targets(
     } else {
         primitive["targets"] = json!(targets);
         mesh["weights"] = json!(vec![0.0f32; targets_n]);
-        mesh["extras"] =
-            json!({"targetNames": (1..frames.len()).map(frame_name).collect::<Vec<_>>()});
+        mesh["extras"] = json!({"targetNames": (1..count).map(frame_name).collect::<Vec<_>>()});
         // Key k: target k - 1 at weight 1, all others 0.
         let mut weights = vec![0.0f32; keys.len() * targets_n];
         for k in 1..keys.len() {
             weights[k * targets_n + (k - 1)] = 1.0;
         }
-        let sampler = builder.sampler(keys, &weights, 1);
+        let sampler = builder.sampler(keys, &weights, 1)?;
         (
             sampler,
             json!({"sampler": 0, "target": {"node": 0, "path": "weights"}}),
@@ -531,24 +669,34 @@ fn build_morph_targets(
     Ok(builder.document(vec![node], vec![mesh], vec![sampler], vec![channel]))
 }
 
-/// The node-per-frame layout.
-fn build_node_per_frame(frames: &[TriMesh], keys: &[f32]) -> (Value, Vec<u8>) {
-    let n = frames.len();
-    let mut builder = Builder::default();
+/// The node-per-frame layout, frame by frame.
+fn build_node_per_frame(
+    path: &Path,
+    frames: &dyn FrameSource,
+    keys: &[f32],
+    sink: &mut dyn Sink,
+) -> Result<Value, IoError> {
+    let _ = path;
+    let n = frames.frame_count();
+    let mut builder = Builder::new(sink);
     let mut nodes = vec![json!({"name": SEQUENCE_NAME, "children": (1..=n).collect::<Vec<_>>()})];
     let mut meshes = Vec::new();
     let mut samplers = Vec::with_capacity(n);
     let mut channels = Vec::with_capacity(n);
     // The index accessor of the last frame with a mesh, shared while the triangles repeat.
-    let mut last_indices: Option<(&[[u32; 3]], usize)> = None;
-    for (k, frame) in frames.iter().enumerate() {
+    let mut last_indices: Option<(Vec<[u32; 3]>, usize)> = None;
+    for k in 0..n {
+        let frame = frames.frame(k)?;
         let mut node = json!({"name": frame_name(k)});
         if frame.triangle_count() > 0 {
             let shared = last_indices
-                .filter(|(triangles, _)| *triangles == frame.triangles())
-                .map(|(_, accessor)| accessor);
-            let (primitive, indices) = builder.primitive(frame, true, shared);
-            last_indices = Some((frame.triangles(), indices));
+                .as_ref()
+                .filter(|(triangles, _)| triangles.as_slice() == frame.triangles())
+                .map(|(_, accessor)| *accessor);
+            let (primitive, indices) = builder.primitive(&frame, true, shared)?;
+            if shared.is_none() {
+                last_indices = Some((frame.triangles().to_vec(), indices));
+            }
             meshes.push(json!({"name": frame_name(k), "primitives": [primitive]}));
             node["mesh"] = json!(meshes.len() - 1);
         }
@@ -568,30 +716,34 @@ fn build_node_per_frame(frames: &[TriMesh], keys: &[f32]) -> (Value, Vec<u8>) {
             times.push(next);
             scales.extend([0.0; 3]);
         }
-        samplers.push(builder.sampler(&times, &scales, 3));
+        samplers.push(builder.sampler(&times, &scales, 3)?);
         channels.push(json!({"sampler": k, "target": {"node": k + 1, "path": "scale"}}));
     }
-    builder.document(nodes, meshes, samplers, channels)
+    Ok(builder.document(nodes, meshes, samplers, channels))
 }
 
-/// Writes the document and buffer as `.glb` (JSON chunk padded with spaces, binary chunk with
-/// zeros, both to 4 bytes).
-fn write_glb(path: &Path, doc: &Value, mut bin: Vec<u8>) -> Result<(), IoError> {
+/// Writes the document and a buffer of `bin_len` bytes, produced by `fill` into the sink it is
+/// given, as `.glb` (JSON chunk padded with spaces, binary chunk with zeros, both to 4 bytes).
+fn write_glb(
+    path: &Path,
+    doc: &Value,
+    bin_len: usize,
+    fill: impl Fn(&mut dyn Sink) -> Result<(), IoError>,
+) -> Result<(), IoError> {
     let mut json = serde_json::to_vec(doc).map_err(|e| IoError::os(path, e.into()))?;
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let padding = (4 - bin_len % 4) % 4;
+    let padded = bin_len + padding;
+    let total = 12 + 8 + json.len() + 8 + padded;
     let too_big = || IoError::Unsupported {
         path: path.to_path_buf(),
         what: format!("a {total}-byte GLB (the format holds at most 4 GiB)"),
     };
     let total32 = u32::try_from(total).map_err(|_| too_big())?;
     let json_len = u32::try_from(json.len()).map_err(|_| too_big())?;
-    let bin_len = u32::try_from(bin.len()).map_err(|_| too_big())?;
+    let bin_len32 = u32::try_from(padded).map_err(|_| too_big())?;
     write_atomically(path, |w| {
         let mut put = |bytes: &[u8]| w.write_all(bytes).map_err(|e| IoError::os(path, e));
         put(b"glTF")?;
@@ -600,9 +752,27 @@ fn write_glb(path: &Path, doc: &Value, mut bin: Vec<u8>) -> Result<(), IoError> 
         put(&json_len.to_le_bytes())?;
         put(b"JSON")?;
         put(&json)?;
-        put(&bin_len.to_le_bytes())?;
+        put(&bin_len32.to_le_bytes())?;
         put(b"BIN\0")?;
-        put(&bin)
+        let mut stream = Stream {
+            out: &mut *w,
+            path,
+            written: 0,
+        };
+        fill(&mut stream)?;
+        if stream.written != bin_len {
+            return Err(IoError::malformed(
+                path,
+                "buffer",
+                format!(
+                    "the frames gave {} bytes on the second reading, {bin_len} on the first \
+                     (a frame changed while the sequence was written)",
+                    stream.written
+                ),
+            ));
+        }
+        w.write_all(&[0u8; 3][..padding])
+            .map_err(|e| IoError::os(path, e))
     })
 }
 

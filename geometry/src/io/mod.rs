@@ -21,7 +21,9 @@ use std::path::Path;
 
 pub use atomic::write_atomically;
 pub use error::IoError;
-pub use gltf_sequence::{SequenceLayout, write_mesh_sequence};
+pub use gltf_sequence::{
+    FrameFiles, FrameSource, SequenceLayout, write_mesh_sequence, write_sequence,
+};
 pub use npy::{NpyArray, read_npy, write_npy};
 pub use obj::ObjVertices;
 pub use ply::{PlyEncoding, PlyExtras};
