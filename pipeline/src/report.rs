@@ -325,6 +325,10 @@ pub struct MethodReport {
     pub ply_dir: String,
     /// Its animated glTF, relative to the output folder.
     pub glb: String,
+    /// When the sequence is over glTF's 4 GiB limit: the `.glb` parts that hold it instead of
+    /// `glb`, in frame order (`<method>_part001.glb`, ...); empty otherwise.
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub glb_parts: Vec<String>,
     /// What the incremental update did per frame (delaunay only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delaunay: Option<DelaunayStats>,
@@ -478,13 +482,17 @@ impl Report {
                 .iter()
                 .map(|(k, v)| format!("{k} {v}"))
                 .collect();
+            let glb = if m.glb_parts.is_empty() {
+                m.glb.clone()
+            } else {
+                m.glb_parts.join("`, `")
+            };
             let _ = writeln!(
                 s,
-                "\n## {}\n\nparameters: {}; files: `{}/`, `{}`\n",
+                "\n## {}\n\nparameters: {}; files: `{}/`, `{glb}`\n",
                 m.method,
                 params.join(", "),
                 m.ply_dir,
-                m.glb
             );
             if let Some(d) = &m.delaunay {
                 let pct = |v: Option<f64>| {
@@ -712,6 +720,7 @@ mod tests {
             frames: records.clone(),
             ply_dir: m.name().to_owned(),
             glb: format!("{}.glb", m.name()),
+            glb_parts: Vec::new(),
             delaunay,
         };
         let report = Report {

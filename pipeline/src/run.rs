@@ -4,7 +4,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use trisplat_geometry::io::{FrameFiles, SequenceLayout, WriteOptions, write_mesh, write_sequence};
+use trisplat_geometry::io::{
+    FrameFiles, GLB_PART_LIMIT, SequenceLayout, WriteOptions, write_mesh, write_sequence_parts,
+};
 
 pub use crate::output::frame_file;
 
@@ -163,6 +165,7 @@ fn run_inner(
                 mean,
                 ply_dir: m.name().to_owned(),
                 glb: format!("{}.glb", m.name()),
+                glb_parts: Vec::new(),
                 delaunay: (m == Method::Delaunay).then(|| {
                     DelaunayStats::new(
                         session.template().triangle_count(),
@@ -173,7 +176,7 @@ fn run_inner(
             },
         );
     }
-    let report = Report {
+    let mut report = Report {
         version: env!("CARGO_PKG_VERSION").to_owned(),
         template: config.template.display().to_string(),
         template_vertices: session.welded().stored_vertices,
@@ -195,7 +198,7 @@ fn run_inner(
         resolved,
         methods: method_reports,
     };
-    write_outputs(out, &report, &frame_files, created)?;
+    write_outputs(out, &mut report, &frame_files, created)?;
     Ok(report)
 }
 
@@ -228,23 +231,37 @@ fn check_outputs(
     Ok(())
 }
 
-/// Writes one animated glTF per method, the report files and the plot.
+/// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
+/// report), the report files and the plot.
 fn write_outputs(
     out: &Path,
-    report: &Report,
+    report: &mut Report,
     frame_files: &FrameFilesByMethod,
     created: &mut Created,
 ) -> Result<(), PipelineError> {
     for (m, files) in frame_files {
         let glb = out.join(format!("{}.glb", m.name()));
         let existed = glb.exists();
-        write_sequence(
+        let written = write_sequence_parts(
             &glb,
             &FrameFiles(files),
             &report.frame_times,
             SequenceLayout::Auto,
+            GLB_PART_LIMIT,
         )?;
-        created.note(&glb, existed);
+        if written.len() == 1 {
+            created.note(&glb, existed);
+        } else {
+            for part in &written {
+                created.note(part, false);
+            }
+            if let Some(r) = report.methods.get_mut(m.name()) {
+                r.glb_parts = written
+                    .iter()
+                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect();
+            }
+        }
     }
     let json = out.join(REPORT_JSON);
     let existed = json.exists();

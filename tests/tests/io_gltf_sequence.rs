@@ -696,3 +696,59 @@ fn frames_from_files_write_the_same_bytes_as_frames_in_memory() {
         assert!(!missing.exists());
     }
 }
+
+/// A sequence over the part size is split into consecutive `.glb` parts, each complete and
+/// keeping its frames' own times; under it, one file at the path asked for.
+#[test]
+fn long_sequences_split_into_parts() {
+    use trisplat_geometry::io::write_sequence_parts;
+    let dir = out_dir();
+    for (name, frames) in [("wave", wave_frames(5, true)), ("mixed", mixed_frames())] {
+        let times = times_at(30.0, frames.len());
+        let path = dir.path().join(format!("{name}.glb"));
+        let one = write_sequence_parts(
+            &path,
+            &frames.as_slice(),
+            &times,
+            SequenceLayout::Auto,
+            u64::MAX,
+        )
+        .expect("one file");
+        assert_eq!(one, std::slice::from_ref(&path));
+        // About two frames per part.
+        let frame_bytes = std::fs::metadata(&path).expect("size").len() / frames.len() as u64;
+        let parts = write_sequence_parts(
+            &path,
+            &frames.as_slice(),
+            &times,
+            SequenceLayout::Auto,
+            frame_bytes * 5 / 2,
+        )
+        .expect("parts");
+        assert!(parts.len() >= 2, "{name}: {parts:?}");
+        let mut first = 0;
+        for (i, part) in parts.iter().enumerate() {
+            assert_eq!(
+                part.file_name().and_then(|n| n.to_str()),
+                Some(format!("{name}_part{:03}.glb", i + 1).as_str())
+            );
+            let doc = check_structure(part);
+            let count = match doc["meshes"][0]["primitives"][0]["targets"].as_array() {
+                Some(targets) if name == "wave" => targets.len() + 1,
+                _ => doc["nodes"][0]["children"].as_array().map_or(1, Vec::len),
+            };
+            let run = first..first + count;
+            if name == "wave" {
+                check_morph_roundtrip(part, &frames[run.clone()], &times[run.clone()]);
+            } else {
+                check_node_roundtrip(part, &frames[run.clone()], &times[run.clone()]);
+            }
+            first += count;
+        }
+        assert_eq!(
+            first,
+            frames.len(),
+            "{name}: every frame in exactly one part"
+        );
+    }
+}

@@ -188,11 +188,22 @@ pub fn write_sequence(
     }
     let keys = key_times(path, frames.frame_count(), frame_times)?;
     let survey = Survey::of(path, frames, layout)?;
+    write_surveyed(path, format, frames, &keys, &survey)
+}
+
+/// Writes `frames` at `keys` in the layout `survey` chose.
+fn write_surveyed(
+    path: &Path,
+    format: Format,
+    frames: &dyn FrameSource,
+    keys: &[f32],
+    survey: &Survey,
+) -> Result<(), IoError> {
     let build = |sink: &mut dyn Sink| -> Result<Value, IoError> {
         if survey.morph {
-            build_morph_targets(path, frames, &keys, survey.normals, sink)
+            build_morph_targets(path, frames, keys, survey.normals, sink)
         } else {
-            build_node_per_frame(path, frames, &keys, sink)
+            build_node_per_frame(frames, keys, sink)
         }
     };
     match format {
@@ -210,12 +221,112 @@ pub fn write_sequence(
     }
 }
 
+/// The largest `.glb` [`write_sequence_parts`] writes as one file: the format's 4 GiB limit
+/// less room for the JSON chunk.
+pub const GLB_PART_LIMIT: u64 = (1 << 32) - (64 << 20);
+
+/// [`write_sequence`] into as many `.glb` files as glTF's 4 GiB limit needs: one file at
+/// `path` when the sequence fits in `max_bytes` of buffer, else consecutive runs of frames in
+/// `STEM_part001.glb`, `STEM_part002.glb`, ... beside it, each a complete animated glTF that
+/// keeps the frames' own times (part 2 starts at its first frame's time). Returns the files
+/// written, in order. Use [`GLB_PART_LIMIT`] for `max_bytes` unless a smaller part is wanted.
+///
+/// # Errors
+/// As [`write_sequence`]; [`IoError::Unsupported`] when a single frame exceeds `max_bytes`,
+/// or for a `.gltf` path (parts are `.glb`). Parts already written stay when a later one
+/// fails (each is complete).
+pub fn write_sequence_parts(
+    path: &Path,
+    frames: &dyn FrameSource,
+    frame_times: &[f64],
+    layout: SequenceLayout,
+    max_bytes: u64,
+) -> Result<Vec<PathBuf>, IoError> {
+    if Format::from_path(path)? != Format::Glb {
+        return Err(IoError::Unsupported {
+            path: path.to_path_buf(),
+            what: "a sequence split into parts is written as .glb".into(),
+        });
+    }
+    let keys = key_times(path, frames.frame_count(), frame_times)?;
+    let survey = Survey::of(path, frames, layout)?;
+    let runs = split(path, &survey.sizes, max_bytes)?;
+    if runs.len() == 1 {
+        write_surveyed(path, Format::Glb, frames, &keys, &survey)?;
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let stem = path
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let mut written = Vec::with_capacity(runs.len());
+    for (i, run) in runs.into_iter().enumerate() {
+        let part = path.with_file_name(format!("{stem}_part{:03}.glb", i + 1));
+        let part_keys = &keys[run.clone()];
+        write_surveyed(
+            &part,
+            Format::Glb,
+            &FrameRun { frames, run },
+            part_keys,
+            &survey,
+        )?;
+        written.push(part);
+    }
+    Ok(written)
+}
+
+/// Consecutive runs of frames whose buffers stay within `max_bytes`: each frame's bound from
+/// `sizes`, plus the morph layout's weights track (4 bytes per frame and target, quadratic in
+/// the frames of a part).
+fn split(
+    path: &Path,
+    sizes: &[u64],
+    max_bytes: u64,
+) -> Result<Vec<std::ops::Range<usize>>, IoError> {
+    let fits = |frames: u64, bytes: u64| bytes.saturating_add(4 * frames * frames) <= max_bytes;
+    let mut runs = Vec::new();
+    let (mut start, mut bytes) = (0, 0u64);
+    for (k, &size) in sizes.iter().enumerate() {
+        if !fits(1, size) {
+            return Err(IoError::Unsupported {
+                path: path.to_path_buf(),
+                what: format!("frame {k} alone needs {size} bytes, over the {max_bytes}-byte part"),
+            });
+        }
+        if !fits((k + 1 - start) as u64, bytes + size) {
+            runs.push(start..k);
+            (start, bytes) = (k, 0);
+        }
+        bytes += size;
+    }
+    runs.push(start..sizes.len());
+    Ok(runs)
+}
+
+/// Frames `run` of another source.
+struct FrameRun<'a> {
+    frames: &'a dyn FrameSource,
+    run: std::ops::Range<usize>,
+}
+
+impl FrameSource for FrameRun<'_> {
+    fn frame_count(&self) -> usize {
+        self.run.len()
+    }
+
+    fn frame(&self, k: usize) -> Result<Cow<'_, TriMesh>, IoError> {
+        self.frames.frame(self.run.start + k)
+    }
+}
+
 /// What one read of every frame tells before anything is written.
 struct Survey {
     /// Whether the morph-target layout is used.
     morph: bool,
     /// Morph targets carry normal deltas (every frame has normals).
     normals: bool,
+    /// Per frame, an upper bound of the buffer bytes it adds in either layout (its vertex
+    /// data, its own indices and its animation keys).
+    sizes: Vec<u64>,
 }
 
 impl Survey {
@@ -232,6 +343,7 @@ impl Survey {
             ));
         }
         let mut normals = base.normals().is_some();
+        let mut sizes = Vec::with_capacity(frames.frame_count());
         for k in 0..frames.frame_count() {
             let frame = if k == 0 {
                 Cow::Borrowed(base.as_ref())
@@ -246,6 +358,13 @@ impl Survey {
                 ));
             }
             normals &= frame.normals().is_some();
+            let per_vertex = 12
+                + if frame.normals().is_some() { 12 } else { 0 }
+                + if frame.uvs().is_some() { 8 } else { 0 }
+                + if frame.colors().is_some() { 16 } else { 0 };
+            sizes.push(
+                (per_vertex * frame.vertex_count() + 12 * frame.triangle_count() + 64) as u64,
+            );
             if layout == SequenceLayout::NodePerFrame || !same || k == 0 {
                 continue;
             }
@@ -263,6 +382,7 @@ impl Survey {
         Ok(Self {
             morph: layout != SequenceLayout::NodePerFrame && same,
             normals,
+            sizes,
         })
     }
 }
@@ -671,12 +791,10 @@ fn build_morph_targets(
 
 /// The node-per-frame layout, frame by frame.
 fn build_node_per_frame(
-    path: &Path,
     frames: &dyn FrameSource,
     keys: &[f32],
     sink: &mut dyn Sink,
 ) -> Result<Value, IoError> {
-    let _ = path;
     let n = frames.frame_count();
     let mut builder = Builder::new(sink);
     let mut nodes = vec![json!({"name": SEQUENCE_NAME, "children": (1..=n).collect::<Vec<_>>()})];

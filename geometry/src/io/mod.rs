@@ -22,7 +22,8 @@ use std::path::Path;
 pub use atomic::write_atomically;
 pub use error::IoError;
 pub use gltf_sequence::{
-    FrameFiles, FrameSource, SequenceLayout, write_mesh_sequence, write_sequence,
+    FrameFiles, FrameSource, GLB_PART_LIMIT, SequenceLayout, write_mesh_sequence, write_sequence,
+    write_sequence_parts,
 };
 pub use npy::{NpyArray, read_npy, write_npy};
 pub use obj::ObjVertices;
