@@ -220,6 +220,23 @@ impl Default for ExtractOptions {
     }
 }
 
+/// How a run treats an output folder that already holds a run, and frames that fail.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct RunControl {
+    /// Continue the run in the output folder: frames its journal lists as done are kept, the
+    /// others (and failed ones) are run. Refused if the inputs or options changed.
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "force"))]
+    pub resume: bool,
+    /// Start over in an output folder that holds a previous run (its outputs are removed).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub force: bool,
+    /// Stop at the first frame that fails (completed frames are kept) instead of recording it
+    /// and going on.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub fail_fast: bool,
+}
+
 /// A whole `trisplat extract` run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ExtractConfig {

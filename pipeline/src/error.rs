@@ -265,6 +265,25 @@ pub enum PipelineError {
         /// Why.
         cause: std::io::Error,
     },
+    /// The output folder holds a previous run and neither `--resume` nor `--force` was given.
+    #[error(
+        "{path}: holds the outputs of a previous run ({found}); continue it with --resume, start \
+         over with --force, or choose another output folder"
+    )]
+    UsedOutput {
+        /// The folder.
+        path: PathBuf,
+        /// What shows the previous run.
+        found: String,
+    },
+    /// `--resume` cannot continue the run in the folder.
+    #[error("{path}: cannot resume: {problem}")]
+    Resume {
+        /// The folder or its journal.
+        path: PathBuf,
+        /// Why.
+        problem: String,
+    },
     /// A broken invariant of the pipeline itself (a bug: please report it).
     #[error("internal error: {what}")]
     Internal {

@@ -61,6 +61,7 @@ pub mod deform;
 pub mod error;
 mod font;
 pub mod input;
+pub mod journal;
 pub mod methods;
 pub mod output;
 pub mod plan;
@@ -69,7 +70,7 @@ pub mod report;
 pub mod run;
 pub mod session;
 
-pub use config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode};
+pub use config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, RunControl};
 pub use error::PipelineError;
 pub use plan::{Plan, Stage, StagePlan};
 pub use report::Report;

@@ -64,7 +64,7 @@ impl GtSamples {
 }
 
 /// The metrics of one method on one frame.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameMetrics {
     /// (accuracy + completeness) / 2.
     pub chamfer_l1: f64,
@@ -146,7 +146,7 @@ pub fn is_watertight(mesh: &TriMesh) -> bool {
 }
 
 /// One method on one frame.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameRecord {
     /// Animation frame index.
     pub frame: usize,
@@ -167,7 +167,7 @@ pub struct FrameRecord {
 }
 
 /// What the incremental Delaunay update did on one frame (its `FrameStats`).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DelaunayFrame {
     /// Animation frame index.
     pub frame: usize,
@@ -362,6 +362,8 @@ pub struct Report {
     pub frame_times: Vec<f64>,
     /// Deformation wall time per frame, milliseconds (shared by the methods).
     pub deform_ms: Vec<f64>,
+    /// Frames that failed (not in `frames`), with the error; the run went on without them.
+    pub failed_frames: Vec<crate::journal::FailedFrame>,
     /// `template`, the ground-truth file, or `None`.
     pub ground_truth: Option<String>,
     /// Samples per mesh for the metrics.
@@ -434,6 +436,16 @@ impl Report {
             }
             None => {
                 let _ = writeln!(s, "- ground truth: none (no metrics)");
+            }
+        }
+        if !self.failed_frames.is_empty() {
+            let _ = writeln!(
+                s,
+                "- **failed frames** ({}; not in the tables below):",
+                self.failed_frames.len()
+            );
+            for f in &self.failed_frames {
+                let _ = writeln!(s, "  - frame {}: {}", f.frame, f.error);
             }
         }
         if !self.unused_channels.is_empty() {
@@ -730,6 +742,7 @@ mod tests {
             welded_vertices: 4,
             animation: "t.glb".to_owned(),
             unused_channels: Vec::new(),
+            failed_frames: Vec::new(),
             gaussians: "bound here: 4 per triangle".to_owned(),
             gaussian_count: 40,
             mode: "binding".to_owned(),

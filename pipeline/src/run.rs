@@ -10,10 +10,11 @@ use trisplat_geometry::io::{
 
 pub use crate::output::frame_file;
 
-use crate::config::{ExtractConfig, GroundTruth, Method};
+use crate::config::{ExtractConfig, GroundTruth, Method, RunControl};
 use crate::error::PipelineError;
 use crate::input::GaussianSource;
-use crate::output::{Created, Inputs};
+use crate::journal::{FailedFrame, FrameEntry, JOURNAL, Journal, Previous};
+use crate::output::Inputs;
 use crate::plot;
 use crate::report::{
     DelaunayFrame, DelaunayStats, FrameRecord, MethodReport, Report, Summary, is_watertight,
@@ -56,25 +57,19 @@ type FrameFilesByMethod = BTreeMap<Method, Vec<PathBuf>>;
 /// Runs the main job and writes every output (see the crate docs); returns the report.
 /// `progress` is told when frames are done.
 ///
+/// Each frame's files are written as soon as they exist and recorded in the run journal
+/// (module [`crate::journal`]); a frame that fails is recorded and the run goes on (unless
+/// `control.fail_fast`), and the report lists it. Completed frames are never removed, so an
+/// interrupted run can be continued with `control.resume`.
+///
 /// # Errors
-/// Bad inputs (named), an output that would replace an input, a failed method or write. The
-/// files this run created are removed again on failure.
+/// Bad inputs (named), an output that would replace an input, an output folder that holds a
+/// previous run (without `resume` or `force`), a resume that does not match, a failed write of
+/// the sequences or reports; with `fail_fast`, the first failing frame.
 pub fn run(
     config: &ExtractConfig,
+    control: RunControl,
     progress: &mut dyn FnMut(Progress),
-) -> Result<Report, PipelineError> {
-    let mut created = Created::default();
-    let result = run_inner(config, progress, &mut created);
-    if result.is_err() {
-        created.remove();
-    }
-    result
-}
-
-fn run_inner(
-    config: &ExtractConfig,
-    progress: &mut dyn FnMut(Progress),
-    created: &mut Created,
 ) -> Result<Report, PipelineError> {
     let o = &config.options;
     let methods = config.methods();
@@ -83,9 +78,10 @@ fn run_inner(
     }
     let mut session = Session::open(config)?;
     let frames = session.frames();
-    check_outputs(config, &methods, frames.clone(), session.input_files())?;
-
     let out = &config.output;
+    check_outputs(config, &methods, frames.clone(), session.input_files())?;
+    let (mut journal, previous) = open_journal(out, config, control)?;
+
     let total = frames.len();
     if !session.unused_channels().is_empty() {
         progress(Progress::Notice(format!(
@@ -95,40 +91,44 @@ fn run_inner(
             session.unused_channels().join(", ")
         )));
     }
+    if !previous.done.is_empty() {
+        progress(Progress::Notice(format!(
+            "resuming: {} of {total} frame(s) already done",
+            previous.done.keys().filter(|f| frames.contains(f)).count()
+        )));
+    }
     progress(Progress::Started { frames: total });
-    let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
-    let mut delaunay_frames: Vec<DelaunayFrame> = Vec::new();
-    let mut frame_files: FrameFilesByMethod = BTreeMap::new();
-    let mut frame_times = Vec::with_capacity(total);
-    let mut deform_ms = Vec::with_capacity(total);
+    let mut done_frames = previous.done;
+    let mut failed: Vec<FailedFrame> = Vec::new();
     for (done, f) in frames.clone().enumerate() {
-        let result = session.frame(f)?;
-        deform_ms.push(result.deform_ms);
-        frame_times.push(result.time);
-        for MethodFrame {
-            method: m,
-            output,
-            metrics,
-        } in result.methods
-        {
-            if let Some(stats) = &output.delaunay {
-                delaunay_frames.push(DelaunayFrame::new(f, stats));
+        let finished = done_frames.get(&f).is_some_and(|entry| {
+            entry
+                .methods
+                .keys()
+                .all(|m| out.join(m).join(frame_file(f)).is_file())
+        });
+        if !finished {
+            match run_frame(&mut session, out, f) {
+                Ok(entry) => {
+                    journal.frame(&entry)?;
+                    done_frames.insert(f, entry);
+                }
+                Err(e) => {
+                    let record = FailedFrame {
+                        frame: f,
+                        error: e.to_string(),
+                    };
+                    journal.failed(&record)?;
+                    if control.fail_fast {
+                        return Err(e);
+                    }
+                    progress(Progress::Notice(format!(
+                        "frame {f} failed, the run goes on: {e}"
+                    )));
+                    done_frames.remove(&f);
+                    failed.push(record);
+                }
             }
-            let path = out.join(m.name()).join(frame_file(f));
-            let existed = path.exists();
-            write_mesh(&path, &output.mesh, WriteOptions::default())?;
-            created.note(&path, existed);
-            records.entry(m).or_default().push(FrameRecord {
-                frame: f,
-                time: result.time,
-                ms: output.ms,
-                render_ms: output.render_ms,
-                vertices: output.mesh.vertex_count(),
-                faces: output.mesh.triangle_count(),
-                watertight: is_watertight(&output.mesh),
-                metrics,
-            });
-            frame_files.entry(m).or_default().push(path);
         }
         progress(Progress::Frame {
             done: done + 1,
@@ -137,6 +137,28 @@ fn run_inner(
     }
     progress(Progress::Finishing);
 
+    // The report and the sequences from the journal's frames (this run's and resumed ones).
+    let entries: Vec<&FrameEntry> = done_frames
+        .values()
+        .filter(|e| frames.contains(&e.frame))
+        .collect();
+    let mut records: BTreeMap<Method, Vec<FrameRecord>> = BTreeMap::new();
+    let mut frame_files: FrameFilesByMethod = BTreeMap::new();
+    let mut delaunay_frames: Vec<DelaunayFrame> = Vec::new();
+    for e in &entries {
+        for m in &methods {
+            if let Some(r) = e.methods.get(m.name()) {
+                records.entry(*m).or_default().push(r.clone());
+                frame_files
+                    .entry(*m)
+                    .or_default()
+                    .push(out.join(m.name()).join(frame_file(e.frame)));
+            }
+        }
+        delaunay_frames.extend(e.delaunay);
+    }
+    let frame_times: Vec<f64> = entries.iter().map(|e| e.time).collect();
+    let deform_ms: Vec<f64> = entries.iter().map(|e| e.deform_ms).collect();
     let resolved = *session.resolved();
     let mut method_reports = BTreeMap::new();
     for (m, frames_of) in records {
@@ -188,9 +210,10 @@ fn run_inner(
         },
         gaussian_count: session.gaussians().len(),
         mode: o.mode.name().to_owned(),
-        frames: frames.collect(),
+        frames: entries.iter().map(|e| e.frame).collect(),
         frame_times,
         deform_ms,
+        failed_frames: failed,
         unused_channels: session.unused_channels().to_vec(),
         ground_truth: config.gt.as_ref().map(GroundTruth::label),
         samples: o.samples,
@@ -198,8 +221,100 @@ fn run_inner(
         resolved,
         methods: method_reports,
     };
-    write_outputs(out, &mut report, &frame_files, created)?;
+    write_outputs(out, &mut report, &frame_files)?;
     Ok(report)
+}
+
+/// One frame: meshed by every method, each mesh written (atomically) to its frame file.
+fn run_frame(session: &mut Session, out: &Path, f: usize) -> Result<FrameEntry, PipelineError> {
+    let result = session.frame(f)?;
+    let mut entry = FrameEntry {
+        frame: f,
+        time: result.time,
+        deform_ms: result.deform_ms,
+        methods: BTreeMap::new(),
+        delaunay: None,
+    };
+    for MethodFrame {
+        method: m,
+        output,
+        metrics,
+    } in result.methods
+    {
+        if let Some(stats) = &output.delaunay {
+            entry.delaunay = Some(DelaunayFrame::new(f, stats));
+        }
+        let path = out.join(m.name()).join(frame_file(f));
+        write_mesh(&path, &output.mesh, WriteOptions::default())?;
+        entry.methods.insert(
+            m.name().to_owned(),
+            FrameRecord {
+                frame: f,
+                time: result.time,
+                ms: output.ms,
+                render_ms: output.render_ms,
+                vertices: output.mesh.vertex_count(),
+                faces: output.mesh.triangle_count(),
+                watertight: is_watertight(&output.mesh),
+                metrics,
+            },
+        );
+    }
+    Ok(entry)
+}
+
+/// The journal of this run: refuses a folder that holds another run unless told to resume it
+/// (then the frames it lists are done) or to start over (then its outputs are removed first).
+fn open_journal(
+    out: &Path,
+    config: &ExtractConfig,
+    control: RunControl,
+) -> Result<(Journal, Previous), PipelineError> {
+    if control.resume {
+        return Journal::resume(out, config);
+    }
+    let marks = [JOURNAL, REPORT_JSON];
+    if let Some(found) = marks.iter().find(|m| out.join(m).exists()) {
+        if !control.force {
+            return Err(PipelineError::UsedOutput {
+                path: out.to_path_buf(),
+                found: (*found).to_owned(),
+            });
+        }
+        remove_previous_outputs(out);
+    } else if control.force {
+        remove_previous_outputs(out);
+    }
+    Ok((Journal::create(out, config)?, Previous::default()))
+}
+
+/// Removes what a previous run wrote into `out`: journal, reports, plot, every method's frame
+/// files and sequences (best effort; files that cannot be removed are overwritten later).
+fn remove_previous_outputs(out: &Path) {
+    for name in [JOURNAL, REPORT_JSON, REPORT_MD, PLOT_PNG] {
+        let _ = std::fs::remove_file(out.join(name));
+    }
+    for m in [Method::Tsdf, Method::Delaunay, Method::Alpha] {
+        let dir = out.join(m.name());
+        if let Ok(listing) = std::fs::read_dir(&dir) {
+            for e in listing.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with("frame_") && name.ends_with(".ply") {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+        let _ = std::fs::remove_file(out.join(format!("{}.glb", m.name())));
+        if let Ok(listing) = std::fs::read_dir(out) {
+            let prefix = format!("{}_part", m.name());
+            for e in listing.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with(&prefix) && name.ends_with(".glb") {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+    }
 }
 
 /// Refuses outputs that would replace an input, then creates the method folders.
@@ -237,11 +352,9 @@ fn write_outputs(
     out: &Path,
     report: &mut Report,
     frame_files: &FrameFilesByMethod,
-    created: &mut Created,
 ) -> Result<(), PipelineError> {
     for (m, files) in frame_files {
         let glb = out.join(format!("{}.glb", m.name()));
-        let existed = glb.exists();
         let written = write_sequence_parts(
             &glb,
             &FrameFiles(files),
@@ -249,31 +362,17 @@ fn write_outputs(
             SequenceLayout::Auto,
             GLB_PART_LIMIT,
         )?;
-        if written.len() == 1 {
-            created.note(&glb, existed);
-        } else {
-            for part in &written {
-                created.note(part, false);
-            }
-            if let Some(r) = report.methods.get_mut(m.name()) {
-                r.glb_parts = written
-                    .iter()
-                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-                    .collect();
-            }
+        if written.len() > 1
+            && let Some(r) = report.methods.get_mut(m.name())
+        {
+            r.glb_parts = written
+                .iter()
+                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
         }
     }
-    let json = out.join(REPORT_JSON);
-    let existed = json.exists();
-    report.write_json(&json)?;
-    created.note(&json, existed);
-    let md = out.join(REPORT_MD);
-    let existed = md.exists();
-    report.write_markdown(&md)?;
-    created.note(&md, existed);
-    let png = out.join(PLOT_PNG);
-    let existed = png.exists();
-    plot::write_plot(&png, report)?;
-    created.note(&png, existed);
+    report.write_json(&out.join(REPORT_JSON))?;
+    report.write_markdown(&out.join(REPORT_MD))?;
+    plot::write_plot(&out.join(PLOT_PNG), report)?;
     Ok(())
 }

@@ -11,7 +11,9 @@ use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_pipeline::config::{DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS};
 use trisplat_pipeline::input::read_template;
-use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method, PipelineError, run};
+use trisplat_pipeline::{
+    ExtractConfig, ExtractOptions, GroundTruth, Method, PipelineError, RunControl, run,
+};
 
 /// Scale of the mesh node (undone by the inverse bind matrix of its one joint).
 const NODE_SCALE: f32 = 0.01;
@@ -145,7 +147,12 @@ fn skinned_template_with_a_scaled_node_is_meshed_in_world_space() {
     assert_eq!(world.triangles(), stored.triangles());
 
     let out = dir.path().join("out");
-    let report = run(&config(path, None, out.clone()), &mut |_| {}).expect("run");
+    let report = run(
+        &config(path, None, out.clone()),
+        RunControl::default(),
+        &mut |_| {},
+    )
+    .expect("run");
     let r = report.resolved;
     // The scale-derived defaults follow the world-space size (radius 1), not the node
     // transform's (0.01).
@@ -198,6 +205,7 @@ fn template_and_frames_at_different_scales_are_refused() {
     let anim = frames.display().to_string();
     let err = run(
         &config(template.clone(), Some(anim.clone()), out.clone()),
+        RunControl::default(),
         &mut |_| {},
     )
     .expect_err("scale mismatch");
@@ -218,6 +226,11 @@ fn template_and_frames_at_different_scales_are_refused() {
         let frame = TriMesh::new(positions.clone(), triangles.clone());
         write_mesh(&f, &frame, WriteOptions::default()).expect("rewrite frame");
     }
-    let report = run(&config(template, Some(anim), out), &mut |_| {}).expect("same scale");
+    let report = run(
+        &config(template, Some(anim), out),
+        RunControl::default(),
+        &mut |_| {},
+    )
+    .expect("same scale");
     assert_eq!(report.frames, vec![0, 1]);
 }

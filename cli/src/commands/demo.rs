@@ -4,10 +4,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use trisplat_geometry::io::{IoError, write_atomically};
-use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method};
+use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method, RunControl};
 
 use super::Context;
-use super::extract::{print_summary, run_with_progress};
+use super::extract::{fail_on_failed_frames, print_summary, run_with_progress};
 
 /// File name of the bundled avatar, written into the output folder: Khronos' CesiumMan
 /// (CC BY 4.0, © Cesium), a skinned walk cycle.
@@ -80,9 +80,14 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
          ground truth: the deformed template",
         config.template.display()
     );
-    let report = run_with_progress(&config, ctx)?;
+    // The demo always starts over in its folder.
+    let control = RunControl {
+        force: true,
+        ..RunControl::default()
+    };
+    let report = run_with_progress(&config, control, ctx)?;
     print_summary(&report, &config.output);
-    Ok(())
+    fail_on_failed_frames(&report)
 }
 
 /// Writes the embedded avatar and its licence into `dir` (created if missing); returns the

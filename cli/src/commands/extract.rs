@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, GroundTruth, Method, Plan, Progress, Report,
+    ExtractConfig, ExtractOptions, GroundTruth, Method, Plan, Progress, Report, RunControl,
 };
 
 use super::Context;
@@ -51,15 +51,22 @@ frame's deformed template. Metrics as `trisplat eval --surface` (docs/convention
 mesh, exact point-to-triangle distances, Chamfer L1/L2, normal consistency, F-score at --tau.
 
 Outputs in DIR: <method>/frame_NNNNNN.ply (NNNNNN = the animation's frame index), <method>.glb \
-(the animated sequence), report.json (per method and frame: ms, vertices, faces, watertight, \
+(the animated sequence), journal.jsonl (the run journal), report.json (per method and frame: ms, vertices, faces, watertight, \
 metrics; per-method means), report.md (the same as tables), error_vs_time.png (Chamfer L1 \
 against ms/frame per method, log axes; without --gt: ms per frame). Times cover each method's \
 own work (rendering included for tsdf); deformation is reported separately.
 
 --explain prints the plan and exits without reading or writing anything.
 
-Every file is written atomically, never over an input; on failure the files of this run are \
-removed.")]
+Long runs: every file is written atomically, never over an input, and each frame's files as \
+soon as they exist; journal.jsonl records the run's configuration and every frame done, so a run \
+killed at any point (Ctrl-C, kill, crash) continues with --resume (refused if the inputs or \
+options changed; frames listed as done are kept, with the incremental Delaunay rebuilt at the \
+first frame run). A folder holding a previous run is refused without --resume or --force (which \
+removes its outputs first). A frame that fails is recorded (journal, report, a warning) and the \
+run goes on; the exit code is then 1 and --resume retries it; --fail-fast stops at the first \
+failure instead. The animated glTF is assembled from the frame files; past glTF's 4 GiB limit it \
+is split into <method>_part001.glb, ... (listed in the report).")]
 pub struct ExtractArgs {
     /// Template mesh T (.ply, .obj, .gltf, .glb) in its rest shape.
     #[arg(long, value_name = "T")]
@@ -94,6 +101,9 @@ pub struct ExtractArgs {
     /// Method and metric settings.
     #[command(flatten)]
     pub options: ExtractOptions,
+    /// Resuming, starting over, failing frames.
+    #[command(flatten)]
+    pub control: RunControl,
 }
 
 impl ExtractArgs {
@@ -117,24 +127,46 @@ impl ExtractArgs {
 /// Whatever the pipeline reports (bad inputs, named; failed writes).
 pub fn run(args: ExtractArgs, ctx: &Context) -> anyhow::Result<()> {
     let explain = args.explain;
+    let control = args.control;
     let config = args.config();
     if explain {
         print!("{}", Plan::new(&config));
         return Ok(());
     }
-    let report = run_with_progress(&config, ctx)?;
+    let report = run_with_progress(&config, control, ctx)?;
     print_summary(&report, &config.output);
-    Ok(())
+    fail_on_failed_frames(&report)
+}
+
+/// An error when frames failed (they are listed in the report; the others were written).
+///
+/// # Errors
+/// When `report.failed_frames` is not empty.
+pub fn fail_on_failed_frames(report: &Report) -> anyhow::Result<()> {
+    match report.failed_frames.as_slice() {
+        [] => Ok(()),
+        [first, ..] => anyhow::bail!(
+            "{} frame(s) failed (listed in report.md; the other frames were written, rerun \
+             with --resume to retry them); first: frame {}: {}",
+            report.failed_frames.len(),
+            first.frame,
+            first.error
+        ),
+    }
 }
 
 /// Runs the pipeline with a progress bar on stderr.
 ///
 /// # Errors
 /// As [`trisplat_pipeline::run`].
-pub fn run_with_progress(config: &ExtractConfig, ctx: &Context) -> anyhow::Result<Report> {
+pub fn run_with_progress(
+    config: &ExtractConfig,
+    control: RunControl,
+    ctx: &Context,
+) -> anyhow::Result<Report> {
     let spinner = ctx.progress.spinner("extract: reading inputs");
     let mut bar = None;
-    let result = trisplat_pipeline::run(config, &mut |p| match p {
+    let result = trisplat_pipeline::run(config, control, &mut |p| match p {
         Progress::Started { frames } => {
             spinner.finish_and_clear();
             bar = Some(ctx.progress.bar(frames as u64, "extract: meshing frames"));
@@ -149,7 +181,13 @@ pub fn run_with_progress(config: &ExtractConfig, ctx: &Context) -> anyhow::Resul
                 b.set_message("extract: writing sequences and report");
             }
         }
-        Progress::Notice(message) => spinner.suspend(|| eprintln!("warning: {message}")),
+        Progress::Notice(message) => {
+            let say = || eprintln!("warning: {message}");
+            match &bar {
+                Some(b) => b.suspend(say),
+                None => spinner.suspend(say),
+            }
+        }
     });
     spinner.finish_and_clear();
     if let Some(b) = bar {

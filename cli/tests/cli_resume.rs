@@ -1,0 +1,227 @@
+//! Long runs through the real binary: a used output folder is refused unless `--resume` or
+//! `--force`; a run killed after some frames and resumed writes the same bytes as one that ran
+//! through; a changed configuration is not resumed; a failing frame is recorded and the run
+//! goes on (exit 1, the other frames written), or stops with `--fail-fast`.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{fresh_dir, one_error_line, run, run_ok, s};
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
+use trisplat_splat::glam::Vec3;
+
+/// A template and a folder of six frames of it (a slow stretch), as PLY files.
+fn frames_case(dir: &Path) -> (PathBuf, PathBuf) {
+    let rest = read_mesh(&trisplat_fixtures::path("anim/RiggedFigure.glb")).expect("figure");
+    let template = dir.join("template.ply");
+    write_mesh(&template, &rest, WriteOptions::default()).expect("template");
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).expect("frames folder");
+    for k in 0..6 {
+        let s = 1.0 + 0.03 * k as f32;
+        let positions: Vec<Vec3> = rest
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(p.x * s, p.y, p.z / s))
+            .collect();
+        let mesh = TriMesh::new(positions, rest.triangles().to_vec());
+        write_mesh(
+            &frames.join(format!("f_{k:03}.ply")),
+            &mesh,
+            WriteOptions::default(),
+        )
+        .expect("frame");
+    }
+    (template, frames)
+}
+
+fn extract_args<'a>(template: &'a Path, frames: &'a Path, out: &'a Path) -> Vec<&'a str> {
+    vec![
+        "extract",
+        "--template",
+        s(template),
+        "--animation",
+        s(frames),
+        "--method",
+        "delaunay,alpha",
+        "--gt",
+        "template",
+        "--samples",
+        "2000",
+        "-q",
+        "-o",
+        s(out),
+    ]
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+        .expect("json")
+}
+
+/// Every output file's bytes except the journal, reports and plot (they hold timings).
+fn mesh_outputs(out: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files = Vec::new();
+    for m in ["delaunay", "alpha"] {
+        let mut names: Vec<String> = std::fs::read_dir(out.join(m))
+            .expect("method folder")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        for n in names {
+            let bytes = std::fs::read(out.join(m).join(&n)).expect("frame");
+            files.push((format!("{m}/{n}"), bytes));
+        }
+        let glb = format!("{m}.glb");
+        files.push((glb.clone(), std::fs::read(out.join(&glb)).expect("glb")));
+    }
+    files
+}
+
+#[test]
+fn a_used_folder_is_refused_unless_resumed_or_forced() {
+    let dir = fresh_dir("used");
+    let (template, frames) = frames_case(&dir);
+    let out = dir.join("out");
+    let args = extract_args(&template, &frames, &out);
+    run_ok(&args);
+    let first = mesh_outputs(&out);
+    let line = one_error_line(&run(&args));
+    assert!(
+        line.contains("previous run") && line.contains("--resume") && line.contains("--force"),
+        "{line}"
+    );
+    assert_eq!(mesh_outputs(&out), first, "the refused run changed nothing");
+    // --force starts over; --resume of a finished run redoes nothing.
+    let mut force = args.clone();
+    force.push("--force");
+    run_ok(&force);
+    let mut resume = args.clone();
+    resume.push("--resume");
+    let before = std::fs::read(out.join("journal.jsonl")).expect("journal");
+    run_ok(&resume);
+    let after = std::fs::read(out.join("journal.jsonl")).expect("journal");
+    assert!(before == after, "nothing was run again");
+    assert_eq!(report(&out)["frames"].as_array().map(Vec::len), Some(6));
+    // Resuming with other options is refused.
+    let mut other = resume.clone();
+    other.extend(["--hop-threshold", "0.1"]);
+    let line = one_error_line(&run(&other));
+    assert!(
+        line.contains("cannot resume") && line.contains("other inputs or options"),
+        "{line}"
+    );
+    // Nothing to resume.
+    let empty = dir.join("empty");
+    let mut nothing = extract_args(&template, &frames, &empty);
+    nothing.push("--resume");
+    assert!(one_error_line(&run(&nothing)).contains("nothing to resume"));
+}
+
+#[test]
+fn a_killed_run_resumes_to_the_same_bytes() {
+    let dir = fresh_dir("resume");
+    let (template, frames) = frames_case(&dir);
+    let through = dir.join("through");
+    run_ok(&extract_args(&template, &frames, &through));
+
+    // The same run, killed after frame 2: the journal lists frames 0-2 and ends in a line cut
+    // short, frame 3's files were written but not journalled, nothing after that exists.
+    let killed = dir.join("killed");
+    run_ok(&extract_args(&template, &frames, &killed));
+    let journal = std::fs::read_to_string(killed.join("journal.jsonl")).expect("journal");
+    let mut cut: String = journal.lines().take(4).map(|l| format!("{l}\n")).collect();
+    cut.push_str(r#"{"kind":"frame","frame":3,"ti"#);
+    std::fs::write(killed.join("journal.jsonl"), cut).expect("cut journal");
+    for m in ["delaunay", "alpha"] {
+        for k in 4..6 {
+            std::fs::remove_file(killed.join(m).join(format!("frame_{k:06}.ply"))).expect("rm");
+        }
+        std::fs::remove_file(killed.join(format!("{m}.glb"))).expect("rm glb");
+    }
+    for name in ["report.json", "report.md", "error_vs_time.png"] {
+        std::fs::remove_file(killed.join(name)).expect("rm report");
+    }
+    let mut resume = extract_args(&template, &frames, &killed);
+    resume.push("--resume");
+    let ran = run_ok(&resume);
+    assert!(
+        String::from_utf8_lossy(&ran.stderr).contains("resuming: 3 of 6 frame(s) already done")
+    );
+    let (a, b) = (mesh_outputs(&through), mesh_outputs(&killed));
+    assert_eq!(a.len(), b.len());
+    for ((name_a, bytes_a), (name_b, bytes_b)) in a.iter().zip(&b) {
+        assert_eq!(name_a, name_b);
+        assert!(bytes_a == bytes_b, "{name_a} differs after the resume");
+    }
+    let (ra, rb) = (report(&through), report(&killed));
+    assert_eq!(ra["frames"], rb["frames"]);
+    for m in ["delaunay", "alpha"] {
+        for k in 0..6 {
+            let metrics = |r: &serde_json::Value| r["methods"][m]["frames"][k]["metrics"].clone();
+            assert_eq!(metrics(&ra), metrics(&rb), "{m} frame {k}");
+        }
+    }
+}
+
+#[test]
+fn a_failing_frame_is_recorded_and_the_run_goes_on() {
+    let dir = fresh_dir("failing");
+    let (template, frames) = frames_case(&dir);
+    let good = std::fs::read(frames.join("f_003.ply")).expect("frame 3");
+    std::fs::write(
+        frames.join("f_003.ply"),
+        b"ply\nformat ascii 1.0\nend_header\n",
+    )
+    .expect("break frame 3");
+    let out = dir.join("out");
+    let args = extract_args(&template, &frames, &out);
+    // Exit 1; the failure is told as it happens (a warning) and summed up in the last line.
+    let ran = run(&args);
+    assert_eq!(ran.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&ran.stderr);
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(lines.len(), 2, "{stderr}");
+    assert!(
+        lines[0].starts_with("warning: frame 3 failed, the run goes on"),
+        "{stderr}"
+    );
+    let line = lines[1];
+    assert!(
+        line.starts_with("error: 1 frame(s) failed") && line.contains("frame 3"),
+        "{line}"
+    );
+    let r = report(&out);
+    assert_eq!(r["frames"], serde_json::json!([0, 1, 2, 4, 5]));
+    assert_eq!(r["failed_frames"][0]["frame"], 3);
+    assert!(out.join("delaunay/frame_000005.ply").is_file());
+    assert!(!out.join("delaunay/frame_000003.ply").exists());
+    assert!(
+        std::fs::read_to_string(out.join("report.md"))
+            .expect("md")
+            .contains("failed frames")
+    );
+    // Repaired, the frame is run on --resume and the run completes.
+    std::fs::write(frames.join("f_003.ply"), good).expect("repair frame 3");
+    let mut resume = args.clone();
+    resume.push("--resume");
+    run_ok(&resume);
+    assert_eq!(report(&out)["frames"].as_array().map(Vec::len), Some(6));
+    assert!(out.join("delaunay/frame_000003.ply").is_file());
+
+    // --fail-fast stops at the failure and keeps what was done.
+    std::fs::write(
+        frames.join("f_003.ply"),
+        b"ply\nformat ascii 1.0\nend_header\n",
+    )
+    .expect("break frame 3");
+    let fast_out = dir.join("fast");
+    let mut fast = extract_args(&template, &frames, &fast_out);
+    fast.push("--fail-fast");
+    assert!(one_error_line(&run(&fast)).contains("f_003.ply"));
+    assert!(fast_out.join("alpha/frame_000002.ply").is_file());
+    assert!(!fast_out.join("alpha/frame_000004.ply").exists());
+    assert!(!fast_out.join("report.json").exists());
+}
