@@ -61,6 +61,8 @@ pub enum Command {
     Extract(commands::extract::ExtractArgs),
     /// The main job on the bundled avatar fixture.
     Demo(commands::demo::DemoArgs),
+    /// Join extract runs over disjoint frame ranges (shards) into one run folder.
+    Merge(commands::merge::MergeArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -104,5 +106,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Cameras(args) => commands::cameras::run(args, &ctx),
         Command::Extract(args) => commands::extract::run(args, &ctx),
         Command::Demo(args) => commands::demo::run(args, &ctx),
+        Command::Merge(args) => commands::merge::run(args, &ctx),
     }
 }

@@ -225,3 +225,79 @@ fn a_failing_frame_is_recorded_and_the_run_goes_on() {
     assert!(!fast_out.join("alpha/frame_000004.ply").exists());
     assert!(!fast_out.join("report.json").exists());
 }
+
+#[test]
+fn two_shards_merge_to_one_run() {
+    let dir = fresh_dir("shards");
+    let (template, frames) = frames_case(&dir);
+    let through = dir.join("through");
+    run_ok(&extract_args(&template, &frames, &through));
+    let shard = |name: &str, range: &'static str| {
+        let out = dir.join(name);
+        let mut args = extract_args(&template, &frames, &out);
+        args.extend(["--frames", range]);
+        run_ok(&args);
+        out
+    };
+    let (a, b) = (shard("a", "0..3"), shard("b", "3..6"));
+    let merged = dir.join("merged");
+    // Shards in any order.
+    run_ok(&["merge", s(&b), s(&a), "-q", "-o", s(&merged)]);
+    let (x, y) = (mesh_outputs(&through), mesh_outputs(&merged));
+    assert_eq!(x.len(), y.len());
+    for ((name_x, bytes_x), (name_y, bytes_y)) in x.iter().zip(&y) {
+        assert_eq!(name_x, name_y);
+        assert!(bytes_x == bytes_y, "{name_x} differs after the merge");
+    }
+    let (rx, ry) = (report(&through), report(&merged));
+    for key in [
+        "frames",
+        "frame_times",
+        "resolved",
+        "gaussian_count",
+        "failed_frames",
+    ] {
+        assert_eq!(rx[key], ry[key], "{key}");
+    }
+    for m in ["delaunay", "alpha"] {
+        for k in 0..6 {
+            let metrics = |r: &serde_json::Value| r["methods"][m]["frames"][k]["metrics"].clone();
+            assert_eq!(metrics(&rx), metrics(&ry), "{m} frame {k}");
+        }
+        let fscore = |r: &serde_json::Value| r["methods"][m]["mean"]["fscore"].clone();
+        assert_eq!(fscore(&rx), fscore(&ry), "{m} mean");
+    }
+    assert_eq!(
+        rx["methods"]["delaunay"]["delaunay"]["frames"]
+            .as_array()
+            .map(Vec::len),
+        ry["methods"]["delaunay"]["delaunay"]["frames"]
+            .as_array()
+            .map(Vec::len)
+    );
+
+    // Overlapping shards, another job, the output among the shards, a used output: refused.
+    let overlap = shard("overlap", "2..4");
+    let line = one_error_line(&run(&[
+        "merge",
+        s(&a),
+        s(&overlap),
+        "-o",
+        s(&dir.join("m2")),
+    ]));
+    assert!(line.contains("frame 2 is also in shard"), "{line}");
+    let other = dir.join("other");
+    let mut args = extract_args(&template, &frames, &other);
+    args.extend(["--frames", "3..6", "--tau", "0.01"]);
+    run_ok(&args);
+    let line = one_error_line(&run(&["merge", s(&a), s(&other), "-o", s(&dir.join("m3"))]));
+    assert!(
+        line.contains("another job") && line.contains("tau"),
+        "{line}"
+    );
+    let line = one_error_line(&run(&["merge", s(&a), s(&b), "-o", s(&a)]));
+    assert!(line.contains("is also the output folder"), "{line}");
+    let line = one_error_line(&run(&["merge", s(&a), s(&b), "-o", s(&merged)]));
+    assert!(line.contains("previous run"), "{line}");
+    run_ok(&["merge", s(&a), s(&b), "-q", "-o", s(&merged), "--force"]);
+}

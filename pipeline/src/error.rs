@@ -284,6 +284,14 @@ pub enum PipelineError {
         /// Why.
         problem: String,
     },
+    /// Shards that cannot be merged.
+    #[error("{path}: cannot merge: {problem}")]
+    Merge {
+        /// The shard folder or file at fault.
+        path: PathBuf,
+        /// Why.
+        problem: String,
+    },
     /// A broken invariant of the pipeline itself (a bug: please report it).
     #[error("internal error: {what}")]
     Internal {

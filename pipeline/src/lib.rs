@@ -62,6 +62,7 @@ pub mod error;
 mod font;
 pub mod input;
 pub mod journal;
+pub mod merge;
 pub mod methods;
 pub mod output;
 pub mod plan;

@@ -105,7 +105,7 @@ pub fn mean_spacing(points: &[Vec3]) -> Option<f64> {
 }
 
 /// Scale-derived parameters of the methods, resolved once for the run.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Resolved {
     /// Bounding radius of the rest template (about its box centre).
     pub template_radius: f64,

@@ -204,7 +204,7 @@ impl DelaunayFrame {
 }
 
 /// The incremental Delaunay's work over the frames (delaunay only).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DelaunayStats {
     /// Charts: one per template triangle.
     pub charts: usize,
@@ -246,7 +246,7 @@ impl DelaunayStats {
 }
 
 /// Means of one method over the frames.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Summary {
     /// Frames meshed.
     pub frames: usize,
@@ -311,7 +311,7 @@ impl Summary {
 }
 
 /// Everything about one method.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MethodReport {
     /// The method.
     pub method: Method,
@@ -335,7 +335,7 @@ pub struct MethodReport {
 }
 
 /// The whole run (report.json).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Report {
     /// trisplat version.
     pub version: String,

@@ -52,7 +52,7 @@ pub enum Progress {
 
 /// The per-frame mesh files of each method, in frame order: the animated glTF is assembled
 /// from them at the end, one frame at a time (no frame's mesh stays in memory).
-type FrameFilesByMethod = BTreeMap<Method, Vec<PathBuf>>;
+pub(crate) type FrameFilesByMethod = BTreeMap<Method, Vec<PathBuf>>;
 
 /// Runs the main job and writes every output (see the crate docs); returns the report.
 /// `progress` is told when frames are done.
@@ -273,19 +273,26 @@ fn open_journal(
     if control.resume {
         return Journal::resume(out, config);
     }
+    refuse_used_output(out, control.force)?;
+    Ok((Journal::create(out, config)?, Previous::default()))
+}
+
+/// Refuses an output folder that holds a previous run (its journal or report), unless `force`:
+/// then that run's outputs are removed first.
+pub(crate) fn refuse_used_output(out: &Path, force: bool) -> Result<(), PipelineError> {
     let marks = [JOURNAL, REPORT_JSON];
-    if let Some(found) = marks.iter().find(|m| out.join(m).exists()) {
-        if !control.force {
-            return Err(PipelineError::UsedOutput {
-                path: out.to_path_buf(),
-                found: (*found).to_owned(),
-            });
-        }
-        remove_previous_outputs(out);
-    } else if control.force {
+    if let Some(found) = marks.iter().find(|m| out.join(m).exists())
+        && !force
+    {
+        return Err(PipelineError::UsedOutput {
+            path: out.to_path_buf(),
+            found: (*found).to_owned(),
+        });
+    }
+    if force {
         remove_previous_outputs(out);
     }
-    Ok((Journal::create(out, config)?, Previous::default()))
+    Ok(())
 }
 
 /// Removes what a previous run wrote into `out`: journal, reports, plot, every method's frame
@@ -348,7 +355,7 @@ fn check_outputs(
 
 /// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
 /// report), the report files and the plot.
-fn write_outputs(
+pub(crate) fn write_outputs(
     out: &Path,
     report: &mut Report,
     frame_files: &FrameFilesByMethod,

@@ -1,0 +1,51 @@
+//! `trisplat merge SHARD... -o DIR [--force]`: joins `extract` runs over disjoint frame ranges
+//! into one run folder.
+
+use std::path::PathBuf;
+
+use super::Context;
+use super::extract::{fail_on_failed_frames, print_summary};
+
+/// Arguments of `trisplat merge`.
+#[derive(Debug, clap::Args)]
+#[command(after_long_help = "\
+Joins shards of one extract job, each run into its own folder with its own --frames A..B (on \
+one machine or many: a Slurm array or a Kubernetes indexed job runs shard i with --frames \
+i*N..(i+1)*N, then one merge), into DIR: every shard's frame files (hard links where possible), \
+one animated glTF per method assembled from them, and report.json/report.md/error_vs_time.png \
+over all frames. The shards must be the same job (same inputs, options and version; only \
+--frames differs) and no frame may be in two shards. Frame files and glTF are then \
+byte-identical to one run over all frames (at the default --hop-threshold 0); the report \
+differs only in the timings. See docs/shards.md.")]
+pub struct MergeArgs {
+    /// Shard folders (finished `extract` runs).
+    #[arg(required = true, value_name = "SHARD")]
+    pub shards: Vec<PathBuf>,
+    /// Output folder (created if missing).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: PathBuf,
+    /// Start over in an output folder that holds a run (its outputs are removed).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Runs `trisplat merge`.
+///
+/// # Errors
+/// Shards that are not one job, overlap or miss files (named); write errors.
+pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.output).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: cannot create the output folder: {e}",
+            args.output.display()
+        )
+    })?;
+    let spinner = ctx
+        .progress
+        .spinner("merge: linking frames, writing sequences and report");
+    let result = trisplat_pipeline::merge::merge(&args.shards, &args.output, args.force);
+    spinner.finish_and_clear();
+    let report = result?;
+    print_summary(&report, &args.output);
+    fail_on_failed_frames(&report)
+}

@@ -1,0 +1,209 @@
+//! Shards joined into one run: `trisplat extract --frames A..B` run into separate folders
+//! (on one machine or many, e.g. a Slurm array or a Kubernetes indexed job), then
+//! `trisplat merge SHARD... -o DIR` writes what one run over all their frames would have.
+//!
+//! Each shard is a finished run folder (its `report.json` and frame files). The shards must be
+//! the same job: same version, template, animation, Gaussians, mode, ground truth, metric
+//! settings, resolved parameters and methods with the same parameters; only the frames differ,
+//! and no frame may be in two shards. The merged folder gets every shard's frame files (hard
+//! links where the file system allows, else copies), one animated glTF per method assembled
+//! from them (in parts past 4 GiB), and a report whose frames, per-frame records, failures,
+//! means and Delaunay statistics are those of all shards in frame order. Frame files, and
+//! hence the glTF, are byte-identical to one run's at the default `--hop-threshold 0` (each
+//! shard's incremental Delaunay starts with a rebuild, which equals the incremental update
+//! there); the report differs only in the timings.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use trisplat_geometry::io::IoError;
+
+use crate::error::PipelineError;
+use crate::report::{DelaunayStats, MethodReport, Report, Summary};
+use crate::run::{FrameFilesByMethod, REPORT_JSON, frame_file, refuse_used_output, write_outputs};
+
+/// Merges the finished shard runs in `shards` into `out` (see the module docs); returns the
+/// merged report. `force`: start over in an output folder that holds a run.
+///
+/// # Errors
+/// [`PipelineError::Merge`] naming the shard for a missing or unreadable report, a shard of
+/// another job (and the field that differs), a frame in two shards, a missing frame file, the
+/// output folder being a shard; [`PipelineError::UsedOutput`] for an output folder holding a
+/// run (without `force`); write errors.
+pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, PipelineError> {
+    let bad = |path: &Path, problem: String| PipelineError::Merge {
+        path: path.to_path_buf(),
+        problem,
+    };
+    if shards.is_empty() {
+        return Err(bad(out, "no shard folders to merge".to_owned()));
+    }
+    let mut reports = Vec::with_capacity(shards.len());
+    for shard in shards {
+        if same_folder(shard, out) {
+            return Err(bad(shard, "is also the output folder".to_owned()));
+        }
+        let path = shard.join(REPORT_JSON);
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            bad(
+                &path,
+                format!("cannot read the shard's report ({e}); is the run finished?"),
+            )
+        })?;
+        let report: Report = serde_json::from_str(&text)
+            .map_err(|e| bad(&path, format!("not a trisplat report: {e}")))?;
+        reports.push((shard.as_path(), report));
+    }
+    let (first_shard, first) = (reports[0].0, &reports[0].1);
+    for (shard, r) in &reports[1..] {
+        if let Some(field) = job_difference(first, r) {
+            return Err(bad(
+                shard,
+                format!(
+                    "is another job than {}: its {field} differs (shards must differ only in \
+                     --frames)",
+                    first_shard.display()
+                ),
+            ));
+        }
+    }
+    // Every frame once, in order, with the shard that made it.
+    let mut owner: BTreeMap<usize, usize> = BTreeMap::new();
+    for (i, (shard, r)) in reports.iter().enumerate() {
+        for &f in r
+            .frames
+            .iter()
+            .chain(r.failed_frames.iter().map(|x| &x.frame))
+        {
+            if let Some(&j) = owner.get(&f) {
+                return Err(bad(
+                    shard,
+                    format!("frame {f} is also in shard {}", reports[j].0.display()),
+                ));
+            }
+            owner.insert(f, i);
+        }
+    }
+    refuse_used_output(out, force)?;
+    let merged = merged_report(&reports);
+    // The frame files, linked or copied into the merged folder.
+    let mut frame_files: FrameFilesByMethod = BTreeMap::new();
+    for m in merged.methods.values() {
+        let dir = out.join(&m.ply_dir);
+        std::fs::create_dir_all(&dir).map_err(|cause| PipelineError::OutputDir {
+            path: dir.clone(),
+            cause,
+        })?;
+        for record in &m.frames {
+            let shard = reports[owner[&record.frame]].0;
+            let name = frame_file(record.frame);
+            let src = shard.join(&m.ply_dir).join(&name);
+            if !src.is_file() {
+                return Err(bad(
+                    &src,
+                    "frame file listed in the shard's report is missing".to_owned(),
+                ));
+            }
+            let dst = dir.join(&name);
+            let _ = std::fs::remove_file(&dst);
+            if std::fs::hard_link(&src, &dst).is_err() {
+                std::fs::copy(&src, &dst).map_err(|e| PipelineError::Io(IoError::os(&dst, e)))?;
+            }
+            frame_files.entry(m.method).or_default().push(dst);
+        }
+    }
+    let mut merged = merged;
+    write_outputs(out, &mut merged, &frame_files)?;
+    Ok(merged)
+}
+
+/// The first field (by report name) in which two shard reports are not the same job.
+fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
+    let fields: [(&'static str, bool); 13] = [
+        ("version", a.version == b.version),
+        ("template", a.template == b.template),
+        (
+            "template_vertices",
+            a.template_vertices == b.template_vertices,
+        ),
+        ("welded_vertices", a.welded_vertices == b.welded_vertices),
+        ("animation", a.animation == b.animation),
+        ("gaussians", a.gaussians == b.gaussians),
+        ("gaussian_count", a.gaussian_count == b.gaussian_count),
+        ("mode", a.mode == b.mode),
+        ("ground_truth", a.ground_truth == b.ground_truth),
+        ("samples", a.samples == b.samples),
+        ("tau", a.tau == b.tau),
+        ("resolved", a.resolved == b.resolved),
+        (
+            "methods",
+            a.methods.len() == b.methods.len()
+                && a.methods.iter().all(|(name, m)| {
+                    b.methods
+                        .get(name)
+                        .is_some_and(|n| n.parameters == m.parameters)
+                }),
+        ),
+    ];
+    fields.iter().find(|(_, same)| !same).map(|(name, _)| *name)
+}
+
+/// One report over the frames of all shards, in frame order.
+fn merged_report(reports: &[(&Path, Report)]) -> Report {
+    let mut rows: Vec<(usize, f64, f64)> = reports
+        .iter()
+        .flat_map(|(_, r)| {
+            r.frames
+                .iter()
+                .zip(&r.frame_times)
+                .zip(&r.deform_ms)
+                .map(|((&f, &t), &d)| (f, t, d))
+        })
+        .collect();
+    rows.sort_by_key(|row| row.0);
+    let mut merged = reports[0].1.clone();
+    merged.frames = rows.iter().map(|r| r.0).collect();
+    merged.frame_times = rows.iter().map(|r| r.1).collect();
+    merged.deform_ms = rows.iter().map(|r| r.2).collect();
+    merged.failed_frames = reports
+        .iter()
+        .flat_map(|(_, r)| r.failed_frames.iter().cloned())
+        .collect();
+    merged.failed_frames.sort_by_key(|f| f.frame);
+    for (name, m) in &mut merged.methods {
+        let mut frames: Vec<_> = reports
+            .iter()
+            .filter_map(|(_, r)| r.methods.get(name))
+            .flat_map(|x| x.frames.iter().cloned())
+            .collect();
+        frames.sort_by_key(|r| r.frame);
+        let delaunay = m.delaunay.as_ref().map(|d| {
+            let mut per_frame: Vec<_> = reports
+                .iter()
+                .filter_map(|(_, r)| r.methods.get(name).and_then(|x| x.delaunay.as_ref()))
+                .flat_map(|x| x.frames.iter().copied())
+                .collect();
+            per_frame.sort_by_key(|f| f.frame);
+            DelaunayStats::new(d.charts, d.gaussians, per_frame)
+        });
+        *m = MethodReport {
+            method: m.method,
+            parameters: m.parameters.clone(),
+            mean: Summary::of(&frames),
+            frames,
+            ply_dir: m.ply_dir.clone(),
+            glb: m.glb.clone(),
+            glb_parts: Vec::new(),
+            delaunay,
+        };
+    }
+    merged
+}
+
+/// Whether two paths name the same folder (by their canonical forms when both exist).
+fn same_folder(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
