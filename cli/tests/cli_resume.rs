@@ -301,3 +301,65 @@ fn two_shards_merge_to_one_run() {
     assert!(line.contains("previous run"), "{line}");
     run_ok(&["merge", s(&a), s(&b), "-q", "-o", s(&merged), "--force"]);
 }
+
+/// `--gt-sequence`: one ground-truth mesh per frame. The frames of the animation themselves as
+/// ground truth score as `--gt template` does (the same surfaces); a sequence shorter than the
+/// frames is refused naming the option; `--gt` and `--gt-sequence` exclude each other.
+#[test]
+fn a_ground_truth_per_frame() {
+    let dir = fresh_dir("gt_sequence");
+    let (template, frames) = frames_case(&dir);
+    let by_template = dir.join("by_template");
+    run_ok(&extract_args(&template, &frames, &by_template));
+    let by_sequence = dir.join("by_sequence");
+    let args: Vec<&str> = extract_args(&template, &frames, &by_sequence)
+        .into_iter()
+        .map(|a| if a == "template" { s(&frames) } else { a })
+        .collect();
+    let args: Vec<&str> = args
+        .iter()
+        .map(|a| if *a == "--gt" { "--gt-sequence" } else { a })
+        .collect();
+    run_ok(&args);
+    let (a, b) = (report(&by_template), report(&by_sequence));
+    assert_eq!(b["ground_truth"], serde_json::json!(s(&frames)));
+    for m in ["delaunay", "alpha"] {
+        for k in 0..6 {
+            let chamfer = |r: &serde_json::Value| {
+                r["methods"][m]["frames"][k]["metrics"]["chamfer_l1"]
+                    .as_f64()
+                    .expect("measured")
+            };
+            let (x, y) = (chamfer(&a), chamfer(&b));
+            assert!(
+                (x - y).abs() <= 0.05 * x.max(y) + 1e-9,
+                "{m} frame {k}: {x} vs {y}"
+            );
+        }
+    }
+    // Too short: only 4 meshes for 6 frames.
+    let short = dir.join("short");
+    std::fs::create_dir_all(&short).expect("folder");
+    for k in 0..4 {
+        let name = format!("f_{k:03}.ply");
+        std::fs::copy(frames.join(&name), short.join(&name)).expect("copy");
+    }
+    let short_out = dir.join("short_out");
+    let mut too_short = args.clone();
+    let gt_at = too_short
+        .iter()
+        .position(|a| *a == "--gt-sequence")
+        .expect("flag")
+        + 1;
+    too_short[gt_at] = s(&short);
+    let out_at = too_short.len() - 1;
+    too_short[out_at] = s(&short_out);
+    let line = one_error_line(&run(&too_short));
+    assert!(
+        line.contains("--gt-sequence") && line.contains("4 mesh file(s)"),
+        "{line}"
+    );
+    let mut both = args.clone();
+    both.extend(["--gt", "template"]);
+    assert_eq!(run(&both).status.code(), Some(2));
+}

@@ -122,6 +122,10 @@ pub enum GroundTruth {
     Template,
     /// One static mesh for every frame.
     Mesh(PathBuf),
+    /// One mesh per frame (`--gt-sequence`): a folder or pattern of OBJ/PLY files, taken in
+    /// order, the file at position `i` being the ground truth of animation frame `i`; their
+    /// topologies may differ (scans).
+    Sequence(String),
 }
 
 impl GroundTruth {
@@ -141,6 +145,7 @@ impl GroundTruth {
         match self {
             Self::Template => "template".to_owned(),
             Self::Mesh(p) => p.display().to_string(),
+            Self::Sequence(spec) => spec.clone(),
         }
     }
 }

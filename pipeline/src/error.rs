@@ -284,6 +284,14 @@ pub enum PipelineError {
         /// Why.
         problem: String,
     },
+    /// A `--gt-sequence` that cannot serve the frames.
+    #[error("--gt-sequence {spec}: {problem}")]
+    GtSequence {
+        /// The folder or pattern.
+        spec: String,
+        /// Why.
+        problem: String,
+    },
     /// Shards that cannot be merged.
     #[error("{path}: cannot merge: {problem}")]
     Merge {

@@ -185,6 +185,7 @@ impl Plan {
                 let against = match gt {
                     GroundTruth::Template => "each frame's deformed template".to_owned(),
                     GroundTruth::Mesh(p) => format!("the static mesh {}", p.display()),
+                    GroundTruth::Sequence(spec) => format!("one mesh per frame from {spec}"),
                 };
                 push(
                     Stage::Metrics,

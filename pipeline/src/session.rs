@@ -19,6 +19,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use trisplat_geometry::TriMesh;
+use trisplat_geometry::animation::MeshSequence;
 use trisplat_geometry::io::read_mesh;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{Deformer, WorldGeometry};
@@ -101,6 +102,8 @@ pub struct Session {
     meshers: Vec<(Method, Mesher)>,
     gt: Option<GroundTruth>,
     static_gt: Option<GtSamples>,
+    /// `--gt-sequence`: the ground-truth mesh file of each animation frame.
+    gt_files: Vec<PathBuf>,
     samples: usize,
     tau: f64,
     fps: f64,
@@ -204,6 +207,28 @@ impl Session {
             }
             _ => None,
         };
+        // Per-frame ground truth: the file list now, each mesh when its frame comes.
+        let gt_files = match (&config.gt, plan.runs(Stage::Metrics)) {
+            (Some(GroundTruth::Sequence(spec)), true) => {
+                let sequence = MeshSequence::from_pattern(spec)?;
+                let files = sequence.files().to_vec();
+                if files.len() < frames.end {
+                    return Err(PipelineError::GtSequence {
+                        spec: spec.clone(),
+                        problem: format!(
+                            "{} mesh file(s), but frame {} needs {} (one per animation frame, \
+                             in order)",
+                            files.len(),
+                            frames.end - 1,
+                            frames.end
+                        ),
+                    });
+                }
+                input_files.extend(files.iter().cloned());
+                files
+            }
+            _ => Vec::new(),
+        };
 
         let template = &welded.mesh;
         let gaussians_path = config.gaussians.clone().unwrap_or_default();
@@ -271,6 +296,7 @@ impl Session {
             meshers,
             gt: config.gt.clone(),
             static_gt,
+            gt_files,
             samples: o.samples,
             tau: o.tau,
             fps: o.fps,
@@ -480,6 +506,18 @@ impl Session {
                         frame,
                     })?,
                 )
+            }
+            (Some(GroundTruth::Sequence(_)), true) => {
+                let path = self.gt_files.get(frame).ok_or(PipelineError::Internal {
+                    what: "a frame past the checked ground-truth sequence",
+                })?;
+                let mesh = read_mesh(path)?;
+                Some(GtSamples::new(mesh, self.samples).ok_or_else(|| {
+                    PipelineError::EmptyGroundTruth {
+                        gt: path.display().to_string(),
+                        frame,
+                    }
+                })?)
             }
             _ => None,
         };

@@ -47,7 +47,8 @@ and whether the frame was rebuilt.
 nearest-neighbour spacing of the rest-pose means (3 x leaves holes on real templates).
 
 --gt GT: a mesh file (a static ground truth for every frame) or the word `template`: each \
-frame's deformed template. Metrics as `trisplat eval --surface` (docs/conventions.md §8): --samples points per \
+frame's deformed template; --gt-sequence DIR|PATTERN: one mesh per frame (a folder or pattern of \
+OBJ/PLY files in natural order, file i for animation frame i; scans may differ in topology). Metrics as `trisplat eval --surface` (docs/conventions.md §8): --samples points per \
 mesh, exact point-to-triangle distances, Chamfer L1/L2, normal consistency, F-score at --tau.
 
 Outputs in DIR: <method>/frame_NNNNNN.ply (NNNNNN = the animation's frame index), <method>.glb \
@@ -95,6 +96,10 @@ pub struct ExtractArgs {
     /// Ground truth: a mesh file, or `template` for each frame's deformed template.
     #[arg(long, value_name = "GT")]
     pub gt: Option<String>,
+    /// Ground truth per frame: a folder or pattern of OBJ/PLY meshes (e.g. scans), the i-th
+    /// file for animation frame i.
+    #[arg(long, value_name = "DIR|PATTERN", conflicts_with = "gt")]
+    pub gt_sequence: Option<String>,
     /// Print the stages (run or skipped, and why) and exit without running.
     #[arg(long)]
     pub explain: bool,
@@ -115,7 +120,11 @@ impl ExtractArgs {
             methods: self.methods,
             output: self.output,
             frames: self.frames,
-            gt: self.gt.as_deref().map(GroundTruth::parse),
+            gt: self
+                .gt
+                .as_deref()
+                .map(GroundTruth::parse)
+                .or(self.gt_sequence.map(GroundTruth::Sequence)),
             options: self.options,
         }
     }
