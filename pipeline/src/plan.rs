@@ -87,7 +87,11 @@ impl Plan {
             Some(g) => push(
                 Stage::Bind,
                 false,
-                format!("--gaussians {} is already bound", g.display()),
+                format!(
+                    "--gaussians {} given: read as bound Gaussians (a file without a triangle \
+                     binding, or bound to another template, is refused when the run reads it)",
+                    g.display()
+                ),
             ),
             None => push(
                 Stage::Bind,
@@ -277,7 +281,10 @@ mod tests {
         assert!(Plan::new(&config(&[Method::Alpha], false, None)).runs(Stage::Bind));
         let p = Plan::new(&config(&[Method::Alpha], true, None));
         assert!(!p.runs(Stage::Bind));
-        assert!(p.to_string().contains("g.ply is already bound"));
+        assert!(
+            p.to_string()
+                .contains("g.ply given: read as bound Gaussians")
+        );
     }
 
     #[test]

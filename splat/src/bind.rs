@@ -63,6 +63,47 @@ pub enum BindError {
     /// Too many Gaussians for `u32` triangle ids or counts.
     #[error("too many Gaussians or triangles")]
     TooMany,
+    /// The attachment is not plausible (see [`AttachLimits`]): the message names the numbers.
+    #[error("{0}")]
+    Implausible(String),
+}
+
+/// Plausibility limits of [`attach_checked`]: a binding that breaks one is almost always a
+/// mistake of units or frames (Gaussians in another coordinate frame than the template, offsets
+/// taken for positions), and the avatar it makes is garbage even though every Gaussian has a
+/// triangle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttachLimits {
+    /// Largest ratio (either way) of the bounding-box diagonals of the Gaussian means and the
+    /// template (3: hair and accessories make real avatars' Gaussians up to ~1.5x their mesh).
+    pub max_size_ratio: f64,
+    /// Largest median distance from a Gaussian centre to its triangle, in mean template edge
+    /// lengths (25: LAM's real Gaussians sit a median 7.5 edges off their dense head mesh).
+    pub max_median_distance_edges: f64,
+    /// Largest share of all Gaussians on one triangle (0.25), checked from 64 Gaussians and 16
+    /// triangles up.
+    pub max_triangle_share: f64,
+}
+
+impl Default for AttachLimits {
+    fn default() -> Self {
+        Self {
+            max_size_ratio: 3.0,
+            max_median_distance_edges: 25.0,
+            max_triangle_share: 0.25,
+        }
+    }
+}
+
+/// What [`attach_checked`] measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttachStats {
+    /// Bounding-box diagonal of the Gaussian means over the template's.
+    pub size_ratio: f64,
+    /// Median distance from a centre to its triangle, in mean template edge lengths.
+    pub median_distance_edges: f64,
+    /// Largest share of the Gaussians bound to one triangle, and that triangle.
+    pub triangle_share: (f64, u32),
 }
 
 /// The `j`-th of `n` sample points in a triangle, as (u, v) weights of the edges `v1 - v0`,
@@ -142,6 +183,108 @@ pub fn attach(
     mesh: &TriMesh,
     convention: Convention,
 ) -> Result<GaussianSet, BindError> {
+    attach_with_distances(world, mesh, convention).map(|(set, _)| set)
+}
+
+/// [`attach`], refused when the result is implausible (see [`AttachLimits`]); returns the
+/// bound set and what was measured.
+///
+/// # Errors
+/// As [`attach`], and [`BindError::Implausible`] naming the number that broke its limit.
+pub fn attach_checked(
+    world: &GaussianSet,
+    mesh: &TriMesh,
+    convention: Convention,
+    limits: &AttachLimits,
+) -> Result<(GaussianSet, AttachStats), BindError> {
+    let (set, distances) = attach_with_distances(world, mesh, convention)?;
+    let stats = attach_stats(world, mesh, &set, distances);
+    let n = world.len();
+    if stats.size_ratio > limits.max_size_ratio || stats.size_ratio < 1.0 / limits.max_size_ratio {
+        return Err(BindError::Implausible(format!(
+            "the Gaussians span {:.3}x the template's bounding-box diagonal (limit {}x either \
+             way): are they in the template's units and coordinate frame?",
+            stats.size_ratio, limits.max_size_ratio
+        )));
+    }
+    if stats.median_distance_edges > limits.max_median_distance_edges {
+        return Err(BindError::Implausible(format!(
+            "the median Gaussian centre lies {:.1} mean template edges from its triangle (limit \
+             {}): are the Gaussians placed on this template?",
+            stats.median_distance_edges, limits.max_median_distance_edges
+        )));
+    }
+    let (share, triangle) = stats.triangle_share;
+    if n >= 64 && mesh.triangle_count() >= 16 && share > limits.max_triangle_share {
+        return Err(BindError::Implausible(format!(
+            "{:.1}% of the {n} Gaussians bind to triangle {triangle} alone (limit {}%): the \
+             Gaussians are not spread over the template",
+            100.0 * share,
+            100.0 * limits.max_triangle_share
+        )));
+    }
+    Ok((set, stats))
+}
+
+/// The plausibility numbers of an attachment (`distances`: each centre to its triangle).
+fn attach_stats(
+    world: &GaussianSet,
+    mesh: &TriMesh,
+    bound: &GaussianSet,
+    mut distances: Vec<f64>,
+) -> AttachStats {
+    let diagonal =
+        |b: Option<trisplat_geometry::mesh::Aabb>| b.map_or(0.0, |b| f64::from(b.diagonal()));
+    let template = diagonal(mesh.bounds());
+    let gaussians = diagonal(trisplat_geometry::mesh::Aabb::from_points(world.means()));
+    let size_ratio = if template > 0.0 {
+        gaussians / template
+    } else {
+        1.0
+    };
+    let (edge_sum, edges) = mesh.triangles().iter().fold((0.0, 0usize), |(s, n), t| {
+        let [a, b, c] = corners_of(mesh.positions(), *t);
+        (
+            s + (b - a).length() + (c - b).length() + (a - c).length(),
+            n + 3,
+        )
+    });
+    let mean_edge = if edges > 0 {
+        edge_sum / edges as f64
+    } else {
+        0.0
+    };
+    distances.sort_by(f64::total_cmp);
+    let median = distances.get(distances.len() / 2).copied().unwrap_or(0.0);
+    let median_distance_edges = if mean_edge > 0.0 {
+        median / mean_edge
+    } else {
+        0.0
+    };
+    let mut counts = vec![0u32; mesh.triangle_count()];
+    for t in bound.binding().map_or(&[][..], |b| b.triangles.as_slice()) {
+        if let Some(c) = counts.get_mut(t.0 as usize) {
+            *c += 1;
+        }
+    }
+    let (triangle, most) = counts
+        .iter()
+        .enumerate()
+        .max_by_key(|(_, c)| **c)
+        .map_or((0, 0), |(t, c)| (t as u32, *c));
+    AttachStats {
+        size_ratio,
+        median_distance_edges,
+        triangle_share: (f64::from(most) / world.len().max(1) as f64, triangle),
+    }
+}
+
+/// [`attach`] and the distance from each centre to its triangle.
+fn attach_with_distances(
+    world: &GaussianSet,
+    mesh: &TriMesh,
+    convention: Convention,
+) -> Result<(GaussianSet, Vec<f64>), BindError> {
     if world.space() != ParameterSpace::World {
         return Err(BindError::NotWorld);
     }
@@ -187,5 +330,6 @@ pub fn attach(
         encoding: BindingEncoding::Float,
     });
     parts.space = ParameterSpace::Local;
-    Ok(GaussianSet::new_unchecked(parts))
+    let distances = nearest.iter().map(|c| c.distance).collect();
+    Ok((GaussianSet::new_unchecked(parts), distances))
 }

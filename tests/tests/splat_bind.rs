@@ -4,7 +4,9 @@
 use std::path::Path;
 
 use trisplat_geometry::rng::Rng;
-use trisplat_splat::bind::{BindOptions, attach, init_bound};
+use trisplat_splat::bind::{
+    AttachLimits, BindError, BindOptions, attach, attach_checked, init_bound,
+};
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::frames::Convention;
 use trisplat_splat::glam::{DMat3, Vec3};
@@ -115,4 +117,60 @@ fn initial_gaussians_sit_on_their_triangles() {
             }
         }
     }
+}
+
+/// `attach_checked` passes Gaussians placed on the template and refuses the usual mistakes,
+/// each with the number that broke its limit: another unit (9.9x), another frame (moved off
+/// the template), all on one spot.
+#[test]
+fn implausible_attachments_are_refused_with_their_numbers() {
+    let mesh = trisplat_fixtures::spot().unwrap();
+    let limits = AttachLimits::default();
+    let world = world_set(&mesh, 3000);
+    let (_, stats) = attach_checked(&world, &mesh, Convention::GaussianAvatars, &limits)
+        .expect("placed on the template");
+    assert!((0.8..1.25).contains(&stats.size_ratio), "{stats:?}");
+    assert!(stats.median_distance_edges < 1.0, "{stats:?}");
+    assert!(stats.triangle_share.0 < 0.01, "{stats:?}");
+    let with_means = |f: &dyn Fn(usize, Vec3) -> Vec3| {
+        let mut parts = world.clone().into_parts();
+        for (i, m) in parts.means.iter_mut().enumerate() {
+            *m = f(i, *m);
+        }
+        GaussianSet::try_new(parts).unwrap()
+    };
+    let centre = mesh.bounds().unwrap().center();
+    let diag = mesh.bounds().unwrap().diagonal();
+    let refused = |set: &GaussianSet| match attach_checked(
+        set,
+        &mesh,
+        Convention::GaussianAvatars,
+        &limits,
+    ) {
+        Err(BindError::Implausible(message)) => message,
+        other => panic!("{:?}", other.map(|(_, s)| s)),
+    };
+    let scaled = refused(&with_means(&|_, m| centre + (m - centre) * 9.9));
+    assert!(
+        scaled.contains("span 9.") && scaled.contains("limit 3x"),
+        "{scaled}"
+    );
+    let moved = refused(&with_means(&|_, m| m + Vec3::X * 2.0 * diag));
+    assert!(
+        moved.contains("mean template edges") && moved.contains("limit 25"),
+        "{moved}"
+    );
+    let triangle = mesh.corners(100);
+    let spot = (triangle[0] + triangle[1] + triangle[2]) / 3.0;
+    let piled = refused(&with_means(&|i, m| if i % 2 == 0 { spot } else { m }));
+    assert!(piled.contains("bind to triangle 100 alone"), "{piled}");
+    // The unchecked primitive binds them all the same.
+    assert!(
+        attach(
+            &with_means(&|_, m| m * 9.9),
+            &mesh,
+            Convention::GaussianAvatars
+        )
+        .is_ok()
+    );
 }

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use trisplat_pipeline::input::read_template;
-use trisplat_splat::bind::{BindOptions, DEFAULT_INITIAL_OPACITY, attach, init_bound};
+use trisplat_splat::bind::{
+    AttachLimits, BindOptions, DEFAULT_INITIAL_OPACITY, attach, attach_checked, init_bound,
+};
 use trisplat_splat::frames::Convention;
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 
@@ -44,7 +46,12 @@ impl From<ConventionArg> for Convention {
     the N Gaussians cover about the area one would.\n\n\
     With --gaussians WORLD.ply, existing world-space Gaussians (any 3DGS PLY) are attached to \
     the triangle whose surface is nearest to their centre (exact closest point, BVH) and \
-    expressed in its frame; colours, opacities and extra properties are kept.\n\n\
+    expressed in its frame; colours, opacities and extra properties are kept. The result is \
+    refused when it is implausible, naming the number: the Gaussians' bounding box more than 3x \
+    (or less than 1/3) the template's, a median centre more than 25 mean template edges from its \
+    triangle, or over 25% of the Gaussians on one triangle (from 64 Gaussians and 16 triangles) \
+    - signs of other units, another coordinate frame, or offsets taken for positions. \
+    --unchecked binds anyway.\n\n\
     The convention picks the frame: gaussianavatars (for deform --mode binding or lbs) or \
     surfhead (for deform --mode jacobian). Both use the template's positions as given (its rest \
     shape)."
@@ -65,6 +72,9 @@ pub struct BindArgs {
     /// Attach these world-space Gaussians (a 3DGS PLY) instead of initialising new ones.
     #[arg(long, value_name = "WORLD.ply", conflicts_with = "per_triangle")]
     pub gaussians: Option<PathBuf>,
+    /// With --gaussians: bind even when the result looks implausible (see below).
+    #[arg(long, requires = "gaussians")]
+    pub unchecked: bool,
 }
 
 /// Runs `trisplat bind`.
@@ -98,9 +108,14 @@ pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
                     path.display()
                 );
             }
-            attach(&world, &mesh, convention).with_context(|| {
-                format!("attaching {} to {}", path.display(), args.mesh.display())
-            })?
+            let context = || format!("attaching {} to {}", path.display(), args.mesh.display());
+            if args.unchecked {
+                attach(&world, &mesh, convention).with_context(context)?
+            } else {
+                attach_checked(&world, &mesh, convention, &AttachLimits::default())
+                    .with_context(context)?
+                    .0
+            }
         }
     };
     spinner.finish_and_clear();
