@@ -144,9 +144,13 @@ fn a_killed_run_resumes_to_the_same_bytes() {
     for name in ["report.json", "report.md", "error_vs_time.png"] {
         std::fs::remove_file(killed.join(name)).expect("rm report");
     }
+    // What a kill in the middle of an atomic write leaves behind.
+    let stale = killed.join("delaunay").join(".trisplat-x1y2z3.tmp");
+    std::fs::write(&stale, b"half a frame").expect("stale temporary");
     let mut resume = extract_args(&template, &frames, &killed);
     resume.push("--resume");
     let ran = run_ok(&resume);
+    assert!(!stale.exists(), "the stale temporary is removed");
     assert!(
         String::from_utf8_lossy(&ran.stderr).contains("resuming: 3 of 6 frame(s) already done")
     );

@@ -271,7 +271,9 @@ fn open_journal(
     control: RunControl,
 ) -> Result<(Journal, Previous), PipelineError> {
     if control.resume {
-        return Journal::resume(out, config);
+        let resumed = Journal::resume(out, config)?;
+        remove_stale_temporaries(out);
+        return Ok(resumed);
     }
     refuse_used_output(out, control.force)?;
     Ok((Journal::create(out, config)?, Previous::default()))
@@ -291,8 +293,27 @@ pub(crate) fn refuse_used_output(out: &Path, force: bool) -> Result<(), Pipeline
     }
     if force {
         remove_previous_outputs(out);
+        remove_stale_temporaries(out);
     }
     Ok(())
+}
+
+/// Removes the temporary files (`.trisplat-*.tmp`) a run killed in the middle of an atomic
+/// write left in `out` and its method folders (best effort).
+fn remove_stale_temporaries(out: &Path) {
+    let folders = std::iter::once(out.to_path_buf())
+        .chain([Method::Tsdf, Method::Delaunay, Method::Alpha].map(|m| out.join(m.name())));
+    for dir in folders {
+        let Ok(listing) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in listing.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with(".trisplat-") && name.ends_with(".tmp") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
 }
 
 /// Removes what a previous run wrote into `out`: journal, reports, plot, every method's frame
