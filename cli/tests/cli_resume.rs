@@ -367,3 +367,57 @@ fn a_ground_truth_per_frame() {
     both.extend(["--gt", "template"]);
     assert_eq!(run(&both).status.code(), Some(2));
 }
+
+/// `--targets` writes only what is asked for (the journal always); the glb alone is assembled
+/// from frame files that are removed afterwards.
+#[test]
+fn targets_choose_the_outputs() {
+    let dir = fresh_dir("targets");
+    let (template, frames) = frames_case(&dir);
+    let ply_count = |out: &Path| {
+        ["delaunay", "alpha"]
+            .iter()
+            .map(|m| std::fs::read_dir(out.join(m)).map_or(0, |d| d.count()))
+            .sum::<usize>()
+    };
+    for (targets, meshes, glb, report_json) in [
+        ("report", false, false, true),
+        ("glb", false, true, false),
+        ("meshes", true, false, false),
+        ("meshes,glb,report", true, true, true),
+    ] {
+        let out = dir.join(targets.replace(',', "_"));
+        let mut args = extract_args(&template, &frames, &out);
+        args.extend(["--targets", targets]);
+        run_ok(&args);
+        assert_eq!(ply_count(&out) > 0, meshes, "{targets}: frame files");
+        assert_eq!(out.join("delaunay.glb").is_file(), glb, "{targets}: glb");
+        assert_eq!(
+            out.join("report.json").is_file(),
+            report_json,
+            "{targets}: report"
+        );
+        assert!(out.join("journal.jsonl").is_file(), "{targets}: journal");
+        if glb {
+            let doc = read_mesh(&out.join("delaunay.glb")).expect("glb reads");
+            assert!(doc.triangle_count() > 0);
+        }
+    }
+    let explained = run_ok(&[
+        "extract",
+        "--template",
+        s(&template),
+        "--method",
+        "alpha",
+        "--targets",
+        "report",
+        "-o",
+        s(&dir.join("explain")),
+        "--explain",
+    ]);
+    let plan = String::from_utf8_lossy(&explained.stdout);
+    assert!(
+        plan.contains("--targets names neither meshes nor glb"),
+        "{plan}"
+    );
+}

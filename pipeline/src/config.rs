@@ -205,6 +205,47 @@ pub struct ExtractOptions {
     /// once on stderr and in the report, and ignored).
     #[cfg_attr(feature = "cli", arg(long))]
     pub strict: bool,
+    /// What to write, comma-separated: meshes (per-frame PLYs), glb (the animated sequence;
+    /// its frames are written to assemble it and removed after unless meshes is asked too),
+    /// report (report.json, report.md, the plot). The run journal is always written.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, value_delimiter = ',', value_name = "LIST",
+        num_args = 1.., default_values_t = OutputTarget::ALL))]
+    pub targets: Vec<OutputTarget>,
+}
+
+/// One kind of output of the main job (`extract --targets`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum OutputTarget {
+    /// `<method>/frame_NNNNNN.ply`, one per frame and method.
+    Meshes,
+    /// `<method>.glb` (or its parts), the animated sequence.
+    Glb,
+    /// `report.json`, `report.md` and `error_vs_time.png`.
+    Report,
+}
+
+impl OutputTarget {
+    /// Every output, the default.
+    pub const ALL: [Self; 3] = [Self::Meshes, Self::Glb, Self::Report];
+}
+
+impl std::fmt::Display for OutputTarget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Meshes => "meshes",
+            Self::Glb => "glb",
+            Self::Report => "report",
+        })
+    }
+}
+
+impl ExtractOptions {
+    /// Whether `target` is among the outputs asked for.
+    #[must_use]
+    pub fn writes(&self, target: OutputTarget) -> bool {
+        self.targets.contains(&target)
+    }
 }
 
 impl Default for ExtractOptions {
@@ -223,6 +264,7 @@ impl Default for ExtractOptions {
             samples: DEFAULT_SAMPLES,
             tau: DEFAULT_TAU,
             strict: false,
+            targets: OutputTarget::ALL.to_vec(),
         }
     }
 }

@@ -71,7 +71,9 @@ pub mod report;
 pub mod run;
 pub mod session;
 
-pub use config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, RunControl};
+pub use config::{
+    ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl,
+};
 pub use error::PipelineError;
 pub use plan::{Plan, Stage, StagePlan};
 pub use report::Report;

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 
 use trisplat_geometry::io::IoError;
 
+use crate::config::OutputTarget;
 use crate::error::PipelineError;
 use crate::report::{DelaunayStats, MethodReport, Report, Summary};
 use crate::run::{FrameFilesByMethod, REPORT_JSON, frame_file, refuse_used_output, write_outputs};
@@ -113,7 +114,7 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
         }
     }
     let mut merged = merged;
-    write_outputs(out, &mut merged, &frame_files)?;
+    write_outputs(out, &mut merged, &frame_files, &OutputTarget::ALL)?;
     Ok(merged)
 }
 

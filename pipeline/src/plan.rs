@@ -5,6 +5,7 @@ use std::fmt;
 
 use crate::config::{
     DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
+    OutputTarget,
 };
 
 /// A stage of the main job (docs/conventions.md §1), in the order they run.
@@ -204,25 +205,42 @@ impl Plan {
         }
 
         let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
+        let out = config.output.display();
+        let (meshes, glb) = (o.writes(OutputTarget::Meshes), o.writes(OutputTarget::Glb));
         push(
             Stage::Write,
-            true,
-            format!(
-                "{}/<method>/frame_NNNNNN.ply and {}/<method>.glb for {}",
-                config.output.display(),
-                config.output.display(),
-                names.join(", ")
-            ),
+            meshes || glb,
+            match (meshes, glb) {
+                (true, true) => format!(
+                    "{out}/<method>/frame_NNNNNN.ply and {out}/<method>.glb for {}",
+                    names.join(", ")
+                ),
+                (true, false) => format!(
+                    "{out}/<method>/frame_NNNNNN.ply for {} (--targets without glb)",
+                    names.join(", ")
+                ),
+                (false, true) => format!(
+                    "{out}/<method>.glb for {} (its frame files are removed once it is assembled: \
+                     --targets without meshes)",
+                    names.join(", ")
+                ),
+                (false, false) => "--targets names neither meshes nor glb".to_owned(),
+            },
         );
         let plot = if config.gt.is_some() {
             "Chamfer L1 against ms/frame"
         } else {
             "ms per frame (no --gt: no error to plot)"
         };
+        let report = o.writes(OutputTarget::Report);
         push(
             Stage::Report,
-            true,
-            format!("report.json, report.md, error_vs_time.png ({plot})"),
+            report,
+            if report {
+                format!("report.json, report.md, error_vs_time.png ({plot})")
+            } else {
+                "--targets without report (the journal still records every frame)".to_owned()
+            },
         );
         Self { stages }
     }

@@ -10,7 +10,7 @@ use trisplat_geometry::io::{
 
 pub use crate::output::frame_file;
 
-use crate::config::{ExtractConfig, GroundTruth, Method, RunControl};
+use crate::config::{ExtractConfig, GroundTruth, Method, OutputTarget, RunControl};
 use crate::error::PipelineError;
 use crate::input::GaussianSource;
 use crate::journal::{FailedFrame, FrameEntry, JOURNAL, Journal, Previous};
@@ -98,17 +98,20 @@ pub fn run(
         )));
     }
     progress(Progress::Started { frames: total });
+    // The frame files: asked for, or the glTF is assembled from them.
+    let frame_files_wanted = o.writes(OutputTarget::Meshes) || o.writes(OutputTarget::Glb);
     let mut done_frames = previous.done;
     let mut failed: Vec<FailedFrame> = Vec::new();
     for (done, f) in frames.clone().enumerate() {
         let finished = done_frames.get(&f).is_some_and(|entry| {
-            entry
-                .methods
-                .keys()
-                .all(|m| out.join(m).join(frame_file(f)).is_file())
+            !frame_files_wanted
+                || entry
+                    .methods
+                    .keys()
+                    .all(|m| out.join(m).join(frame_file(f)).is_file())
         });
         if !finished {
-            match run_frame(&mut session, out, f) {
+            match run_frame(&mut session, out, f, frame_files_wanted) {
                 Ok(entry) => {
                     journal.frame(&entry)?;
                     done_frames.insert(f, entry);
@@ -221,12 +224,23 @@ pub fn run(
         resolved,
         methods: method_reports,
     };
-    write_outputs(out, &mut report, &frame_files)?;
+    write_outputs(out, &mut report, &frame_files, &o.targets)?;
+    if !o.writes(OutputTarget::Meshes) {
+        // Written only to assemble the glTF.
+        for file in frame_files.values().flatten() {
+            let _ = std::fs::remove_file(file);
+        }
+    }
     Ok(report)
 }
 
 /// One frame: meshed by every method, each mesh written (atomically) to its frame file.
-fn run_frame(session: &mut Session, out: &Path, f: usize) -> Result<FrameEntry, PipelineError> {
+fn run_frame(
+    session: &mut Session,
+    out: &Path,
+    f: usize,
+    write_files: bool,
+) -> Result<FrameEntry, PipelineError> {
     let result = session.frame(f)?;
     let mut entry = FrameEntry {
         frame: f,
@@ -244,8 +258,10 @@ fn run_frame(session: &mut Session, out: &Path, f: usize) -> Result<FrameEntry, 
         if let Some(stats) = &output.delaunay {
             entry.delaunay = Some(DelaunayFrame::new(f, stats));
         }
-        let path = out.join(m.name()).join(frame_file(f));
-        write_mesh(&path, &output.mesh, WriteOptions::default())?;
+        if write_files {
+            let path = out.join(m.name()).join(frame_file(f));
+            write_mesh(&path, &output.mesh, WriteOptions::default())?;
+        }
         entry.methods.insert(
             m.name().to_owned(),
             FrameRecord {
@@ -380,8 +396,10 @@ pub(crate) fn write_outputs(
     out: &Path,
     report: &mut Report,
     frame_files: &FrameFilesByMethod,
+    targets: &[OutputTarget],
 ) -> Result<(), PipelineError> {
-    for (m, files) in frame_files {
+    let glb = targets.contains(&OutputTarget::Glb);
+    for (m, files) in frame_files.iter().filter(|_| glb) {
         let glb = out.join(format!("{}.glb", m.name()));
         let written = write_sequence_parts(
             &glb,
@@ -399,8 +417,10 @@ pub(crate) fn write_outputs(
                 .collect();
         }
     }
-    report.write_json(&out.join(REPORT_JSON))?;
-    report.write_markdown(&out.join(REPORT_MD))?;
-    plot::write_plot(&out.join(PLOT_PNG), report)?;
+    if targets.contains(&OutputTarget::Report) {
+        report.write_json(&out.join(REPORT_JSON))?;
+        report.write_markdown(&out.join(REPORT_MD))?;
+        plot::write_plot(&out.join(PLOT_PNG), report)?;
+    }
     Ok(())
 }

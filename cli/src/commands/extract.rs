@@ -67,7 +67,8 @@ first frame run). A folder holding a previous run is refused without --resume or
 removes its outputs first). A frame that fails is recorded (journal, report, a warning) and the \
 run goes on; the exit code is then 1 and --resume retries it; --fail-fast stops at the first \
 failure instead. The animated glTF is assembled from the frame files; past glTF's 4 GiB limit it \
-is split into <method>_part001.glb, ... (listed in the report).")]
+is split into <method>_part001.glb, ... (listed in the report). --targets chooses the outputs \
+(meshes, glb, report; default all) so a run that only needs the numbers writes no meshes.")]
 pub struct ExtractArgs {
     /// Template mesh T (.ply, .obj, .gltf, .glb) in its rest shape.
     #[arg(long, value_name = "T")]
