@@ -86,7 +86,7 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
         ..RunControl::default()
     };
     let report = run_with_progress(&config, control, ctx)?;
-    print_summary(&report, &config.output);
+    print_summary(&report, &config.output, &config.options.targets, true);
     fail_on_failed_frames(&report)
 }
 

@@ -5,7 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, GroundTruth, Method, Plan, Progress, Report, RunControl,
+    ExtractConfig, ExtractOptions, GroundTruth, Method, OutputTarget, Plan, Progress, Report,
+    RunControl,
 };
 
 use super::Context;
@@ -144,7 +145,7 @@ pub fn run(args: ExtractArgs, ctx: &Context) -> anyhow::Result<()> {
         return Ok(());
     }
     let report = run_with_progress(&config, control, ctx)?;
-    print_summary(&report, &config.output);
+    print_summary(&report, &config.output, &config.options.targets, true);
     fail_on_failed_frames(&report)
 }
 
@@ -207,7 +208,8 @@ pub fn run_with_progress(
 }
 
 /// Prints one line per method (ms/frame, Chamfer L1, faces, watertight frames) and the outputs.
-pub fn print_summary(report: &Report, out: &Path) {
+/// `targets`: the outputs written; `journal`: whether a run journal was written too.
+pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], journal: bool) {
     println!(
         "{} frame(s), {} Gaussians, deformation {:.2} ms/frame",
         report.frames.len(),
@@ -232,8 +234,18 @@ pub fn print_summary(report: &Report, out: &Path) {
             format!("{}/{}", a.watertight_frames, a.frames)
         );
     }
-    println!(
-        "outputs: {}/{{<method>/frame_*.ply, <method>.glb, report.json, report.md, error_vs_time.png}}",
-        out.display()
-    );
+    let mut written = Vec::new();
+    if targets.contains(&OutputTarget::Meshes) {
+        written.push("<method>/frame_*.ply");
+    }
+    if targets.contains(&OutputTarget::Glb) {
+        written.push("<method>.glb");
+    }
+    if targets.contains(&OutputTarget::Report) {
+        written.extend(["report.json", "report.md", "error_vs_time.png"]);
+    }
+    if journal {
+        written.push("journal.jsonl");
+    }
+    println!("outputs: {}/{{{}}}", out.display(), written.join(", "));
 }

@@ -46,6 +46,12 @@ pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
     let result = trisplat_pipeline::merge::merge(&args.shards, &args.output, args.force);
     spinner.finish_and_clear();
     let report = result?;
-    print_summary(&report, &args.output);
+    // No journal: the shards keep theirs.
+    print_summary(
+        &report,
+        &args.output,
+        &trisplat_pipeline::OutputTarget::ALL,
+        false,
+    );
     fail_on_failed_frames(&report)
 }
