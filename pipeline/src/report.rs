@@ -6,7 +6,7 @@
 //! frame's numbers equal `trisplat eval DIR/<method>/frame_NNNNNN.ply GT --surface --samples N
 //! --tau T` for a static ground truth.
 
-use std::collections::{BTreeMap, HashSet};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -130,19 +130,23 @@ pub fn is_watertight(mesh: &TriMesh) -> bool {
     if t.is_empty() {
         return false;
     }
-    let mut directed: HashSet<(u32, u32)> = HashSet::with_capacity(3 * t.len());
+    // Every edge as (smaller id, larger id) and its direction in its triangle; watertight and
+    // consistently wound iff each undirected edge occurs exactly twice, once each way. Sorting
+    // a flat vector is several times faster than hashing on meshes of 100k+ triangles.
+    let mut edges: Vec<(u64, bool)> = Vec::with_capacity(3 * t.len());
     for &[a, b, c] in t {
         if a == b || b == c || a == c {
             return false;
         }
-        for e in [(a, b), (b, c), (c, a)] {
-            if !directed.insert(e) {
-                // A third triangle on the edge, or two with the same direction.
-                return false;
-            }
+        for (x, y) in [(a, b), (b, c), (c, a)] {
+            let (lo, hi) = (x.min(y), x.max(y));
+            edges.push(((u64::from(lo) << 32) | u64::from(hi), x < y));
         }
     }
-    directed.iter().all(|&(a, b)| directed.contains(&(b, a)))
+    edges.sort_unstable();
+    edges
+        .chunk_by(|p, q| p.0 == q.0)
+        .all(|group| matches!(group, [(_, first), (_, second)] if first != second))
 }
 
 /// One method on one frame.
