@@ -154,19 +154,35 @@ fn a_killed_run_resumes_to_the_same_bytes() {
     assert!(
         String::from_utf8_lossy(&ran.stderr).contains("resuming: 3 of 6 frame(s) already done")
     );
-    let (a, b) = (mesh_outputs(&through), mesh_outputs(&killed));
+    assert_same_run(&through, &killed, "the resume");
+}
+
+/// Two run folders hold the same frame files and glTFs byte for byte, and the same frames and
+/// per-frame metrics in their reports (timings aside).
+fn assert_same_run(x: &Path, y: &Path, what: &str) {
+    let (a, b) = (mesh_outputs(x), mesh_outputs(y));
     assert_eq!(a.len(), b.len());
     for ((name_a, bytes_a), (name_b, bytes_b)) in a.iter().zip(&b) {
         assert_eq!(name_a, name_b);
-        assert!(bytes_a == bytes_b, "{name_a} differs after the resume");
+        assert!(bytes_a == bytes_b, "{name_a} differs after {what}");
     }
-    let (ra, rb) = (report(&through), report(&killed));
-    assert_eq!(ra["frames"], rb["frames"]);
+    let (ra, rb) = (report(x), report(y));
+    for key in [
+        "frames",
+        "frame_times",
+        "resolved",
+        "gaussian_count",
+        "failed_frames",
+    ] {
+        assert_eq!(ra[key], rb[key], "{key} after {what}");
+    }
     for m in ["delaunay", "alpha"] {
         for k in 0..6 {
             let metrics = |r: &serde_json::Value| r["methods"][m]["frames"][k]["metrics"].clone();
-            assert_eq!(metrics(&ra), metrics(&rb), "{m} frame {k}");
+            assert_eq!(metrics(&ra), metrics(&rb), "{m} frame {k} after {what}");
         }
+        let fscore = |r: &serde_json::Value| r["methods"][m]["mean"]["fscore"].clone();
+        assert_eq!(fscore(&ra), fscore(&rb), "{m} mean after {what}");
     }
 }
 
@@ -247,30 +263,8 @@ fn two_shards_merge_to_one_run() {
     let merged = dir.join("merged");
     // Shards in any order.
     run_ok(&["merge", s(&b), s(&a), "-q", "-o", s(&merged)]);
-    let (x, y) = (mesh_outputs(&through), mesh_outputs(&merged));
-    assert_eq!(x.len(), y.len());
-    for ((name_x, bytes_x), (name_y, bytes_y)) in x.iter().zip(&y) {
-        assert_eq!(name_x, name_y);
-        assert!(bytes_x == bytes_y, "{name_x} differs after the merge");
-    }
+    assert_same_run(&through, &merged, "the merge");
     let (rx, ry) = (report(&through), report(&merged));
-    for key in [
-        "frames",
-        "frame_times",
-        "resolved",
-        "gaussian_count",
-        "failed_frames",
-    ] {
-        assert_eq!(rx[key], ry[key], "{key}");
-    }
-    for m in ["delaunay", "alpha"] {
-        for k in 0..6 {
-            let metrics = |r: &serde_json::Value| r["methods"][m]["frames"][k]["metrics"].clone();
-            assert_eq!(metrics(&rx), metrics(&ry), "{m} frame {k}");
-        }
-        let fscore = |r: &serde_json::Value| r["methods"][m]["mean"]["fscore"].clone();
-        assert_eq!(fscore(&rx), fscore(&ry), "{m} mean");
-    }
     assert_eq!(
         rx["methods"]["delaunay"]["delaunay"]["frames"]
             .as_array()
