@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use trisplat_geometry::TriId;
 use trisplat_geometry::io::ply::{
-    PlyDocument, PlyElement, PlyProperty, PropertyData, parse_ply, write_ply_document,
+    ColumnView, PlyDocument, PlyProperty, PropertyData, parse_ply, write_ply_columns,
 };
 use trisplat_geometry::io::{IoError, write_atomically};
 
@@ -320,9 +320,17 @@ fn standard_from_columns(columns: &mut [PropertyValues], layout: &Layout, n: usi
     let rotations = (0..n).map(|i| [r0[i], r1[i], r2[i], r3[i]]).collect();
     let opacity_logits = take(layout.opacity);
     let sh_columns: Vec<Vec<f32>> = layout.sh.iter().map(|&i| take(i)).collect();
-    let mut sh = Vec::with_capacity(n * sh_columns.len());
-    for i in 0..n {
-        sh.extend(sh_columns.iter().map(|c| c[i]));
+    let k = sh_columns.len();
+    let mut sh = vec![0.0f32; n * k];
+    // Interleaved block by block (a block of rows stays in cache while every column fills it).
+    const BLOCK: usize = 1024;
+    for (b, rows) in sh.chunks_mut(BLOCK * k.max(1)).enumerate() {
+        let first = b * BLOCK;
+        for (j, column) in sh_columns.iter().enumerate() {
+            for (row, value) in rows.chunks_exact_mut(k).zip(&column[first..]) {
+                row[j] = *value;
+            }
+        }
     }
     Standard {
         means,
@@ -514,10 +522,8 @@ pub fn write_gaussians(
     options: &PlyWriteOptions,
 ) -> Result<(), PlyError> {
     check_binding(set, path)?;
-    let document = gaussians_to_document(set);
     write_atomically(path, |w| {
-        write_ply_document(path, w, &document, options.encoding)?;
-        w.flush().map_err(|e| IoError::os(path, e))
+        write_vertex_element(path, w, set, options.encoding)
     })
     .map_err(PlyError::Write)
 }
@@ -534,58 +540,69 @@ pub fn write_gaussians_to(
 ) -> Result<(), PlyError> {
     let path = Path::new("");
     check_binding(set, path)?;
-    write_ply_document(path, w, &gaussians_to_document(set), options.encoding)
-        .and_then(|()| w.flush().map_err(|e| IoError::os(path, e)))
-        .map_err(PlyError::Write)
+    write_vertex_element(path, w, set, options.encoding).map_err(PlyError::Write)
 }
 
-/// The PLY document of `set`: one `vertex` element whose columns are copies of the set's
-/// parameters, in the order described in the module docs.
-#[must_use]
-pub fn gaussians_to_document(set: &GaussianSet) -> PlyDocument {
-    let n = set.len();
+/// Writes `set` as one `vertex` element in the order described in the module docs, straight
+/// from the set's own arrays (only the binding is converted into a column).
+fn write_vertex_element(
+    path: &Path,
+    w: &mut dyn Write,
+    set: &GaussianSet,
+    encoding: PlyEncoding,
+) -> Result<(), IoError> {
     let sh_stride = 3 * sh_coeffs_per_channel(set.sh_degree());
     let binding = set.binding().map(|b| b.triangles.as_slice()).unwrap_or(&[]);
-    let properties = columns_to_write(set)
-        .into_iter()
+    let columns = columns_to_write(set);
+    let binding_column = columns.iter().find_map(|(_, c)| match c {
+        Column::BindingFloat => Some(binding_column(ScalarType::F32, binding)),
+        Column::BindingInt(ty) => Some(binding_column(*ty, binding)),
+        _ => None,
+    });
+    let rotations = set.rotations().as_flattened();
+    let properties: Vec<(&str, ColumnView<'_>)> = columns
+        .iter()
         .map(|(name, column)| {
-            let values = match column {
-                Column::Mean(a) => PropertyValues::F32(set.means().iter().map(|m| m[a]).collect()),
-                Column::LogScale(a) => {
-                    PropertyValues::F32(set.log_scales().iter().map(|s| s[a]).collect())
-                }
-                Column::Rot(a) => {
-                    PropertyValues::F32(set.rotations().iter().map(|r| r[a]).collect())
-                }
-                Column::Opacity => PropertyValues::F32(set.opacity_logits().to_vec()),
-                Column::Sh(a) => PropertyValues::F32(
-                    set.sh()
-                        .iter()
-                        .skip(a)
-                        .step_by(sh_stride)
-                        .copied()
-                        .collect(),
-                ),
-                Column::BindingFloat => {
-                    PropertyValues::F32(binding.iter().map(|t| t.0 as f32).collect())
-                }
-                Column::BindingInt(ty) => binding_column(ty, binding),
-                Column::Extra(values) => values.clone(),
+            let view = match *column {
+                Column::Mean(axis) => ColumnView::Vec3Axis {
+                    values: set.means(),
+                    axis,
+                },
+                Column::LogScale(axis) => ColumnView::Vec3Axis {
+                    values: set.log_scales(),
+                    axis,
+                },
+                Column::Rot(a) => ColumnView::StridedF32 {
+                    values: rotations,
+                    offset: a,
+                    stride: 4,
+                },
+                Column::Opacity => ColumnView::StridedF32 {
+                    values: set.opacity_logits(),
+                    offset: 0,
+                    stride: 1,
+                },
+                Column::Sh(a) => ColumnView::StridedF32 {
+                    values: set.sh(),
+                    offset: a,
+                    stride: sh_stride,
+                },
+                Column::BindingFloat | Column::BindingInt(_) => match &binding_column {
+                    Some(c) => ColumnView::Column(c),
+                    // Not reached: binding columns are listed only for a bound set.
+                    None => ColumnView::StridedF32 {
+                        values: &[],
+                        offset: 0,
+                        stride: 1,
+                    },
+                },
+                Column::Extra(values) => ColumnView::Column(values),
             };
-            PlyProperty {
-                name,
-                data: PropertyData::Scalar(values),
-            }
+            (name.as_str(), view)
         })
         .collect();
-    PlyDocument {
-        elements: vec![PlyElement {
-            name: "vertex".into(),
-            count: n,
-            properties,
-        }],
-        ..PlyDocument::default()
-    }
+    write_ply_columns(path, w, encoding, "vertex", set.len(), &properties)?;
+    w.flush().map_err(|e| IoError::os(path, e))
 }
 
 /// The bindings as a column of type `ty` (the caller checked they fit, see `check_binding`).

@@ -1024,11 +1024,11 @@ pub fn write_ply_document(
     let mut buf = Vec::with_capacity(1 << 16);
     for e in &doc.elements {
         if !ascii {
-            let scalars: Option<Vec<&ScalarColumn>> = e
+            let scalars: Option<Vec<ColumnView<'_>>> = e
                 .properties
                 .iter()
                 .map(|p| match &p.data {
-                    PropertyData::Scalar(c) => Some(c),
+                    PropertyData::Scalar(c) => Some(ColumnView::Column(c)),
                     PropertyData::List { .. } => None,
                 })
                 .collect();
@@ -1084,11 +1084,170 @@ pub fn write_ply_document(
     Ok(())
 }
 
+/// The values of one scalar property to write, borrowed: a stored column, or every `stride`-th
+/// `f32` of `values` from `offset` on (quaternions, interleaved coefficients), or one component
+/// of a slice of vectors, so data kept in another layout is written without being copied into
+/// columns.
+#[derive(Clone, Copy, Debug)]
+pub enum ColumnView<'a> {
+    /// A stored column.
+    Column(&'a ScalarColumn),
+    /// Row `i` is component `axis` (0 = x) of `values[i]`.
+    Vec3Axis {
+        /// The vectors.
+        values: &'a [Vec3],
+        /// Which component.
+        axis: usize,
+    },
+    /// Row `i` is `values[offset + i * stride]`.
+    StridedF32 {
+        /// The values.
+        values: &'a [f32],
+        /// Index of row 0's value.
+        offset: usize,
+        /// Distance between consecutive rows' values.
+        stride: usize,
+    },
+}
+
+impl ColumnView<'_> {
+    /// The type written.
+    #[must_use]
+    pub fn scalar_type(&self) -> ScalarType {
+        match self {
+            Self::Column(c) => c.scalar_type(),
+            Self::Vec3Axis { .. } | Self::StridedF32 { .. } => ScalarType::F32,
+        }
+    }
+
+    /// Number of rows the view holds.
+    #[must_use]
+    pub fn rows(&self) -> usize {
+        match *self {
+            Self::Column(c) => c.len(),
+            Self::Vec3Axis { values, .. } => values.len(),
+            Self::StridedF32 {
+                values,
+                offset,
+                stride,
+            } => values.len().saturating_sub(offset).div_ceil(stride.max(1)),
+        }
+    }
+
+    /// As [`ScalarColumn`]'s `write_strided`, for rows `first..first + rows`.
+    fn write_strided(
+        &self,
+        first: usize,
+        rows: usize,
+        block: &mut [u8],
+        offset: usize,
+        stride: usize,
+        big_endian: bool,
+    ) {
+        match *self {
+            Self::Column(c) => c.write_strided(first, rows, block, offset, stride, big_endian),
+            _ => {
+                for r in 0..rows {
+                    let x = self.f32_at(first + r);
+                    let bytes = if big_endian {
+                        x.to_be_bytes()
+                    } else {
+                        x.to_le_bytes()
+                    };
+                    let at = offset + r * stride;
+                    block[at..at + 4].copy_from_slice(&bytes);
+                }
+            }
+        }
+    }
+
+    /// Row `i` of a float view (0 for a stored column, which is written by its own code).
+    fn f32_at(&self, i: usize) -> f32 {
+        match *self {
+            Self::Column(_) => 0.0,
+            Self::Vec3Axis { values, axis } => values[i][axis],
+            Self::StridedF32 {
+                values,
+                offset,
+                stride,
+            } => values[offset + i * stride],
+        }
+    }
+
+    fn write_ascii(&self, i: usize, out: &mut Vec<u8>) {
+        match *self {
+            Self::Column(c) => c.write_ascii(i, out),
+            _ => {
+                let x = self.f32_at(i);
+                write_float(out, f64::from(x), x);
+            }
+        }
+    }
+}
+
+/// Writes a PLY file of one element whose properties are all scalars, from borrowed columns
+/// (binary: block by block, column by column).
+///
+/// # Errors
+/// [`IoError::Malformed`] when a property holds fewer than `count` rows, [`IoError::Os`] when
+/// writing fails.
+pub fn write_ply_columns(
+    path: &Path,
+    out: &mut dyn Write,
+    encoding: PlyEncoding,
+    element: &str,
+    count: usize,
+    properties: &[(&str, ColumnView<'_>)],
+) -> Result<(), IoError> {
+    let os = |e| IoError::os(path, e);
+    let mut head = format!(
+        "ply\nformat {} 1.0\nelement {element} {count}\n",
+        encoding.header_name()
+    );
+    for (name, view) in properties {
+        if view.rows() < count {
+            return Err(IoError::malformed(
+                path,
+                format!("element {element}"),
+                format!(
+                    "property `{name}` has {} rows, the element {count}",
+                    view.rows()
+                ),
+            ));
+        }
+        head.push_str(&format!("property {} {name}\n", view.scalar_type()));
+    }
+    head.push_str("end_header\n");
+    out.write_all(head.as_bytes()).map_err(os)?;
+    let views: Vec<ColumnView<'_>> = properties.iter().map(|(_, v)| *v).collect();
+    match encoding {
+        PlyEncoding::Ascii => {
+            let mut buf = Vec::with_capacity(1 << 16);
+            for row in 0..count {
+                for (k, v) in views.iter().enumerate() {
+                    if k > 0 {
+                        buf.push(b' ');
+                    }
+                    v.write_ascii(row, &mut buf);
+                }
+                buf.push(b'\n');
+                if buf.len() >= 1 << 16 {
+                    out.write_all(&buf).map_err(os)?;
+                    buf.clear();
+                }
+            }
+            out.write_all(&buf).map_err(os)
+        }
+        PlyEncoding::BinaryLittleEndian => write_fixed_rows(out, &views, count, false).map_err(os),
+        PlyEncoding::BinaryBigEndian => write_fixed_rows(out, &views, count, true).map_err(os),
+    }
+}
+
 /// Writes `count` binary rows of scalar columns (each checked to hold `count` values), block by
 /// block, column by column.
 fn write_fixed_rows(
     out: &mut dyn Write,
-    columns: &[&ScalarColumn],
+    columns: &[ColumnView<'_>],
     count: usize,
     big: bool,
 ) -> std::io::Result<()> {
@@ -1571,4 +1730,80 @@ pub fn write_ply_points(
 ) -> Result<(), IoError> {
     let doc = points_to_ply(points, extras);
     super::write_atomically(path, |w| write_ply_document(path, w, &doc, encoding))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Borrowed views write what the same values as stored columns write, in every encoding;
+    /// a view shorter than the element is refused naming the property.
+    #[test]
+    fn column_views_write_as_columns_do() {
+        let vectors = [Vec3::new(1.0, 2.0, 3.0), Vec3::new(-4.5, 1e-30, 6.0)];
+        let quats = [0.5f32, 0.1, 0.2, 0.3, 0.25, 1e20, 0.0, -0.75];
+        let ids = ScalarColumn::U8(vec![7, 200]);
+        let views = [
+            (
+                "y",
+                ColumnView::Vec3Axis {
+                    values: &vectors,
+                    axis: 1,
+                },
+            ),
+            (
+                "r1",
+                ColumnView::StridedF32 {
+                    values: &quats,
+                    offset: 1,
+                    stride: 4,
+                },
+            ),
+            ("id", ColumnView::Column(&ids)),
+        ];
+        let stored = PlyDocument {
+            elements: vec![PlyElement {
+                name: "vertex".into(),
+                count: 2,
+                properties: [
+                    ("y", ScalarColumn::F32(vec![2.0, 1e-30])),
+                    ("r1", ScalarColumn::F32(vec![0.1, 1e20])),
+                    ("id", ids.clone()),
+                ]
+                .into_iter()
+                .map(|(name, c)| PlyProperty {
+                    name: name.into(),
+                    data: PropertyData::Scalar(c),
+                })
+                .collect(),
+            }],
+            ..PlyDocument::default()
+        };
+        let path = Path::new("v.ply");
+        for encoding in [
+            PlyEncoding::Ascii,
+            PlyEncoding::BinaryLittleEndian,
+            PlyEncoding::BinaryBigEndian,
+        ] {
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            write_ply_columns(path, &mut a, encoding, "vertex", 2, &views).expect("views");
+            write_ply_document(path, &mut b, &stored, encoding).expect("columns");
+            assert_eq!(a, b, "{encoding:?}");
+            let back = parse_ply(path, &a).expect("reads back");
+            assert_eq!(back.elements, stored.elements, "{encoding:?}");
+        }
+        let err = write_ply_columns(
+            path,
+            &mut Vec::new(),
+            PlyEncoding::Ascii,
+            "vertex",
+            3,
+            &views,
+        )
+        .expect_err("too few rows");
+        assert!(
+            err.to_string().contains("`y` has 2 rows, the element 3"),
+            "{err}"
+        );
+    }
 }
