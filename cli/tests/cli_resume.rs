@@ -298,6 +298,19 @@ fn two_shards_merge_to_one_run() {
     let line = one_error_line(&run(&["merge", s(&a), s(&b), "-o", s(&merged)]));
     assert!(line.contains("previous run"), "{line}");
     run_ok(&["merge", s(&a), s(&b), "-q", "-o", s(&merged), "--force"]);
+    // A shard missing a frame file its report lists, a shard without a readable report.
+    std::fs::remove_file(b.join("alpha/frame_000004.ply")).expect("rm");
+    let line = one_error_line(&run(&["merge", s(&a), s(&b), "-o", s(&dir.join("m4"))]));
+    assert!(
+        line.contains("frame_000004.ply") && line.contains("missing"),
+        "{line}"
+    );
+    std::fs::write(b.join("report.json"), b"{}").expect("break report");
+    let line = one_error_line(&run(&["merge", s(&a), s(&b), "-o", s(&dir.join("m5"))]));
+    assert!(line.contains("not a trisplat report"), "{line}");
+    std::fs::remove_file(b.join("report.json")).expect("rm report");
+    let line = one_error_line(&run(&["merge", s(&a), s(&b), "-o", s(&dir.join("m6"))]));
+    assert!(line.contains("is the run finished"), "{line}");
 }
 
 /// `--gt-sequence`: one ground-truth mesh per frame. The frames of the animation themselves as

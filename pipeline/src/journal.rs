@@ -209,3 +209,76 @@ fn line(l: &Line) -> String {
     s.push('\n');
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ExtractOptions, Method};
+
+    fn config(tau: f64) -> ExtractConfig {
+        ExtractConfig {
+            template: PathBuf::from("t.glb"),
+            animation: None,
+            gaussians: None,
+            methods: vec![Method::Alpha],
+            output: PathBuf::from("out"),
+            frames: None,
+            gt: None,
+            options: ExtractOptions {
+                tau,
+                ..ExtractOptions::default()
+            },
+        }
+    }
+
+    fn entry(frame: usize) -> FrameEntry {
+        FrameEntry {
+            frame,
+            time: frame as f64 / 30.0,
+            deform_ms: 0.1,
+            methods: BTreeMap::new(),
+            delaunay: None,
+        }
+    }
+
+    fn problem(result: Result<(Journal, Previous), PipelineError>) -> String {
+        match result {
+            Err(PipelineError::Resume { problem, .. }) => problem,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn resume_keeps_complete_frames_and_refuses_another_run() {
+        let dir = tempfile::tempdir().expect("dir");
+        let c = config(0.0025);
+        assert!(problem(Journal::resume(dir.path(), &c)).contains("nothing to resume"));
+        let mut j = Journal::create(dir.path(), &c).expect("create");
+        j.frame(&entry(0)).expect("frame 0");
+        j.failed(&FailedFrame {
+            frame: 1,
+            error: "broken".into(),
+        })
+        .expect("failed 1");
+        j.frame(&entry(2)).expect("frame 2");
+        drop(j);
+        let path = dir.path().join(JOURNAL);
+        let mut text = std::fs::read_to_string(&path).expect("read");
+        text.push_str(r#"{"kind":"frame","frame":3,"#);
+        std::fs::write(&path, &text).expect("cut");
+        let (_, previous) = Journal::resume(dir.path(), &c).expect("resume");
+        assert_eq!(previous.done.keys().copied().collect::<Vec<_>>(), [0, 2]);
+        assert_eq!(previous.done[&2], entry(2));
+        // Rewritten without the cut line and the failure: three complete lines.
+        let rewritten = std::fs::read_to_string(&path).expect("read");
+        assert_eq!(rewritten.lines().count(), 3, "{rewritten}");
+        assert!(rewritten.ends_with('\n'));
+        // Another configuration, another version, not a journal.
+        assert!(problem(Journal::resume(dir.path(), &config(0.01))).contains("other inputs"));
+        let other_version = rewritten.replacen(env!("CARGO_PKG_VERSION"), "0.0.0-other", 1);
+        std::fs::write(&path, other_version).expect("write");
+        assert!(problem(Journal::resume(dir.path(), &c)).contains("trisplat 0.0.0-other"));
+        std::fs::write(&path, "not json\n").expect("write");
+        assert!(problem(Journal::resume(dir.path(), &c)).contains("not a run record"));
+    }
+}

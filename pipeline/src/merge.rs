@@ -86,7 +86,7 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
         }
     }
     refuse_used_output(out, force)?;
-    let merged = merged_report(&reports);
+    let mut merged = merged_report(&reports);
     // The frame files, linked or copied into the merged folder.
     let mut frame_files: FrameFilesByMethod = BTreeMap::new();
     for m in merged.methods.values() {
@@ -113,7 +113,6 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
             frame_files.entry(m.method).or_default().push(dst);
         }
     }
-    let mut merged = merged;
     write_outputs(out, &mut merged, &frame_files, &OutputTarget::ALL)?;
     Ok(merged)
 }

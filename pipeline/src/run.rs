@@ -225,7 +225,7 @@ pub fn run(
         methods: method_reports,
     };
     write_outputs(out, &mut report, &frame_files, &o.targets)?;
-    if !o.writes(OutputTarget::Meshes) {
+    if o.writes(OutputTarget::Glb) && !o.writes(OutputTarget::Meshes) {
         // Written only to assemble the glTF.
         for file in frame_files.values().flatten() {
             let _ = std::fs::remove_file(file);

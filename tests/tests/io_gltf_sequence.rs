@@ -752,3 +752,66 @@ fn long_sequences_split_into_parts() {
         );
     }
 }
+
+/// The parts writer writes `.glb` only and refuses a frame larger than a part; a source whose
+/// frame changes between the writer's readings is an error, and nothing is written.
+#[test]
+fn sequence_writer_error_paths() {
+    use std::cell::Cell;
+    use trisplat_geometry::io::{FrameSource, write_sequence_parts};
+    let dir = out_dir();
+    let frames = wave_frames(3, false);
+    let times = times_at(30.0, 3);
+    let gltf = dir.path().join("seq.gltf");
+    let err = write_sequence_parts(
+        &gltf,
+        &frames.as_slice(),
+        &times,
+        SequenceLayout::Auto,
+        1 << 30,
+    )
+    .expect_err("parts are .glb");
+    assert!(matches!(err, IoError::Unsupported { .. }), "{err}");
+    let glb = dir.path().join("seq.glb");
+    let err = write_sequence_parts(&glb, &frames.as_slice(), &times, SequenceLayout::Auto, 1000)
+        .expect_err("a frame over the part size");
+    assert!(err.to_string().contains("frame 0 alone needs"), "{err}");
+    assert!(!glb.exists());
+
+    /// Frame 1 gains a vertex on every reading after the first.
+    struct Shifting {
+        frames: Vec<TriMesh>,
+        reads: Cell<usize>,
+    }
+    impl FrameSource for Shifting {
+        fn frame_count(&self) -> usize {
+            self.frames.len()
+        }
+        fn frame(&self, k: usize) -> Result<std::borrow::Cow<'_, TriMesh>, IoError> {
+            if k != 1 {
+                return Ok(std::borrow::Cow::Borrowed(&self.frames[k]));
+            }
+            self.reads.set(self.reads.get() + 1);
+            let f = &self.frames[1];
+            let mut positions = f.positions().to_vec();
+            positions.extend(std::iter::repeat_n(Vec3::ZERO, self.reads.get()));
+            Ok(std::borrow::Cow::Owned(TriMesh::new(
+                positions,
+                f.triangles().to_vec(),
+            )))
+        }
+    }
+    let shifting = Shifting {
+        frames: mixed_frames(),
+        reads: Cell::new(0),
+    };
+    let times = times_at(30.0, shifting.frames.len());
+    let err = write_sequence(&glb, &shifting, &times, SequenceLayout::NodePerFrame)
+        .expect_err("frame changed");
+    assert!(
+        err.to_string()
+            .contains("a frame changed while the sequence was written"),
+        "{err}"
+    );
+    assert!(!glb.exists(), "nothing written");
+}
