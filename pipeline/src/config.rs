@@ -1,5 +1,6 @@
 //! What the main job is asked to do: inputs, methods, options and their defaults.
 
+use crate::avatar::GaussianLayout;
 use std::fmt;
 use std::path::PathBuf;
 
@@ -163,6 +164,11 @@ pub struct ExtractOptions {
     /// Sampling rate of a glTF clip, frames per second.
     #[cfg_attr(feature = "cli", arg(long, value_name = "F", default_value_t = DEFAULT_FPS))]
     pub fps: f64,
+    /// How the --gaussians file relates to the template: bound (binding_0, local
+    /// parameters) or lam (LAM's per-vertex offsets, bound here; set by --avatar).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = GaussianLayout::Bound,
+        value_name = "LAYOUT"))]
+    pub layout: GaussianLayout,
     /// Gaussians per triangle when the pipeline binds them itself (no --gaussians).
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_PER_TRIANGLE,
         value_parser = clap::value_parser!(u32).range(1..)))]
@@ -254,6 +260,7 @@ impl Default for ExtractOptions {
             mode: Mode::Binding,
             clip: None,
             fps: DEFAULT_FPS,
+            layout: GaussianLayout::Bound,
             per_triangle: DEFAULT_PER_TRIANGLE,
             voxel: None,
             views: DEFAULT_VIEWS,

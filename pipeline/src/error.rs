@@ -126,7 +126,8 @@ pub enum PipelineError {
     /// The Gaussian file has no triangle binding.
     #[error(
         "{path}: the Gaussians are not bound to triangles (no `binding_0`/`binding` property); \
-         use `trisplat bind` first"
+         use `trisplat bind` first (LAM's per-vertex offset.ply: --layout lam, or --avatar \
+         DIR for the whole folder)"
     )]
     NotBound {
         /// The Gaussian file.
@@ -142,6 +143,14 @@ pub enum PipelineError {
         template: PathBuf,
         /// What the deformer found.
         cause: DeformError,
+    },
+    /// A LAM avatar folder or one of its files does not fit LAM's layout.
+    #[error("{path}: {problem}")]
+    Avatar {
+        /// The folder or file.
+        path: PathBuf,
+        /// What is wrong, with the numbers.
+        problem: String,
     },
     /// A Gaussian file whose own validity report has a problem.
     #[error("{path}: {issue} (template {template})")]

@@ -448,6 +448,8 @@ pub enum GaussianSource {
     File(PathBuf),
     /// Bound here: this many per triangle.
     Bound(u32),
+    /// LAM's per-vertex Gaussians read from this file, bound here around their vertices.
+    Lam(PathBuf),
 }
 
 /// Reads bound Gaussians from `path` and checks them against `template` (read from
@@ -574,6 +576,8 @@ pub struct WeldedTemplate {
     pub mesh: TriMesh,
     /// For each welded vertex, its first original vertex.
     pub first: Vec<u32>,
+    /// For each original vertex, its welded vertex.
+    pub of_stored: Vec<u32>,
     /// Vertices of the template as stored.
     pub stored_vertices: usize,
 }
@@ -592,6 +596,7 @@ impl WeldedTemplate {
         Self {
             mesh,
             first,
+            of_stored: map,
             stored_vertices: template.vertex_count(),
         }
     }
@@ -604,6 +609,7 @@ impl WeldedTemplate {
         Self {
             mesh: template.clone(),
             first: (0..n).collect(),
+            of_stored: (0..n).collect(),
             stored_vertices: template.vertex_count(),
         }
     }

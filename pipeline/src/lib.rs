@@ -56,6 +56,7 @@
 //! One [`PipelineError`] naming the file, frame, method or option at fault; files the run
 //! created are removed again. Outputs are written atomically and never over an input.
 
+pub mod avatar;
 pub mod config;
 pub mod deform;
 pub mod error;

@@ -3,6 +3,8 @@
 
 use std::fmt;
 
+use crate::avatar::GaussianLayout;
+
 use crate::config::{
     DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
     OutputTarget,
@@ -85,12 +87,28 @@ impl Plan {
         push(Stage::Animate, true, animate);
 
         match &config.gaussians {
+            Some(g) if o.layout == GaussianLayout::Lam => push(
+                Stage::Bind,
+                true,
+                format!(
+                    "--gaussians {} in LAM's per-vertex layout: row i is the offset of a \
+                     Gaussian from template vertex i (colour as RGB); each is bound here to the \
+                     triangle around its vertex nearest to it ({} convention)",
+                    g.display(),
+                    if o.mode == Mode::Jacobian {
+                        "surfhead"
+                    } else {
+                        "gaussianavatars"
+                    }
+                ),
+            ),
             Some(g) => push(
                 Stage::Bind,
                 false,
                 format!(
                     "--gaussians {} given: read as bound Gaussians (a file without a triangle \
-                     binding, or bound to another template, is refused when the run reads it)",
+                     binding, or bound to another template, is refused when the run reads it; \
+                     LAM's per-vertex offsets need --layout lam or --avatar)",
                     g.display()
                 ),
             ),

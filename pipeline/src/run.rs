@@ -210,6 +210,12 @@ pub fn run(
         gaussians: match session.source() {
             GaussianSource::File(p) => p.display().to_string(),
             GaussianSource::Bound(n) => format!("bound here: {n} per triangle"),
+            GaussianSource::Lam(p) => {
+                format!(
+                    "{} (LAM per-vertex, bound here around its vertices)",
+                    p.display()
+                )
+            }
         },
         gaussian_count: session.gaussians().len(),
         mode: o.mode.name().to_owned(),

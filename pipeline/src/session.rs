@@ -23,8 +23,10 @@ use trisplat_geometry::animation::MeshSequence;
 use trisplat_geometry::io::read_mesh;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{Deformer, WorldGeometry};
+use trisplat_splat::frames::Convention;
 
-use crate::config::{ExtractConfig, GroundTruth, Method};
+use crate::avatar::{GaussianLayout, bind_lam};
+use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
 use crate::deform::{Engine, EngineInputs};
 use crate::error::PipelineError;
 use crate::input::{
@@ -232,10 +234,26 @@ impl Session {
 
         let template = &welded.mesh;
         let gaussians_path = config.gaussians.clone().unwrap_or_default();
-        let (set, source) = if plan.runs(Stage::Bind) {
+        let (set, source) = if config.gaussians.is_none() {
             executed.push(Stage::Bind);
             let set = bind_here(template, &config.template, o.mode, o.per_triangle)?;
             (set, GaussianSource::Bound(o.per_triangle))
+        } else if o.layout == GaussianLayout::Lam {
+            executed.push(Stage::Bind);
+            let convention = if o.mode == Mode::Jacobian {
+                Convention::SurfHead
+            } else {
+                Convention::GaussianAvatars
+            };
+            let set = bind_lam(
+                &gaussians_path,
+                &stored,
+                template,
+                &welded.of_stored,
+                &config.template,
+                convention,
+            )?;
+            (set, GaussianSource::Lam(gaussians_path.clone()))
         } else {
             let set = read_bound(&gaussians_path, template, &config.template)?;
             (set, GaussianSource::File(gaussians_path.clone()))

@@ -11,7 +11,7 @@
 
 use glam::{DQuat, Vec3};
 use rayon::prelude::*;
-use trisplat_geometry::spatial::TriangleBvh;
+use trisplat_geometry::spatial::{TriangleBvh, closest_point_on_triangle};
 use trisplat_geometry::{TriId, TriMesh};
 
 use crate::frames::{Convention, FrameOptions, corners_of, frame};
@@ -63,6 +63,9 @@ pub enum BindError {
     /// Too many Gaussians for `u32` triangle ids or counts.
     #[error("too many Gaussians or triangles")]
     TooMany,
+    /// A per-vertex attachment's vertex list does not fit the Gaussians or the mesh.
+    #[error("per-vertex binding: {0}")]
+    VertexMap(String),
     /// The attachment is not plausible (see [`AttachLimits`]): the message names the numbers.
     #[error("{0}")]
     Implausible(String),
@@ -298,6 +301,99 @@ fn attach_with_distances(
         bvh.closest_points(world.means())
             .map_err(|e| BindError::Search(e.to_string()))?
     };
+    let triangles: Vec<TriId> = nearest.iter().map(|c| TriId(c.triangle)).collect();
+    let set = express_locally(world, mesh, convention, triangles);
+    let distances = nearest.iter().map(|c| c.distance).collect();
+    Ok((set, distances))
+}
+
+/// Attaches world-space Gaussians that belong to mesh vertices (one vertex per Gaussian,
+/// `vertex_of[i]` for Gaussian `i`, as in LAM's per-vertex avatars) to a triangle around their
+/// vertex: of the triangles using the vertex, the one whose surface is nearest the Gaussian's
+/// centre. Unlike [`attach`], a Gaussian far from the surface (hair, a LAM offset of several
+/// centimetres) stays with the part of the mesh it was made for instead of jumping to whatever
+/// surface happens to be nearest. Deforming the result at rest gives the Gaussians back.
+///
+/// # Errors
+/// [`BindError::NotWorld`], [`BindError::NoTriangles`]; [`BindError::VertexMap`] when
+/// `vertex_of` does not have one entry per Gaussian, names a vertex out of range, or a vertex
+/// that no triangle uses.
+pub fn attach_to_vertices(
+    world: &GaussianSet,
+    mesh: &TriMesh,
+    vertex_of: &[u32],
+    convention: Convention,
+) -> Result<GaussianSet, BindError> {
+    if world.space() != ParameterSpace::World {
+        return Err(BindError::NotWorld);
+    }
+    if mesh.triangles().is_empty() {
+        return Err(BindError::NoTriangles);
+    }
+    if vertex_of.len() != world.len() {
+        return Err(BindError::VertexMap(format!(
+            "{} vertices given for {} Gaussians",
+            vertex_of.len(),
+            world.len()
+        )));
+    }
+    let n = mesh.vertex_count();
+    // Triangles around each vertex, as offsets into one list (CSR).
+    let mut start = vec![0u32; n + 1];
+    for t in mesh.triangles() {
+        for &v in t {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut around = vec![0u32; start[n] as usize];
+    for (t, tri) in mesh.triangles().iter().enumerate() {
+        for &v in tri {
+            around[fill[v as usize] as usize] = t as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    let positions = mesh.positions();
+    let triangles = (0..world.len())
+        .into_par_iter()
+        .map(|i| {
+            let v = vertex_of[i] as usize;
+            if v >= n {
+                return Err(BindError::VertexMap(format!(
+                    "Gaussian {i} belongs to vertex {v}, but the template has {n} vertices"
+                )));
+            }
+            let p = world.means()[i].as_dvec3();
+            around[start[v] as usize..start[v + 1] as usize]
+                .iter()
+                .map(|&t| {
+                    let [a, b, c] = corners_of(positions, mesh.triangles()[t as usize]);
+                    let (q, _) = closest_point_on_triangle(p, a, b, c);
+                    (t, q.distance_squared(p))
+                })
+                .min_by(|x, y| x.1.total_cmp(&y.1))
+                .map(|(t, _)| TriId(t))
+                .ok_or_else(|| {
+                    BindError::VertexMap(format!(
+                        "Gaussian {i} belongs to vertex {v}, which no triangle uses"
+                    ))
+                })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(express_locally(world, mesh, convention, triangles))
+}
+
+/// `world` expressed in the frames of the given triangles of `mesh` (one per Gaussian), bound
+/// to them (`binding_0`); colour, opacity, extras and the property order are kept.
+fn express_locally(
+    world: &GaussianSet,
+    mesh: &TriMesh,
+    convention: Convention,
+    triangles: Vec<TriId>,
+) -> GaussianSet {
     let fo = FrameOptions::for_positions(mesh.positions());
     let frames: Vec<_> = mesh
         .triangles()
@@ -307,7 +403,7 @@ fn attach_with_distances(
     let local: Vec<(Vec3, [f32; 4], Vec3)> = (0..world.len())
         .into_par_iter()
         .map(|i| {
-            let f = &frames[nearest[i].triangle as usize];
+            let f = &frames[triangles[i].0 as usize];
             let mu = (f.rotation.transpose() * (world.means()[i].as_dvec3() - f.origin)) / f.scale;
             let q_f = quat_from_rotation(f.rotation);
             let q = normalize_wxyz(world.rotations()[i]).unwrap_or(DQuat::IDENTITY);
@@ -326,10 +422,9 @@ fn attach_with_distances(
         };
     }
     parts.binding = Some(Binding {
-        triangles: nearest.iter().map(|c| TriId(c.triangle)).collect(),
+        triangles,
         encoding: BindingEncoding::Float,
     });
     parts.space = ParameterSpace::Local;
-    let distances = nearest.iter().map(|c| c.distance).collect();
-    Ok((GaussianSet::new_unchecked(parts), distances))
+    GaussianSet::new_unchecked(parts)
 }

@@ -1,13 +1,15 @@
 //! `trisplat bind MESH -o GAUSSIANS.ply [--per-triangle N] [--convention gaussianavatars|surfhead]
 //! [--gaussians WORLD.ply]`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
+use trisplat_pipeline::avatar::{AvatarFolder, Silhouettes, bind_lam, silhouette_iou};
 use trisplat_pipeline::input::read_template;
 use trisplat_splat::bind::{
     AttachLimits, BindOptions, DEFAULT_INITIAL_OPACITY, attach, attach_checked, init_bound,
 };
+use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::frames::Convention;
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 
@@ -32,6 +34,15 @@ impl From<ConventionArg> for Convention {
     }
 }
 
+/// What `bind --gaussians` reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum WorldLayout {
+    /// World-space Gaussians (any 3DGS PLY).
+    World,
+    /// LAM's per-vertex offsets (`offset.ply`): one row per template vertex.
+    Lam,
+}
+
 /// Arguments of `trisplat bind`.
 #[derive(Debug, clap::Args)]
 #[command(
@@ -54,11 +65,23 @@ impl From<ConventionArg> for Convention {
     --unchecked binds anyway.\n\n\
     The convention picks the frame: gaussianavatars (for deform --mode binding or lbs) or \
     surfhead (for deform --mode jacobian). Both use the template's positions as given (its rest \
-    shape)."
+    shape).\n\n\
+    LAM avatars (--avatar DIR, or MESH being such a folder: skin.glb and offset.ply; or \
+    --gaussians offset.ply --layout lam beside MESH): row i of offset.ply is the offset of a \
+    Gaussian from template vertex i, its f_dc the colour as RGB. Each Gaussian is placed at its \
+    vertex plus its offset and bound to the triangle around that vertex nearest to it; the \
+    command then renders the bound avatar at rest and the template from --check-views views and \
+    prints the silhouette IoU per view (1: the Gaussians cover exactly the template's outline; \
+    hair and accessories the mesh lacks lower it)."
 )]
 pub struct BindArgs {
-    /// Template mesh (.ply, .obj, .gltf, .glb; glTF in its rest state).
-    pub mesh: PathBuf,
+    /// Template mesh (.ply, .obj, .gltf, .glb; glTF in its rest state), or a LAM avatar
+    /// folder (as --avatar).
+    #[arg(required_unless_present = "avatar")]
+    pub mesh: Option<PathBuf>,
+    /// A LAM avatar folder: MESH = DIR/skin.glb, --gaussians DIR/offset.ply --layout lam.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["mesh", "gaussians", "per_triangle"])]
+    pub avatar: Option<PathBuf>,
     /// Output Gaussian PLY (bound, local parameters, `binding_0`).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
@@ -75,6 +98,13 @@ pub struct BindArgs {
     /// With --gaussians: bind even when the result looks implausible (see below).
     #[arg(long, requires = "gaussians")]
     pub unchecked: bool,
+    /// How --gaussians relates to MESH: world-space 3DGS Gaussians (attached to their nearest
+    /// triangle) or LAM's per-vertex offsets.
+    #[arg(long, value_enum, default_value_t = WorldLayout::World, requires = "gaussians")]
+    pub layout: WorldLayout,
+    /// Views of the rest-pose silhouette check of a LAM avatar (0: no check).
+    #[arg(long, value_name = "N", default_value_t = 8)]
+    pub check_views: usize,
 }
 
 /// Runs `trisplat bind`.
@@ -83,21 +113,31 @@ pub struct BindArgs {
 /// Unreadable mesh or Gaussians, a mesh without triangles, Gaussians that are already bound, an
 /// output equal to an input, a failed write.
 pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
-    refuse_to_overwrite(&args.mesh, &args.output)?;
-    if let Some(g) = &args.gaussians {
+    let (mesh_path, gaussians, layout) = match (&args.avatar, &args.mesh) {
+        (Some(dir), _) => lam_files(dir)?,
+        (None, Some(m)) if m.is_dir() => lam_files(m)?,
+        (None, Some(m)) => (m.clone(), args.gaussians.clone(), args.layout),
+        (None, None) => anyhow::bail!("a template MESH or --avatar DIR is needed"),
+    };
+    refuse_to_overwrite(&mesh_path, &args.output)?;
+    if let Some(g) = &gaussians {
         refuse_to_overwrite(g, &args.output)?;
     }
-    let mesh = read_template(&args.mesh)?;
+    let mesh = read_template(&mesh_path)?;
     let convention = Convention::from(args.convention);
     let spinner = ctx.progress.spinner("binding");
-    let bound = match &args.gaussians {
+    let bound = match &gaussians {
         None => {
             let options = BindOptions {
                 per_triangle: args.per_triangle as usize,
                 convention,
                 opacity: DEFAULT_INITIAL_OPACITY,
             };
-            init_bound(&mesh, &options).with_context(|| format!("{}", args.mesh.display()))?
+            init_bound(&mesh, &options).with_context(|| format!("{}", mesh_path.display()))?
+        }
+        Some(path) if layout == WorldLayout::Lam => {
+            let identity: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
+            bind_lam(path, &mesh, &mesh, &identity, &mesh_path, convention)?
         }
         Some(path) => {
             let world = read_gaussians(path)?;
@@ -108,7 +148,7 @@ pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
                     path.display()
                 );
             }
-            let context = || format!("attaching {} to {}", path.display(), args.mesh.display());
+            let context = || format!("attaching {} to {}", path.display(), mesh_path.display());
             if args.unchecked {
                 attach(&world, &mesh, convention).with_context(context)?
             } else {
@@ -120,5 +160,37 @@ pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     spinner.finish_and_clear();
     write_gaussians(&args.output, &bound, &PlyWriteOptions::default())?;
+    if layout == WorldLayout::Lam && gaussians.is_some() && args.check_views > 0 {
+        let mode = match convention {
+            Convention::GaussianAvatars => DeformMode::Binding,
+            Convention::SurfHead => DeformMode::Jacobian,
+        };
+        let rest = Deformer::new(&mesh, mode)
+            .deform(&bound, mesh.positions())
+            .with_context(|| format!("deforming {} at rest", args.output.display()))?;
+        let views = silhouette_iou(&rest, &mesh, args.check_views, 512, &mesh_path)?;
+        let stat = |f: fn(&Silhouettes) -> f64| {
+            let values: Vec<f64> = views.iter().map(f).collect();
+            let min = values.iter().copied().fold(1.0, f64::min);
+            let mean = values.iter().sum::<f64>() / values.len() as f64;
+            let list: Vec<String> = values.iter().map(|v| format!("{v:.3}")).collect();
+            format!("min {min:.3}, mean {mean:.3} ({})", list.join(" "))
+        };
+        println!(
+            "rest pose against {} over {} views (Gaussians: alpha >= 0.5):\n  silhouette IoU     \
+             {}\n  Gaussians on mesh  {}\n  mesh covered       {}",
+            mesh_path.display(),
+            views.len(),
+            stat(|s| s.iou),
+            stat(|s| s.inside),
+            stat(|s| s.covered)
+        );
+    }
     Ok(())
+}
+
+/// The template and Gaussians of the LAM avatar folder `dir`.
+fn lam_files(dir: &Path) -> anyhow::Result<(PathBuf, Option<PathBuf>, WorldLayout)> {
+    let avatar = AvatarFolder::open(dir)?;
+    Ok((avatar.template, Some(avatar.gaussians), WorldLayout::Lam))
 }

@@ -9,6 +9,8 @@ use trisplat_pipeline::{
     RunControl,
 };
 
+use trisplat_pipeline::avatar::{AvatarFolder, GaussianLayout};
+
 use super::Context;
 
 /// Arguments of `trisplat extract`.
@@ -71,9 +73,13 @@ failure instead. The animated glTF is assembled from the frame files; past glTF'
 is split into <method>_part001.glb, ... (listed in the report). --targets chooses the outputs \
 (meshes, glb, report; default all) so a run that only needs the numbers writes no meshes.")]
 pub struct ExtractArgs {
-    /// Template mesh T (.ply, .obj, .gltf, .glb) in its rest shape.
-    #[arg(long, value_name = "T")]
-    pub template: PathBuf,
+    /// Template mesh T (.ply, .obj, .gltf, .glb) in its rest shape, or a LAM avatar folder
+    /// (as --avatar).
+    #[arg(long, value_name = "T", required_unless_present = "avatar")]
+    pub template: Option<PathBuf>,
+    /// A LAM avatar folder: --template DIR/skin.glb --gaussians DIR/offset.ply --layout lam.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["template", "gaussians"])]
+    pub avatar: Option<PathBuf>,
     /// Animation: a glTF/GLB, a folder or pattern of OBJ/PLY frames, or a weights JSON.
     #[arg(long, value_name = "A")]
     pub animation: Option<String>,
@@ -114,11 +120,22 @@ pub struct ExtractArgs {
 }
 
 impl ExtractArgs {
-    fn config(self) -> ExtractConfig {
-        ExtractConfig {
-            template: self.template,
+    /// The run's configuration; an avatar folder (`--avatar DIR`, or `--template DIR` when it
+    /// holds one) stands for its template and per-vertex Gaussians.
+    fn config(self) -> anyhow::Result<ExtractConfig> {
+        let mut options = self.options;
+        let (template, gaussians) = match (self.avatar, self.template) {
+            (Some(dir), _) => avatar_files(&dir, self.gaussians.as_deref(), &mut options)?,
+            (None, Some(t)) if t.is_dir() => {
+                avatar_files(&t, self.gaussians.as_deref(), &mut options)?
+            }
+            (None, Some(t)) => (t, self.gaussians),
+            (None, None) => anyhow::bail!("--template or --avatar is needed"),
+        };
+        Ok(ExtractConfig {
+            template,
             animation: self.animation,
-            gaussians: self.gaussians,
+            gaussians,
             methods: self.methods,
             output: self.output,
             frames: self.frames,
@@ -127,9 +144,31 @@ impl ExtractArgs {
                 .as_deref()
                 .map(GroundTruth::parse)
                 .or(self.gt_sequence.map(GroundTruth::Sequence)),
-            options: self.options,
-        }
+            options,
+        })
     }
+}
+
+/// The template and Gaussians of the LAM avatar folder `dir`, with `options` set to read it.
+///
+/// # Errors
+/// Not an avatar folder, or `--gaussians` given beside one.
+fn avatar_files(
+    dir: &Path,
+    gaussians: Option<&Path>,
+    options: &mut ExtractOptions,
+) -> anyhow::Result<(PathBuf, Option<PathBuf>)> {
+    let avatar = AvatarFolder::open(dir)?;
+    if let Some(g) = gaussians {
+        anyhow::bail!(
+            "--gaussians {}: the avatar folder {} brings its own ({})",
+            g.display(),
+            dir.display(),
+            avatar.gaussians.display()
+        );
+    }
+    options.layout = GaussianLayout::Lam;
+    Ok((avatar.template, Some(avatar.gaussians)))
 }
 
 /// Runs `trisplat extract`.
@@ -139,7 +178,7 @@ impl ExtractArgs {
 pub fn run(args: ExtractArgs, ctx: &Context) -> anyhow::Result<()> {
     let explain = args.explain;
     let control = args.control;
-    let config = args.config();
+    let config = args.config()?;
     if explain {
         print!("{}", Plan::new(&config));
         return Ok(());
