@@ -3,7 +3,11 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::{DQuat, DVec3, Vec3};
 use trisplat_geometry::TriMesh;
+use trisplat_geometry::animation::{
+    AnimatedTemplate, Clip, GltfMorphAnimation, GltfTemplate, WeightsTrack,
+};
 use trisplat_pipeline::avatar::{
     AvatarFolder, LAM_VERTEX_ORDER, bind_lam, read_lam_gaussians, silhouette_iou,
 };
@@ -207,4 +211,138 @@ fn folders_and_files_that_do_not_fit_are_refused_naming_them() {
     trisplat_splat::ply::write_gaussians(&bound_path, &bound, &Default::default()).expect("write");
     let e = read_lam_gaussians(&bound_path, &mesh, &skin).expect_err("bound");
     assert!(message(&e).contains("already bound"), "{e}");
+}
+
+/// The weights track of the fixture's targets, all at zero, with these head poses.
+fn head_track(poses: &[[f64; 3]]) -> WeightsTrack {
+    let frames: Vec<String> = (0..poses.len())
+        .map(|i| format!(r#"{{"weights": [0, 0, 0], "time": {}}}"#, i as f64 / 30.0))
+        .collect();
+    let poses: Vec<String> = poses
+        .iter()
+        .map(|p| format!("[{}, {}, {}]", p[0], p[1], p[2]))
+        .collect();
+    let text = format!(
+        r#"{{"names": ["jawOpen", "mouthSmileLeft", "eyeBlinkLeft"], "frames": [{}],
+            "head_pose": [{}]}}"#,
+        frames.join(", "),
+        poses.join(", ")
+    );
+    WeightsTrack::parse(&text, Path::new("head.json")).expect("track")
+}
+
+/// Vertices skinned by one matrix only, the one that skins the most of them (the head joint).
+fn head_only_vertices(template: &GltfTemplate) -> Vec<usize> {
+    let skinning = template.skinning();
+    let single: Vec<(usize, usize)> = (0..template.rest().vertex_count())
+        .filter_map(|v| {
+            let influences: Vec<(usize, f64)> = skinning.influences(v).collect();
+            (influences.len() == 1).then(|| (v, influences[0].0))
+        })
+        .collect();
+    let mut counts = std::collections::HashMap::new();
+    for (_, m) in &single {
+        *counts.entry(*m).or_insert(0usize) += 1;
+    }
+    let head = counts
+        .into_iter()
+        .max_by_key(|(_, c)| *c)
+        .expect("skinned")
+        .0;
+    single
+        .into_iter()
+        .filter(|(_, m)| *m == head)
+        .map(|(v, _)| v)
+        .collect()
+}
+
+/// Largest `|(a1 - b1) - R (a0 - b0)|` over pairs of `vertices` between two frames.
+fn rigid_residual(vertices: &[usize], before: &[Vec3], after: &[Vec3], r: DQuat) -> f64 {
+    let a = vertices[0];
+    vertices
+        .iter()
+        .map(|&b| {
+            let d0 = before[b].as_dvec3() - before[a].as_dvec3();
+            let d1 = after[b].as_dvec3() - after[a].as_dvec3();
+            (d1 - r * d0).length()
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn head_pose_turns_the_head_joint_by_an_axis_angle_vector_in_radians() {
+    // LAM's track (test_expression_1s.json) gives `head_pose` as 973 triples up to 0.065 in
+    // size, and LAM's FLAME tracking poses the head with an axis-angle vector (Rodrigues) in
+    // radians. Degrees would make 0.065 an invisible 0.001 rad; read as Euler XYZ angles the
+    // track would differ by at most 0.002 rad. A large pose tells the readings apart: the
+    // vertices the head joint alone skins must turn rigidly by exp([v]x) in world axes.
+    let template = GltfTemplate::open(&folder().join("skin.glb"), &Clip::None).expect("skin.glb");
+    let pose = [0.3, -0.5, 0.2];
+    let anim = GltfMorphAnimation::new(template.clone(), head_track(&[[0.0; 3], pose]))
+        .expect("animation");
+    assert!(
+        anim.unused_channels().is_empty(),
+        "{:?}",
+        anim.unused_channels()
+    );
+    let (rest, turned) = (
+        anim.frame(0).expect("frame 0"),
+        anim.frame(1).expect("frame 1"),
+    );
+    let head = head_only_vertices(&template);
+    assert!(head.len() > 100, "{} head-only vertices", head.len());
+    let axis_angle = DQuat::from_scaled_axis(DVec3::from_array(pose));
+    let size = f64::from(template.rest().bounds().expect("bounds").diagonal());
+    let residual = rigid_residual(&head, &rest, &turned, axis_angle);
+    assert!(residual < 1e-5 * size, "axis-angle residual {residual}");
+    for (name, other) in [
+        (
+            "Euler XYZ",
+            DQuat::from_euler(glam::EulerRot::XYZ, pose[0], pose[1], pose[2]),
+        ),
+        (
+            "degrees",
+            DQuat::from_scaled_axis(DVec3::from_array(pose) * std::f64::consts::PI / 180.0),
+        ),
+        ("inverse", DQuat::from_scaled_axis(-DVec3::from_array(pose))),
+    ] {
+        let r = rigid_residual(&head, &rest, &turned, other);
+        assert!(r > 100.0 * residual.max(1e-9), "{name}: {r} vs {residual}");
+    }
+    // Frame 0 (no turn) is the rest pose itself.
+    for (a, b) in rest.iter().zip(template.rest().positions()) {
+        assert!(a.distance(*b) < 1e-6, "{a} vs {b}");
+    }
+
+    // Without a joint named `head` the pose drives nothing: listed as unused.
+    let morph_only = GltfTemplate::open(
+        &trisplat_fixtures::path("anim/SyntheticFeatures.gltf"),
+        &Clip::None,
+    )
+    .expect("synthetic");
+    let names = morph_only.morph_target_names().concat();
+    let text = format!(
+        r#"{{"names": ["{}"], "frames": [{{"weights": [0.5]}}], "head_pose": [[0.1, 0, 0]]}}"#,
+        names[0]
+    );
+    let track = WeightsTrack::parse(&text, Path::new("h.json")).expect("track");
+    let anim = GltfMorphAnimation::new(morph_only, track).expect("anim");
+    assert_eq!(anim.unused_channels(), ["head_pose"]);
+
+    // A head pose that does not fit its frames is refused, naming the entry.
+    for (text, want) in [
+        (
+            r#""head_pose": [[0, 0, 0]]"#,
+            "has 1 rotations for 2 frames",
+        ),
+        (r#""head_pose": [[0, 0], [0, 0, 0]]"#, "head_pose[0]"),
+        (r#""head_pose": [[0, 0, 0], [0, null, 0]]"#, "head_pose[1]"),
+        (r#""head_pose": 3"#, "expected a list"),
+    ] {
+        let json = format!(
+            r#"{{"names": ["jawOpen"], "frames": [{{"weights": [0]}}, {{"weights": [1]}}], {text}}}"#
+        );
+        let e = WeightsTrack::parse(&json, Path::new("h.json")).expect_err(want);
+        assert!(e.to_string().contains(want), "{e} (want {want})");
+    }
 }

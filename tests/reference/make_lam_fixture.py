@@ -1,10 +1,11 @@
 """Cut-down LAM avatar for the tests (fixtures/data/lam_mini), from LAM's p2-1 export.
 
 Keeps the face around the mouth: the vertices of skin.glb within RADIUS of CENTRE, the
-triangles among them, three ARKit morph targets, their rows of offset.ply (values unchanged,
+triangles among them, three ARKit morph targets, the skin (every node and joint of skin.glb,
+their weights on the kept vertices), their rows of offset.ply (values unchanged,
 same header), vertex_order.json restricted to them (same relative order), and the first
 FRAMES frames of test_expression_1s.json for the kept targets plus `tongueOut`, which drives
-nothing. The glTF is static (no skin): LAM's ARKit track drives morph targets only.
+nothing, and their `head_pose` (which turns the joint named `head`).
 
 Usage: python make_lam_fixture.py ../shared/data/avatars/lam_p2-1 fixtures/data/lam_mini
 Pinned: numpy 2.4.6, pygltflib 1.16.5, plyfile 1.1.5 (requirements.txt). Source licence MIT
@@ -39,7 +40,7 @@ def read_view(g, blob, view_index, offset, dtype, count):
 def accessor(g, blob, index):
     """An accessor's values as [count, width], sparse accessors included."""
     a = g.accessors[index]
-    width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}[a.type]
+    width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[a.type]
     dtype = DTYPES[a.componentType]
     if a.bufferView is None:
         values = np.zeros((a.count, width), dtype)
@@ -84,16 +85,23 @@ def main(src, dst):
         accessors.append(acc)
         return len(accessors) - 1
 
+    joints = accessor(g, blob, prim.attributes.JOINTS_0)[used]
+    weights = accessor(g, blob, prim.attributes.WEIGHTS_0)[used].astype(np.float32)
+    inverse_bind = accessor(g, blob, g.skins[0].inverseBindMatrices).astype(np.float32)
     p = add(positions, pygltflib.ARRAY_BUFFER, "VEC3", pygltflib.FLOAT, True)
+    j = add(joints.astype(np.uint16 if joints.dtype == np.uint16 else np.uint8), pygltflib.ARRAY_BUFFER, "VEC4", pygltflib.UNSIGNED_SHORT if joints.dtype == np.uint16 else pygltflib.UNSIGNED_BYTE, False)
+    w = add(weights, pygltflib.ARRAY_BUFFER, "VEC4", pygltflib.FLOAT, False)
+    ibm = add(inverse_bind, None, "MAT4", pygltflib.FLOAT, False)
     i = add(tris.reshape(-1), pygltflib.ELEMENT_ARRAY_BUFFER, "SCALAR", pygltflib.UNSIGNED_INT, False)
     targets = [{"POSITION": add(d, pygltflib.ARRAY_BUFFER, "VEC3", pygltflib.FLOAT, True)} for d in deltas]
     buffer = b"".join(chunks)
     out = pygltflib.GLTF2(
         asset=pygltflib.Asset(version="2.0", generator="trisplat tests/reference/make_lam_fixture.py"),
         scene=0,
-        scenes=[pygltflib.Scene(nodes=[0])],
-        nodes=[pygltflib.Node(mesh=0, name="head_final")],
-        meshes=[pygltflib.Mesh(name="head", primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=p), indices=i, targets=targets)], weights=[0.0] * len(TARGETS), extras={"targetNames": TARGETS})],
+        scenes=[pygltflib.Scene(nodes=list(g.scenes[g.scene or 0].nodes))],
+        nodes=g.nodes,
+        skins=[pygltflib.Skin(joints=list(g.skins[0].joints), inverseBindMatrices=ibm, skeleton=g.skins[0].skeleton)],
+        meshes=[pygltflib.Mesh(name="head", primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=p, JOINTS_0=j, WEIGHTS_0=w), indices=i, targets=targets)], weights=[0.0] * len(TARGETS), extras={"targetNames": TARGETS})],
         accessors=accessors,
         bufferViews=views,
         buffers=[pygltflib.Buffer(byteLength=len(buffer))],

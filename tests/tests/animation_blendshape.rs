@@ -103,7 +103,11 @@ fn frames_equal_neutral_plus_weighted_deltas() {
     let set = BlendshapeSet::from_files(&neutral, &targets).expect("set");
     assert_eq!(set.names(), ["jawOpen", "eyeBlink_L", "mouthSmile_L"]);
     let anim = BlendshapeAnimation::new(set, track(TRACK).expect("track")).expect("anim");
-    assert_eq!(anim.unused_channels(), ["browDownLeft", "tongueOut"]);
+    // OBJ blendshapes have no head joint: the head pose drives nothing either.
+    assert_eq!(
+        anim.unused_channels(),
+        ["browDownLeft", "tongueOut", "head_pose"]
+    );
     assert!(anim.unmatched_targets().is_empty());
     assert_eq!(anim.frame_count(), 3);
     assert_eq!(anim.frame_time(1), Some(0.0333));

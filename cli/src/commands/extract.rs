@@ -21,7 +21,8 @@ and method, an animated glTF per method, a report and a plot out. Only the stage
 need run (--explain lists them with the reason each runs or is skipped).
 
 Stages: read T and its animation A (a glTF clip sampled at --fps; a folder or pattern of OBJ/PLY \
-frames; a weights JSON driving a glTF template's morph targets; without A a glTF template plays \
+frames; a weights JSON driving a glTF template's morph targets by name (LAM's head_pose, an \
+axis-angle vector in radians per frame, turns the skin's joint named head); without A a glTF template plays \
 its own first clip and any other template is one frame; vertices the file splits at UV/normal \
 seams are welded by position, each taking its first copy's position in every frame) -> bind Gaussians (only without \
 --gaussians: --per-triangle N per triangle, opaque discs flat along the normal) -> deform them \

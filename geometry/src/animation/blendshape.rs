@@ -5,8 +5,11 @@
 //!
 //! # Weights file
 //! A JSON object with `names` (one string per channel) and `frames`, each an object with
-//! `weights` (one number per name) and optionally `time` (seconds). Other keys (LAM's
-//! `head_pose`, per-frame `rotation`) are ignored. Without `time` on every frame, frame `i` is
+//! `weights` (one number per name) and optionally `time` (seconds). LAM's top-level
+//! `head_pose` (one `[x, y, z]` per frame) is the head's rotation as an axis-angle vector in
+//! radians, in world axes: a glTF template turns its skin's joint named `head` by it, about
+//! the joint's origin, on top of the morph targets (without such a joint `head_pose` is listed
+//! as an unused channel). Per-frame `rotation` (empty in LAM's files) is ignored. Without `time` on every frame, frame `i` is
 //! at `i / fps` with `fps` from a top-level `fps` key or [`DEFAULT_FPS`]. `NaN`/`Infinity`
 //! tokens (Python's `json` writes them) and `null` weights are refused with the frame and the
 //! channel named.
@@ -20,11 +23,11 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use glam::{DVec3, Vec3};
+use glam::{DQuat, DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::sequence::check_topology;
-use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS, GltfTemplate};
+use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS, GltfTemplate, JointTurn};
 use crate::TriMesh;
 use crate::io::read_mesh;
 
@@ -58,6 +61,8 @@ pub struct WeightsTrack {
     times: Vec<f64>,
     /// `frames × names`, row-major.
     weights: Vec<f64>,
+    /// LAM's `head_pose`: per frame, the head's rotation as an axis-angle vector in radians.
+    head_pose: Option<Vec<DVec3>>,
 }
 
 /// Replaces the bare tokens `NaN`, `Infinity` and `-Infinity` outside strings by `null`, so
@@ -92,6 +97,50 @@ fn nulls_for_non_finite(text: &str) -> String {
         rest = &rest[c.len_utf8()..];
     }
     out
+}
+
+/// The key of LAM's head rotation track, and the channel name under which a track whose
+/// template has no head joint lists it as unused.
+pub const HEAD_POSE: &str = "head_pose";
+
+/// The joint LAM's `head_pose` turns (compared without case).
+pub const HEAD_JOINT: &str = "head";
+
+/// Parses `head_pose`: one `[x, y, z]` axis-angle vector (radians) per frame.
+fn parse_head_pose(
+    value: &serde_json::Value,
+    frames: usize,
+    err: &dyn Fn(&str, String) -> AnimationError,
+) -> Result<Vec<DVec3>, AnimationError> {
+    let Some(list) = value.as_array() else {
+        return Err(err(
+            HEAD_POSE,
+            "expected a list of [x, y, z] per frame".into(),
+        ));
+    };
+    if list.len() != frames {
+        return Err(err(
+            HEAD_POSE,
+            format!("has {} rotations for {frames} frames", list.len()),
+        ));
+    }
+    list.iter()
+        .enumerate()
+        .map(|(f, r)| {
+            let bad = || {
+                err(
+                    &format!("{HEAD_POSE}[{f}]"),
+                    format!("{r} is not three finite numbers (an axis-angle vector, radians)"),
+                )
+            };
+            let v = r.as_array().filter(|v| v.len() == 3).ok_or_else(bad)?;
+            let c: Vec<f64> = v.iter().filter_map(serde_json::Value::as_f64).collect();
+            match c.as_slice() {
+                [x, y, z] if c.iter().all(|x| x.is_finite()) => Ok(DVec3::new(*x, *y, *z)),
+                _ => Err(bad()),
+            }
+        })
+        .collect()
 }
 
 impl WeightsTrack {
@@ -222,12 +271,29 @@ impl WeightsTrack {
         } else {
             times = (0..frames.len()).map(|i| i as f64 / fps).collect();
         }
+        let head_pose = match object.get(HEAD_POSE) {
+            None => None,
+            Some(value) => Some(parse_head_pose(value, frames.len(), &err)?),
+        };
         Ok(Self {
             path: path.to_path_buf(),
             names,
             times,
             weights,
+            head_pose,
         })
+    }
+
+    /// LAM's head rotation of `frame` (axis-angle, radians, world axes), if the track has one.
+    #[must_use]
+    pub fn head_pose(&self, frame: usize) -> Option<DVec3> {
+        self.head_pose.as_ref()?.get(frame).copied()
+    }
+
+    /// Whether the track carries LAM's `head_pose`.
+    #[must_use]
+    pub fn has_head_pose(&self) -> bool {
+        self.head_pose.is_some()
     }
 
     /// The file this track was read from.
@@ -517,7 +583,12 @@ impl AnimatedTemplate for BlendshapeAnimation {
     }
 
     fn unused_channels(&self) -> Vec<&str> {
-        unused(&self.track, self.mapping.iter())
+        let mut list = unused(&self.track, self.mapping.iter());
+        if self.track.has_head_pose() {
+            // OBJ/PLY blendshapes have no joint to turn.
+            list.push(HEAD_POSE);
+        }
+        list
     }
 }
 
@@ -527,6 +598,9 @@ impl AnimatedTemplate for BlendshapeAnimation {
 pub struct GltfMorphAnimation {
     template: GltfTemplate,
     track: WeightsTrack,
+    /// The joint `head_pose` turns ([`HEAD_JOINT`]), when the track has a head pose and the
+    /// template such a joint.
+    head: Option<usize>,
     /// Per mesh, per target: the driving channel.
     mapping: Vec<Vec<Option<usize>>>,
 }
@@ -545,9 +619,15 @@ impl GltfMorphAnimation {
         let mapping: Vec<Vec<Option<usize>>> = names.iter().map(|n| track.map_targets(n)).collect();
         let flat: Vec<Option<usize>> = mapping.iter().flatten().copied().collect();
         require_match(&flat, &track, &names.concat())?;
+        let head = if track.has_head_pose() {
+            template.joint_named(HEAD_JOINT)
+        } else {
+            None
+        };
         Ok(Self {
             template,
             track,
+            head,
             mapping,
         })
     }
@@ -565,7 +645,11 @@ impl AnimatedTemplate for GltfMorphAnimation {
     }
 
     fn unused_channels(&self) -> Vec<&str> {
-        unused(&self.track, self.mapping.iter().flatten())
+        let mut list = unused(&self.track, self.mapping.iter().flatten());
+        if self.track.has_head_pose() && self.head.is_none() {
+            list.push(HEAD_POSE);
+        }
+        list
     }
 
     fn frame_time(&self, frame: usize) -> Option<f64> {
@@ -595,7 +679,14 @@ impl AnimatedTemplate for GltfMorphAnimation {
                 .flatten()
                 .map(|c| w[c])
         };
-        self.template.evaluate_with_weights(Some(t), &lookup)
+        let turn = self
+            .head
+            .zip(self.track.head_pose(frame))
+            .map(|(node, r)| JointTurn {
+                node,
+                rotation: DQuat::from_scaled_axis(r),
+            });
+        self.template.evaluate_turned(Some(t), &lookup, turn)
     }
 }
 

@@ -71,6 +71,7 @@ enum Local {
 
 #[derive(Clone, Debug)]
 struct NodeData {
+    name: Option<String>,
     local: Local,
     mesh: Option<usize>,
     skin: Option<usize>,
@@ -130,6 +131,16 @@ struct ClipData {
     name: Option<String>,
     channels: Vec<Channel>,
     end: f64,
+}
+
+/// A rotation of one joint on top of a pose: `rotation` in world axes about the joint's own
+/// origin, so everything the joint carries (its children, the vertices it skins) turns with it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointTurn {
+    /// The joint's node index.
+    pub node: usize,
+    /// The rotation, in world axes.
+    pub rotation: DQuat,
 }
 
 /// A glTF scene with (optionally) one animation clip: evaluates world-space vertex positions
@@ -286,6 +297,7 @@ impl GltfTemplate {
                 .weights()
                 .map(|w| w.iter().map(|&v| f64::from(v)).collect());
             nodes.push(NodeData {
+                name: node.name().map(str::to_owned),
                 local,
                 mesh: node.mesh().map(|m| m.index()),
                 skin: node.skin().map(|s| s.index()),
@@ -453,7 +465,7 @@ impl GltfTemplate {
             fps: DEFAULT_FPS,
             rest: TriMesh::new_unchecked(Vec::new(), Vec::new()),
         };
-        let rest_positions = template.evaluate_pose(None, None)?;
+        let rest_positions = template.evaluate_pose(None, None, None)?;
         template.rest = TriMesh::try_new(rest_positions, triangles)?;
         template.clip = template.read_clip(doc, buffers, clip)?;
         Ok(template)
@@ -764,7 +776,7 @@ impl GltfTemplate {
         if !t.is_finite() {
             return Err(AnimationError::BadTime { time: t });
         }
-        self.evaluate_pose(Some(t), None)
+        self.evaluate_pose(Some(t), None, None)
     }
 
     /// Like [`Self::evaluate_at`] (or the stored scene when `t` is `None`), with the morph
@@ -777,15 +789,47 @@ impl GltfTemplate {
         t: Option<f64>,
         weights: &dyn Fn(usize, usize) -> Option<f64>,
     ) -> Result<Vec<Vec3>, AnimationError> {
+        self.evaluate_turned(t, weights, None)
+    }
+
+    /// [`Self::evaluate_with_weights`] with one joint turned on top of the pose (a head
+    /// rotation of a face track).
+    ///
+    /// # Errors
+    /// [`AnimationError::BadTime`] when `t` is not finite.
+    pub fn evaluate_turned(
+        &self,
+        t: Option<f64>,
+        weights: &dyn Fn(usize, usize) -> Option<f64>,
+        turn: Option<JointTurn>,
+    ) -> Result<Vec<Vec3>, AnimationError> {
         if let Some(t) = t.filter(|t| !t.is_finite()) {
             return Err(AnimationError::BadTime { time: t });
         }
-        self.evaluate_pose(t, Some(weights))
+        self.evaluate_pose(t, Some(weights), turn)
+    }
+
+    /// The first node named `name` (compared without case) that is a joint of a skin, if any.
+    #[must_use]
+    pub fn joint_named(&self, name: &str) -> Option<usize> {
+        self.skins
+            .iter()
+            .flat_map(|s| s.joints.iter().copied())
+            .find(|&j| {
+                self.nodes
+                    .get(j)
+                    .and_then(|n| n.name.as_deref())
+                    .is_some_and(|n| n.eq_ignore_ascii_case(name))
+            })
     }
 
     /// World matrices of every node and the animated morph weights (by node) at time `t`
     /// (`None`: the stored scene).
-    fn pose(&self, t: Option<f64>) -> (Vec<DMat4>, HashMap<usize, Vec<f64>>) {
+    fn pose(
+        &self,
+        t: Option<f64>,
+        turn: Option<JointTurn>,
+    ) -> (Vec<DMat4>, HashMap<usize, Vec<f64>>) {
         // Local transforms (matrix nodes that are animated are decomposed first).
         let mut locals: Vec<Local> = self.nodes.iter().map(|n| n.local).collect();
         let mut anim_weights: HashMap<usize, Vec<f64>> = HashMap::new();
@@ -820,6 +864,28 @@ impl GltfTemplate {
                 locals[ch.node] = Local::Trs(trs);
             }
         }
+        if let Some(turn) = turn.filter(|j| j.node < locals.len()) {
+            // A rotation in world axes about the joint's own origin: with the parent's world
+            // rotation P, the local rotation becomes (P⁻¹ R P) · local.
+            let parents = world_matrices(&locals, &self.order, &self.parents);
+            let p = self.parents[turn.node].map_or(DQuat::IDENTITY, |q| {
+                let (_, r, _) = parents[q].to_scale_rotation_translation();
+                r
+            });
+            let local = match locals[turn.node] {
+                Local::Trs(trs) => trs.matrix(),
+                Local::Matrix(m) => m,
+            };
+            let spin = DMat4::from_quat((p.inverse() * turn.rotation * p).normalize());
+            // Turned about the joint's origin (the local translation, in the parent's frame).
+            let translation = local.w_axis.truncate();
+            locals[turn.node] = Local::Matrix(
+                DMat4::from_translation(translation)
+                    * spin
+                    * DMat4::from_translation(-translation)
+                    * local,
+            );
+        }
         (
             world_matrices(&locals, &self.order, &self.parents),
             anim_weights,
@@ -830,8 +896,9 @@ impl GltfTemplate {
         &self,
         t: Option<f64>,
         override_weights: Option<&dyn Fn(usize, usize) -> Option<f64>>,
+        turn: Option<JointTurn>,
     ) -> Result<Vec<Vec3>, AnimationError> {
-        let (world, anim_weights) = self.pose(t);
+        let (world, anim_weights) = self.pose(t, turn);
         let mut out = Vec::with_capacity(self.rest.vertex_count());
         for &(node, _) in &self.instances {
             let data = &self.nodes[node];
@@ -1013,7 +1080,7 @@ impl GltfTemplate {
         if let Some(t) = t.filter(|t| !t.is_finite()) {
             return Err(AnimationError::BadTime { time: t });
         }
-        let (world, _) = self.pose(t);
+        let (world, _) = self.pose(t, None);
         let (_, len) = self.palette_layout();
         let mut palette = Vec::with_capacity(len);
         for &(node, _) in &self.instances {
@@ -1074,6 +1141,6 @@ impl AnimatedTemplate for GltfTemplate {
                 frame,
                 count: self.frame_count(),
             })?;
-        self.evaluate_pose(Some(t), None)
+        self.evaluate_pose(Some(t), None, None)
     }
 }

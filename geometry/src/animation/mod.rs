@@ -26,7 +26,7 @@ pub use self::blendshape::{
     BlendshapeAnimation, BlendshapeSet, GltfMorphAnimation, WeightsTrack, canonical_target_name,
 };
 pub use self::error::AnimationError;
-pub use self::gltf::{Clip, GltfTemplate, VertexSkinning};
+pub use self::gltf::{Clip, GltfTemplate, JointTurn, VertexSkinning};
 pub use self::sampler::Interpolation;
 pub use self::sequence::{MeshSequence, check_topology, natural_cmp};
 use crate::TriMesh;
