@@ -40,3 +40,81 @@ impl Progress {
             .with_message(message.to_owned())
     }
 }
+
+/// Running time per frame of each extraction method, for the progress bar's message: what
+/// each method costs and how long it still needs for the frames left.
+#[derive(Clone, Debug, Default)]
+pub struct MethodPace {
+    /// Per method in first-seen order: name, total milliseconds, frames.
+    methods: Vec<(&'static str, f64, usize)>,
+}
+
+impl MethodPace {
+    /// Adds one frame's time of `method`.
+    pub fn add(&mut self, method: &'static str, ms: f64) {
+        match self.methods.iter_mut().find(|(m, _, _)| *m == method) {
+            Some((_, total, n)) => {
+                *total += ms;
+                *n += 1;
+            }
+            None => self.methods.push((method, ms, 1)),
+        }
+    }
+
+    /// `tsdf 3.3 s/frame, 52 min left · delaunay 250 ms/frame, 4 min left` for `left` frames
+    /// to go (empty before the first frame).
+    #[must_use]
+    pub fn message(&self, left: usize) -> String {
+        self.methods
+            .iter()
+            .map(|(name, total, n)| {
+                let mean = total / *n as f64;
+                format!(
+                    "{name} {}/frame, {} left",
+                    duration(mean),
+                    duration(mean * left as f64)
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(" · ")
+    }
+}
+
+/// `850 ms`, `3.3 s`, `4 min`, `2.5 h`.
+fn duration(ms: f64) -> String {
+    if ms < 1_000.0 {
+        format!("{ms:.0} ms")
+    } else if ms < 60_000.0 {
+        format!("{:.1} s", ms / 1_000.0)
+    } else if ms < 3_600_000.0 {
+        format!("{:.0} min", ms / 60_000.0)
+    } else {
+        format!("{:.1} h", ms / 3_600_000.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pace_reports_each_method_mean_and_time_left() {
+        let mut pace = MethodPace::default();
+        assert_eq!(pace.message(10), "");
+        pace.add("tsdf", 3_000.0);
+        pace.add("delaunay", 200.0);
+        pace.add("tsdf", 3_600.0);
+        pace.add("delaunay", 300.0);
+        assert_eq!(
+            pace.message(1_000),
+            "tsdf 3.3 s/frame, 55 min left · delaunay 250 ms/frame, 4 min left"
+        );
+        assert_eq!(
+            pace.message(0),
+            "tsdf 3.3 s/frame, 0 ms left · delaunay 250 ms/frame, 0 ms left"
+        );
+        let mut long = MethodPace::default();
+        long.add("tsdf", 10_000.0);
+        assert_eq!(long.message(973), "tsdf 10.0 s/frame, 2.7 h left");
+    }
+}

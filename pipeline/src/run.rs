@@ -29,7 +29,7 @@ pub const REPORT_MD: &str = "report.md";
 pub const PLOT_PNG: &str = "error_vs_time.png";
 
 /// Progress of a run, for a progress bar.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Progress {
     /// Inputs read; `frames` frames will be meshed.
     Started {
@@ -42,6 +42,9 @@ pub enum Progress {
         done: usize,
         /// Frames in all.
         total: usize,
+        /// Milliseconds each method took on this frame (empty when the frame failed or was
+        /// done by the run being resumed).
+        method_ms: Vec<(Method, f64)>,
     },
     /// Writing the sequences, reports and plot.
     Finishing,
@@ -110,9 +113,14 @@ pub fn run(
                     .keys()
                     .all(|m| out.join(m).join(frame_file(f)).is_file())
         });
+        let mut method_ms = Vec::new();
         if !finished {
             match run_frame(&mut session, out, f, frame_files_wanted) {
                 Ok(entry) => {
+                    method_ms = Method::ALL
+                        .into_iter()
+                        .filter_map(|m| entry.methods.get(m.name()).map(|r| (m, r.ms)))
+                        .collect();
                     journal.frame(&entry)?;
                     done_frames.insert(f, entry);
                 }
@@ -136,6 +144,7 @@ pub fn run(
         progress(Progress::Frame {
             done: done + 1,
             total,
+            method_ms,
         });
     }
     progress(Progress::Finishing);

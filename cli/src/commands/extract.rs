@@ -12,6 +12,7 @@ use trisplat_pipeline::{
 use trisplat_pipeline::avatar::{AvatarFolder, GaussianLayout};
 
 use super::Context;
+use crate::progress::MethodPace;
 
 /// Arguments of `trisplat extract`.
 #[derive(Debug, clap::Args)]
@@ -217,14 +218,26 @@ pub fn run_with_progress(
 ) -> anyhow::Result<Report> {
     let spinner = ctx.progress.spinner("extract: reading inputs");
     let mut bar = None;
+    let mut pace = MethodPace::default();
     let result = trisplat_pipeline::run(config, control, &mut |p| match p {
         Progress::Started { frames } => {
             spinner.finish_and_clear();
             bar = Some(ctx.progress.bar(frames as u64, "extract: meshing frames"));
         }
-        Progress::Frame { done, .. } => {
+        Progress::Frame {
+            done,
+            total,
+            method_ms,
+        } => {
+            for (m, ms) in method_ms {
+                pace.add(m.name(), ms);
+            }
             if let Some(b) = &bar {
                 b.set_position(done as u64);
+                b.set_message(format!(
+                    "extract: {}",
+                    pace.message(total.saturating_sub(done))
+                ));
             }
         }
         Progress::Finishing => {
