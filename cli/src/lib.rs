@@ -58,7 +58,7 @@ pub enum Command {
     /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
     Cameras(commands::cameras::CamerasArgs),
     /// The main job: per-frame meshes (tsdf, delaunay, alpha) of an animated avatar, report, plot.
-    Extract(commands::extract::ExtractArgs),
+    Extract(Box<commands::extract::ExtractArgs>),
     /// The main job on the bundled avatar fixture.
     Demo(commands::demo::DemoArgs),
     /// Join extract runs over disjoint frame ranges (shards) into one run folder.
@@ -104,7 +104,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Prune(args) => commands::prune::run(args, &ctx),
         Command::Render(args) => commands::render::run(args, &ctx),
         Command::Cameras(args) => commands::cameras::run(args, &ctx),
-        Command::Extract(args) => commands::extract::run(args, &ctx),
+        Command::Extract(args) => commands::extract::run(*args, &ctx),
         Command::Demo(args) => commands::demo::run(args, &ctx),
         Command::Merge(args) => commands::merge::run(args, &ctx),
     }

@@ -204,3 +204,69 @@ fn avatar_refusals_name_the_culprit() {
         "{line}"
     );
 }
+
+#[test]
+fn clip_from_another_file_plays_by_joint_name_and_lists_the_unmatched() {
+    let dir = fresh_dir("clip_from");
+    let synthetic = trisplat_fixtures::path("anim/SyntheticFeatures.gltf");
+    // The clip's file with one joint renamed: its channels have no namesake.
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&synthetic).expect("read")).expect("json");
+    for node in json["nodes"].as_array_mut().expect("nodes") {
+        if node["name"] == "joint2" {
+            node["name"] = "jointX".into();
+        }
+    }
+    for buffer in json["buffers"].as_array().expect("buffers") {
+        if let Some(uri) = buffer["uri"].as_str().filter(|u| !u.starts_with("data:")) {
+            std::fs::copy(synthetic.with_file_name(uri), dir.join(uri)).expect("buffer");
+        }
+    }
+    let source = dir.join("motion.gltf");
+    std::fs::write(&source, json.to_string()).expect("write");
+    let out = dir.join("out");
+    let args = [
+        "extract",
+        "--template",
+        s(&synthetic),
+        "--clip-from",
+        s(&source),
+        "--method",
+        "alpha",
+        "-q",
+        "-o",
+        s(&out),
+    ];
+    let ran = run_ok(&args);
+    assert!(String::from_utf8_lossy(&ran.stderr).contains("joint:jointX"));
+    let r = report(&out);
+    assert_eq!(r["unused_channels"], serde_json::json!(["joint:jointX"]));
+    assert!(
+        r["animation"]
+            .as_str()
+            .expect("str")
+            .contains("by joint name"),
+        "{r}"
+    );
+    // --strict refuses the clip that leaves a joint behind.
+    let mut strict = args.to_vec();
+    let strict_out = dir.join("strict");
+    strict[9] = s(&strict_out);
+    strict.push("--strict");
+    let line = one_error_line(&run(&strict));
+    assert!(line.contains("joint:jointX"), "{line}");
+    // --clip-from with a template that has no joints to play it on.
+    let line = one_error_line(&run(&[
+        "extract",
+        "--template",
+        &fixture("spot_triangulated.obj"),
+        "--clip-from",
+        s(&source),
+        "--method",
+        "alpha",
+        "-q",
+        "-o",
+        s(&dir.join("obj")),
+    ]));
+    assert!(line.contains("--clip-from needs a glTF template"), "{line}");
+}

@@ -161,6 +161,10 @@ pub struct ExtractOptions {
     /// glTF animation clip by name or index [default: the first].
     #[cfg_attr(feature = "cli", arg(long, value_name = "NAME|INDEX"))]
     pub clip: Option<String>,
+    /// Play --clip of this glTF (e.g. LAM's animation.glb) on the template's joints, matched
+    /// by name; with a weights JSON animation both play together (the clip looped).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "A.glb"))]
+    pub clip_from: Option<PathBuf>,
     /// Sampling rate of a glTF clip, frames per second.
     #[cfg_attr(feature = "cli", arg(long, value_name = "F", default_value_t = DEFAULT_FPS))]
     pub fps: f64,
@@ -259,6 +263,7 @@ impl Default for ExtractOptions {
         Self {
             mode: Mode::Binding,
             clip: None,
+            clip_from: None,
             fps: DEFAULT_FPS,
             layout: GaussianLayout::Bound,
             per_triangle: DEFAULT_PER_TRIANGLE,

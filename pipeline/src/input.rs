@@ -88,10 +88,18 @@ fn is_gltf(path: &Path) -> bool {
 /// The template's label for messages: the animation argument, or the template file.
 #[must_use]
 pub fn animation_label(config: &ExtractConfig) -> String {
-    config
+    let own = config
         .animation
         .clone()
-        .unwrap_or_else(|| config.template.display().to_string())
+        .unwrap_or_else(|| config.template.display().to_string());
+    match &config.options.clip_from {
+        Some(source) => format!(
+            "{own} + clip {} of {} (by joint name)",
+            config.options.clip.as_deref().unwrap_or("0"),
+            source.display()
+        ),
+        None => own,
+    }
 }
 
 /// The clip of a `--clip` value: an index when it parses as one, else a name; the first clip
@@ -247,6 +255,9 @@ pub fn open_template_and_animation(
     targets: Option<&Path>,
 ) -> Result<(TriMesh, Animation, Vec<PathBuf>), PipelineError> {
     let o = &config.options;
+    if let Some(source) = &o.clip_from {
+        return open_retargeted(config, source, targets);
+    }
     if let Some(spec) = &config.animation {
         let stored = read_template(&config.template)?;
         let (animation, files) = AnimationSource {
@@ -279,6 +290,61 @@ pub fn open_template_and_animation(
     let mesh = read_template(&config.template)?;
     let still = Still { mesh: mesh.clone() };
     Ok((mesh, Animation::Other(Box::new(still)), Vec::new()))
+}
+
+/// `--clip-from`: the clip of `source` retargeted onto the glTF template by joint name,
+/// alone (sampled at `--fps`) or under a weights JSON animation (the clip looped over the
+/// track's times, the track's morph weights and head pose on top).
+///
+/// # Errors
+/// A template or `source` that is not glTF, another kind of `--animation`, `--targets`, a
+/// clip that does not exist or matches no joint (named).
+fn open_retargeted(
+    config: &ExtractConfig,
+    source: &Path,
+    targets: Option<&Path>,
+) -> Result<(TriMesh, Animation, Vec<PathBuf>), PipelineError> {
+    let o = &config.options;
+    let bad = |path: &Path, problem: &str| PipelineError::BadAnimation {
+        path: path.to_path_buf(),
+        problem: problem.to_owned(),
+    };
+    if !is_gltf(&config.template) {
+        return Err(bad(
+            &config.template,
+            "--clip-from needs a glTF template with joints to play the clip on",
+        ));
+    }
+    if !is_gltf(source) {
+        return Err(bad(source, "--clip-from takes a glTF/GLB file with a clip"));
+    }
+    if let Some(dir) = targets {
+        return Err(bad(dir, "--targets is for an OBJ/PLY template"));
+    }
+    let clip = Clip::Index(0);
+    let clip = o.clip.as_deref().map_or(clip, |c| clip_of(Some(c)));
+    let motion = GltfTemplate::open(source, &clip)?;
+    let template = GltfTemplate::open(&config.template, &Clip::None)?
+        .retarget(&motion)?
+        .with_fps(o.fps);
+    let stored = template.rest().clone();
+    let mut files = vec![source.to_path_buf()];
+    let animation = match config.animation.as_deref().map(Path::new) {
+        None => Animation::Gltf(Box::new(template)),
+        Some(track) if extension(track) == "json" => {
+            files.push(track.to_path_buf());
+            let weights = WeightsTrack::read(track)?;
+            Animation::Other(Box::new(GltfMorphAnimation::new(template, weights)?))
+        }
+        Some(other) => {
+            return Err(bad(
+                other,
+                "--clip-from plays a clip alone or under a weights JSON animation, not with \
+                 another animation",
+            ));
+        }
+    };
+    Ok((stored, animation, files))
 }
 
 /// Reads the template in world space, as the animation evaluates it.

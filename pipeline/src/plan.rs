@@ -80,6 +80,15 @@ impl Plan {
                 "template {t}; no --animation: its own glTF clip if it has one, else one frame"
             ),
         };
+        let animate = match &o.clip_from {
+            Some(source) => format!(
+                "{animate}; clip {} of {} played on the template's joints by name (looped under \
+                 a weights track)",
+                o.clip.as_deref().unwrap_or("0"),
+                source.display()
+            ),
+            None => animate,
+        };
         let animate = format!(
             "{animate}; template in world space (glTF: node transforms and skins applied), \
              checked against the first frame's scale; vertices split at seams welded by position"

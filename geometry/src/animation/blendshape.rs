@@ -649,6 +649,7 @@ impl AnimatedTemplate for GltfMorphAnimation {
         if self.track.has_head_pose() && self.head.is_none() {
             list.push(HEAD_POSE);
         }
+        list.extend(self.template.unused_channels());
         list
     }
 
@@ -686,7 +687,8 @@ impl AnimatedTemplate for GltfMorphAnimation {
                 node,
                 rotation: DQuat::from_scaled_axis(r),
             });
-        self.template.evaluate_turned(Some(t), &lookup, turn)
+        self.template
+            .evaluate_turned(Some(self.template.clip_time(t)), &lookup, turn)
     }
 }
 

@@ -112,6 +112,14 @@ pub enum AnimationError {
         /// What is wrong.
         message: String,
     },
+    /// A clip cannot be retargeted onto a template.
+    #[error("{path}: {message}")]
+    Retarget {
+        /// The glTF file holding the clip.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// The requested clip does not exist.
     #[error("{path}: no animation {clip} (the file has: {available})")]
     ClipNotFound {

@@ -160,6 +160,11 @@ pub struct GltfTemplate {
     clip_names: Vec<Option<String>>,
     fps: f64,
     rest: TriMesh,
+    /// Joints of a retargeted clip ([`GltfTemplate::retarget`]) that no node of this template
+    /// is named after (their channels are dropped).
+    unmatched_joints: Vec<String>,
+    /// Whether the clip came from another file ([`GltfTemplate::retarget`]).
+    retargeted: bool,
 }
 
 /// Names of morph targets per mesh: an explicit JSON parse of `meshes[i].extras.targetNames`
@@ -464,6 +469,8 @@ impl GltfTemplate {
             clip_names,
             fps: DEFAULT_FPS,
             rest: TriMesh::new_unchecked(Vec::new(), Vec::new()),
+            unmatched_joints: Vec::new(),
+            retargeted: false,
         };
         let rest_positions = template.evaluate_pose(None, None, None)?;
         template.rest = TriMesh::try_new(rest_positions, triangles)?;
@@ -809,6 +816,90 @@ impl GltfTemplate {
         self.evaluate_pose(t, Some(weights), turn)
     }
 
+    /// This template posed by `source`'s clip instead of its own: every channel of the clip
+    /// goes to this template's node with the same name as the channel's node in `source`
+    /// (rotation, translation and scale copied as they are, so both rigs must share their
+    /// joints' rest frames, as LAM's `animation.glb` and `skin.glb` do). Channels of nodes
+    /// without a namesake are dropped and listed by [`AnimatedTemplate::unused_channels`].
+    ///
+    /// # Errors
+    /// [`AnimationError::Retarget`] when `source` has no clip, or none of its channels' nodes has
+    /// a namesake here.
+    pub fn retarget(mut self, source: &Self) -> Result<Self, AnimationError> {
+        let fail = |message: String| AnimationError::Retarget {
+            path: source.path.clone(),
+            message,
+        };
+        let Some(clip) = &source.clip else {
+            return Err(fail("has no animation clip to retarget".into()));
+        };
+        let mut by_name: HashMap<&str, usize> = HashMap::new();
+        for (i, n) in self.nodes.iter().enumerate().rev() {
+            if let Some(name) = &n.name {
+                by_name.insert(name.as_str(), i);
+            }
+        }
+        let mut channels = Vec::new();
+        let mut unmatched: Vec<String> = Vec::new();
+        for ch in &clip.channels {
+            let name = source.nodes[ch.node].name.as_deref().unwrap_or("");
+            match by_name.get(name) {
+                Some(&node) => channels.push(Channel {
+                    node,
+                    property: ch.property,
+                    sampler: ch.sampler.clone(),
+                }),
+                None => {
+                    let label = if name.is_empty() {
+                        format!("node {}", ch.node)
+                    } else {
+                        name.to_owned()
+                    };
+                    if !unmatched.contains(&label) {
+                        unmatched.push(label);
+                    }
+                }
+            }
+        }
+        if channels.is_empty() {
+            return Err(fail(format!(
+                "none of the clip's {} animated nodes is named like a node of {}",
+                unmatched.len(),
+                self.path.display()
+            )));
+        }
+        self.clip = Some(ClipData {
+            index: clip.index,
+            name: clip.name.clone(),
+            channels,
+            end: clip.end,
+        });
+        self.clip_names.clone_from(&source.clip_names);
+        self.unmatched_joints = unmatched
+            .into_iter()
+            .map(|n| format!("joint:{n}"))
+            .collect();
+        self.retargeted = true;
+        Ok(self)
+    }
+
+    /// Where a track's time `t` falls in the clip: `t` itself, or for a retargeted clip
+    /// ([`GltfTemplate::retarget`]) `t` modulo the clip's length, so that a short clip (an idle
+    /// loop) plays on under a long expression track.
+    #[must_use]
+    pub fn clip_time(&self, t: f64) -> f64 {
+        match &self.clip {
+            Some(c) if self.retargeted => {
+                if c.end > 0.0 {
+                    t.rem_euclid(c.end)
+                } else {
+                    0.0
+                }
+            }
+            _ => t,
+        }
+    }
+
     /// The first node named `name` (compared without case) that is a joint of a skin, if any.
     #[must_use]
     pub fn joint_named(&self, name: &str) -> Option<usize> {
@@ -1114,6 +1205,10 @@ impl GltfTemplate {
 }
 
 impl AnimatedTemplate for GltfTemplate {
+    fn unused_channels(&self) -> Vec<&str> {
+        self.unmatched_joints.iter().map(String::as_str).collect()
+    }
+
     fn frame_count(&self) -> usize {
         match &self.clip {
             // Frames at i / fps up to the clip end.
