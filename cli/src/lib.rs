@@ -68,6 +68,7 @@ pub enum Command {
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
 #[must_use]
 pub fn main() -> ExitCode {
+    quiet_on_closed_stdout();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -81,6 +82,29 @@ pub fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Exit code of a run whose reader closed stdout early (`trisplat ... | head`): the code of a
+/// process ended by SIGPIPE, as other Unix tools report it.
+pub const CLOSED_STDOUT_EXIT: i32 = 141;
+
+/// Makes a write to a closed stdout end the run quietly with [`CLOSED_STDOUT_EXIT`] instead of
+/// a panic message: Rust ignores SIGPIPE, so `print!` into a pipe whose reader has gone panics
+/// with "failed printing to stdout: Broken pipe". Every other panic is reported as before.
+fn quiet_on_closed_stdout() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(CLOSED_STDOUT_EXIT);
+        }
+        default(info);
+    }));
 }
 
 /// Runs one parsed command line.

@@ -164,3 +164,36 @@ fn convert_evaluates_a_gltf_clip_at_a_time() {
     assert_eq!(bad.status.code(), Some(1));
     assert!(!dir.join("x.ply").exists());
 }
+
+/// A reader that closes stdout before the output is written (`trisplat ... | head`): the run
+/// ends quietly with SIGPIPE's exit code, no panic message.
+#[test]
+fn closed_stdout_ends_quietly() {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(common::BIN)
+        .args([
+            "extract",
+            "--template",
+            &common::fixture("anim/RiggedFigure.glb"),
+        ])
+        .args([
+            "--method",
+            "tsdf,delaunay,alpha",
+            "-o",
+            "unused",
+            "--explain",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("wait");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        out.status.success() || out.status.code() == Some(141),
+        "{:?}: {stderr}",
+        out.status
+    );
+}
