@@ -199,7 +199,7 @@ fn write_surveyed(
     keys: &[f32],
     survey: &Survey,
 ) -> Result<(), IoError> {
-    let build = |sink: &mut dyn Sink| -> Result<Value, IoError> {
+    let build = |sink: &mut dyn Sink| -> Result<Document, IoError> {
         if survey.morph {
             build_morph_targets(path, frames, keys, survey.normals, sink)
         } else {
@@ -585,13 +585,41 @@ impl Sink for Stream<'_> {
     }
 }
 
+/// A buffer view of the document (buffer 0), kept compact until the JSON is written: a long
+/// sequence has several per frame, and a `serde_json::Value` map each would grow the run's
+/// memory with its length.
+#[derive(serde::Serialize)]
+#[serde(rename_all = "camelCase")]
+struct ViewJson {
+    buffer: u32,
+    byte_offset: usize,
+    byte_length: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    target: Option<u32>,
+}
+
+/// An accessor of the document (one per buffer view), compact as [`ViewJson`].
+#[derive(serde::Serialize)]
+#[serde(rename_all = "camelCase")]
+struct AccessorJson {
+    buffer_view: usize,
+    component_type: u32,
+    count: usize,
+    #[serde(rename = "type")]
+    kind: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    min: Option<Vec<f32>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max: Option<Vec<f32>>,
+}
+
 /// The buffer views and accessors under construction (one buffer, 4-byte aligned views: every
 /// component is 4 bytes); the bytes go to a [`Sink`].
 struct Builder<'s> {
     sink: &'s mut dyn Sink,
     len: usize,
-    views: Vec<Value>,
-    accessors: Vec<Value>,
+    views: Vec<ViewJson>,
+    accessors: Vec<AccessorJson>,
 }
 
 impl<'s> Builder<'s> {
@@ -609,24 +637,21 @@ impl<'s> Builder<'s> {
         let offset = self.len;
         self.sink.put(&block.bytes)?;
         self.len += block.bytes.len();
-        let mut view = json!({
-            "buffer": 0, "byteOffset": offset, "byteLength": block.bytes.len(),
+        self.views.push(ViewJson {
+            buffer: 0,
+            byte_offset: offset,
+            byte_length: block.bytes.len(),
+            target: block.target,
         });
-        if let Some(target) = block.target {
-            view["target"] = json!(target);
-        }
-        self.views.push(view);
-        let mut accessor = json!({
-            "bufferView": self.views.len() - 1,
-            "componentType": block.component_type,
-            "count": block.count,
-            "type": block.kind,
+        let (min, max) = block.bounds.unzip();
+        self.accessors.push(AccessorJson {
+            buffer_view: self.views.len() - 1,
+            component_type: block.component_type,
+            count: block.count,
+            kind: block.kind,
+            min,
+            max,
         });
-        if let Some((min, max)) = block.bounds {
-            accessor["min"] = json!(min);
-            accessor["max"] = json!(max);
-        }
-        self.accessors.push(accessor);
         Ok(self.accessors.len() - 1)
     }
 
@@ -687,22 +712,36 @@ impl<'s> Builder<'s> {
         meshes: Vec<Value>,
         samplers: Vec<Value>,
         channels: Vec<Value>,
-    ) -> Value {
-        let mut doc = json!({
-            "asset": {"version": "2.0", "generator": "trisplat"},
-            "scene": 0,
-            "scenes": [{"nodes": [0]}],
-            "nodes": nodes,
-            "animations": [{"name": SEQUENCE_NAME, "samplers": samplers, "channels": channels}],
-            "accessors": self.accessors,
-            "bufferViews": self.views,
-            "buffers": [{"byteLength": self.len}],
-        });
-        if !meshes.is_empty() {
-            doc["meshes"] = json!(meshes);
+    ) -> Document {
+        Document {
+            asset: json!({"version": "2.0", "generator": "trisplat"}),
+            scene: 0,
+            scenes: json!([{"nodes": [0]}]),
+            nodes,
+            meshes,
+            animations: json!([{"name": SEQUENCE_NAME, "samplers": samplers, "channels": channels}]),
+            accessors: self.accessors,
+            buffer_views: self.views,
+            buffers: json!([{"byteLength": self.len}]),
         }
-        doc
     }
+}
+
+/// The glTF JSON of a sequence, serialised straight from its parts: the accessors and buffer
+/// views (several per frame) stay compact structs instead of becoming one `Value` tree.
+#[derive(serde::Serialize)]
+#[serde(rename_all = "camelCase")]
+struct Document {
+    asset: Value,
+    scene: u32,
+    scenes: Value,
+    nodes: Vec<Value>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    meshes: Vec<Value>,
+    animations: Value,
+    accessors: Vec<AccessorJson>,
+    buffer_views: Vec<ViewJson>,
+    buffers: Value,
 }
 
 /// The morph-target layout (topology already checked), frame by frame.
@@ -712,7 +751,7 @@ fn build_morph_targets(
     keys: &[f32],
     with_normals: bool,
     sink: &mut dyn Sink,
-) -> Result<Value, IoError> {
+) -> Result<Document, IoError> {
     let base = frames.frame(0)?;
     let mut builder = Builder::new(sink);
     let (mut primitive, _) = builder.primitive(&base, with_normals, None)?;
@@ -794,7 +833,7 @@ fn build_node_per_frame(
     frames: &dyn FrameSource,
     keys: &[f32],
     sink: &mut dyn Sink,
-) -> Result<Value, IoError> {
+) -> Result<Document, IoError> {
     let n = frames.frame_count();
     let mut builder = Builder::new(sink);
     let mut nodes = vec![json!({"name": SEQUENCE_NAME, "children": (1..=n).collect::<Vec<_>>()})];
@@ -844,7 +883,7 @@ fn build_node_per_frame(
 /// given, as `.glb` (JSON chunk padded with spaces, binary chunk with zeros, both to 4 bytes).
 fn write_glb(
     path: &Path,
-    doc: &Value,
+    doc: &Document,
     bin_len: usize,
     fill: impl Fn(&mut dyn Sink) -> Result<(), IoError>,
 ) -> Result<(), IoError> {
@@ -895,12 +934,12 @@ fn write_glb(
 }
 
 /// Writes the document as `.gltf` text with the buffer embedded as a base64 data URI.
-fn write_gltf(path: &Path, mut doc: Value, bin: &[u8]) -> Result<(), IoError> {
+fn write_gltf(path: &Path, mut doc: Document, bin: &[u8]) -> Result<(), IoError> {
     let uri = format!(
         "data:application/octet-stream;base64,{}",
         base64::engine::general_purpose::STANDARD.encode(bin)
     );
-    doc["buffers"] = json!([{"byteLength": bin.len(), "uri": uri}]);
+    doc.buffers = json!([{"byteLength": bin.len(), "uri": uri}]);
     write_atomically(path, |w| {
         serde_json::to_writer(&mut *w, &doc).map_err(|e| IoError::os(path, e.into()))
     })
