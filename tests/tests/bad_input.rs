@@ -463,3 +463,45 @@ fn fuzz_glb_never_panics() {
     });
     assert!(errors > 0);
 }
+
+/// A glTF whose mesh hangs under a chain of 20,000 nested nodes: both glTF readers walk it
+/// without recursion (the static reader overflowed the stack at depth 5,000) and agree.
+#[test]
+fn deep_node_chains_read_without_overflowing_the_stack() {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().expect("tmp");
+    let path = dir.path().join("deep.gltf");
+    let n = 20_000;
+    let positions: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let mut nodes: Vec<serde_json::Value> = (1..n)
+        .map(|i| serde_json::json!({"children": [i], "translation": [0.001, 0.0, 0.0]}))
+        .collect();
+    nodes.push(serde_json::json!({"mesh": 0}));
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": nodes,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "buffers": [{"byteLength": 36, "uri": format!("data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&positions))}],
+    });
+    std::fs::write(&path, doc.to_string()).expect("write");
+    let stat = trisplat_geometry::io::read_mesh(&path).expect("static reader");
+    let posed = trisplat_geometry::animation::GltfTemplate::open(
+        &path,
+        &trisplat_geometry::animation::Clip::None,
+    )
+    .expect("animation reader");
+    use trisplat_geometry::animation::AnimatedTemplate as _;
+    assert_eq!(stat.triangle_count(), 1);
+    // 19,999 translations of 1 mm each.
+    let x = f64::from(stat.positions()[0].x);
+    assert!((x - 19.999).abs() < 1e-3, "{x}");
+    for (a, b) in stat.positions().iter().zip(posed.rest().positions()) {
+        assert!(a.distance(*b) < 1e-4, "{a} vs {b}");
+    }
+}
