@@ -505,3 +505,60 @@ fn deep_node_chains_read_without_overflowing_the_stack() {
         assert!(a.distance(*b) < 1e-4, "{a} vs {b}");
     }
 }
+
+/// Animations the `gltf` crate takes on trust (it panicked on them): a channel path that is
+/// none of glTF's four, a channel node or sampler out of range, a sampler accessor out of
+/// range. Each is refused naming the animation and channel.
+#[test]
+fn animation_references_out_of_range_are_refused() {
+    let source = trisplat_fixtures::path("anim/SyntheticFeatures.gltf");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&source).expect("read")).expect("json");
+    let dir = tempfile::tempdir().expect("tmp");
+    for buffer in json["buffers"].as_array().expect("buffers") {
+        if let Some(uri) = buffer["uri"].as_str().filter(|u| !u.starts_with("data:")) {
+            std::fs::copy(source.with_file_name(uri), dir.path().join(uri)).expect("buffer");
+        }
+    }
+    type Edit = fn(&mut serde_json::Value);
+    let cases: [(&str, Edit, &str); 4] = [
+        (
+            "path",
+            |g| g["animations"][0]["channels"][0]["target"]["path"] = "bogus".into(),
+            "target path \"bogus\"",
+        ),
+        (
+            "node",
+            |g| g["animations"][0]["channels"][0]["target"]["node"] = 999.into(),
+            "targets node 999",
+        ),
+        (
+            "sampler",
+            |g| g["animations"][0]["channels"][0]["sampler"] = 999.into(),
+            "its sampler does not exist",
+        ),
+        (
+            "accessor",
+            |g| g["animations"][0]["samplers"][0]["output"] = 999.into(),
+            "output accessor does not exist",
+        ),
+    ];
+    for (name, edit, want) in cases {
+        let mut g = json.clone();
+        edit(&mut g);
+        let path = dir.path().join(format!("{name}.gltf"));
+        std::fs::write(&path, g.to_string()).expect("write");
+        for clip in [
+            trisplat_geometry::animation::Clip::None,
+            trisplat_geometry::animation::Clip::Index(0),
+        ] {
+            let e = trisplat_geometry::animation::GltfTemplate::open(&path, &clip)
+                .expect_err(name)
+                .to_string();
+            // The gltf crate's own validation catches some first ("animations[0]...").
+            let named =
+                (e.contains("animation 0") && e.contains(want)) || e.contains("animations[0]");
+            assert!(e.contains(&format!("{name}.gltf")) && named, "{name}: {e}");
+        }
+    }
+}

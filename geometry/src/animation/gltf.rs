@@ -227,6 +227,94 @@ fn world_matrices(locals: &[Local], order: &[usize], parents: &[Option<usize>]) 
     world
 }
 
+/// Checks what the `gltf` crate takes on trust in animations (it panics on them): every
+/// channel's target path is one of glTF's four and its node and sampler exist, and every
+/// sampler's accessors exist.
+fn check_animation_references(path: &Path, json: &serde_json::Value) -> Result<(), AnimationError> {
+    let count = |key: &str| json.get(key).and_then(|v| v.as_array()).map_or(0, Vec::len);
+    let (nodes, accessors) = (count("nodes"), count("accessors"));
+    let empty = Vec::new();
+    let animations = json
+        .get("animations")
+        .and_then(|a| a.as_array())
+        .unwrap_or(&empty);
+    for (a, anim) in animations.iter().enumerate() {
+        let samplers = anim
+            .get("samplers")
+            .and_then(|s| s.as_array())
+            .unwrap_or(&empty);
+        let channels = anim
+            .get("channels")
+            .and_then(|c| c.as_array())
+            .unwrap_or(&empty);
+        let fail = |channel: usize, message: String| AnimationError::Animation {
+            path: path.to_path_buf(),
+            animation: a,
+            channel,
+            message,
+        };
+        for (c, channel) in channels.iter().enumerate() {
+            let target = channel.get("target");
+            let path_name = target.and_then(|t| t.get("path")).and_then(|p| p.as_str());
+            if !matches!(
+                path_name,
+                Some("translation" | "rotation" | "scale" | "weights")
+            ) {
+                return Err(fail(
+                    c,
+                    format!(
+                        "target path {} is not translation, rotation, scale or weights",
+                        path_name.map_or_else(|| "(missing)".to_owned(), |p| format!("{p:?}"))
+                    ),
+                ));
+            }
+            match target
+                .and_then(|t| t.get("node"))
+                .and_then(serde_json::Value::as_u64)
+            {
+                Some(n) if (n as usize) < nodes => {}
+                other => {
+                    return Err(fail(
+                        c,
+                        format!(
+                            "targets node {}, but the file has {nodes} nodes",
+                            other.map_or_else(|| "(missing)".to_owned(), |n| n.to_string())
+                        ),
+                    ));
+                }
+            }
+            match channel.get("sampler").and_then(serde_json::Value::as_u64) {
+                Some(k) if (k as usize) < samplers.len() => {}
+                _ => {
+                    return Err(fail(
+                        c,
+                        format!("its sampler does not exist ({} samplers)", samplers.len()),
+                    ));
+                }
+            }
+        }
+        for (k, sampler) in samplers.iter().enumerate() {
+            for key in ["input", "output"] {
+                match sampler.get(key).and_then(serde_json::Value::as_u64) {
+                    Some(i) if (i as usize) < accessors => {}
+                    _ => {
+                        return Err(AnimationError::Animation {
+                            path: path.to_path_buf(),
+                            animation: a,
+                            channel: k,
+                            message: format!(
+                                "sampler {k}: its {key} accessor does not exist ({accessors} \
+                                 accessors)"
+                            ),
+                        });
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 fn to_vec3s(v: &[f64]) -> Vec<DVec3> {
     v.chunks_exact(3)
         .map(|c| DVec3::new(c[0], c[1], c[2]))
@@ -242,6 +330,7 @@ impl GltfTemplate {
     /// animation at fault; [`AnimationError::ClipNotFound`] when `clip` does not exist.
     pub fn open(path: &Path, clip: &Clip) -> Result<Self, AnimationError> {
         let data = GltfData::open(path)?;
+        check_animation_references(path, &data.json)?;
         Self::build(path, &data.document, &data, &target_names(&data.json), clip)
     }
 
