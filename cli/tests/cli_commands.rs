@@ -197,3 +197,43 @@ fn closed_stdout_ends_quietly() {
         out.status
     );
 }
+
+/// `sample -n` beyond `--max-points` (a capacity-overflow panic for 2^64 - 1 before) is
+/// refused before anything is allocated, naming the option; `-n 0` is a usage error instead of
+/// an empty file.
+#[test]
+fn sample_counts_are_limited_before_allocation() {
+    let dir = fresh_dir("sample_limits");
+    let out = dir.join("points.ply");
+    let spot = common::fixture("spot_triangulated.obj");
+    let line = one_error_line(&run(&[
+        "sample",
+        &spot,
+        "-n",
+        "18446744073709551615",
+        "-o",
+        out.to_str().expect("utf-8"),
+    ]));
+    assert!(line.contains("--max-points"), "{line}");
+    let line = one_error_line(&run(&[
+        "sample",
+        &spot,
+        "-n",
+        "1000",
+        "--max-points",
+        "999",
+        "-o",
+        out.to_str().expect("utf-8"),
+    ]));
+    assert!(line.contains("more than --max-points 999"), "{line}");
+    let zero = run(&[
+        "sample",
+        &spot,
+        "-n",
+        "0",
+        "-o",
+        out.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(zero.status.code(), Some(2));
+    assert!(!out.exists());
+}

@@ -8,14 +8,21 @@ use trisplat_geometry::sampling::{SampleOptions, sample};
 
 use super::{Context, refuse_to_overwrite};
 
+/// Default `--max-points`: 100 million points (2.4 GB of positions and normals).
+pub const DEFAULT_MAX_POINTS: u64 = 100_000_000;
+
 /// Arguments of `trisplat sample`.
 #[derive(Debug, clap::Args)]
 pub struct SampleArgs {
     /// Input mesh (.ply, .obj, .gltf, .glb).
     pub mesh: PathBuf,
-    /// Number of points to sample.
-    #[arg(short = 'n', long = "number")]
-    pub n: usize,
+    /// Number of points to sample (at least 1, at most --max-points).
+    #[arg(short = 'n', long = "number", value_parser = clap::value_parser!(u64).range(1..))]
+    pub n: u64,
+    /// Largest -n accepted, checked before anything is allocated (each point takes 24 bytes
+    /// in memory and in the file).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_POINTS)]
+    pub max_points: u64,
     /// Output point cloud (.ply): positions and the unit normals of the sampled triangles.
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
@@ -42,9 +49,17 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
             args.output.display()
         );
     }
+    let n = match usize::try_from(args.n) {
+        Ok(n) if args.n <= args.max_points => n,
+        _ => bail!(
+            "-n {}: more than --max-points {} (raise --max-points to sample more)",
+            args.n,
+            args.max_points
+        ),
+    };
     let mesh = read_mesh(&args.mesh)?;
     let area = mesh.area();
-    if args.n > 0 && (area <= 0.0 || area.is_nan()) {
+    if n > 0 && (area <= 0.0 || area.is_nan()) {
         bail!(
             "{}: the mesh has no surface to sample ({} triangles, total area 0)",
             args.mesh.display(),
@@ -52,7 +67,7 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
         );
     }
     let spinner = ctx.progress.spinner("sampling");
-    let samples = sample(&mesh, args.n, &args.options)
+    let samples = sample(&mesh, n, &args.options)
         .with_context(|| format!("{}: sampling failed", args.mesh.display()))?;
     spinner.finish_and_clear();
     write_points(&args.output, &samples.points, WriteOptions::default())?;
