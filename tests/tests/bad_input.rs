@@ -562,3 +562,24 @@ fn animation_references_out_of_range_are_refused() {
         }
     }
 }
+
+/// NaN or infinite PLY normals are refused naming the vertex (they were read and written
+/// back as `vn NaN 0 1`).
+#[test]
+fn non_finite_ply_normals_are_refused() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let path = dir.path().join("normals.ply");
+    std::fs::write(
+        &path,
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+         property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
+         element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+         0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 inf 1\n3 0 1 2\n",
+    )
+    .expect("write");
+    let e = io::read_mesh(&path).expect_err("inf normal").to_string();
+    assert!(
+        e.contains("vertex 2") && e.contains("non-finite normal"),
+        "{e}"
+    );
+}

@@ -1370,6 +1370,16 @@ fn decode_vertices(path: &Path, doc: &PlyDocument) -> Result<VertexData, IoError
         used.extend(["nx", "ny", "nz"]);
         zip3(c)
     });
+    if let Some(n) = &normals
+        && let Some(i) = n.iter().position(|p| !p.is_finite())
+    {
+        let p = n[i];
+        return Err(IoError::malformed(
+            path,
+            format!("vertex {i}"),
+            format!("non-finite normal ({}, {}, {})", p.x, p.y, p.z),
+        ));
+    }
     let colors = triple(v, ["red", "green", "blue"]).map(|[r, g, b]| {
         used.extend(["red", "green", "blue"]);
         let (r, g, b) = (r.to_unit_color(), g.to_unit_color(), b.to_unit_color());
