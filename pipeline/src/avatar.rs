@@ -4,7 +4,7 @@
 //! offset2xyz=True)`) for its web renderer.
 //!
 //! What the files mean, established from LAM's exporter and pinned by tests on a cut-down LAM
-//! avatar (`fixtures/lam_mini`):
+//! avatar (`fixtures/data/lam_mini`):
 //! - Row `i` of `offset.ply` belongs to vertex `i` of `skin.glb`, in the order the glTF stores
 //!   them. Its `x, y, z` are not a position but the Gaussian's offset from that vertex in the
 //!   mesh's rest frame (LAM animates `vertex + offset` by the vertex's skinning; the offsets
