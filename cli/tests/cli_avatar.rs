@@ -165,6 +165,20 @@ fn avatar_refusals_name_the_culprit() {
         line.contains("offset.ply") && line.contains("--layout lam"),
         "{line}"
     );
+    // An avatar folder as --template brings its own Gaussians: --gaussians beside it is refused.
+    let line = one_error_line(&run(&[
+        "extract",
+        "--template",
+        &avatar,
+        "--gaussians",
+        &fixture("lam_mini/offset.ply"),
+        "--method",
+        "alpha",
+        "-q",
+        "-o",
+        s(&dir.join("both")),
+    ]));
+    assert!(line.contains("brings its own"), "{line}");
     // A folder that is not an avatar, as --avatar and as bind's MESH.
     let empty = dir.join("empty");
     std::fs::create_dir_all(&empty).expect("mkdir");
