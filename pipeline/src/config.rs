@@ -9,9 +9,14 @@ use trisplat_geometry::animation::DEFAULT_FPS;
 
 /// Default Gaussians per triangle when the pipeline binds them itself.
 pub const DEFAULT_PER_TRIANGLE: u32 = 4;
-/// Default TSDF voxel as a fraction of the template's bounding radius (radius / 128: on the
-/// demo avatar, radius / 256 is 4x slower for a 7% lower Chamfer distance).
+/// Finest default TSDF voxel as a fraction of the template's bounding radius (radius / 128: on
+/// the demo avatar, radius / 256 is 4x slower for a 7% lower Chamfer distance). The default
+/// voxel is the mean spacing of the Gaussians when that is coarser (a finer grid only follows
+/// the rendered discs), at most radius / [`COARSEST_VOXELS_PER_RADIUS`].
 pub const DEFAULT_VOXELS_PER_RADIUS: f64 = 128.0;
+/// Coarsest default TSDF voxel as a fraction of the template's bounding radius (sparse
+/// Gaussians still get a grid of 32 voxels per radius).
+pub const COARSEST_VOXELS_PER_RADIUS: f64 = 32.0;
 /// Default number of views of the TSDF camera rig (a Fibonacci sphere around each frame).
 pub const DEFAULT_VIEWS: usize = 24;
 /// Default side of the square TSDF depth images, in pixels.
@@ -177,7 +182,8 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_PER_TRIANGLE,
         value_parser = clap::value_parser!(u32).range(1..)))]
     pub per_triangle: u32,
-    /// TSDF voxel size in scene units [default: template bounding radius / 128].
+    /// TSDF voxel size in scene units [default: the Gaussians' mean nearest-neighbour spacing,
+    /// clamped to template bounding radius / 128 ..= / 32].
     #[cfg_attr(feature = "cli", arg(long, value_name = "V"))]
     pub voxel: Option<f64>,
     /// TSDF camera views per frame (a Fibonacci sphere around the frame's bounding sphere).

@@ -34,7 +34,9 @@
 //! 8. **report**: `DIR/report.json`, `DIR/report.md`, `DIR/error_vs_time.png`.
 //!
 //! # Defaults, derived from the (world-space) template so that any scale works
-//! - TSDF voxel: template bounding radius / [`config::DEFAULT_VOXELS_PER_RADIUS`]; truncation
+//! - TSDF voxel: the rest-pose Gaussians' mean nearest-neighbour spacing, clamped to template
+//!   bounding radius / [`config::DEFAULT_VOXELS_PER_RADIUS`] ..=
+//!   / [`config::COARSEST_VOXELS_PER_RADIUS`] ([`methods::default_voxel`]); truncation
 //!   5 voxels; [`config::DEFAULT_VIEWS`] views of [`config::DEFAULT_RESOLUTION`]² pixels,
 //!   40° field of view, framing each frame's bounding sphere with a 10% margin.
 //! - Alpha: [`config::DEFAULT_ALPHA_SPACINGS`] × the mean nearest-neighbour spacing of the

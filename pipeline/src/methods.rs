@@ -5,8 +5,9 @@
 //!   around the bounding sphere of the frame (deformed template and Gaussian means), expected
 //!   depth rendered from the deformed Gaussians (3DGS, gsplat rules) and masked where the
 //!   rendered alpha is below [`RENDERED_ALPHA_MIN`], fused with the extract crate's TSDF at
-//!   `voxel` (default: template radius / [`DEFAULT_VOXELS_PER_RADIUS`]), truncation 5 voxels, depth truncation twice the
-//!   rig's scene radius, largest connected piece kept.
+//!   `voxel` (default: [`default_voxel`], the Gaussians' mean spacing within template radius
+//!   / 128 ..= / 32), truncation 5 voxels, depth truncation twice the rig's scene radius,
+//!   largest connected piece kept.
 //! - **delaunay**: [`IncrementalDelaunay`] over the rest template and the Gaussians' canonical
 //!   means; each frame moves vertices and redoes only the charts Gaussians hopped into or out
 //!   of (`hop_threshold` lets Gaussians stay in a chart they left by less than that many mean
@@ -30,7 +31,8 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
-    DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS, ExtractOptions, Method,
+    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG,
+    DEFAULT_VOXELS_PER_RADIUS, ExtractOptions, Method,
 };
 use crate::error::PipelineError;
 
@@ -159,11 +161,22 @@ impl Resolved {
             voxel: check(
                 "voxel",
                 options.voxel,
-                template_radius / DEFAULT_VOXELS_PER_RADIUS,
+                default_voxel(template_radius, spacing),
             )?,
             alpha: check("alpha", options.alpha, DEFAULT_ALPHA_SPACINGS * spacing)?,
         })
     }
+}
+
+/// The default TSDF voxel: the Gaussians' mean nearest-neighbour `spacing` (depth rendered
+/// from Gaussians holds no detail finer than their spacing, and a finer grid follows the
+/// rendered discs), clamped to `template_radius` / [`DEFAULT_VOXELS_PER_RADIUS`] ..=
+/// `template_radius` / [`COARSEST_VOXELS_PER_RADIUS`].
+#[must_use]
+pub fn default_voxel(template_radius: f64, spacing: f64) -> f64 {
+    let finest = template_radius / DEFAULT_VOXELS_PER_RADIUS;
+    let coarsest = template_radius / COARSEST_VOXELS_PER_RADIUS;
+    spacing.max(finest).min(coarsest)
 }
 
 /// Why [`rendered_depth`] failed.

@@ -6,7 +6,7 @@ use std::fmt;
 use crate::avatar::GaussianLayout;
 
 use crate::config::{
-    DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
+    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
     OutputTarget,
 };
 
@@ -169,7 +169,7 @@ impl Plan {
                 Method::Tsdf => match o.voxel {
                     Some(v) => format!("voxel {v}, trunc 5 voxels"),
                     None => format!(
-                        "voxel = template radius / {DEFAULT_VOXELS_PER_RADIUS}, trunc 5 voxels"
+                        "voxel = Gaussian spacing within template radius / {DEFAULT_VOXELS_PER_RADIUS} ..= / {COARSEST_VOXELS_PER_RADIUS}, trunc 5 voxels"
                     ),
                 },
                 Method::Delaunay => {
