@@ -428,3 +428,20 @@ fn targets_choose_the_outputs() {
         "{plan}"
     );
 }
+
+#[test]
+fn methods_side_by_side_or_one_after_another_write_the_same_outputs() {
+    let dir = fresh_dir("serial");
+    let (template, frames) = frames_case(&dir);
+    let side_by_side = dir.join("side_by_side");
+    run_ok(&extract_args(&template, &frames, &side_by_side));
+    let serial = dir.join("serial");
+    let mut args = extract_args(&template, &frames, &serial);
+    args.push("--serial-methods");
+    run_ok(&args);
+    assert_same_run(&side_by_side, &serial, "--serial-methods");
+    assert_eq!(report(&side_by_side)["serial_methods"], false);
+    assert_eq!(report(&serial)["serial_methods"], true);
+    let md = std::fs::read_to_string(serial.join("report.md")).expect("report.md");
+    assert!(md.contains("one after another (--serial-methods)"), "{md}");
+}

@@ -201,6 +201,11 @@ pub struct ExtractOptions {
     /// Delaunay: rebuild from scratch every N frames (0: never; 1: every frame).
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = 0))]
     pub rebuild_every: usize,
+    /// Delaunay: keep updating incrementally even when updates cost more than rebuilds (by
+    /// default an update dearer than a rebuild is followed by rebuilds from scratch and the
+    /// update path probed again later; docs/conventions.md §6).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub no_auto_rebuild: bool,
     /// Delaunay hop threshold T, relative to the mean template edge: a Gaussian moves to
     /// another triangle's chart only when that triangle is nearer than its own by more than
     /// T x the mean edge. 0: every frame equals a from-scratch triangulation; T > 0 redoes
@@ -278,6 +283,7 @@ impl Default for ExtractOptions {
             resolution: DEFAULT_RESOLUTION,
             alpha: None,
             rebuild_every: 0,
+            no_auto_rebuild: false,
             hop_threshold: DEFAULT_HOP_THRESHOLD,
             samples: DEFAULT_SAMPLES,
             tau: DEFAULT_TAU,
@@ -302,6 +308,11 @@ pub struct RunControl {
     /// and going on.
     #[cfg_attr(feature = "cli", arg(long))]
     pub fail_fast: bool,
+    /// Run the methods of each frame one after another, so that each method's ms/frame is its
+    /// time alone; by default they run side by side (a shorter run; each method's time then
+    /// includes waiting for cores the others hold). The meshes are the same either way.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub serial_methods: bool,
 }
 
 /// A whole `trisplat extract` run.

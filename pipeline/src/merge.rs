@@ -170,6 +170,7 @@ fn merged_report(reports: &[(&Path, Report)]) -> Report {
         .flat_map(|(_, r)| r.failed_frames.iter().cloned())
         .collect();
     merged.failed_frames.sort_by_key(|f| f.frame);
+    merged.serial_methods = reports.iter().all(|(_, r)| r.serial_methods);
     for (name, m) in &mut merged.methods {
         let mut frames: Vec<_> = reports
             .iter()

@@ -11,7 +11,8 @@
 //! - **delaunay**: [`IncrementalDelaunay`] over the rest template and the Gaussians' canonical
 //!   means; each frame moves vertices and redoes only the charts Gaussians hopped into or out
 //!   of (`hop_threshold` lets Gaussians stay in a chart they left by less than that many mean
-//!   template edges; `rebuild_every` forces full rebuilds); [`MethodOutput::delaunay`] says
+//!   template edges; `rebuild_every` forces full rebuilds, and updates that cost more than
+//!   rebuilds are followed by rebuilds unless `no_auto_rebuild`); [`MethodOutput::delaunay`] says
 //!   what each update did.
 //! - **alpha**: the alpha shape of the deformed means at `alpha` (default
 //!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
@@ -31,8 +32,8 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
-    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG,
-    DEFAULT_VOXELS_PER_RADIUS, ExtractOptions, Method,
+    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS,
+    ExtractOptions, Method,
 };
 use crate::error::PipelineError;
 
@@ -328,6 +329,7 @@ impl Mesher {
             Method::Delaunay => {
                 let d_options = DelaunayOptions {
                     rebuild_every: options.rebuild_every,
+                    auto_rebuild: !options.no_auto_rebuild,
                     hop_threshold: options.hop_threshold,
                     ..DelaunayOptions::default()
                 };

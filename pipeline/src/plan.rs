@@ -6,8 +6,8 @@ use std::fmt;
 use crate::avatar::GaussianLayout;
 
 use crate::config::{
-    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig, GroundTruth, Method, Mode,
-    OutputTarget,
+    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig,
+    GroundTruth, Method, Mode, OutputTarget,
 };
 
 /// A stage of the main job (docs/conventions.md §1), in the order they run.
@@ -174,8 +174,11 @@ impl Plan {
                 },
                 Method::Delaunay => {
                     let rebuild = match o.rebuild_every {
+                        0 if o.no_auto_rebuild => "incremental: only charts that Gaussians hop \
+                                                   into or out of are redone, whatever it costs"
+                            .to_owned(),
                         0 => "incremental: only charts that Gaussians hop into or out of are \
-                              redone"
+                              redone; rebuilt from scratch while updates cost more"
                             .to_owned(),
                         1 => "--rebuild-every 1: triangulated from scratch every frame".to_owned(),
                         n => format!("incremental, rebuilt from scratch every {n} frames"),

@@ -376,6 +376,11 @@ pub struct Report {
     pub tau: f64,
     /// Scale-derived parameters.
     pub resolved: Resolved,
+    /// Whether the methods of a frame ran one after another (`--serial-methods`: each
+    /// method's ms is its time alone) rather than side by side (the default: each method's ms
+    /// includes waiting for the cores the others held).
+    #[serde(default)]
+    pub serial_methods: bool,
     /// One entry per method, by name.
     pub methods: BTreeMap<String, MethodReport>,
 }
@@ -428,6 +433,17 @@ impl Report {
             s,
             "- template radius {:.6}, mean Gaussian spacing {:.6}",
             self.resolved.template_radius, self.resolved.mean_spacing
+        );
+        let _ = writeln!(
+            s,
+            "- timing: {}",
+            if self.serial_methods {
+                "the methods ran one after another (--serial-methods): each method's ms/frame \
+                 is its time alone"
+            } else {
+                "the methods ran side by side: each method's ms/frame includes waiting for the \
+                 cores the others held (--serial-methods times each alone)"
+            }
         );
         match &self.ground_truth {
             Some(gt) => {
@@ -762,6 +778,7 @@ mod tests {
                 voxel: 0.01,
                 alpha: 0.6,
             },
+            serial_methods: false,
             methods: BTreeMap::from([
                 ("delaunay".to_owned(), method(Method::Delaunay, Some(d))),
                 ("alpha".to_owned(), method(Method::Alpha, None)),

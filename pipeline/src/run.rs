@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
 use trisplat_geometry::io::{
     FrameFiles, GLB_PART_LIMIT, SequenceLayout, WriteOptions, write_mesh, write_sequence_parts,
 };
@@ -80,6 +81,7 @@ pub fn run(
         return Err(PipelineError::NoMethod);
     }
     let mut session = Session::open(config)?;
+    session.set_serial_methods(control.serial_methods);
     let frames = session.frames();
     let out = &config.output;
     check_outputs(config, &methods, frames.clone(), session.input_files())?;
@@ -183,6 +185,10 @@ pub fn run(
             }
             Method::Delaunay => {
                 parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);
+                parameters.insert(
+                    "auto_rebuild".to_owned(),
+                    f64::from(u8::from(!o.no_auto_rebuild)),
+                );
                 parameters.insert("hop_threshold".to_owned(), o.hop_threshold);
             }
             Method::Alpha => {
@@ -237,6 +243,7 @@ pub fn run(
         samples: o.samples,
         tau: o.tau,
         resolved,
+        serial_methods: control.serial_methods,
         methods: method_reports,
     };
     write_outputs(out, &mut report, &frame_files, &o.targets)?;
@@ -264,32 +271,40 @@ fn run_frame(
         methods: BTreeMap::new(),
         delaunay: None,
     };
-    for MethodFrame {
-        method: m,
-        output,
-        metrics,
-    } in result.methods
-    {
-        if let Some(stats) = &output.delaunay {
-            entry.delaunay = Some(DelaunayFrame::new(f, stats));
-        }
-        if write_files {
-            let path = out.join(m.name()).join(frame_file(f));
-            write_mesh(&path, &output.mesh, WriteOptions::default())?;
-        }
-        entry.methods.insert(
-            m.name().to_owned(),
-            FrameRecord {
-                frame: f,
-                time: result.time,
-                ms: output.ms,
-                render_ms: output.render_ms,
-                vertices: output.mesh.vertex_count(),
-                faces: output.mesh.triangle_count(),
-                watertight: is_watertight(&output.mesh),
-                metrics,
+    // Each method's frame file and watertightness, side by side (the meshes are large).
+    let written: Vec<(Method, FrameRecord, Option<DelaunayFrame>)> = result
+        .methods
+        .into_par_iter()
+        .map(
+            |MethodFrame {
+                 method: m,
+                 output,
+                 metrics,
+             }| {
+                if write_files {
+                    let path = out.join(m.name()).join(frame_file(f));
+                    write_mesh(&path, &output.mesh, WriteOptions::default())?;
+                }
+                let record = FrameRecord {
+                    frame: f,
+                    time: result.time,
+                    ms: output.ms,
+                    render_ms: output.render_ms,
+                    vertices: output.mesh.vertex_count(),
+                    faces: output.mesh.triangle_count(),
+                    watertight: is_watertight(&output.mesh),
+                    metrics,
+                };
+                let delaunay = output.delaunay.as_ref().map(|s| DelaunayFrame::new(f, s));
+                Ok::<_, PipelineError>((m, record, delaunay))
             },
-        );
+        )
+        .collect::<Result<_, _>>()?;
+    for (m, record, delaunay) in written {
+        if delaunay.is_some() {
+            entry.delaunay = delaunay;
+        }
+        entry.methods.insert(m.name().to_owned(), record);
     }
     Ok(entry)
 }

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::MeshSequence;
 use trisplat_geometry::io::read_mesh;
@@ -115,6 +116,8 @@ pub struct Session {
     unused_channels: Vec<String>,
     scratch: WorldGeometry,
     executed: Vec<Stage>,
+    /// Run the methods of a frame one after another instead of side by side.
+    serial_methods: bool,
 }
 
 impl std::fmt::Debug for Session {
@@ -322,7 +325,16 @@ impl Session {
             unused_channels,
             scratch: WorldGeometry::default(),
             executed,
+            serial_methods: false,
         })
+    }
+
+    /// Runs the methods of each frame one after another (`serial`) or side by side (the
+    /// default). Side by side the whole frame takes less time, and each method's
+    /// [`MethodOutput::ms`] includes the time it waited for cores the others held; one after
+    /// another it is the method's time alone. The meshes are the same either way.
+    pub fn set_serial_methods(&mut self, serial: bool) {
+        self.serial_methods = serial;
     }
 
     /// Channels of the driving weights track that match no morph target or blendshape and so
@@ -545,39 +557,54 @@ impl Session {
             means: &self.scratch.means,
             world: world.as_ref(),
         };
-        let mut methods = Vec::with_capacity(self.meshers.len());
-        let mut ran = Vec::new();
-        for (method, mesher) in &mut self.meshers {
-            if *method == Method::Tsdf {
-                ran.push(Stage::Render);
-            }
-            ran.push(Stage::Mesh(*method));
-            let output = mesher.mesh(&input)?;
-            let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
-            let metrics = match gt {
-                Some(gt) => {
-                    measure(&output.mesh, gt, self.samples, self.tau).map_err(|source| {
+        let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
+        let (samples, tau) = (self.samples, self.tau);
+        let gt_label = self
+            .gt
+            .as_ref()
+            .map_or_else(String::new, GroundTruth::label);
+        let mesh_and_measure =
+            |(method, mesher): &mut (Method, Mesher)| -> Result<MethodFrame, PipelineError> {
+                let output = mesher.mesh(&input)?;
+                let metrics = match gt {
+                    Some(gt) => measure(&output.mesh, gt, samples, tau).map_err(|source| {
                         PipelineError::Metrics {
-                            gt: self
-                                .gt
-                                .as_ref()
-                                .map_or_else(String::new, GroundTruth::label),
+                            gt: gt_label.clone(),
                             frame,
                             method: *method,
                             cause: source,
                         }
-                    })?
-                }
-                None => None,
+                    })?,
+                    None => None,
+                };
+                Ok(MethodFrame {
+                    method: *method,
+                    output,
+                    metrics,
+                })
             };
+        // Side by side, each method's own parallel loops share the cores with the others';
+        // one after another, each method's time is its own.
+        let methods: Vec<MethodFrame> = if self.serial_methods {
+            self.meshers
+                .iter_mut()
+                .map(mesh_and_measure)
+                .collect::<Result<_, _>>()?
+        } else {
+            self.meshers
+                .par_iter_mut()
+                .map(mesh_and_measure)
+                .collect::<Result<_, _>>()?
+        };
+        let mut ran = Vec::new();
+        for m in &methods {
+            if m.method == Method::Tsdf {
+                ran.push(Stage::Render);
+            }
+            ran.push(Stage::Mesh(m.method));
             if gt.is_some() {
                 ran.push(Stage::Metrics);
             }
-            methods.push(MethodFrame {
-                method: *method,
-                output,
-                metrics,
-            });
         }
         for stage in ran {
             self.record(stage);

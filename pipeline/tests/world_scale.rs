@@ -12,8 +12,8 @@ use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_pipeline::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS,
 };
-use trisplat_pipeline::methods::default_voxel;
 use trisplat_pipeline::input::read_template;
+use trisplat_pipeline::methods::default_voxel;
 use trisplat_pipeline::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, PipelineError, RunControl, run,
 };
@@ -161,8 +161,14 @@ fn skinned_template_with_a_scaled_node_is_meshed_in_world_space() {
     // transform's (0.01).
     assert!((r.template_radius - 1.0).abs() < 1e-6, "{r:?}");
     assert_eq!(r.voxel, default_voxel(r.template_radius, r.mean_spacing));
-    assert!(r.voxel >= r.template_radius / DEFAULT_VOXELS_PER_RADIUS, "{r:?}");
-    assert!(r.voxel <= r.template_radius / COARSEST_VOXELS_PER_RADIUS, "{r:?}");
+    assert!(
+        r.voxel >= r.template_radius / DEFAULT_VOXELS_PER_RADIUS,
+        "{r:?}"
+    );
+    assert!(
+        r.voxel <= r.template_radius / COARSEST_VOXELS_PER_RADIUS,
+        "{r:?}"
+    );
     // Four Gaussians per triangle of edge sqrt(2): spacing a sizeable part of an edge.
     assert!(r.mean_spacing > 0.1 && r.mean_spacing < 1.0, "{r:?}");
     assert_eq!(r.alpha, DEFAULT_ALPHA_SPACINGS * r.mean_spacing);

@@ -103,7 +103,11 @@ fn every_frame_equals_a_fresh_triangulation_and_is_watertight() {
     assert_watertight(spot.triangles(), "template");
     let deformer = Deformer::new(&spot, DeformMode::Binding);
     let mut geometry = WorldGeometry::default();
-    let options = DelaunayOptions::default();
+    // The update path on every frame (no automatic rebuilds).
+    let options = DelaunayOptions {
+        auto_rebuild: false,
+        ..DelaunayOptions::default()
+    };
     let rest_means = deformer.means(&set, spot.positions()).expect("rest means");
     let mut inc = IncrementalDelaunay::new(&spot, &rest_means, options).expect("mesher");
     let (mut hops, mut partial) = (0, 0);
@@ -157,6 +161,7 @@ fn hysteresis_and_rebuild_period_match_scratch_of_current_assignment() {
             DelaunayOptions {
                 hop_threshold: tau,
                 rebuild_every: 4,
+                auto_rebuild: false,
                 ..DelaunayOptions::default()
             },
         )
@@ -180,6 +185,85 @@ fn hysteresis_and_rebuild_period_match_scratch_of_current_assignment() {
         hops[1] < hops[0],
         "a hop threshold must reduce hops: {hops:?}"
     );
+}
+
+/// Every vertex moved by its own random offset of up to `amplitude` (not an affine motion of
+/// any neighbourhood: the motion certificates fail).
+fn shake(rest: &TriMesh, f: usize, amplitude: f32) -> Vec<Vec3> {
+    let mut rng = Rng::new(100 + f as u64);
+    rest.positions()
+        .iter()
+        .map(|p| {
+            let mut u = || amplitude * (2.0 * rng.uniform_f32() - 1.0);
+            *p + Vec3::new(u(), u(), u())
+        })
+        .collect()
+}
+
+#[test]
+fn costly_updates_are_followed_by_rebuilds() {
+    let (spot, set) = spot_with_gaussians();
+    let deformer = Deformer::new(&spot, DeformMode::Binding);
+    let rest_means = deformer.means(&set, spot.positions()).expect("rest means");
+    let edge = {
+        let p = spot.positions();
+        let t = spot.triangles()[0];
+        (p[t[0] as usize] - p[t[1] as usize]).length()
+    };
+    let mut geometry = WorldGeometry::default();
+    // Per frame: rebuilt or not; every mesh checked against a triangulation of its assignment
+    // (at τ = 0 also against a fresh mesher: the choice never changes the mesh there).
+    let mut run = |tau: f64, auto_rebuild: bool, motion: &dyn Fn(usize) -> Vec<Vec3>| {
+        let options = DelaunayOptions {
+            hop_threshold: tau,
+            auto_rebuild,
+            ..DelaunayOptions::default()
+        };
+        let mut inc = IncrementalDelaunay::new(&spot, &rest_means, options).expect("mesher");
+        let mut rebuilt = Vec::new();
+        for f in 0..FRAMES {
+            let positions = motion(f);
+            deformer
+                .deform_geometry(&set, &positions, &mut geometry)
+                .expect("deform");
+            let stats = inc.update(&positions, &geometry.means).expect("update");
+            rebuilt.push(stats.rebuilt);
+            assert_eq!(canonical(inc.triangles()), canonical(inc.triangulate_all()));
+            if tau == 0.0 {
+                let mut fresh =
+                    IncrementalDelaunay::new(&spot, &rest_means, options).expect("fresh");
+                fresh.update(&positions, &geometry.means).expect("fresh");
+                assert_eq!(
+                    canonical(inc.triangles()),
+                    canonical(fresh.triangles()),
+                    "frame {f}: != from scratch"
+                );
+            }
+        }
+        rebuilt
+    };
+    let shaken = |f: usize| shake(&spot, f, 0.5 * edge);
+    // At τ > 0 the verdict counts work: frame 1 certifies (not judged), frame 2 is judged
+    // costly, rebuilds from frame 3 on.
+    let auto = run(0.01, true, &shaken);
+    assert_eq!(&auto[..3], &[true, false, false], "{auto:?}");
+    assert!(auto[3..].iter().all(|&r| r), "{auto:?}");
+    // Without the automatic choice it keeps updating.
+    let always = run(0.01, false, &shaken);
+    assert!(always[1..].iter().all(|&r| !r), "{always:?}");
+    // Motion of the whole (rotation, uniform scale, translation) stays on the update path.
+    let similar = |f: usize| {
+        let (s, c) = (0.02 * f as f32).sin_cos();
+        let k = 1.0 + 0.01 * f as f32;
+        spot.positions()
+            .iter()
+            .map(|p| k * Vec3::new(c * p.x - s * p.z, p.y, s * p.x + c * p.z) + 0.1 * f as f32)
+            .collect::<Vec<_>>()
+    };
+    let gentle = run(0.01, true, &similar);
+    assert!(gentle[1..].iter().all(|&r| !r), "{gentle:?}");
+    // At τ = 0 the clock decides; whatever it decides, every mesh equals a fresh one.
+    run(0.0, true, &shaken);
 }
 
 /// Circumcircle test in 2D, positive when `d` is strictly inside (a, b, c counter-clockwise).
@@ -471,7 +555,11 @@ fn assert_matches_scratch(
     canonical_means: &[Vec3],
     frames: &[(Vec<Vec3>, Vec<Vec3>)],
 ) -> (usize, usize) {
-    let options = DelaunayOptions::default();
+    // The update path on every frame (no automatic rebuilds).
+    let options = DelaunayOptions {
+        auto_rebuild: false,
+        ..DelaunayOptions::default()
+    };
     let mut inc = IncrementalDelaunay::new(rest, canonical_means, options).expect("mesher");
     let (mut hops, mut certified) = (0, 0);
     for (f, (positions, means)) in frames.iter().enumerate() {

@@ -173,6 +173,9 @@ pub struct DelaunayOptions {
     pub hop_threshold: f64,
     /// Rebuild from scratch every this many updates (0: never).
     pub rebuild_every: usize,
+    /// Rebuild from scratch instead of updating while updates cost more than rebuilds (see
+    /// [`AutoRebuild`]); `false` keeps updating whatever the motion.
+    pub auto_rebuild: bool,
     /// Placement of Gaussian vertices.
     pub lift: Lift,
     /// Shrink of canonical weights toward the centroid ([`DEFAULT_INTERIOR_MARGIN`]), in
@@ -187,6 +190,7 @@ impl Default for DelaunayOptions {
         Self {
             hop_threshold: DEFAULT_HOP_THRESHOLD,
             rebuild_every: 0,
+            auto_rebuild: true,
             lift: Lift::Means,
             interior_margin: DEFAULT_INTERIOR_MARGIN,
             degenerate_tol: DEFAULT_DEGENERATE_TOL,
@@ -278,6 +282,84 @@ const CHART_BATCH: usize = 64;
 /// Room left in each chart's member and certificate lists for Gaussians hopping in, so that
 /// they are rarely moved away from their neighbours in memory.
 const SPARE_CAPACITY: usize = 4;
+
+/// At hop threshold τ > 0 (where the choice changes the meshes and must not depend on the
+/// machine), an update that fully checks more than this fraction of the Gaussians (their
+/// motion certificates failed) is judged to cost more than a rebuild: on the LAM head (20k
+/// Gaussians up to centimetres off their triangles, the head turning every frame) 13% checks
+/// cost 1.4x a rebuild, 23% 1.8x, 50% 3.5-5x; on the FLAME benchmark 5% cost a fifth of one.
+pub const AUTO_REBUILD_CHECKED: f64 = 0.10;
+/// At τ > 0, an update that redoes more than this fraction of the charts is judged to cost
+/// about a rebuild.
+pub const AUTO_REBUILD_CHARTS: f64 = 0.25;
+/// Rebuilds before the first probe of the update path after a costly update. A probe is
+/// dear (the first update after a rebuild certifies every Gaussian: 0.5-0.6 s on the LAM head
+/// against a 37 ms rebuild), hence long runs of rebuilds between probes.
+const AUTO_BACKOFF_FIRST: usize = 64;
+/// Factor by which a costly probe lengthens the next run of rebuilds.
+const AUTO_BACKOFF_GROWTH: usize = 4;
+/// Longest run of rebuilds between probes.
+const AUTO_BACKOFF_MAX: usize = 1024;
+
+/// The automatic choice between updating and rebuilding ([`DelaunayOptions::auto_rebuild`]).
+/// An update judged costly is followed by a run of rebuilds; after it the update path is
+/// probed again, and a probe judged costly makes the next run [`AUTO_BACKOFF_GROWTH`] times
+/// longer ([`AUTO_BACKOFF_FIRST`] up to [`AUTO_BACKOFF_MAX`]). The first update after a
+/// rebuild certifies every Gaussian and is not judged; the second is.
+///
+/// The verdict: at hop threshold 0 an update equals a rebuild (tested), so the choice changes
+/// only the time and is made by the clock (the update took longer than the last rebuild); at
+/// τ > 0 a rebuild resets the hysteresis and changes the meshes, so the choice counts work
+/// instead ([`AUTO_REBUILD_CHECKED`], [`AUTO_REBUILD_CHARTS`]) and a run gives the same meshes
+/// on any machine.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AutoRebuild {
+    /// Rebuilds still to do before the next probe.
+    rebuilds_left: usize,
+    /// Rebuilds after the next costly update.
+    backoff: usize,
+    /// Wall time of the last rebuild, milliseconds.
+    rebuild_ms: f64,
+}
+
+impl Default for AutoRebuild {
+    fn default() -> Self {
+        Self {
+            rebuilds_left: 0,
+            backoff: AUTO_BACKOFF_FIRST,
+            rebuild_ms: f64::INFINITY,
+        }
+    }
+}
+
+impl AutoRebuild {
+    /// Whether an update that took `update_ms` with these counts cost more than a rebuild.
+    fn costly(
+        &self,
+        stats: &FrameStats,
+        update_ms: f64,
+        by_clock: bool,
+        gaussians: usize,
+        charts: usize,
+    ) -> bool {
+        if by_clock {
+            update_ms > self.rebuild_ms
+        } else {
+            stats.searches as f64 > AUTO_REBUILD_CHECKED * gaussians as f64
+                || stats.charts_redone as f64 > AUTO_REBUILD_CHARTS * charts as f64
+        }
+    }
+
+    /// Takes the verdict on a judged update.
+    fn judge(&mut self, costly: bool) {
+        if costly {
+            self.rebuilds_left = self.backoff;
+            self.backoff = (self.backoff * AUTO_BACKOFF_GROWTH).min(AUTO_BACKOFF_MAX);
+        } else {
+            self.backoff = AUTO_BACKOFF_FIRST;
+        }
+    }
+}
 
 /// Shared inputs of the per-chart hop search of one frame.
 struct SearchContext<'a> {
@@ -477,6 +559,7 @@ pub struct IncrementalDelaunay {
     certified: bool,
     updates: usize,
     since_rebuild: usize,
+    auto: AutoRebuild,
 }
 
 /// The first point that is not finite or exceeds [`MAX_COORDINATE`] is an error. Chunks are
@@ -611,6 +694,7 @@ impl IncrementalDelaunay {
             certified: false,
             updates: 0,
             since_rebuild: 0,
+            auto: AutoRebuild::default(),
         })
     }
 
@@ -708,10 +792,31 @@ impl IncrementalDelaunay {
         let start = Instant::now();
         self.check_frame(positions, means)?;
         let period = self.options.rebuild_every;
-        let mut stats = if self.bvh.is_none() || (period > 0 && self.since_rebuild >= period) {
-            self.rebuild_now(positions, means)?
+        let scheduled = self.bvh.is_none() || (period > 0 && self.since_rebuild >= period);
+        let automatic = self.options.auto_rebuild && self.auto.rebuilds_left > 0;
+        let mut stats = if scheduled || automatic {
+            if automatic {
+                self.auto.rebuilds_left -= 1;
+            }
+            let stats = self.rebuild_now(positions, means)?;
+            self.auto.rebuild_ms = start.elapsed().as_secs_f64() * 1e3;
+            stats
         } else {
-            self.step(positions, means)?
+            // Judged only when the Gaussians came with certificates (not right after a
+            // rebuild, which leaves none).
+            let judged = self.certified;
+            let stats = self.step(positions, means)?;
+            if self.options.auto_rebuild && judged {
+                let costly = self.auto.costly(
+                    &stats,
+                    start.elapsed().as_secs_f64() * 1e3,
+                    self.options.hop_threshold == 0.0,
+                    self.canonical.len(),
+                    self.triangles.len(),
+                );
+                self.auto.judge(costly);
+            }
+            stats
         };
         stats.frame = self.updates;
         self.updates += 1;
@@ -779,7 +884,11 @@ impl IncrementalDelaunay {
         let all: Vec<u32> = (0..self.triangles.len() as u32).collect();
         self.charts = self.triangulate_charts(&all, &self.members);
         self.bvh = Some(bvh);
+        // Certificates and cached chart meshes describe the previous state; the next update
+        // makes new ones (and a run of rebuilds holds none).
         self.certified = false;
+        self.states = Vec::new();
+        self.previous = Vec::new();
         self.since_rebuild = 1;
         self.lift(positions, means);
         Ok(FrameStats {
