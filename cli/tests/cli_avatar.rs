@@ -284,3 +284,80 @@ fn clip_from_another_file_plays_by_joint_name_and_lists_the_unmatched() {
     ]));
     assert!(line.contains("--clip-from needs a glTF template"), "{line}");
 }
+
+#[test]
+fn deform_reads_an_avatar_folder_and_a_clip_from_another_file() {
+    let dir = fresh_dir("deform_avatar");
+    let track = fixture("lam_mini/expression.json");
+    let out = dir.join("frames");
+    run_ok(&[
+        "deform",
+        "--avatar",
+        &fixture("lam_mini"),
+        "--animation",
+        &track,
+        "--frames",
+        "0..2",
+        "-q",
+        "-o",
+        s(&out),
+    ]);
+    for f in 0..2 {
+        let set = trisplat_splat::ply::read_gaussians(&out.join(format!("frame_{f:06}.ply")))
+            .expect("world-space frame");
+        assert_eq!(set.len(), 952, "frame {f}: one Gaussian per LAM vertex");
+    }
+    // The folder given as --template reads the same; --gaussians beside it is refused.
+    let same = dir.join("same");
+    run_ok(&[
+        "deform",
+        "--template",
+        &fixture("lam_mini"),
+        "--animation",
+        &track,
+        "--frames",
+        "0..2",
+        "-q",
+        "-o",
+        s(&same),
+    ]);
+    for f in 0..2 {
+        let name = format!("frame_{f:06}.ply");
+        assert!(
+            std::fs::read(out.join(&name)).expect("a")
+                == std::fs::read(same.join(&name)).expect("b"),
+            "{name}"
+        );
+    }
+    let line = one_error_line(&run(&[
+        "deform",
+        "--template",
+        &fixture("lam_mini"),
+        "--gaussians",
+        &fixture("lam_mini/offset.ply"),
+        "--animation",
+        &track,
+        "-q",
+        "-o",
+        s(&dir.join("refused")),
+    ]));
+    assert!(line.contains("brings its own"), "{line}");
+    // --clip-from on a template without joints is refused as in extract.
+    let line = one_error_line(&run(&[
+        "deform",
+        "--template",
+        &fixture("spot_triangulated.obj"),
+        "--gaussians",
+        &fixture("lam_mini/offset.ply"),
+        "--animation",
+        &track,
+        "--clip-from",
+        &trisplat_fixtures::path("anim/SyntheticFeatures.gltf")
+            .display()
+            .to_string(),
+        "-q",
+        "-o",
+        s(&dir.join("no_joints")),
+    ]));
+    assert!(line.contains("--clip-from"), "{line}");
+}

@@ -31,6 +31,9 @@ pub const VERTEX_EDGE_MARGIN: f64 = 1e-3;
 /// Blocks per parallel work item.
 const BLOCKS_PER_TASK: usize = 4;
 
+/// Storage offsets of the next voxel along x, y and z inside one block.
+const AXIS_STRIDES: [usize; 3] = [1, BLOCK as usize, (BLOCK * BLOCK) as usize];
+
 /// Position of the centre block in [`Neighborhood::ids`].
 const CENTRE: usize = 13;
 
@@ -66,8 +69,7 @@ impl Neighborhood {
     /// centre block, `None` when that block is not allocated.
     #[inline]
     fn slot(&self, l: IVec3) -> Option<usize> {
-        let block = l.div_euclid(IVec3::splat(BLOCK));
-        let local = l.rem_euclid(IVec3::splat(BLOCK));
+        let (block, local) = split(l);
         let i = (block.x + 1) + 3 * (block.y + 1) + 9 * (block.z + 1);
         let b = self.ids[i as usize]? as usize;
         Some(b * BLOCK_VOXELS + local_index(local))
@@ -76,11 +78,19 @@ impl Neighborhood {
     /// `(block id, local index)` of the voxel at local coordinates `l`.
     #[inline]
     fn owner(&self, l: IVec3) -> Option<(usize, usize)> {
-        let block = l.div_euclid(IVec3::splat(BLOCK));
-        let local = l.rem_euclid(IVec3::splat(BLOCK));
+        let (block, local) = split(l);
         let i = (block.x + 1) + 3 * (block.y + 1) + 9 * (block.z + 1);
         Some((self.ids[i as usize]? as usize, local_index(local)))
     }
+}
+
+/// Local coordinates relative to the centre block split into the block offset (floor
+/// division by [`BLOCK`], a power of two: an arithmetic shift) and the coordinates inside it.
+#[inline]
+fn split(l: IVec3) -> (IVec3, IVec3) {
+    const SHIFT: u32 = BLOCK.trailing_zeros();
+    const _: () = assert!(BLOCK.count_ones() == 1, "BLOCK must be a power of two");
+    (l >> SHIFT, l & IVec3::splat(BLOCK - 1))
 }
 
 /// The eight corner values of the cell whose low corner is at local coordinates `l`, or
@@ -150,8 +160,14 @@ fn block_vertices(grid: &BlockGrid, b: usize) -> BlockVertices {
         let l = local_coords(local);
         for axis in 0..3 {
             let step = IVec3::AXES[axis];
-            let Some(s1) = hood.slot(l + step) else {
-                continue;
+            // The far end is in this block unless `l` is on its high face.
+            let s1 = if l[axis] + 1 < BLOCK {
+                s0 + AXIS_STRIDES[axis]
+            } else {
+                match hood.slot(l + step) {
+                    Some(s1) => s1,
+                    None => continue,
+                }
             };
             if grid.weight[s1] == 0.0 {
                 continue;

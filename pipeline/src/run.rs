@@ -428,23 +428,31 @@ pub(crate) fn write_outputs(
     frame_files: &FrameFilesByMethod,
     targets: &[OutputTarget],
 ) -> Result<(), PipelineError> {
-    let glb = targets.contains(&OutputTarget::Glb);
-    for (m, files) in frame_files.iter().filter(|_| glb) {
-        let glb = out.join(format!("{}.glb", m.name()));
-        let written = write_sequence_parts(
-            &glb,
-            &FrameFiles(files),
-            &report.frame_times,
-            SequenceLayout::Auto,
-            GLB_PART_LIMIT,
-        )?;
-        if written.len() > 1
-            && let Some(r) = report.methods.get_mut(m.name())
-        {
-            r.glb_parts = written
-                .iter()
-                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-                .collect();
+    if targets.contains(&OutputTarget::Glb) {
+        // One method per task: reading the frame files back is most of the work.
+        let written: Vec<(Method, Vec<PathBuf>)> = frame_files
+            .par_iter()
+            .map(|(m, files)| {
+                let glb = out.join(format!("{}.glb", m.name()));
+                write_sequence_parts(
+                    &glb,
+                    &FrameFiles(files),
+                    &report.frame_times,
+                    SequenceLayout::Auto,
+                    GLB_PART_LIMIT,
+                )
+                .map(|parts| (*m, parts))
+            })
+            .collect::<Result<_, _>>()?;
+        for (m, parts) in written {
+            if parts.len() > 1
+                && let Some(r) = report.methods.get_mut(m.name())
+            {
+                r.glb_parts = parts
+                    .iter()
+                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect();
+            }
         }
     }
     if targets.contains(&OutputTarget::Report) {

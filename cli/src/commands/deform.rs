@@ -1,5 +1,6 @@
-//! `trisplat deform --template T --animation A --gaussians G -o DIR [--mode binding|jacobian|lbs]
-//! [--frames A..B] [--clip NAME|INDEX] [--fps F] [--targets DIR] [--adaptive-scale]`.
+//! `trisplat deform (--template T --gaussians G | --avatar DIR) --animation A -o DIR
+//! [--mode binding|jacobian|lbs] [--frames A..B] [--clip NAME|INDEX] [--clip-from A.glb] [--fps F]
+//! [--targets DIR] [--adaptive-scale]`.
 
 use std::path::PathBuf;
 
@@ -9,6 +10,7 @@ use trisplat_pipeline::{ExtractConfig, ExtractOptions, Mode, Session, SessionOpt
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
 use super::Context;
+use super::extract::avatar_files;
 
 /// Arguments of `trisplat deform`.
 #[derive(Debug, clap::Args)]
@@ -25,6 +27,9 @@ use super::Context;
     T is a .gltf/.glb, its morph targets are driven by name (extras.targetNames); otherwise T \
     is the neutral mesh and --targets DIR holds one .obj/.ply per target, named by the file \
     stem (jawOpen.obj drives the channel jawOpen; names match ignoring case, `_`/`.` and `_L`/`_R` vs `Left`/`Right`).\n\n\
+    --avatar DIR reads a LAM avatar folder (skin.glb, offset.ply, vertex_order.json) as \
+    `extract --avatar` does; --clip-from A.glb plays a clip of another glTF (LAM's \
+    animation.glb) on T's joints by name, together with a weights JSON animation.\n\n\
     Every frame must have the vertices and triangles of T, in T's order; the Gaussians' \
     bindings must name triangles of T.\n\n\
     Modes: binding (GaussianAvatars: local parameters in the frame of the posed triangle, as \
@@ -39,15 +44,19 @@ use super::Context;
 )]
 pub struct DeformArgs {
     /// Template mesh T (.ply, .obj, .gltf, .glb): the triangles the Gaussians are bound to, in
-    /// its rest shape.
-    #[arg(long, value_name = "T")]
-    pub template: PathBuf,
+    /// its rest shape; or a LAM avatar folder (as --avatar).
+    #[arg(long, value_name = "T", required_unless_present = "avatar")]
+    pub template: Option<PathBuf>,
+    /// A LAM avatar folder: --template DIR/skin.glb with DIR/offset.ply's per-vertex Gaussians.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["template", "gaussians"])]
+    pub avatar: Option<PathBuf>,
     /// Animation: a glTF/GLB, a folder or pattern of OBJ/PLY frames, or a weights JSON.
     #[arg(long, value_name = "A")]
     pub animation: String,
-    /// Bound Gaussians (GaussianAvatars-style PLY with `binding_0` or `binding`).
+    /// Bound Gaussians (GaussianAvatars-style PLY with `binding_0` or `binding`); not with an
+    /// avatar folder, which brings its own.
     #[arg(long, value_name = "G")]
-    pub gaussians: PathBuf,
+    pub gaussians: Option<PathBuf>,
     /// Output folder (created if missing).
     #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: PathBuf,
@@ -60,6 +69,10 @@ pub struct DeformArgs {
     /// glTF animation clip by name or index (default: the first).
     #[arg(long, value_name = "NAME|INDEX")]
     pub clip: Option<String>,
+    /// Play --clip of this glTF (e.g. LAM's animation.glb) on the template's joints, matched
+    /// by name; with a weights JSON animation both play together (the clip looped).
+    #[arg(long, value_name = "A.glb")]
+    pub clip_from: Option<PathBuf>,
     /// Sampling rate of a glTF clip, frames per second.
     #[arg(long, value_name = "F", default_value_t = trisplat_geometry::animation::DEFAULT_FPS)]
     pub fps: f64,
@@ -84,21 +97,32 @@ pub struct DeformArgs {
 /// # Errors
 /// Unreadable or mismatched inputs (named), a failed write (files of this run removed).
 pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
+    let mut options = ExtractOptions {
+        mode: args.mode,
+        clip: args.clip.clone(),
+        clip_from: args.clip_from.clone(),
+        fps: args.fps,
+        strict: args.strict,
+        ..ExtractOptions::default()
+    };
+    let (template, gaussians) = match (&args.avatar, &args.template) {
+        (Some(dir), _) => avatar_files(dir, args.gaussians.as_deref(), &mut options)?,
+        (None, Some(t)) if t.is_dir() => avatar_files(t, args.gaussians.as_deref(), &mut options)?,
+        (None, Some(t)) => (t.clone(), args.gaussians.clone()),
+        (None, None) => anyhow::bail!("--template or --avatar is needed"),
+    };
+    let Some(gaussians) = gaussians else {
+        anyhow::bail!("--gaussians is needed (deform moves bound Gaussians; `bind` makes them)");
+    };
     let config = ExtractConfig {
-        template: args.template.clone(),
+        template,
         animation: Some(args.animation.clone()),
-        gaussians: Some(args.gaussians.clone()),
+        gaussians: Some(gaussians),
         methods: Vec::new(),
         output: args.output.clone(),
         frames: args.frames.clone(),
         gt: None,
-        options: ExtractOptions {
-            mode: args.mode,
-            clip: args.clip.clone(),
-            fps: args.fps,
-            strict: args.strict,
-            ..ExtractOptions::default()
-        },
+        options,
     };
     let mut session = Session::open_with(
         &config,

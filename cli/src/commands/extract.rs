@@ -151,11 +151,12 @@ impl ExtractArgs {
     }
 }
 
-/// The template and Gaussians of the LAM avatar folder `dir`, with `options` set to read it.
+/// The template and Gaussians of the LAM avatar folder `dir`, with `options` set to read it
+/// (`extract` and `deform`).
 ///
 /// # Errors
 /// Not an avatar folder, or `--gaussians` given beside one.
-fn avatar_files(
+pub(crate) fn avatar_files(
     dir: &Path,
     gaussians: Option<&Path>,
     options: &mut ExtractOptions,
