@@ -205,9 +205,17 @@ impl TriangleClusters {
     }
 }
 
-/// The triangles around each vertex as offsets (`vertex_count + 1`) into a flat list, in
-/// triangle order (a triangle that repeats a vertex is listed twice there).
-fn triangles_around_vertices(vertex_count: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, Vec<u32>) {
+/// The triangles around each vertex: `(offsets, around)` with the triangles of vertex `v` at
+/// `around[offsets[v]..offsets[v + 1]]`, in triangle order (a triangle that repeats a vertex
+/// is listed there twice).
+///
+/// # Panics
+/// If a triangle index is `>= vertex_count` (a [`crate::TriMesh`] never has one).
+#[must_use]
+pub fn triangles_around_vertices(
+    vertex_count: usize,
+    triangles: &[[u32; 3]],
+) -> (Vec<u32>, Vec<u32>) {
     let mut offsets = vec![0u32; vertex_count + 1];
     for tri in triangles {
         for &v in tri {

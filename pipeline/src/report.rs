@@ -16,6 +16,7 @@ use trisplat_geometry::metrics::{MetricsError, MetricsOptions, Shape, evaluate};
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::spatial::TriangleBvh;
+use trisplat_geometry::topology::triangles_around_vertices;
 use trisplat_geometry::{PointCloud, TriMesh};
 
 use crate::config::Method;
@@ -127,26 +128,26 @@ pub fn measure(
 #[must_use]
 pub fn is_watertight(mesh: &TriMesh) -> bool {
     let t = mesh.triangles();
-    if t.is_empty() {
+    if t.is_empty() || t.iter().any(|&[a, b, c]| a == b || b == c || a == c) {
         return false;
     }
-    // Every edge as (smaller id, larger id) and its direction in its triangle; watertight and
-    // consistently wound iff each undirected edge occurs exactly twice, once each way. Sorting
-    // a flat vector is several times faster than hashing on meshes of 100k+ triangles.
-    let mut edges: Vec<(u64, bool)> = Vec::with_capacity(3 * t.len());
-    for &[a, b, c] in t {
-        if a == b || b == c || a == c {
-            return false;
-        }
-        for (x, y) in [(a, b), (b, c), (c, a)] {
-            let (lo, hi) = (x.min(y), x.max(y));
-            edges.push(((u64::from(lo) << 32) | u64::from(hi), x < y));
-        }
-    }
-    edges.sort_unstable();
-    edges
-        .chunk_by(|p, q| p.0 == q.0)
-        .all(|group| matches!(group, [(_, first), (_, second)] if first != second))
+    // Each directed edge x -> y must be in exactly one triangle and its reverse in exactly one:
+    // look among the triangles around x (no sort or hash of the 3n edges; the first open edge
+    // ends the search, and TSDF meshes have many).
+    let (offsets, around) = triangles_around_vertices(mesh.vertex_count(), t);
+    let has = |tri: [u32; 3], x: u32, y: u32| (0..3).any(|k| tri[k] == x && tri[(k + 1) % 3] == y);
+    t.iter().all(|&[a, b, c]| {
+        [(a, b), (b, c), (c, a)].into_iter().all(|(x, y)| {
+            let ring = &around[offsets[x as usize] as usize..offsets[x as usize + 1] as usize];
+            let (mut forward, mut backward) = (0, 0);
+            for &u in ring {
+                let tri = t[u as usize];
+                forward += usize::from(has(tri, x, y));
+                backward += usize::from(has(tri, y, x));
+            }
+            forward == 1 && backward == 1
+        })
+    })
 }
 
 /// One method on one frame.
@@ -849,5 +850,70 @@ mod tests {
             ],
         );
         assert!(is_watertight(&two));
+    }
+
+    /// The definition, by sorting every edge use.
+    fn watertight_by_sorting(t: &[[u32; 3]]) -> bool {
+        if t.is_empty() || t.iter().any(|&[a, b, c]| a == b || b == c || a == c) {
+            return false;
+        }
+        let mut edges: Vec<(u32, u32, bool)> = t
+            .iter()
+            .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
+            .map(|(x, y)| (x.min(y), x.max(y), x < y))
+            .collect();
+        edges.sort_unstable();
+        edges
+            .chunk_by(|p, q| (p.0, p.1) == (q.0, q.1))
+            .all(|g| matches!(g, [(_, _, f), (_, _, s)] if f != s))
+    }
+
+    #[test]
+    fn watertight_matches_the_definition_on_edited_closed_meshes() {
+        // An octahedron (closed), then random edits: a face removed, flipped, duplicated (as
+        // is or reversed), a vertex renamed; and pairs of closed pieces.
+        let octahedron: Vec<[u32; 3]> = vec![
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
+        ];
+        let mut rng = trisplat_geometry::rng::Rng::new(5);
+        let positions: Vec<Vec3> = (0..12).map(|k| Vec3::splat(k as f32)).collect();
+        let (mut closed, mut open) = (0, 0);
+        for case in 0..2000 {
+            let mut t = octahedron.clone();
+            if case % 3 == 0 {
+                t.extend(octahedron.iter().map(|f| f.map(|v| v + 6)));
+            }
+            for _ in 0..rng.below(3) {
+                let k = rng.below(t.len() as u32) as usize;
+                match rng.below(5) {
+                    0 => {
+                        t.remove(k);
+                    }
+                    1 => t[k].swap(0, 1),
+                    2 => t.push(t[k]),
+                    3 => t.push([t[k][1], t[k][0], t[k][2]]),
+                    _ => t[k][rng.below(3) as usize] = rng.below(12),
+                }
+                if t.is_empty() {
+                    break;
+                }
+            }
+            let mesh = TriMesh::new_unchecked(positions.clone(), t.clone());
+            let want = watertight_by_sorting(&t);
+            assert_eq!(is_watertight(&mesh), want, "case {case}: {t:?}");
+            if want {
+                closed += 1;
+            } else {
+                open += 1;
+            }
+        }
+        assert!(closed > 100 && open > 100, "{closed} closed, {open} open");
     }
 }

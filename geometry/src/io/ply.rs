@@ -232,6 +232,24 @@ impl ScalarColumn {
     }
 
     /// Value `i` as i64 when it is an integer type or a float with an integral value.
+    /// Every value as [`ScalarColumn::get_i64`] reads it, `-1` where it has no integer value
+    /// (one pass per column instead of a type dispatch per value).
+    fn to_i64_or_minus_one(&self) -> Vec<i64> {
+        fn float(x: f64) -> i64 {
+            float_to_i64(x).unwrap_or(-1)
+        }
+        match self {
+            Self::F32(v) => v.iter().map(|&x| float(f64::from(x))).collect(),
+            Self::F64(v) => v.iter().map(|&x| float(x)).collect(),
+            Self::I8(v) => v.iter().map(|&x| i64::from(x)).collect(),
+            Self::U8(v) => v.iter().map(|&x| i64::from(x)).collect(),
+            Self::I16(v) => v.iter().map(|&x| i64::from(x)).collect(),
+            Self::U16(v) => v.iter().map(|&x| i64::from(x)).collect(),
+            Self::I32(v) => v.iter().map(|&x| i64::from(x)).collect(),
+            Self::U32(v) => v.iter().map(|&x| i64::from(x)).collect(),
+        }
+    }
+
     fn get_i64(&self, i: usize) -> Option<i64> {
         match self {
             Self::F32(v) => v.get(i).and_then(|&x| float_to_i64(f64::from(x))),
@@ -795,10 +813,8 @@ fn read_binary_body(
                     } => {
                         let size = count_type.size();
                         let bytes = body.get(pos..pos + size).ok_or_else(|| truncated(row))?;
-                        let mut n = ScalarColumn::with_capacity(*count_type, 1);
-                        n.push_binary(bytes, big_endian);
                         pos += size;
-                        let n = n.get_i64(0).unwrap_or(-1);
+                        let n = binary_count(*count_type, bytes, big_endian).unwrap_or(-1);
                         let n = usize::try_from(n).map_err(|_| {
                             IoError::malformed(
                                 path,
@@ -811,9 +827,7 @@ fn read_binary_body(
                         if len > body.len() - pos {
                             return Err(truncated(row));
                         }
-                        for chunk in body[pos..pos + len].chunks_exact(item) {
-                            values.push_binary(chunk, big_endian);
-                        }
+                        values.extend_strided(&body[pos..pos + len], 0, item, n, big_endian);
                         pos += len;
                         offsets.push(values.len());
                     }
@@ -823,6 +837,32 @@ fn read_binary_body(
         elements.push(finish_element(def, data));
     }
     Ok(elements)
+}
+
+/// A list length of type `t` from its first bytes, as [`ScalarColumn`]'s integer view reads
+/// it (floats only when integral), without a column per row.
+fn binary_count(t: ScalarType, bytes: &[u8], big_endian: bool) -> Option<i64> {
+    macro_rules! read {
+        ($t:ty) => {{
+            let mut a = [0u8; std::mem::size_of::<$t>()];
+            a.copy_from_slice(bytes.get(..std::mem::size_of::<$t>())?);
+            if big_endian {
+                <$t>::from_be_bytes(a)
+            } else {
+                <$t>::from_le_bytes(a)
+            }
+        }};
+    }
+    match t {
+        ScalarType::I8 => Some(i64::from(read!(i8))),
+        ScalarType::U8 => Some(i64::from(read!(u8))),
+        ScalarType::I16 => Some(i64::from(read!(i16))),
+        ScalarType::U16 => Some(i64::from(read!(u16))),
+        ScalarType::I32 => Some(i64::from(read!(i32))),
+        ScalarType::U32 => Some(i64::from(read!(u32))),
+        ScalarType::F32 => float_to_i64(f64::from(read!(f32))),
+        ScalarType::F64 => float_to_i64(read!(f64)),
+    }
 }
 
 fn finish_element(def: &ElementDef, data: Vec<PropertyData>) -> PlyElement {
@@ -1420,15 +1460,8 @@ fn index_list(e: &PlyElement) -> Option<(&str, &[usize], &ScalarColumn)> {
         })
 }
 
-fn checked_index(
-    path: &Path,
-    what: &str,
-    row: usize,
-    values: &ScalarColumn,
-    i: usize,
-    n: usize,
-) -> Result<u32, IoError> {
-    let raw = values.get_i64(i).unwrap_or(-1);
+/// `raw` (a list value, `-1` when it is not an integer) as a vertex index below `n`.
+fn checked_index(path: &Path, what: &str, row: usize, raw: i64, n: usize) -> Result<u32, IoError> {
     match u32::try_from(raw) {
         Ok(v) if (v as usize) < n => Ok(v),
         _ => Err(IoError::malformed(
@@ -1456,6 +1489,7 @@ fn decode_triangles(
             )
         })?;
         triangles.reserve(face.count);
+        let values = values.to_i64_or_minus_one();
         for row in 0..face.count {
             let (a, b) = (offsets[row], offsets[row + 1]);
             if b - a != 3 {
@@ -1464,10 +1498,10 @@ fn decode_triangles(
             if b - a < 3 {
                 continue;
             }
-            let first = checked_index(path, "face", row, values, a, n)?;
-            let mut prev = checked_index(path, "face", row, values, a + 1, n)?;
-            for i in a + 2..b {
-                let cur = checked_index(path, "face", row, values, i, n)?;
+            let first = checked_index(path, "face", row, values[a], n)?;
+            let mut prev = checked_index(path, "face", row, values[a + 1], n)?;
+            for &raw in &values[a + 2..b] {
+                let cur = checked_index(path, "face", row, raw, n)?;
                 triangles.push([first, prev, cur]);
                 prev = cur;
             }
@@ -1498,7 +1532,8 @@ fn decode_triangles(
                 if values.get_i64(i) == Some(-1) {
                     flush(&mut strip, &mut triangles);
                 } else {
-                    strip.push(checked_index(path, "tristrips", row, values, i, n)?);
+                    let raw = values.get_i64(i).unwrap_or(-1);
+                    strip.push(checked_index(path, "tristrips", row, raw, n)?);
                 }
             }
             flush(&mut strip, &mut triangles);
