@@ -143,6 +143,9 @@ pub fn run(
                 }
             }
         }
+        // A frame's transient memory goes back to the system, so that peak memory does not
+        // grow with the frame count through fragmentation (module `memory`).
+        crate::memory::release_free_memory();
         progress(Progress::Frame {
             done: done + 1,
             total,
