@@ -302,6 +302,8 @@ fn run_frame(
                 Ok::<_, PipelineError>((m, record, delaunay))
             },
         )
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect::<Result<_, _>>()?;
     for (m, record, delaunay) in written {
         if delaunay.is_some() {
@@ -446,6 +448,8 @@ pub(crate) fn write_outputs(
                 )
                 .map(|parts| (*m, parts))
             })
+            .collect::<Vec<_>>()
+            .into_iter()
             .collect::<Result<_, _>>()?;
         for (m, parts) in written {
             if parts.len() > 1

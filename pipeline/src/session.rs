@@ -591,9 +591,13 @@ impl Session {
                 .map(mesh_and_measure)
                 .collect::<Result<_, _>>()?
         } else {
+            // Every method runs; the first failure in method order is reported, as one after
+            // another.
             self.meshers
                 .par_iter_mut()
                 .map(mesh_and_measure)
+                .collect::<Vec<_>>()
+                .into_iter()
                 .collect::<Result<_, _>>()?
         };
         let mut ran = Vec::new();

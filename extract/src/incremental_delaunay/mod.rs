@@ -18,7 +18,9 @@
 //! chart until another triangle is nearer by more than `τ` times the mean template edge length
 //! (hysteresis: fewer hops, but a Gaussian may be meshed in a chart it has left). A full
 //! rebuild every `N` frames ([`DelaunayOptions::rebuild_every`]) re-assigns every Gaussian to
-//! its nearest triangle and bounds that drift; at `τ = 0` a rebuild changes nothing.
+//! its nearest triangle and bounds that drift; at `τ = 0` a rebuild changes nothing. Updates
+//! that cost more than a rebuild (large non-rigid motion, Gaussians far off their triangles)
+//! are followed by rebuilds ([`AutoRebuild`], on by default).
 //!
 //! **Hop detection** (module `certify`). Proving that the other ~99.7% of the Gaussians did
 //! not hop is most of an update, so it is done with motion-bounded certificates (Verlet-list
@@ -293,7 +295,7 @@ pub const AUTO_REBUILD_CHECKED: f64 = 0.10;
 /// about a rebuild.
 pub const AUTO_REBUILD_CHARTS: f64 = 0.25;
 /// Rebuilds before the first probe of the update path after a costly update. A probe is
-/// dear (the first update after a rebuild certifies every Gaussian: 0.5-0.6 s on the LAM head
+/// dear (the first update after a rebuild certifies every Gaussian: 0.5-1.2 s on the LAM head
 /// against a 37 ms rebuild), hence long runs of rebuilds between probes.
 const AUTO_BACKOFF_FIRST: usize = 64;
 /// Factor by which a costly probe lengthens the next run of rebuilds.

@@ -12,7 +12,13 @@
 //! distances, about 3e-7 relative. Distance-only metrics are unaffected beyond that rounding.
 //!
 //! The mutable kiddo tree is never used: it fails once more than a bucket of points share a
-//! coordinate (planes, grids); the immutable tree handles any number of duplicates (tested).
+//! coordinate (planes, grids). The immutable tree handles duplicates correctly but searches
+//! them in quadratic time (200k copies of one point: 29 s for `eval` of the set against
+//! itself), so points at the same position are indexed once: the tree holds the distinct
+//! positions, each standing for its copies (the smallest index answers `nearest`; `k_nearest`
+//! lists the copies). Only sets with copies pay for finding them: a set of more than 2,048
+//! points whose evenly spaced sample of 1,024 holds no copy is indexed as it is (the slow case
+//! needs thousands of copies of one position, which the sample sees).
 
 use std::cmp::Ordering;
 use std::num::NonZeroUsize;
@@ -34,8 +40,69 @@ pub struct Nearest {
 
 /// A k-d tree over a fixed set of points (at least one, all finite and bounded).
 pub struct PointIndex {
+    /// Over the distinct positions (all points when there are no copies).
     tree: ImmutableKdTree<f32, 3>,
     points: Vec<Vec3>,
+    /// Copies, when there are any: the points of tree item `u` are
+    /// `members[offsets[u]..offsets[u + 1]]`, ascending.
+    copies: Option<Copies>,
+}
+
+/// Points looked at to decide whether a large set has copies (see [`Copies::of`]).
+const COPY_SAMPLE: usize = 1024;
+
+/// The points of each distinct position (see [`PointIndex`]).
+struct Copies {
+    offsets: Vec<u32>,
+    members: Vec<u32>,
+}
+
+impl Copies {
+    /// Groups equal positions (`-0.0` equals `0.0`); `None` when all are distinct. Returns the
+    /// distinct positions in tree order with the groups.
+    fn of(points: &[Vec3]) -> Option<(Vec<[f32; 3]>, Self)> {
+        let key = |p: Vec3| (p + Vec3::ZERO).to_array().map(f32::to_bits);
+        // The search is slow only with thousands of copies of one position, which an evenly
+        // spaced sample sees: a set whose sample holds no copy is indexed as it is (sorting
+        // every point cost 13% of `eval` on 1M distinct points).
+        if points.len() > 2 * COPY_SAMPLE {
+            let mut sample: Vec<[u32; 3]> = points
+                .iter()
+                .step_by(points.len() / COPY_SAMPLE)
+                .map(|&p| key(p))
+                .collect();
+            sample.sort_unstable();
+            if sample.windows(2).all(|w| w[0] != w[1]) {
+                return None;
+            }
+        }
+        let mut order: Vec<([u32; 3], u32)> = points
+            .par_iter()
+            .enumerate()
+            .map(|(i, &p)| (key(p), i as u32))
+            .collect();
+        order.par_sort_unstable();
+        if order.windows(2).all(|w| w[0].0 != w[1].0) {
+            return None;
+        }
+        let mut distinct = Vec::new();
+        let mut offsets = Vec::new();
+        for (k, &(bits, i)) in order.iter().enumerate() {
+            if k == 0 || order[k - 1].0 != bits {
+                offsets.push(k as u32);
+                distinct.push(points[i as usize].to_array());
+            }
+        }
+        offsets.push(order.len() as u32);
+        let members = order.into_iter().map(|(_, i)| i).collect();
+        Some((distinct, Self { offsets, members }))
+    }
+
+    /// The points at tree item `u`, ascending.
+    fn of_item(&self, u: u32) -> &[u32] {
+        let u = u as usize;
+        &self.members[self.offsets[u] as usize..self.offsets[u + 1] as usize]
+    }
 }
 
 impl std::fmt::Debug for PointIndex {
@@ -70,7 +137,10 @@ impl PointIndex {
                 count: points.len(),
             });
         }
-        let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+        let (coords, copies) = match Copies::of(points) {
+            Some((distinct, copies)) => (distinct, Some(copies)),
+            None => (points.iter().map(|p| p.to_array()).collect(), None),
+        };
         let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&coords).map_err(|e| {
             SpatialError::Build {
                 message: e.to_string(),
@@ -79,7 +149,17 @@ impl PointIndex {
         Ok(Self {
             tree,
             points: points.to_vec(),
+            copies,
         })
+    }
+
+    /// The point a tree item stands for: the smallest index at its position.
+    #[inline]
+    fn representative(&self, item: u32) -> u32 {
+        match &self.copies {
+            Some(c) => c.of_item(item)[0],
+            None => item,
+        }
     }
 
     /// The indexed points, in their original order.
@@ -118,7 +198,7 @@ impl PointIndex {
             .query(&q)
             .nearest_one::<SquaredEuclidean<f32>>()
             .execute();
-        let index = found.item;
+        let index = self.representative(found.item);
         let p = self.points.get(index as usize).copied().unwrap_or(query);
         Nearest {
             index,
@@ -143,12 +223,21 @@ impl PointIndex {
             .query(&q)
             .nearest_n::<SquaredEuclidean<f32>>(k)
             .execute();
+        // Each distinct position found stands for all its copies (at one distance): the `k`
+        // nearest points are among them.
         let mut out: Vec<Nearest> = found
             .into_iter()
-            .filter_map(|r| {
-                let p = self.points.get(r.item as usize)?;
+            .flat_map(|r| {
+                let (copies, single): (&[u32], Option<u32>) = match &self.copies {
+                    Some(c) => (c.of_item(r.item), None),
+                    None => (&[], Some(r.item)),
+                };
+                copies.iter().copied().chain(single)
+            })
+            .filter_map(|index| {
+                let p = self.points.get(index as usize)?;
                 Some(Nearest {
-                    index: r.item,
+                    index,
                     distance: distance_f64(query, *p),
                 })
             })
@@ -159,6 +248,7 @@ impl PointIndex {
                 .unwrap_or(Ordering::Equal)
                 .then(a.index.cmp(&b.index))
         });
+        out.truncate(k.get());
         out
     }
 
@@ -187,9 +277,10 @@ impl PointIndex {
             .zip(order.par_iter())
             .map(|(f, &i)| {
                 let q = queries[i as usize];
-                let p = self.points.get(f.item as usize).copied().unwrap_or(q);
+                let index = self.representative(f.item);
+                let p = self.points.get(index as usize).copied().unwrap_or(q);
                 Nearest {
-                    index: f.item,
+                    index,
                     distance: distance_f64(q, p),
                 }
             })
@@ -311,6 +402,66 @@ mod tests {
         // Queries exactly on grid points find distance 0.
         for p in grid.iter().step_by(37) {
             assert_eq!(index.nearest(*p).map(|n| n.distance), Some(0.0));
+        }
+    }
+
+    #[test]
+    fn copies_are_indexed_once_and_all_listed() {
+        // 200k copies of one point took 29 s to search before they were indexed once.
+        let mut points = vec![Vec3::new(0.25, 0.5, -1.0); 200_000];
+        points[7] = Vec3::new(3.0, 0.0, 0.0);
+        points.push(Vec3::new(-0.0, 0.0, 0.0));
+        points.push(Vec3::new(0.0, -0.0, 0.0));
+        let index = PointIndex::new(&points).expect("valid points");
+        let queries = vec![Vec3::new(0.25, 0.5, -0.9); 200_000];
+        let found = index.nearest_batch(&queries).expect("valid");
+        // The smallest index of the copies answers.
+        assert!(
+            found
+                .iter()
+                .all(|n| n.index == 0 && (n.distance - 0.1).abs() < 1e-6)
+        );
+        assert_eq!(
+            index.nearest(Vec3::new(3.0, 0.1, 0.0)).map(|n| n.index),
+            Some(7)
+        );
+        // -0.0 and 0.0 are one position: both copies listed, in index order.
+        let near: Vec<u32> = index
+            .k_nearest(Vec3::new(0.0, 0.0, 0.01), 2)
+            .iter()
+            .map(|n| n.index)
+            .collect();
+        assert_eq!(near, vec![200_000, 200_001]);
+        // k nearest lists copies by index and stops at k.
+        let k = index.k_nearest(Vec3::new(0.25, 0.5, -1.0), 5);
+        assert_eq!(
+            k.iter().map(|n| n.index).collect::<Vec<_>>(),
+            vec![0, 1, 2, 3, 4]
+        );
+        assert_eq!(index.k_nearest(Vec3::ZERO, 1_000_000).len(), points.len());
+    }
+
+    #[test]
+    fn k_nearest_with_copies_matches_brute_force() {
+        let mut rng = Rng::new(9);
+        let base = random_points(300, 8);
+        let points: Vec<Vec3> = (0..1200).map(|_| base[rng.below(300) as usize]).collect();
+        let index = PointIndex::new(&points).expect("valid points");
+        for q in random_points(40, 10) {
+            let mut all: Vec<(f64, u32)> = points
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| (distance_f64(q, p), i as u32))
+                .collect();
+            all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let got: Vec<(f64, u32)> = index
+                .k_nearest(q, 9)
+                .iter()
+                .map(|n| (n.distance, n.index))
+                .collect();
+            assert_eq!(got, all[..9].to_vec(), "query {q}");
+            let nearest = index.nearest(q).expect("finite");
+            assert_eq!((nearest.distance, nearest.index), all[0]);
         }
     }
 
