@@ -173,3 +173,61 @@ fn refusals_are_one_line() {
     ]);
     assert!(one_error_line(&o).contains("missing.json"));
 }
+
+#[test]
+fn shared_camera_names_are_refused_and_a_failure_leaves_nothing_behind() {
+    let dir = fresh_dir("names");
+    let cameras: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(fixture("render/random_cameras.json")).expect("cameras"),
+    )
+    .expect("json");
+    let list = cameras.as_array().expect("a cameras.json list").clone();
+    // Two cameras named front (the second one renamed): refused before anything is written.
+    let mut twice = list.clone();
+    twice[1]["img_name"] = twice[0]["img_name"].clone();
+    let twice_path = dir.join("twice.json");
+    std::fs::write(&twice_path, serde_json::to_string(&twice).expect("json")).expect("write");
+    let out = dir.join("out");
+    let line = one_error_line(&run(&[
+        "render",
+        &fixture("render/random_deg3.ply"),
+        "--cameras",
+        s(&twice_path),
+        "-o",
+        s(&out),
+    ]));
+    assert!(
+        line.contains("twice.json") && line.contains("cameras 0") && line.contains("own name"),
+        "{line}"
+    );
+    assert!(!out.exists(), "nothing written");
+    // The last camera's image cannot be written (a folder stands in its way): the images of
+    // the cameras before it are removed, what was there before stays.
+    let blocked = dir.join("blocked");
+    let last = list.last().expect("a camera")["img_name"]
+        .as_str()
+        .expect("name")
+        .to_owned();
+    std::fs::create_dir_all(blocked.join(format!("{last}_alpha.npy"))).expect("obstacle");
+    std::fs::write(blocked.join("keep.txt"), b"mine").expect("keep");
+    let o = run(&[
+        "render",
+        &fixture("render/random_deg3.ply"),
+        "--cameras",
+        &fixture("render/random_cameras.json"),
+        "-o",
+        s(&blocked),
+        "--outputs",
+        "alpha",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let mut left: Vec<String> = std::fs::read_dir(&blocked)
+        .expect("folder")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        vec!["keep.txt".to_owned(), format!("{last}_alpha.npy")]
+    );
+}

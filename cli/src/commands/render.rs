@@ -2,12 +2,15 @@
 //! [--outputs rgb,alpha,depth,median_depth,normal] [--background r,g,b] [--compat-3dgs]
 //! [--antialiased]` and `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
 
-use std::path::PathBuf;
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
+use trisplat_geometry::Camera;
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame};
 use trisplat_splat::ply::read_gaussians;
+use trisplat_splat::render::image::{file_stem, image_files};
 use trisplat_splat::render::{
     Outputs, RenderImages, RenderMode, RenderOptions, options::DEFAULT_FAR, render,
 };
@@ -136,13 +139,51 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 /// Unreadable inputs, bound (local) Gaussians, bad options, an output
 /// folder equal to an input, a failed write.
 pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
+    let cameras = read_camera_file(&args.cameras, args.image_size)?;
+    refuse_shared_names(&args.cameras, &cameras)?;
+    // Image files that exist before the run are left alone; on failure the ones this run
+    // wrote are removed (nothing half-done is left behind).
+    let files: Vec<PathBuf> = cameras
+        .iter()
+        .flat_map(|c| image_files(&args.output, &c.name))
+        .collect();
+    let existed: HashSet<PathBuf> = files.iter().filter(|p| p.exists()).cloned().collect();
+    let result = render_all(&args, &cameras, ctx);
+    if result.is_err() {
+        for file in files.iter().filter(|f| !existed.contains(*f)) {
+            let _ = std::fs::remove_file(file);
+        }
+    }
+    result
+}
+
+/// Refuses two cameras whose images would have the same file names (`render` would write one
+/// over the other), before anything is written.
+fn refuse_shared_names(path: &Path, cameras: &[Camera]) -> anyhow::Result<()> {
+    let mut seen: HashMap<String, usize> = HashMap::new();
+    for (i, camera) in cameras.iter().enumerate() {
+        if let Some(first) = seen.insert(file_stem(&camera.name), i) {
+            bail!(
+                "{}: cameras {first} ('{}') and {i} ('{}') would write the same image files \
+                 ({}_*.npy/png); give each camera its own name",
+                path.display(),
+                cameras[first].name,
+                camera.name,
+                file_stem(&camera.name)
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Renders every camera and writes its images (see [`run`]).
+fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::Result<()> {
     let input = args.gaussians.as_deref().or(args.mesh.as_deref());
     let Some(input) = input else {
         bail!("give a Gaussian PLY or --mesh MESH");
     };
     refuse_to_overwrite(input, &args.output)?;
     refuse_to_overwrite(&args.cameras, &args.output)?;
-    let cameras = read_camera_file(&args.cameras, args.image_size)?;
     let frame = match args.normal_frame {
         FrameArg::World => NormalFrame::World,
         FrameArg::Camera => NormalFrame::Camera,
@@ -169,7 +210,7 @@ pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
             },
         )
         .with_context(|| format!("{}: cannot build the ray-casting BVH", mesh_path.display()))?;
-        for camera in &cameras {
+        for camera in cameras {
             let maps = renderer.render(camera);
             let mut images = RenderImages::new(camera.width, camera.height, outputs);
             if outputs.depth {
@@ -208,7 +249,7 @@ pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
     }
     options.far = args.far;
     options.normal_frame = frame;
-    for camera in &cameras {
+    for camera in cameras {
         let out = render(&set, camera, &options)
             .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
         out.images.write(&args.output, &camera.name)?;

@@ -86,10 +86,7 @@ impl RenderImages {
     /// # Errors
     /// [`IoError`] naming the file that could not be written.
     pub fn write(&self, dir: &Path, stem: &str) -> Result<Vec<PathBuf>, IoError> {
-        let stem: String = stem
-            .chars()
-            .map(|c| if matches!(c, '/' | '\\') { '_' } else { c })
-            .collect();
+        let stem = file_stem(stem);
         let (w, h) = (self.width as usize, self.height as usize);
         let mut written = Vec::new();
         let mut out = |suffix: &str, shape: &[usize], data: &[f32], png: Vec<u8>, colour: bool| {
@@ -130,6 +127,28 @@ impl RenderImages {
         }
         Ok(written)
     }
+}
+
+/// The names [`RenderImages::write`] gives the images of `stem`: `<stem>_<kind>.npy` and
+/// `.png` for kind rgb, alpha, depth, median_depth and normal.
+pub const IMAGE_KINDS: [&str; 5] = ["rgb", "alpha", "depth", "median_depth", "normal"];
+
+/// The file stem [`RenderImages::write`] uses for a camera name: path separators become `_`.
+#[must_use]
+pub fn file_stem(name: &str) -> String {
+    name.chars()
+        .map(|c| if matches!(c, '/' | '\\') { '_' } else { c })
+        .collect()
+}
+
+/// Every file [`RenderImages::write`] may write for `stem` in `dir` (all kinds, both formats).
+#[must_use]
+pub fn image_files(dir: &Path, stem: &str) -> Vec<PathBuf> {
+    let stem = file_stem(stem);
+    IMAGE_KINDS
+        .iter()
+        .flat_map(|kind| ["npy", "png"].map(|ext| dir.join(format!("{stem}_{kind}.{ext}"))))
+        .collect()
 }
 
 /// `v` in 0..1 to 0..255 (clamped, rounded; NaN gives 0).
