@@ -445,3 +445,32 @@ fn methods_side_by_side_or_one_after_another_write_the_same_outputs() {
     let md = std::fs::read_to_string(serial.join("report.md")).expect("report.md");
     assert!(md.contains("one after another (--serial-methods)"), "{md}");
 }
+
+#[test]
+fn a_second_run_into_a_folder_in_use_is_refused() {
+    let dir = fresh_dir("busy");
+    let (template, frames) = frames_case(&dir);
+    let shard = dir.join("shard");
+    run_ok(&extract_args(&template, &frames, &shard));
+    let out = dir.join("out");
+    std::fs::create_dir_all(&out).expect("folder");
+    // Another run holds the folder's lock (here: this test).
+    let lock = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .truncate(false)
+        .open(out.join(".trisplat.lock"))
+        .expect("lock file");
+    lock.lock().expect("lock");
+    let line = one_error_line(&run(&extract_args(&template, &frames, &out)));
+    assert!(
+        line.contains("another trisplat run") && line.contains(".trisplat.lock"),
+        "{line}"
+    );
+    assert!(!out.join("journal.jsonl").exists(), "nothing written");
+    let line = one_error_line(&run(&["merge", s(&shard), "-o", s(&out)]));
+    assert!(line.contains("another trisplat run"), "{line}");
+    // Released (as when the other process ends, however it ends): the run goes through.
+    drop(lock);
+    run_ok(&extract_args(&template, &frames, &out));
+}

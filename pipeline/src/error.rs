@@ -285,6 +285,25 @@ pub enum PipelineError {
         /// What shows the previous run.
         found: String,
     },
+    /// Another run holds the output folder's lock ([`crate::lock::FolderLock`]).
+    #[error(
+        "{path}: another trisplat run is writing to this folder (it holds {lock}); wait for it \
+         to end or choose another output folder"
+    )]
+    Busy {
+        /// The folder.
+        path: PathBuf,
+        /// The lock file.
+        lock: String,
+    },
+    /// The output folder's lock file cannot be opened or locked.
+    #[error("{path}: cannot lock the output folder: {cause}")]
+    Lock {
+        /// The lock file.
+        path: PathBuf,
+        /// Why.
+        cause: std::io::Error,
+    },
     /// `--resume` cannot continue the run in the folder.
     #[error("{path}: cannot resume: {problem}")]
     Resume {

@@ -65,6 +65,7 @@ pub mod error;
 mod font;
 pub mod input;
 pub mod journal;
+pub mod lock;
 pub mod memory;
 pub mod merge;
 pub mod methods;

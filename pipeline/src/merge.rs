@@ -20,6 +20,7 @@ use trisplat_geometry::io::IoError;
 
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
+use crate::lock::FolderLock;
 use crate::report::{DelaunayStats, MethodReport, Report, Summary};
 use crate::run::{FrameFilesByMethod, REPORT_JSON, frame_file, refuse_used_output, write_outputs};
 
@@ -85,6 +86,12 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
             owner.insert(f, i);
         }
     }
+    std::fs::create_dir_all(out).map_err(|cause| PipelineError::OutputDir {
+        path: out.to_path_buf(),
+        cause,
+    })?;
+    // Held until the merge returns: a run into this folder is refused meanwhile.
+    let _lock = FolderLock::acquire(out)?;
     refuse_used_output(out, force)?;
     let mut merged = merged_report(&reports);
     // The frame files, linked or copied into the merged folder.

@@ -15,6 +15,7 @@ use crate::config::{ExtractConfig, GroundTruth, Method, OutputTarget, RunControl
 use crate::error::PipelineError;
 use crate::input::GaussianSource;
 use crate::journal::{FailedFrame, FrameEntry, JOURNAL, Journal, Previous};
+use crate::lock::FolderLock;
 use crate::output::Inputs;
 use crate::plot;
 use crate::report::{
@@ -85,6 +86,8 @@ pub fn run(
     let frames = session.frames();
     let out = &config.output;
     check_outputs(config, &methods, frames.clone(), session.input_files())?;
+    // Held until the run returns: a second run into this folder is refused meanwhile.
+    let _lock = FolderLock::acquire(out)?;
     let (mut journal, previous) = open_journal(out, config, control)?;
 
     let total = frames.len();
