@@ -69,6 +69,7 @@ pub enum Command {
 #[must_use]
 pub fn main() -> ExitCode {
     quiet_on_closed_stdout();
+    clean_up_on_interrupt();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -82,6 +83,26 @@ pub fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Exit code of a run ended by Ctrl-C or SIGTERM: 128 + SIGINT, as shells report it.
+pub const INTERRUPTED_EXIT: i32 = 130;
+
+/// On Ctrl-C (SIGINT) or SIGTERM: no new output file is started, the temporary files of the
+/// writes in progress are removed (so no `.trisplat-*.tmp` and no half-written output stays;
+/// completed outputs are kept, and `extract --resume` continues the run), and the process
+/// ends with [`INTERRUPTED_EXIT`].
+fn clean_up_on_interrupt() {
+    // Fails only when a handler is installed already (never here); the run then goes on
+    // without the clean-up.
+    let _ = ctrlc::set_handler(|| {
+        let removed = trisplat_geometry::io::abandon_writes();
+        eprintln!(
+            "interrupted: {removed} unfinished file(s) removed, completed outputs kept \
+             (extract: --resume continues the run)"
+        );
+        std::process::exit(INTERRUPTED_EXIT);
+    });
 }
 
 /// Exit code of a run whose reader closed stdout early (`trisplat ... | head`): the code of a

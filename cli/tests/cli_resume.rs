@@ -474,3 +474,79 @@ fn a_second_run_into_a_folder_in_use_is_refused() {
     drop(lock);
     run_ok(&extract_args(&template, &frames, &out));
 }
+
+#[test]
+fn ctrl_c_leaves_no_temporary_file_and_the_run_resumes_to_the_same_bytes() {
+    let dir = fresh_dir("ctrl_c");
+    let template = trisplat_fixtures::path("anim/CesiumMan.glb");
+    let args = |out: &Path| -> Vec<String> {
+        let template = s(&template);
+        [
+            "extract",
+            "--template",
+            template,
+            "--frames",
+            "0..30",
+            "--method",
+            "delaunay,alpha",
+            "-q",
+            "-o",
+            s(out),
+        ]
+        .map(str::to_owned)
+        .to_vec()
+    };
+    let through = dir.join("through");
+    run_ok(
+        &args(&through)
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    // The same run, interrupted (SIGINT, as Ctrl-C) once a few frames are journalled.
+    let stopped = dir.join("stopped");
+    let mut child = std::process::Command::new(common::BIN)
+        .args(args(&stopped))
+        .spawn()
+        .expect("spawn");
+    let journal = stopped.join("journal.jsonl");
+    let start = std::time::Instant::now();
+    while std::fs::read_to_string(&journal).map_or(0, |t| t.lines().count()) < 4 {
+        assert!(start.elapsed().as_secs() < 60, "the run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(killed.success());
+    let status = child.wait().expect("wait");
+    assert_eq!(status.code(), Some(130), "ended by the interrupt");
+    let mut temporaries = Vec::new();
+    for folder in [
+        stopped.clone(),
+        stopped.join("delaunay"),
+        stopped.join("alpha"),
+    ] {
+        for e in std::fs::read_dir(&folder).expect("folder").flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.ends_with(".tmp") {
+                temporaries.push(name);
+            }
+        }
+    }
+    assert!(temporaries.is_empty(), "{temporaries:?}");
+    let mut resume = args(&stopped);
+    resume.push("--resume".to_owned());
+    run_ok(&resume.iter().map(String::as_str).collect::<Vec<_>>());
+    for m in ["delaunay", "alpha"] {
+        for f in 0..30 {
+            let name = format!("{m}/frame_{f:06}.ply");
+            assert!(
+                std::fs::read(through.join(&name)).expect("through")
+                    == std::fs::read(stopped.join(&name)).expect("resumed"),
+                "{name}"
+            );
+        }
+    }
+}

@@ -1,7 +1,12 @@
 //! Atomic file writes: temporary file in the destination folder, then rename.
+//!
+//! The temporary files being written are registered, so that an interrupt handler can stop
+//! new writes and remove them ([`abandon_writes`]): Ctrl-C leaves neither a half-written
+//! output nor a `.trisplat-*.tmp` file behind.
 
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use super::IoError;
 
@@ -19,11 +24,25 @@ where
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let tmp = tempfile::Builder::new()
-        .prefix(".trisplat-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| IoError::os(path, e))?;
+    let (tmp, _registered) = {
+        let mut writes = IN_FLIGHT
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if writes.stopping {
+            return Err(IoError::os(
+                path,
+                std::io::Error::new(std::io::ErrorKind::Interrupted, "the run was interrupted"),
+            ));
+        }
+        let tmp = tempfile::Builder::new()
+            .prefix(".trisplat-")
+            .suffix(".tmp")
+            .tempfile_in(dir)
+            .map_err(|e| IoError::os(path, e))?;
+        writes.files.push(tmp.path().to_path_buf());
+        let registered = Registered(tmp.path().to_path_buf());
+        (tmp, registered)
+    };
     set_output_permissions(path, tmp.as_file()).map_err(|e| IoError::os(path, e))?;
     let mut writer = BufWriter::with_capacity(1 << 20, tmp);
     write(&mut writer)?;
@@ -35,6 +54,48 @@ where
         .map_err(|e| IoError::os(path, e))?;
     tmp.persist(path).map_err(|e| IoError::os(path, e.error))?;
     Ok(())
+}
+
+/// The atomic writes in progress.
+struct InFlight {
+    /// Their temporary files.
+    files: Vec<PathBuf>,
+    /// Set by [`abandon_writes`]: no new write starts.
+    stopping: bool,
+}
+
+static IN_FLIGHT: Mutex<InFlight> = Mutex::new(InFlight {
+    files: Vec::new(),
+    stopping: false,
+});
+
+/// A registered temporary file, unregistered when the write ends (renamed or removed).
+struct Registered(PathBuf);
+
+impl Drop for Registered {
+    fn drop(&mut self) {
+        let mut writes = IN_FLIGHT
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(k) = writes.files.iter().position(|p| *p == self.0) {
+            writes.files.swap_remove(k);
+        }
+    }
+}
+
+/// For an interrupt handler: stops every atomic write from starting and removes the temporary
+/// files of those in progress (their outputs are never created: the rename that would have
+/// made them fails). Returns how many were removed. The caller then ends the process.
+pub fn abandon_writes() -> usize {
+    let mut writes = IN_FLIGHT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    writes.stopping = true;
+    writes
+        .files
+        .drain(..)
+        .filter(|p| std::fs::remove_file(p).is_ok())
+        .count()
 }
 
 /// Temporary files are created owner-only (0600); the output gets the permissions of the file

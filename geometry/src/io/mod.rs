@@ -19,7 +19,7 @@ pub mod ply;
 
 use std::path::Path;
 
-pub use atomic::write_atomically;
+pub use atomic::{abandon_writes, write_atomically};
 pub use error::IoError;
 pub use gltf_sequence::{
     FrameFiles, FrameSource, GLB_PART_LIMIT, SequenceLayout, write_mesh_sequence, write_sequence,
