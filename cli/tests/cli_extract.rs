@@ -478,3 +478,40 @@ fn weights_channels_that_drive_nothing_are_listed_or_refused() {
     );
     assert!(!strict_out.exists(), "nothing written");
 }
+
+#[test]
+fn resource_limits_are_checked_before_anything_runs() {
+    let dir = fresh_dir("limits");
+    for (extra, needle) in [
+        (
+            &["--views", "100000000"][..],
+            "--views 100000000: at most 4,096",
+        ),
+        (&["--voxel", "1e-9"], "at most 65,536 voxels across"),
+        (
+            &["--samples", "1000000000", "--gt", "template"],
+            "at most 100,000,000 samples",
+        ),
+    ] {
+        let out = dir.join(extra[0].trim_start_matches('-'));
+        let (avatar, track) = (fixture("lam_mini"), fixture("lam_mini/expression.json"));
+        let mut args = vec![
+            "extract",
+            "--avatar",
+            &avatar,
+            "--animation",
+            &track,
+            "--frames",
+            "0..1",
+            "--method",
+            "tsdf",
+            "-q",
+            "-o",
+            s(&out),
+        ];
+        args.extend(extra);
+        let line = one_error_line(&run(&args));
+        assert!(line.contains(needle), "{line}");
+        assert!(!out.exists(), "{extra:?}: nothing written");
+    }
+}

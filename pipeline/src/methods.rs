@@ -41,6 +41,10 @@ use crate::error::PipelineError;
 /// and 2DGS).
 pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
+/// Most TSDF voxels across the template's bounding sphere (a given `--voxel` finer than that is
+/// refused: the blocks of one frame would not fit in memory).
+pub const MAX_VOXELS_ACROSS: f64 = 65_536.0;
+
 /// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
 /// point still gets a rig).
 const MIN_RADIUS_REL: f64 = f32::EPSILON as f64;
@@ -147,6 +151,20 @@ impl Resolved {
         } else {
             template_radius / DEFAULT_VOXELS_PER_RADIUS
         };
+        // A voxel so fine that the template alone spans more than MAX_VOXELS_ACROSS is refused
+        // before any block is allocated.
+        if let Some(v) = options.voxel
+            && v.is_finite()
+            && v > 0.0
+            && 2.0 * template_radius / v > MAX_VOXELS_ACROSS
+        {
+            return Err(PipelineError::BadOption {
+                name: "voxel",
+                value: v,
+                expected: "a voxel giving at most 65,536 voxels across the template's bounding \
+                           sphere (raise --voxel)",
+            });
+        }
         let check = |name, v: Option<f64>, default: f64| match v {
             Some(v) if !(v.is_finite() && v > 0.0) => Err(PipelineError::BadOption {
                 name,

@@ -653,8 +653,27 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             expected: "at least one sample",
         });
     }
+    if o.samples > MAX_SAMPLES {
+        return Err(PipelineError::BadOption {
+            name: "samples",
+            value: o.samples as f64,
+            expected: "at most 100,000,000 samples per mesh",
+        });
+    }
+    if o.views > MAX_VIEWS {
+        return Err(PipelineError::BadOption {
+            name: "views",
+            value: o.views as f64,
+            expected: "at most 4,096 views per frame",
+        });
+    }
     Ok(())
 }
+
+/// Most TSDF views per frame (each is a depth image rendered and fused every frame).
+pub const MAX_VIEWS: usize = 4096;
+/// Most metric samples per mesh (as `sample --max-points`).
+pub const MAX_SAMPLES: usize = 100_000_000;
 
 /// `set` with only the SH degree-0 coefficients and no extra properties: the geometry and
 /// opacity rendering depth needs, so a frame copies 3 SH values per Gaussian instead of up
