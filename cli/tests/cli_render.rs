@@ -231,3 +231,42 @@ fn shared_camera_names_are_refused_and_a_failure_leaves_nothing_behind() {
         vec!["keep.txt".to_owned(), format!("{last}_alpha.npy")]
     );
 }
+
+#[test]
+fn images_past_the_pixel_limit_are_refused_before_anything_is_allocated() {
+    let dir = fresh_dir("pixels");
+    let mut cameras: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(fixture("render/random_cameras.json")).expect("cameras"),
+    )
+    .expect("json");
+    cameras[1]["width"] = 200_000.into();
+    cameras[1]["height"] = 200_000.into();
+    let path = dir.join("huge.json");
+    std::fs::write(&path, cameras.to_string()).expect("write");
+    let out = dir.join("out");
+    for input in [
+        vec!["render", &fixture("render/random_deg3.ply")],
+        vec!["render", "--mesh", &fixture("spot_triangulated.obj")],
+    ] {
+        let mut args = input.clone();
+        args.extend(["--cameras", s(&path), "-o", s(&out)]);
+        let line = one_error_line(&run(&args));
+        assert!(
+            line.contains("huge.json")
+                && line.contains("camera 1")
+                && line.contains("200000x200000"),
+            "{line}"
+        );
+        assert!(!out.exists(), "nothing written");
+    }
+    // `cameras --views` is bounded too (a usage error, exit 2).
+    let o = run(&[
+        "cameras",
+        &fixture("spot_triangulated.obj"),
+        "--views",
+        "1000000000",
+        "-o",
+        s(&dir.join("c.json")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+}

@@ -35,9 +35,10 @@ pub struct CamerasArgs {
     /// Layout of the views.
     #[arg(long, value_enum, default_value_t = RigArg::Sphere)]
     pub rig: RigArg,
-    /// Number of views.
-    #[arg(long, default_value_t = 60)]
-    pub views: usize,
+    /// Number of views (at most 100,000).
+    #[arg(long, default_value_t = 60,
+        value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub views: u32,
     /// Image size WxH in pixels.
     #[arg(long, default_value = "512x512", value_parser = parse_size)]
     pub size: (u32, u32),
@@ -81,11 +82,11 @@ pub fn run(args: CamerasArgs, _ctx: &Context) -> anyhow::Result<()> {
         f64::from(f32::EPSILON) * center.length().max(1.0)
     };
     let cameras = match args.rig {
-        RigArg::Sphere => sphere_rig(center, radius, args.views, args.size, args.fov),
+        RigArg::Sphere => sphere_rig(center, radius, args.views as usize, args.size, args.fov),
         RigArg::Orbit => orbit_rig(
             center,
             radius,
-            args.views,
+            args.views as usize,
             args.elevation,
             args.size,
             args.fov,

@@ -84,8 +84,26 @@ pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result
     if cameras.is_empty() {
         bail!("{}: no cameras", path.display());
     }
+    if let Some((i, c)) = cameras
+        .iter()
+        .enumerate()
+        .find(|(_, c)| u64::from(c.width) * u64::from(c.height) > MAX_IMAGE_PIXELS)
+    {
+        bail!(
+            "{}: camera {i} ('{}') is {}x{} pixels; images of at most {MAX_IMAGE_PIXELS} pixels \
+             (16384 x 16384) are rendered or read",
+            path.display(),
+            c.name,
+            c.width,
+            c.height
+        );
+    }
     Ok(cameras)
 }
+
+/// Most pixels of one camera's image (`render`, `tsdf`): 16384², checked before any image is
+/// allocated.
+pub const MAX_IMAGE_PIXELS: u64 = 16384 * 16384;
 
 /// A `--clip NAME|INDEX` value: a number is an index, anything else a name; none is the first
 /// (the pipeline's parser, so that every command reads `--clip` alike).
