@@ -81,3 +81,43 @@ fn bad_alpha_and_missing_file_fail_cleanly() {
         Some(2)
     );
 }
+
+#[test]
+fn degenerate_point_sets_end_at_once_with_an_empty_shape_and_a_warning() {
+    use trisplat_geometry::PointCloud;
+    use trisplat_geometry::io::{WriteOptions, write_points};
+    use trisplat_splat::glam::Vec3;
+    let dir = fresh_dir("degenerate");
+    let n = 50_000;
+    let sets: [(&str, Vec<Vec3>); 3] = [
+        ("coincident", vec![Vec3::new(1.0, 2.0, 3.0); n]),
+        (
+            "collinear",
+            (0..n).map(|i| Vec3::splat(i as f32 / n as f32)).collect(),
+        ),
+        (
+            "coplanar",
+            (0..n)
+                .map(|i| Vec3::new((i % 250) as f32, (i / 250) as f32 * 0.7, 0.0))
+                .collect(),
+        ),
+    ];
+    for (name, points) in sets {
+        let input = dir.join(format!("{name}.ply"));
+        write_points(
+            &input,
+            &PointCloud::new_unchecked(points),
+            WriteOptions::default(),
+        )
+        .expect("write");
+        let out = dir.join(format!("{name}_shape.ply"));
+        let res = run(&["alpha-shape", s(&input), "--alpha", "10", "-o", s(&out)]);
+        let stderr = String::from_utf8_lossy(&res.stderr);
+        assert_eq!(res.status.code(), Some(0), "{name}: {stderr}");
+        assert!(
+            stderr.contains("alpha shape is empty") && stderr.contains(&format!("{name}.ply")),
+            "{name}: {stderr}"
+        );
+        assert_eq!(read_mesh(&out).expect("written").triangle_count(), 0);
+    }
+}

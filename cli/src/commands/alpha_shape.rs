@@ -37,6 +37,16 @@ pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
     let shape = alpha_shape(cloud.positions(), args.alpha)
         .with_context(|| format!("{}: alpha shape failed", args.points.display()))?;
     spinner.finish_and_clear();
+    if shape.kept_tetrahedra == 0 {
+        eprintln!(
+            "warning: {}: the alpha shape is empty: no tetrahedron of the {} points has a \
+             circumradius <= {} (points that are all coincident, collinear or coplanar have no \
+             tetrahedra at all)",
+            args.points.display(),
+            cloud.len(),
+            args.alpha
+        );
+    }
     let mut mesh = shape.mesh;
     if let Some(colors) = cloud.colors() {
         let picked = shape
