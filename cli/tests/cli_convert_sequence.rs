@@ -156,3 +156,44 @@ fn a_frame_of_another_topology_fails_naming_its_file() {
     assert!(line.contains("no frame files"), "{line}");
     assert_eq!(listing(&dir), ["frames"]);
 }
+
+#[test]
+fn frames_of_any_topology_with_the_flag_become_one_node_per_frame() {
+    let dir = fresh_dir("seq_any");
+    let frames_dir = dir.join("frames");
+    let files = write_frames(&frames_dir, 4, |k| format!("f{k}.ply"));
+    // Frame 2 keeps only its first 100 triangles (and all vertices).
+    let spot = trisplat_fixtures::spot().expect("spot");
+    let fewer = TriMesh::new(
+        frame(2).positions().to_vec(),
+        spot.triangles()[..100].to_vec(),
+    );
+    write_mesh(&files[2], &fewer, WriteOptions::default()).expect("write");
+    let output = dir.join("anim.glb");
+    // Refused without the flag (the morph-target contract), written with it.
+    let line = one_error_line(&run(&["convert", s(&frames_dir), s(&output)]));
+    assert!(line.contains("triangles"), "{line}");
+    run_ok(&["convert", s(&frames_dir), s(&output), "--any-topology"]);
+    let bytes = std::fs::read(&output).expect("glb");
+    assert_eq!(&bytes[..4], b"glTF");
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).expect("json");
+    let meshes = doc["meshes"].as_array().expect("meshes");
+    assert_eq!(meshes.len(), 4, "one mesh per frame");
+    for (k, file) in files.iter().enumerate() {
+        let want = read_mesh(file).expect("frame");
+        let indices = meshes[k]["primitives"][0]["indices"]
+            .as_u64()
+            .expect("indices");
+        let count = doc["accessors"][indices as usize]["count"]
+            .as_u64()
+            .expect("count");
+        assert_eq!(count as usize, 3 * want.triangle_count(), "frame {k}");
+    }
+    // Frames that share the first's topology still become morph targets.
+    let same_dir = dir.join("same");
+    let same = write_frames(&same_dir, 3, |k| format!("f{k}.obj"));
+    let same_out = dir.join("same.glb");
+    run_ok(&["convert", s(&same_dir), s(&same_out), "--any-topology"]);
+    check_plays(&same_out, &same, 30.0);
+}

@@ -27,7 +27,8 @@ use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
     (frames/f_%04d.ply, frames/f_*.obj) as INPUT and a .glb/.gltf OUTPUT write one animated \
     glTF: every frame must have the vertex count and triangles of the first; frame 0 is the \
     base mesh, each later frame a morph target, and a STEP weights track shows frame k at \
-    k / FPS seconds (--fps, default 30)."
+    k / FPS seconds (--fps, default 30). With --any-topology the frames may differ (one node \
+    per frame, each shown by a STEP scale track at its time)."
 )]
 pub struct ConvertArgs {
     /// Input mesh (.ply, .obj, .gltf, .glb), or a folder or pattern of OBJ/PLY frames.
@@ -47,6 +48,11 @@ pub struct ConvertArgs {
     /// [default: 30].
     #[arg(long, value_name = "F", value_parser = parse_fps)]
     pub fps: Option<f64>,
+    /// Frames may differ in vertices and triangles (TSDF or alpha-shape meshes of a sequence):
+    /// one node per frame shown by STEP scale tracks, as extract's sequences; frames that all
+    /// share the first's topology still become morph targets.
+    #[arg(long)]
+    pub any_topology: bool,
 }
 
 /// A `--fps` value: finite and > 0.
@@ -142,8 +148,9 @@ fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `convert` of a folder or pattern of same-topology frames to one animated glTF/GLB (morph
-/// targets, frame k at k / fps seconds).
+/// `convert` of a folder or pattern of frames to one animated glTF/GLB, frame k at k / fps
+/// seconds: morph targets (the frames share the first's topology), or with `--any-topology`
+/// one node per frame where they do not.
 fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     let input = args.input.display();
     if args.clip.is_some() || args.time.is_some() {
@@ -175,7 +182,7 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         refuse_to_overwrite(file, &args.output)?;
     }
     let files = sequence.files();
-    if sequence.rest().triangle_count() == 0 {
+    if !args.any_topology && sequence.rest().triangle_count() == 0 {
         bail!(
             "{}: has no triangles; the first frame is the base mesh of the animated glTF",
             files[0].display()
@@ -192,7 +199,9 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         .par_iter()
         .map(|file| {
             let mesh = io::read_mesh(file)?;
-            check_topology(&mesh, first, file, &files[0])?;
+            if !args.any_topology {
+                check_topology(&mesh, first, file, &files[0])?;
+            }
             bar.inc(1);
             Ok(())
         })
@@ -208,7 +217,11 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         &args.output,
         &io::FrameFiles(files),
         &times,
-        SequenceLayout::MorphTargets,
+        if args.any_topology {
+            SequenceLayout::Auto
+        } else {
+            SequenceLayout::MorphTargets
+        },
     );
     spinner.finish_and_clear();
     result?;
