@@ -174,14 +174,21 @@ fn refusals_are_one_line() {
     assert!(one_error_line(&o).contains("missing.json"));
 }
 
+/// The bundled cameras.json (three cameras: front, side, wide), to edit.
+fn fixture_cameras() -> serde_json::Value {
+    serde_json::from_str(
+        &std::fs::read_to_string(fixture("render/random_cameras.json")).expect("cameras"),
+    )
+    .expect("json")
+}
+
 #[test]
 fn shared_camera_names_are_refused_and_a_failure_leaves_nothing_behind() {
     let dir = fresh_dir("names");
-    let cameras: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(fixture("render/random_cameras.json")).expect("cameras"),
-    )
-    .expect("json");
-    let list = cameras.as_array().expect("a cameras.json list").clone();
+    let list = fixture_cameras()
+        .as_array()
+        .expect("a cameras.json list")
+        .clone();
     // Two cameras named front (the second one renamed): refused before anything is written.
     let mut twice = list.clone();
     twice[1]["img_name"] = twice[0]["img_name"].clone();
@@ -235,10 +242,7 @@ fn shared_camera_names_are_refused_and_a_failure_leaves_nothing_behind() {
 #[test]
 fn images_past_the_pixel_limit_are_refused_before_anything_is_allocated() {
     let dir = fresh_dir("pixels");
-    let mut cameras: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(fixture("render/random_cameras.json")).expect("cameras"),
-    )
-    .expect("json");
+    let mut cameras = fixture_cameras();
     cameras[1]["width"] = 200_000.into();
     cameras[1]["height"] = 200_000.into();
     let path = dir.join("huge.json");

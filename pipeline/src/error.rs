@@ -336,9 +336,31 @@ pub enum PipelineError {
     },
 }
 
+/// The results of a parallel map in their order, or the first error in that order (not the
+/// first a thread hit), so that the error reported does not depend on scheduling.
+pub(crate) fn first_error_in_order<T: Send, E: Send>(
+    results: impl rayon::iter::ParallelIterator<Item = Result<T, E>>,
+) -> Result<Vec<T>, E> {
+    // rayon collects into a Vec in the source order.
+    results.collect::<Vec<_>>().into_iter().collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_first_error_in_order_is_reported_whatever_the_threads_do() {
+        use rayon::prelude::*;
+        for _ in 0..20 {
+            let results = (0..1000usize)
+                .into_par_iter()
+                .map(|k| if k == 317 || k == 900 { Err(k) } else { Ok(k) });
+            assert_eq!(first_error_in_order(results), Err(317));
+        }
+        let all = first_error_in_order((0..100usize).into_par_iter().map(Ok::<_, ()>));
+        assert_eq!(all, Ok((0..100).collect()));
+    }
 
     #[test]
     fn causes_print_once() {

@@ -131,7 +131,8 @@ impl Resolved {
     ///
     /// # Errors
     /// [`PipelineError::BadOption`] for a given voxel or alpha that is not finite and
-    /// positive, or a template without a finite extent.
+    /// positive, a voxel finer than [`MAX_VOXELS_ACROSS`] allows, or a template without a
+    /// finite extent.
     pub fn new(
         options: &ExtractOptions,
         rest: &TriMesh,
@@ -151,20 +152,6 @@ impl Resolved {
         } else {
             template_radius / DEFAULT_VOXELS_PER_RADIUS
         };
-        // A voxel so fine that the template alone spans more than MAX_VOXELS_ACROSS is refused
-        // before any block is allocated.
-        if let Some(v) = options.voxel
-            && v.is_finite()
-            && v > 0.0
-            && 2.0 * template_radius / v > MAX_VOXELS_ACROSS
-        {
-            return Err(PipelineError::BadOption {
-                name: "voxel",
-                value: v,
-                expected: "a voxel giving at most 65,536 voxels across the template's bounding \
-                           sphere (raise --voxel)",
-            });
-        }
         let check = |name, v: Option<f64>, default: f64| match v {
             Some(v) if !(v.is_finite() && v > 0.0) => Err(PipelineError::BadOption {
                 name,
@@ -174,14 +161,25 @@ impl Resolved {
             Some(v) => Ok(v),
             None => Ok(default),
         };
+        let voxel = check(
+            "voxel",
+            options.voxel,
+            default_voxel(template_radius, spacing),
+        )?;
+        // A voxel so fine that the template alone spans more than MAX_VOXELS_ACROSS is refused
+        // before any block is allocated (the default never is: it is at least R / 128).
+        if 2.0 * template_radius / voxel > MAX_VOXELS_ACROSS {
+            return Err(PipelineError::BadOption {
+                name: "voxel",
+                value: voxel,
+                expected: "a voxel giving at most 65,536 voxels across the template's bounding \
+                           sphere (raise --voxel)",
+            });
+        }
         Ok(Self {
             template_radius,
             mean_spacing: spacing,
-            voxel: check(
-                "voxel",
-                options.voxel,
-                default_voxel(template_radius, spacing),
-            )?,
+            voxel,
             alpha: check("alpha", options.alpha, DEFAULT_ALPHA_SPACINGS * spacing)?,
         })
     }

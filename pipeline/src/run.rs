@@ -12,7 +12,7 @@ use trisplat_geometry::io::{
 pub use crate::output::frame_file;
 
 use crate::config::{ExtractConfig, GroundTruth, Method, OutputTarget, RunControl};
-use crate::error::PipelineError;
+use crate::error::{PipelineError, first_error_in_order};
 use crate::input::GaussianSource;
 use crate::journal::{FailedFrame, FrameEntry, JOURNAL, Journal, Previous};
 use crate::lock::FolderLock;
@@ -278,10 +278,8 @@ fn run_frame(
         delaunay: None,
     };
     // Each method's frame file and watertightness, side by side (the meshes are large).
-    let written: Vec<(Method, FrameRecord, Option<DelaunayFrame>)> = result
-        .methods
-        .into_par_iter()
-        .map(
+    let written: Vec<(Method, FrameRecord, Option<DelaunayFrame>)> =
+        first_error_in_order(result.methods.into_par_iter().map(
             |MethodFrame {
                  method: m,
                  output,
@@ -304,10 +302,7 @@ fn run_frame(
                 let delaunay = output.delaunay.as_ref().map(|s| DelaunayFrame::new(f, s));
                 Ok::<_, PipelineError>((m, record, delaunay))
             },
-        )
-        .collect::<Vec<_>>()
-        .into_iter()
-        .collect::<Result<_, _>>()?;
+        ))?;
     for (m, record, delaunay) in written {
         if delaunay.is_some() {
             entry.delaunay = delaunay;
@@ -438,9 +433,8 @@ pub(crate) fn write_outputs(
 ) -> Result<(), PipelineError> {
     if targets.contains(&OutputTarget::Glb) {
         // One method per task: reading the frame files back is most of the work.
-        let written: Vec<(Method, Vec<PathBuf>)> = frame_files
-            .par_iter()
-            .map(|(m, files)| {
+        let written: Vec<(Method, Vec<PathBuf>)> =
+            first_error_in_order(frame_files.par_iter().map(|(m, files)| {
                 let glb = out.join(format!("{}.glb", m.name()));
                 write_sequence_parts(
                     &glb,
@@ -450,10 +444,7 @@ pub(crate) fn write_outputs(
                     GLB_PART_LIMIT,
                 )
                 .map(|parts| (*m, parts))
-            })
-            .collect::<Vec<_>>()
-            .into_iter()
-            .collect::<Result<_, _>>()?;
+            }))?;
         for (m, parts) in written {
             if parts.len() > 1
                 && let Some(r) = report.methods.get_mut(m.name())

@@ -29,7 +29,7 @@ use trisplat_splat::frames::Convention;
 use crate::avatar::{GaussianLayout, bind_lam};
 use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
 use crate::deform::{Engine, EngineInputs};
-use crate::error::PipelineError;
+use crate::error::{PipelineError, first_error_in_order};
 use crate::input::{
     Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
     check_topology, deform_mode, open_template_and_animation, parse_frames, read_bound,
@@ -593,12 +593,7 @@ impl Session {
         } else {
             // Every method runs; the first failure in method order is reported, as one after
             // another.
-            self.meshers
-                .par_iter_mut()
-                .map(mesh_and_measure)
-                .collect::<Vec<_>>()
-                .into_iter()
-                .collect::<Result<_, _>>()?
+            first_error_in_order(self.meshers.par_iter_mut().map(mesh_and_measure))?
         };
         let mut ran = Vec::new();
         for m in &methods {
