@@ -160,7 +160,8 @@ pub struct Fused {
     pub blocks: usize,
     /// Triangles before clean-up.
     pub raw_triangles: usize,
-    /// Seconds spent creating the blocks near the observed depth.
+    /// Seconds spent preparing the frames (depth and ray tables) and creating the blocks near
+    /// the observed depth.
     pub allocate_seconds: f64,
     /// Seconds spent integrating.
     pub integrate_seconds: f64,
@@ -200,7 +201,6 @@ pub fn fuse(
         });
     }
     let params = options.resolve(cameras)?;
-    let start = Instant::now();
     let frames: Vec<Frame<'_>> = cameras
         .iter()
         .zip(depths)
@@ -212,11 +212,7 @@ pub fn fuse(
         })
         .collect();
     let mut volume = TsdfVolume::new(params, colors.is_some())?.with_max_blocks(options.max_blocks);
-    volume.allocate(&frames)?;
-    let allocate_seconds = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    volume.integrate_allocated(&frames)?;
-    let integrate_seconds = start.elapsed().as_secs_f64();
+    let (allocate_seconds, integrate_seconds) = volume.integrate_timed(&frames)?;
     let start = Instant::now();
     let raw = volume.extract_mesh();
     let mc_seconds = start.elapsed().as_secs_f64();

@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
 use glam::{DVec3, IVec3};
+use rayon::iter::ParallelExtend as _;
 
 /// Voxels along each edge of a block.
 pub const BLOCK: i32 = 8;
@@ -176,6 +177,30 @@ impl BlockGrid {
             color.resize(color.len() + BLOCK_VOXELS, [0.0; 3]);
         }
         b
+    }
+
+    /// Appends empty blocks for `keys` (all new, as for [`BlockGrid::push_block`]). The
+    /// storage grows once, and its new pages are written (zeros) by all threads: memory
+    /// that is read before it is first written costs a second page fault and a TLB
+    /// shoot-down per page (20% of the time of a 185k-block fusion).
+    pub(crate) fn push_blocks(&mut self, keys: &[IVec3]) {
+        let voxels = (self.keys.len() + keys.len()) * BLOCK_VOXELS;
+        let grow = |column: &mut Vec<f32>| {
+            let old = column.len();
+            column.reserve_exact(voxels - old);
+            column.par_extend(rayon::iter::repeat_n(0.0, voxels - old));
+        };
+        grow(&mut self.value);
+        grow(&mut self.weight);
+        if let Some(color) = &mut self.color {
+            color.resize(voxels, [0.0; 3]);
+        }
+        self.keys.reserve(keys.len());
+        self.lookup.reserve(keys.len());
+        for &key in keys {
+            self.lookup.insert(key, self.keys.len() as u32);
+            self.keys.push(key);
+        }
     }
 
     /// Number of blocks.

@@ -21,6 +21,15 @@
 //! that has such a voxel, so the extracted surface is the one the dense volume would give.
 //! Values are stored in f32, computed in f64. Blocks are integrated in parallel, each looping
 //! over the frames in order, so the result does not depend on the thread count.
+//!
+//! Per block and frame, the depth range of the pixels the block projects onto (read pixel by
+//! pixel when the block covers at most [`RECT_SCAN_MAX`] of them, else from 16-pixel tiles)
+//! decides the work: nothing when the block is behind the camera, outside the image or
+//! `trunc` behind every depth; tsdf = 1 for all its voxels without projecting them when it
+//! projects inside the image onto valid pixels only and lies `trunc` in front of all of them
+//! (free space); otherwise each row of 8 voxels is projected lane by lane without branches.
+//! The outcome is the plain per-voxel rule's, which a test checks voxel by voxel on a dense
+//! box at coarse and fine voxels.
 
 mod fuse;
 pub mod grid;
@@ -218,6 +227,9 @@ struct Prepared<'a> {
     height: usize,
     /// Depth with invalid values and those beyond `depth_trunc` set to 0.
     depth: Vec<f32>,
+    /// Per pixel: its depth (as `depth`) and its ray-length factor
+    /// `‖((j + ½ − cx)/fx, (i + ½ − cy)/fy, 1)‖`, side by side so that a voxel reads one pair.
+    samples: Vec<[f64; 2]>,
     /// ((j + ½ − cx)/fx)² per column and ((i + ½ − cy)/fy)² per row.
     col_sq: Vec<f64>,
     row_sq: Vec<f64>,
@@ -225,6 +237,8 @@ struct Prepared<'a> {
     tile_max: Vec<f32>,
     /// Smallest valid depth per tile (`f32::INFINITY` = none).
     tile_min: Vec<f32>,
+    /// Whether every pixel of the tile is valid.
+    tile_full: Vec<bool>,
     tiles_x: usize,
     color: Option<&'a [[f32; 3]]>,
 }
@@ -255,22 +269,34 @@ impl<'a> Prepared<'a> {
             .iter()
             .map(|&d| if f64::from(d) <= depth_trunc { d } else { 0.0 })
             .collect();
-        let col_sq = (0..width)
+        let col_sq: Vec<f64> = (0..width)
             .map(|j| ((j as f64 + 0.5 - cam.cx) / cam.fx).powi(2))
             .collect();
-        let row_sq = (0..height)
+        let row_sq: Vec<f64> = (0..height)
             .map(|i| ((i as f64 + 0.5 - cam.cy) / cam.fy).powi(2))
+            .collect();
+        let samples = depth
+            .chunks_exact(width)
+            .zip(&row_sq)
+            .flat_map(|(row, &y2)| {
+                row.iter()
+                    .zip(&col_sq)
+                    .map(move |(&d, &x2)| [f64::from(d), (1.0 + x2 + y2).sqrt()])
+            })
             .collect();
         let tiles_x = width.div_ceil(TILE);
         let tiles_y = height.div_ceil(TILE);
         let mut tile_max = vec![0.0f32; tiles_x * tiles_y];
         let mut tile_min = vec![f32::INFINITY; tiles_x * tiles_y];
+        let mut tile_full = vec![true; tiles_x * tiles_y];
         for (i, row) in depth.chunks_exact(width).enumerate() {
             for (j, &d) in row.iter().enumerate() {
                 let t = (i / TILE) * tiles_x + j / TILE;
                 tile_max[t] = tile_max[t].max(d);
                 if d > 0.0 {
                     tile_min[t] = tile_min[t].min(d);
+                } else {
+                    tile_full[t] = false;
                 }
             }
         }
@@ -285,19 +311,24 @@ impl<'a> Prepared<'a> {
             width,
             height,
             depth,
+            samples,
             col_sq,
             row_sq,
             tile_max,
             tile_min,
+            tile_full,
             tiles_x,
             color: frame.color.map(ColorImage::data),
         })
     }
 
-    /// Whether no voxel of the box `[lo, hi]` (world) can be integrated from this frame: the
-    /// box is behind the camera, projects outside the image, or lies more than `trunc`
-    /// behind the farthest depth of the pixels it covers.
-    fn culls(&self, lo: DVec3, hi: DVec3, trunc: f64) -> bool {
+    /// What this frame does to the voxels of the box `[lo, hi]` (world; the first and last
+    /// voxel centres of a block): nothing when the box is behind the camera, projects outside
+    /// the image, or lies more than `trunc` behind the farthest depth of the pixels it covers;
+    /// tsdf = 1 for every voxel when the whole box projects inside the image onto valid
+    /// pixels and lies at least `trunc` in front of the nearest of them; otherwise it must be
+    /// looked at voxel by voxel.
+    fn visit(&self, lo: DVec3, hi: DVec3, trunc: f64) -> Visit {
         let mut z_min = f64::INFINITY;
         let mut z_max = f64::NEG_INFINITY;
         let (mut u_min, mut u_max) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -320,11 +351,11 @@ impl<'a> Prepared<'a> {
             }
         }
         if z_max <= 0.0 {
-            return true;
+            return Visit::Skip;
         }
         if z_min <= 0.0 {
-            // Straddles the camera plane: the projection is unbounded, keep it.
-            return false;
+            // Straddles the camera plane: the projection is unbounded.
+            return Visit::Voxels;
         }
         let (w, h) = (self.width as f64, self.height as f64);
         if u_max < PIXEL_MARGIN
@@ -332,19 +363,100 @@ impl<'a> Prepared<'a> {
             || u_min >= w - PIXEL_MARGIN
             || v_min >= h - PIXEL_MARGIN
         {
-            return true;
+            return Visit::Skip;
         }
-        // Largest depth over the tiles the box covers.
-        let col = |u: f64| (u.clamp(0.0, w - 1.0) as usize) / TILE;
-        let row = |v: f64| (v.clamp(0.0, h - 1.0) as usize) / TILE;
-        let mut d_max = 0.0f32;
-        for ty in row(v_min)..=row(v_max) {
-            for tx in col(u_min)..=col(u_max) {
-                d_max = d_max.max(self.tile_max[ty * self.tiles_x + tx]);
+        let inside = u_min >= PIXEL_MARGIN
+            && v_min >= PIXEL_MARGIN
+            && u_max < w - PIXEL_MARGIN
+            && v_max < h - PIXEL_MARGIN;
+        // The pixels the voxel centres can land on (the projection of the box lies in the
+        // box of its projected corners).
+        let col = |u: f64| u.clamp(0.0, w - 1.0) as usize;
+        let row = |v: f64| v.clamp(0.0, h - 1.0) as usize;
+        let (j0, j1, i0, i1) = (col(u_min), col(u_max), row(v_min), row(v_max));
+        let range = if (j1 - j0 + 1) * (i1 - i0 + 1) <= RECT_SCAN_MAX {
+            self.rect_depths(j0, j1, i0, i1)
+        } else {
+            self.tile_depths(j0, j1, i0, i1)
+        };
+        // sdf ≤ (d_max − z_min) · factor and factor ≥ 1: nothing passes sdf > −trunc.
+        if range.max == 0.0 || z_min - f64::from(range.max) >= trunc {
+            return Visit::Skip;
+        }
+        // sdf ≥ (d_min − z_max) · factor ≥ trunc for every voxel: tsdf = 1.
+        if inside && range.all_valid && f64::from(range.min) - z_max >= trunc {
+            return Visit::Free;
+        }
+        Visit::Voxels
+    }
+
+    /// The depth range of the pixels `[j0, j1] × [i0, i1]`, read one by one.
+    fn rect_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
+        let mut range = DepthRange::EMPTY;
+        for i in i0..=i1 {
+            for &d in &self.depth[i * self.width + j0..=i * self.width + j1] {
+                range.add(d, d > 0.0);
             }
         }
-        // sdf ≤ (d_max − z_min) · factor and factor ≥ 1: nothing passes sdf > −trunc.
-        d_max == 0.0 || z_min - f64::from(d_max) >= trunc
+        range
+    }
+
+    /// A depth range containing that of the pixels `[j0, j1] × [i0, i1]`, from the tiles
+    /// that cover them.
+    fn tile_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
+        let mut range = DepthRange::EMPTY;
+        for ty in i0 / TILE..=i1 / TILE {
+            for tx in j0 / TILE..=j1 / TILE {
+                let t = ty * self.tiles_x + tx;
+                range.max = range.max.max(self.tile_max[t]);
+                range.min = range.min.min(self.tile_min[t]);
+                range.all_valid &= self.tile_full[t];
+            }
+        }
+        range
+    }
+}
+
+/// Largest rectangle of pixels scanned one by one by [`Prepared::visit`] (larger ones use the
+/// tiles).
+const RECT_SCAN_MAX: usize = 64;
+
+/// What a frame does to a block ([`Prepared::visit`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Visit {
+    /// Nothing: no voxel is integrated.
+    Skip,
+    /// Every voxel is integrated with tsdf = 1 (free space in front of the surface).
+    Free,
+    /// Each voxel must be projected.
+    Voxels,
+}
+
+/// Depths seen over some pixels: the largest (0 when none is valid), the smallest valid
+/// (`+∞` when none), and whether every pixel is valid.
+#[derive(Clone, Copy, Debug)]
+struct DepthRange {
+    max: f32,
+    min: f32,
+    all_valid: bool,
+}
+
+impl DepthRange {
+    const EMPTY: Self = Self {
+        max: 0.0,
+        min: f32::INFINITY,
+        all_valid: true,
+    };
+
+    /// Adds a depth, valid or not (an invalid depth is 0 and only clears `all_valid`).
+    #[inline]
+    fn add(&mut self, d: f32, valid: bool) {
+        self.max = self.max.max(d);
+        if valid {
+            self.min = self.min.min(d);
+        } else {
+            self.all_valid = false;
+        }
     }
 }
 
@@ -400,10 +512,15 @@ impl TsdfVolume {
     /// [`TsdfError::TooManyBlocks`] past the block cap.
     pub fn allocate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
         let prepared = self.prepare(frames)?;
+        self.allocate_prepared(&prepared)
+    }
+
+    /// [`TsdfVolume::allocate`] on frames prepared by [`TsdfVolume::prepare`].
+    fn allocate_prepared(&mut self, prepared: &[Prepared<'_>]) -> Result<(), TsdfError> {
         let limit = self.max_blocks;
         let params = self.params;
         let origin = self.grid.origin;
-        let mut all = frame_blocks(&prepared, params, origin, limit, DENSE_MARK_CELLS)?;
+        let mut all = frame_blocks(prepared, params, origin, limit, DENSE_MARK_CELLS)?;
         all.retain(|k| !self.grid.lookup.contains_key(k));
         if self.grid.block_count() + all.len() > limit {
             return Err(TsdfError::TooManyBlocks {
@@ -411,9 +528,7 @@ impl TsdfVolume {
                 voxel: params.voxel,
             });
         }
-        for key in all {
-            self.grid.push_block(key);
-        }
+        self.grid.push_blocks(&all);
         Ok(())
     }
 
@@ -426,6 +541,12 @@ impl TsdfVolume {
     /// the volume has colour and a frame has none.
     pub fn integrate_allocated(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
         let prepared = self.prepare(frames)?;
+        self.integrate_prepared(&prepared);
+        Ok(())
+    }
+
+    /// [`TsdfVolume::integrate_allocated`] on frames prepared by [`TsdfVolume::prepare`].
+    fn integrate_prepared(&mut self, prepared: &[Prepared<'_>]) {
         let params = self.params;
         let grid = &mut self.grid;
         let (voxel, origin) = (grid.voxel, grid.origin);
@@ -443,7 +564,7 @@ impl TsdfVolume {
                         weight,
                         color: Some(color),
                     };
-                    integrate_block(block, key, voxel, origin, &prepared, params);
+                    integrate_block(block, key, voxel, origin, prepared, params);
                 }),
             None => grid
                 .value
@@ -456,10 +577,9 @@ impl TsdfVolume {
                         weight,
                         color: None,
                     };
-                    integrate_block(block, key, voxel, origin, &prepared, params);
+                    integrate_block(block, key, voxel, origin, prepared, params);
                 }),
         }
-        Ok(())
     }
 
     /// Allocates the blocks `frames` need, then integrates them: the result equals Open3D's
@@ -470,8 +590,25 @@ impl TsdfVolume {
     /// # Errors
     /// As [`TsdfVolume::allocate`] and [`TsdfVolume::integrate_allocated`].
     pub fn integrate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        self.allocate(frames)?;
-        self.integrate_allocated(frames)
+        let prepared = self.prepare(frames)?;
+        self.allocate_prepared(&prepared)?;
+        self.integrate_prepared(&prepared);
+        Ok(())
+    }
+
+    /// [`TsdfVolume::integrate`], timed: (seconds preparing the frames and allocating,
+    /// seconds integrating).
+    pub(crate) fn integrate_timed(
+        &mut self,
+        frames: &[Frame<'_>],
+    ) -> Result<(f64, f64), TsdfError> {
+        let start = std::time::Instant::now();
+        let prepared = self.prepare(frames)?;
+        self.allocate_prepared(&prepared)?;
+        let allocate = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        self.integrate_prepared(&prepared);
+        Ok((allocate, start.elapsed().as_secs_f64()))
     }
 
     /// The zero level set by marching cubes (welded, faces toward free space, cells with an
@@ -482,6 +619,7 @@ impl TsdfVolume {
         marching_cubes(&self.grid)
     }
 
+    /// The per-frame data of `frames` (checked sizes, camera maths, depth and ray tables).
     fn prepare<'a>(&self, frames: &[Frame<'a>]) -> Result<Vec<Prepared<'a>>, TsdfError> {
         let with_color = self.grid.has_color();
         let prepared: Vec<Result<Prepared<'a>, TsdfError>> = frames
@@ -742,16 +880,40 @@ fn integrate_block(
     let lo = origin + base.as_dvec3() * voxel;
     let hi = lo + DVec3::splat(f64::from(BLOCK - 1) * voxel);
     for f in frames {
-        if f.culls(lo, hi, trunc) {
-            continue;
+        match f.visit(lo, hi, trunc) {
+            Visit::Skip => continue,
+            Visit::Free if block.color.is_none() => {
+                integrate_free(block.value, block.weight);
+                continue;
+            }
+            Visit::Free | Visit::Voxels => {}
         }
         let step = f.world_to_camera * DVec3::new(voxel, 0.0, 0.0);
+        if block.color.is_none() {
+            for start in (0..BLOCK_VOXELS).step_by(ROW) {
+                let l = local_coords(start);
+                let p = origin + (base + l).as_dvec3() * voxel;
+                let q = f.world_to_camera * (p - f.center);
+                let row = start..start + ROW;
+                integrate_row(
+                    f,
+                    q,
+                    step,
+                    trunc,
+                    (&mut block.value[row.clone()])
+                        .try_into()
+                        .expect("a block row"),
+                    (&mut block.weight[row]).try_into().expect("a block row"),
+                );
+            }
+            continue;
+        }
         let (w, h) = (f.width as f64, f.height as f64);
-        for start in (0..BLOCK_VOXELS).step_by(BLOCK as usize) {
+        for start in (0..BLOCK_VOXELS).step_by(ROW) {
             let l = local_coords(start);
             let p = origin + (base + l).as_dvec3() * voxel;
             let mut q = f.world_to_camera * (p - f.center);
-            for s in start..start + BLOCK as usize {
+            for s in start..start + ROW {
                 if s > start {
                     q += step;
                 }
@@ -802,6 +964,70 @@ fn integrate_block(
                 }
             }
         }
+    }
+}
+
+/// Integrates tsdf = 1 into every voxel of a block (in f64, as [`integrate_row`]).
+fn integrate_free(value: &mut [f32], weight: &mut [f32]) {
+    for (v, w) in value.iter_mut().zip(weight.iter_mut()) {
+        let w0 = f64::from(*w);
+        *v = ((f64::from(*v) * w0 + 1.0) / (w0 + 1.0)) as f32;
+        *w += 1.0;
+    }
+}
+
+/// Voxels in a row of a block (along x).
+const ROW: usize = BLOCK as usize;
+
+/// Integrates one frame into one row of [`ROW`] voxels whose first voxel is at camera-space `q`
+/// and whose next ones follow by `step`, without branches per voxel so that the compiler can
+/// run the lanes side by side: project, look up the pixel (one load of its depth and ray
+/// factor), then update the lanes that pass. All in f64, as the plain rule.
+#[inline]
+fn integrate_row(
+    f: &Prepared<'_>,
+    q: DVec3,
+    step: DVec3,
+    trunc: f64,
+    value: &mut [f32; ROW],
+    weight: &mut [f32; ROW],
+) {
+    let (u_end, v_end) = (
+        f.width as f64 - PIXEL_MARGIN,
+        f.height as f64 - PIXEL_MARGIN,
+    );
+    let mut pixel = [0u32; ROW];
+    let mut inside = [false; ROW];
+    let mut z = [0.0f64; ROW];
+    for k in 0..ROW {
+        let kf = k as f64;
+        let (qx, qy, qz) = (q.x + kf * step.x, q.y + kf * step.y, q.z + kf * step.z);
+        let inv_z = 1.0 / qz;
+        let u = f.fx * qx * inv_z + f.cx;
+        let v = f.fy * qy * inv_z + f.cy;
+        let ok = (qz > 0.0) & (u >= PIXEL_MARGIN) & (u < u_end) & (v >= PIXEL_MARGIN) & (v < v_end);
+        let (j, i) = if ok { (u as u32, v as u32) } else { (0, 0) };
+        pixel[k] = i * f.width as u32 + j;
+        inside[k] = ok;
+        z[k] = qz;
+    }
+    if !inside.iter().any(|&b| b) {
+        return;
+    }
+    let mut sample = [[0.0f64; 2]; ROW];
+    for k in 0..ROW {
+        sample[k] = f.samples[pixel[k] as usize];
+    }
+    let inv_trunc = 1.0 / trunc;
+    for k in 0..ROW {
+        let [d, ray] = sample[k];
+        let sdf = (d - z[k]) * ray;
+        let ok = inside[k] & (d > 0.0) & (sdf > -trunc);
+        let tsdf = (sdf * inv_trunc).min(1.0);
+        let w0 = f64::from(weight[k]);
+        let averaged = ((f64::from(value[k]) * w0 + tsdf) / (w0 + 1.0)) as f32;
+        value[k] = if ok { averaged } else { value[k] };
+        weight[k] = if ok { weight[k] + 1.0 } else { weight[k] };
     }
 }
 

@@ -88,7 +88,24 @@ fn dense_reference(
 
 #[test]
 fn sparse_volume_matches_dense_open3d_rule() {
-    let cams = rig();
+    // Coarse voxels (a block spans many pixels: the blocks are culled by tiles).
+    check_against_dense(&rig(), VOXEL, 24);
+}
+
+#[test]
+fn fine_voxels_match_dense_open3d_rule() {
+    // Fine voxels on larger images: a block spans a few pixels, so most blocks are judged
+    // from their exact pixel rectangle, and many are wholly in free space or behind the
+    // surface for a view.
+    let cams = sphere_rig(DVec3::ZERO, RADIUS, 9, (160, 128), 50.0).unwrap();
+    check_against_dense(&cams, 0.5 * VOXEL, 40);
+}
+
+/// Integrates the sphere's depth maps seen by `cams` (with invalid pixels and a depth
+/// truncation) into a sparse volume of voxel `voxel` and checks every voxel of the dense box
+/// `[-half, half)³` against [`dense_reference`], and the two meshes.
+fn check_against_dense(cams: &[Camera], voxel: f64, half: i32) {
+    let cams = cams.to_vec();
     let mut depths: Vec<DepthImage> = cams.iter().map(sphere_depth).collect();
     // A few invalid pixels and a depth truncation that cuts some of the far side.
     let mut raw = depths[2].data().to_vec();
@@ -98,6 +115,8 @@ fn sparse_volume_matches_dense_open3d_rule() {
     depths[2] = DepthImage::try_new(cams[2].width, cams[2].height, raw).unwrap();
     assert!(depths[2].invalid_count() > 0);
     let mut p = params();
+    p.voxel = voxel;
+    p.trunc = 4.0 * voxel;
     let nearest = depths
         .iter()
         .flat_map(|d| d.data().iter().copied())
@@ -118,7 +137,6 @@ fn sparse_volume_matches_dense_open3d_rule() {
     let grid = volume.grid();
     assert!(grid.block_count() > 0);
 
-    let half = 24;
     let dense = dense_reference(&cams, &depths, p, half);
     let n = (2 * half) as usize;
     let mut compared = 0;
@@ -150,8 +168,8 @@ fn sparse_volume_matches_dense_open3d_rule() {
         .iter()
         .map(|&(v, w)| if w > 0.0 { v } else { f32::NAN })
         .collect();
-    let origin = DVec3::splat((-f64::from(half) + 0.5) * VOXEL);
-    let reference = marching_cubes_dense(&values, [n; 3], origin, VOXEL).unwrap();
+    let origin = DVec3::splat((-f64::from(half) + 0.5) * voxel);
+    let reference = marching_cubes_dense(&values, [n; 3], origin, voxel).unwrap();
     let ours = volume.extract_mesh();
     assert!(ours.triangle_count() > 100);
     assert_eq!(ours.triangle_count(), reference.triangle_count());
