@@ -3,7 +3,8 @@
 //!
 //! - **tsdf**: a sphere rig of `views` cameras (geometry's `sphere_rig`, 40° field of view)
 //!   around the bounding sphere of the frame (deformed template and Gaussian means), expected
-//!   depth rendered from the deformed Gaussians (3DGS, gsplat rules) and masked where the
+//!   or median depth ([`DepthKind`]) rendered from the deformed Gaussians (3DGS, gsplat
+//!   rules) and masked where the
 //!   rendered alpha is below [`RENDERED_ALPHA_MIN`], fused with the extract crate's TSDF at
 //!   `voxel` (default: [`default_voxel`], the Gaussians' mean spacing within template radius
 //!   / 128 ..= / 32), truncation 5 voxels, depth truncation twice the rig's scene radius,
@@ -33,7 +34,7 @@ use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS,
-    ExtractOptions, Method,
+    DepthKind, ExtractOptions, Method,
 };
 use crate::error::PipelineError;
 
@@ -207,7 +208,7 @@ pub enum RenderedDepthError {
     Image(TsdfError),
 }
 
-/// The expected depth of world-space Gaussians seen by `camera` (3DGS splatting, gsplat's
+/// The depth of `kind` of world-space Gaussians seen by `camera` (3DGS splatting, gsplat's
 /// rules), 0 (no surface) where the rendered alpha is below [`RENDERED_ALPHA_MIN`]: the depth
 /// maps `trisplat tsdf --gaussians` and the pipeline's tsdf method fuse.
 ///
@@ -216,19 +217,24 @@ pub enum RenderedDepthError {
 pub fn rendered_depth(
     world: &GaussianSet,
     camera: &Camera,
+    kind: DepthKind,
 ) -> Result<DepthImage, RenderedDepthError> {
     let options = RenderOptions {
         outputs: Outputs {
             rgb: false,
             alpha: true,
-            depth: true,
-            median_depth: false,
+            depth: kind == DepthKind::Expected,
+            median_depth: kind == DepthKind::Median,
             normal: false,
         },
         ..RenderOptions::default()
     };
     let out = render(world, camera, &options).map_err(RenderedDepthError::Render)?;
-    let (Some(mut depth), Some(alpha)) = (out.images.depth, out.images.alpha) else {
+    let depth = match kind {
+        DepthKind::Expected => out.images.depth,
+        DepthKind::Median => out.images.median_depth,
+    };
+    let (Some(mut depth), Some(alpha)) = (depth, out.images.alpha) else {
         // Both were asked for: only a renderer that refused the set returns neither.
         return Err(RenderedDepthError::Render(RenderError::LocalParameters));
     };
@@ -246,6 +252,7 @@ pub struct TsdfMesher {
     voxel: f64,
     views: usize,
     resolution: u32,
+    depth: DepthKind,
 }
 
 impl TsdfMesher {
@@ -278,7 +285,7 @@ impl TsdfMesher {
         })?;
         let mut depths = Vec::with_capacity(cameras.len());
         for camera in &cameras {
-            let image = rendered_depth(world, camera).map_err(|e| match e {
+            let image = rendered_depth(world, camera, self.depth).map_err(|e| match e {
                 RenderedDepthError::Render(source) => PipelineError::Render {
                     frame,
                     camera: camera.name.clone(),
@@ -341,6 +348,7 @@ impl Mesher {
                 voxel: resolved.voxel,
                 views: options.views,
                 resolution: options.resolution,
+                depth: options.tsdf_depth,
             }),
             Method::Delaunay => {
                 let d_options = DelaunayOptions {
@@ -418,6 +426,53 @@ mod tests {
         // One point: a tiny positive radius.
         let (_, r) = bounding_sphere(&[&[Vec3::ONE]]).expect("finite");
         assert!(r > 0.0);
+    }
+
+    /// Two walls of wide flat Gaussians facing a camera on the z axis: a half-transparent one
+    /// (opacity 0.6) at z = 1 in front of an opaque one at z = 2.
+    fn two_walls() -> (GaussianSet, Camera) {
+        use trisplat_splat::gaussians::{GaussianParts, ParameterSpace, ScaleDims};
+        let logit = |o: f32| (o / (1.0 - o)).ln();
+        let mut parts = GaussianParts {
+            means: Vec::new(),
+            log_scales: Vec::new(),
+            scale_dims: ScaleDims::Three,
+            rotations: Vec::new(),
+            opacity_logits: Vec::new(),
+            sh_degree: 0,
+            sh: Vec::new(),
+            binding: None,
+            space: ParameterSpace::World,
+            extras: Vec::new(),
+            property_order: None,
+        };
+        for (z, opacity) in [(1.0, 0.6), (2.0, 0.999)] {
+            parts.means.push(Vec3::new(0.0, 0.0, z));
+            parts
+                .log_scales
+                .push(Vec3::new(5f32.ln(), 5f32.ln(), 1e-3f32.ln()));
+            parts.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            parts.opacity_logits.push(logit(opacity));
+            parts.sh.extend([0.0; 3]);
+        }
+        let set = GaussianSet::try_new(parts).expect("valid set");
+        let camera = Camera::look_at("c", DVec3::ZERO, DVec3::Z, DVec3::NEG_Y, (16, 16), 40.0)
+            .expect("camera");
+        (set, camera)
+    }
+
+    #[test]
+    fn median_depth_is_the_first_surface_expected_depth_a_blend() {
+        let (set, camera) = two_walls();
+        let centre = |kind| {
+            let d = rendered_depth(&set, &camera, kind).expect("renders");
+            d.data()[8 * 16 + 8]
+        };
+        // Accumulated alpha passes 1/2 at the front wall.
+        assert!((centre(DepthKind::Median) - 1.0).abs() < 1e-3);
+        // 0.6 of the weight at z = 1, 0.4 at z = 2, normalised by the alpha (≈ 1).
+        let expected = centre(DepthKind::Expected);
+        assert!((expected - 1.4).abs() < 1e-2, "{expected}");
     }
 
     #[test]

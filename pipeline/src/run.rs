@@ -11,7 +11,7 @@ use trisplat_geometry::io::{
 
 pub use crate::output::frame_file;
 
-use crate::config::{ExtractConfig, GroundTruth, Method, OutputTarget, RunControl};
+use crate::config::{DepthKind, ExtractConfig, GroundTruth, Method, OutputTarget, RunControl};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::input::GaussianSource;
 use crate::journal::{FailedFrame, FrameEntry, JOURNAL, Journal, Previous};
@@ -188,6 +188,10 @@ pub fn run(
                 parameters.insert("voxel".to_owned(), resolved.voxel);
                 parameters.insert("views".to_owned(), o.views as f64);
                 parameters.insert("resolution".to_owned(), f64::from(o.resolution));
+                parameters.insert(
+                    "median_depth".to_owned(),
+                    f64::from(u8::from(o.tsdf_depth == DepthKind::Median)),
+                );
             }
             Method::Delaunay => {
                 parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);

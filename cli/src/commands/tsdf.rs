@@ -9,6 +9,7 @@ use trisplat_extract::tsdf::{
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
+use trisplat_pipeline::config::DepthKind;
 use trisplat_pipeline::methods::rendered_depth;
 use trisplat_splat::ply::read_gaussians;
 
@@ -34,7 +35,8 @@ to the point nearest every optical axis), voxel = depth truncation / 1024, trunc
 Depth maps without any valid pixel give an empty mesh.
 
 With --gaussians G.ply instead of --depth, the depth maps are rendered from the (world-space) \
-Gaussians first: 3DGS splatting with gsplat's rules, expected depth, set to 0 where the rendered \
+Gaussians first: 3DGS splatting with gsplat's rules, median depth (where the accumulated alpha \
+reaches 1/2; --depth-kind expected: the alpha-weighted mean depth), set to 0 where the rendered \
 alpha is below 0.5.")]
 pub struct TsdfArgs {
     /// Cameras: a 3DGS cameras.json or a NeRF transforms.json (with w and h).
@@ -59,6 +61,10 @@ pub struct TsdfArgs {
     /// Also read <img_name>_rgb.npy/.png from the depth folder and colour the vertices.
     #[arg(long)]
     pub colors: bool,
+    /// With --gaussians: which rendered depth to fuse (median: where the accumulated alpha
+    /// reaches 1/2; expected: the alpha-weighted mean depth).
+    #[arg(long, value_enum, default_value_t = DepthKind::default(), requires = "gaussians")]
+    pub depth_kind: DepthKind,
     /// Voxel size, truncations, clusters kept.
     #[command(flatten)]
     pub options: TsdfOptions,
@@ -77,7 +83,7 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
         (_, Some(gaussians)) => {
             refuse_to_overwrite(gaussians, &args.output)?;
             spinner.set_message("rendering depth maps");
-            let depths = render_depths(gaussians, &cameras)?;
+            let depths = render_depths(gaussians, &cameras, args.depth_kind)?;
             (depths, None, gaussians.clone())
         }
         (Some(dir), None) => {
@@ -99,15 +105,19 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Expected-depth maps of world-space Gaussians, zero where alpha is below
+/// Depth maps (of `kind`) of world-space Gaussians, zero where alpha is below
 /// [`trisplat_pipeline::methods::RENDERED_ALPHA_MIN`]
 /// (the pipeline's tsdf method renders the same maps).
-fn render_depths(path: &Path, cameras: &[Camera]) -> anyhow::Result<Vec<DepthImage>> {
+fn render_depths(
+    path: &Path,
+    cameras: &[Camera],
+    kind: DepthKind,
+) -> anyhow::Result<Vec<DepthImage>> {
     let set = read_gaussians(path)?;
     cameras
         .iter()
         .map(|camera| {
-            rendered_depth(&set, camera)
+            rendered_depth(&set, camera, kind)
                 .with_context(|| format!("{}: camera '{}'", path.display(), camera.name))
         })
         .collect()
