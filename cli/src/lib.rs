@@ -135,6 +135,7 @@ fn quiet_on_closed_stdout() {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     let ctx = commands::Context {
         progress: progress::Progress::new(cli.global.quiet),
+        quiet: cli.global.quiet,
     };
     match cli.command {
         Command::Eval(args) => commands::eval::run(args, &ctx),

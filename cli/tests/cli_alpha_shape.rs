@@ -53,6 +53,72 @@ fn cube_corners_work_where_qhull_fails() {
 }
 
 #[test]
+fn pieces_are_counted_and_the_largest_kept_on_request() {
+    let dir = fresh_dir("pieces");
+    let input = dir.join("two_cubes.ply");
+    // The corners of a unit cube (12 triangles) and a tetrahedron far from it (4).
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 12\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n",
+    );
+    for i in 0..8 {
+        text.push_str(&format!("{} {} {}\n", i & 1, (i >> 1) & 1, (i >> 2) & 1));
+    }
+    text.push_str("10 10 10\n11 10 10\n10 11 10\n10 10 11\n");
+    std::fs::write(&input, text).expect("write cubes");
+    let all = dir.join("all.ply");
+    let res = run(&["alpha-shape", s(&input), "--alpha", "2", "-o", s(&all)]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&res.stderr);
+    assert!(stderr.contains("2 edge-connected pieces"), "{stderr}");
+    assert_eq!(read_mesh(&all).expect("read").triangle_count(), 16);
+
+    let one = dir.join("one.ply");
+    let res = run(&[
+        "alpha-shape",
+        s(&input),
+        "--alpha",
+        "2",
+        "--keep-clusters",
+        "1",
+        "-o",
+        s(&one),
+    ]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let mesh = read_mesh(&one).expect("read");
+    assert_eq!(mesh.triangle_count(), 12);
+    assert!(
+        (mesh.signed_volume() - 1.0).abs() < 1e-6,
+        "the cube is kept"
+    );
+
+    // --quiet drops the note.
+    let res = run(&[
+        "-q",
+        "alpha-shape",
+        s(&input),
+        "--alpha",
+        "2",
+        "-o",
+        s(&all),
+    ]);
+    assert!(res.status.success());
+    assert!(
+        res.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+}
+
+#[test]
 fn bad_alpha_and_missing_file_fail_cleanly() {
     let dir = fresh_dir("bad");
     let out = dir.join("never.ply");

@@ -231,6 +231,10 @@ pub struct ExtractOptions {
     /// the rest-pose Gaussian means].
     #[cfg_attr(feature = "cli", arg(long, value_name = "A"))]
     pub alpha: Option<f64>,
+    /// Alpha: keep the edge-connected pieces at least as large (in triangles) as the K-th
+    /// largest, as tsdf keeps its largest (0: keep every piece; the report counts them).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "K", default_value_t = 0))]
+    pub alpha_keep_clusters: usize,
     /// Delaunay: rebuild from scratch every N frames (0: never; 1: every frame).
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = 0))]
     pub rebuild_every: usize,
@@ -316,6 +320,7 @@ impl Default for ExtractOptions {
             resolution: DEFAULT_RESOLUTION,
             tsdf_depth: DepthKind::default(),
             alpha: None,
+            alpha_keep_clusters: 0,
             rebuild_every: 0,
             no_auto_rebuild: false,
             hop_threshold: DEFAULT_HOP_THRESHOLD,

@@ -17,7 +17,7 @@
 //!   what each update did.
 //! - **alpha**: the alpha shape of the deformed means at `alpha` (default
 //!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
-//!   means).
+//!   means), optionally only its largest edge-connected pieces (`alpha_keep_clusters`).
 
 use std::time::Instant;
 
@@ -28,6 +28,7 @@ use trisplat_extract::tsdf::{DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::camera::sphere_rig;
+use trisplat_geometry::cleanup::keep_largest_clusters;
 use trisplat_geometry::spatial::PointIndex;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
@@ -324,8 +325,14 @@ pub enum Mesher {
     Tsdf(TsdfMesher),
     /// Incremental Delaunay (keeps its triangulation between frames).
     Delaunay(Box<IncrementalDelaunay>),
-    /// Alpha shape at this radius.
-    Alpha(f64),
+    /// Alpha shape at this radius, keeping the edge-connected pieces at least as large as the
+    /// `keep_clusters`-th largest (0: all).
+    Alpha {
+        /// Circumradius bound.
+        alpha: f64,
+        /// Pieces kept (0: all).
+        keep_clusters: usize,
+    },
 }
 
 impl Mesher {
@@ -366,7 +373,10 @@ impl Mesher {
                     })?;
                 Self::Delaunay(Box::new(d))
             }
-            Method::Alpha => Self::Alpha(resolved.alpha),
+            Method::Alpha => Self::Alpha {
+                alpha: resolved.alpha,
+                keep_clusters: options.alpha_keep_clusters,
+            },
         })
     }
 
@@ -394,7 +404,10 @@ impl Mesher {
                     delaunay: Some(stats),
                 })
             }
-            Self::Alpha(alpha) => {
+            Self::Alpha {
+                alpha,
+                keep_clusters,
+            } => {
                 let start = Instant::now();
                 let shape =
                     alpha_shape(input.means, *alpha).map_err(|source| PipelineError::Alpha {
@@ -402,7 +415,7 @@ impl Mesher {
                         cause: source,
                     })?;
                 Ok(MethodOutput {
-                    mesh: shape.mesh,
+                    mesh: keep_largest_clusters(&shape.mesh, *keep_clusters),
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
                     delaunay: None,
@@ -473,6 +486,37 @@ mod tests {
         // 0.6 of the weight at z = 1, 0.4 at z = 2, normalised by the alpha (≈ 1).
         let expected = centre(DepthKind::Expected);
         assert!((expected - 1.4).abs() < 1e-2, "{expected}");
+    }
+
+    #[test]
+    fn alpha_keeps_its_largest_pieces_on_request() {
+        // A unit cube's corners (12 boundary triangles) and a far tetrahedron (4).
+        let mut means: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+            .collect();
+        means.extend(
+            [
+                [10., 10., 10.],
+                [11., 10., 10.],
+                [10., 11., 10.],
+                [10., 10., 11.],
+            ]
+            .map(Vec3::from),
+        );
+        let input = FrameInput {
+            frame: 0,
+            positions: &means,
+            means: &means,
+            world: None,
+        };
+        for (keep, triangles) in [(0, 16), (1, 12), (2, 16)] {
+            let mut mesher = Mesher::Alpha {
+                alpha: 2.0,
+                keep_clusters: keep,
+            };
+            let out = mesher.mesh(&input).expect("alpha shape");
+            assert_eq!(out.mesh.triangle_count(), triangles, "keep {keep}");
+        }
     }
 
     #[test]

@@ -203,6 +203,7 @@ pub fn run(
             }
             Method::Alpha => {
                 parameters.insert("alpha".to_owned(), resolved.alpha);
+                parameters.insert("keep_clusters".to_owned(), o.alpha_keep_clusters as f64);
             }
         }
         let mean = Summary::of(&frames_of);

@@ -4,7 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use trisplat_extract::alpha_shape::alpha_shape;
+use trisplat_geometry::cleanup::keep_largest_clusters;
 use trisplat_geometry::io::{WriteOptions, read_points, write_mesh};
+use trisplat_geometry::topology::TriangleClusters;
 
 use super::{Context, refuse_to_overwrite};
 
@@ -20,6 +22,10 @@ pub struct AlphaShapeArgs {
     /// Output mesh (.ply, .obj, .gltf, .glb): the boundary triangles, oriented outward.
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
+    /// Keep only the edge-connected pieces at least as large (in triangles) as the K-th
+    /// largest (0: every piece, as Open3D).
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    pub keep_clusters: usize,
 }
 
 /// Runs `trisplat alpha-shape`.
@@ -47,7 +53,7 @@ pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
             args.alpha
         );
     }
-    let mut mesh = shape.mesh;
+    let mut mesh = shape.mesh.clone();
     if let Some(colors) = cloud.colors() {
         let picked = shape
             .vertex_ids
@@ -57,6 +63,23 @@ pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
         mesh = mesh
             .with_colors(picked)
             .context("carrying the point colours")?;
+    }
+    let pieces = TriangleClusters::of(&mesh).count();
+    let mesh = keep_largest_clusters(&mesh, args.keep_clusters);
+    if !ctx.quiet && pieces > 1 {
+        eprintln!(
+            "{}: the alpha shape has {pieces} edge-connected pieces{}",
+            args.points.display(),
+            if mesh.triangle_count() < shape.mesh.triangle_count() {
+                format!(
+                    "; kept {} (--keep-clusters {})",
+                    TriangleClusters::of(&mesh).count(),
+                    args.keep_clusters
+                )
+            } else {
+                " (--keep-clusters K keeps the K largest)".to_owned()
+            }
+        );
     }
     write_mesh(&args.output, &mesh, WriteOptions::default())?;
     Ok(())

@@ -35,6 +35,8 @@ pub struct UsageError(pub String);
 pub struct Context {
     /// Progress bar factory.
     pub progress: Progress,
+    /// `--quiet`: no notes on stderr (warnings and errors still print).
+    pub quiet: bool,
 }
 
 /// Refuses an output path that names the input file (also through links or `..`).
