@@ -917,6 +917,32 @@ mod tests {
     }
 
     #[test]
+    fn measure_labels_a_mesh_that_contains_the_ground_truth() {
+        let gt_mesh = tetra(1.0);
+        let gt = GtSamples::new(gt_mesh.clone(), 500).expect("area");
+        let own = measure_with(&gt_mesh, &gt, 500, Tau::Fraction(0.01))
+            .expect("ok")
+            .expect("non-empty");
+        assert_eq!(own.relation, Relation::SelfConsistency);
+        assert_eq!(own.shared_vertex_fraction, Some(1.0));
+        assert_eq!(own.area_ratio, Some(1.0));
+        assert_eq!(own.tau, 0.01 * gt.diagonal());
+        assert_eq!(own.tau_fraction, Some(0.01));
+        assert_eq!(gt.diagonal(), 3f64.sqrt());
+        let st = own.structure.expect("structure");
+        assert!(st.watertight && st.components == 1);
+        // Scaled by 1.1 about a shared corner: one vertex in four is shared, accuracy.
+        let other = measure_with(&tetra(1.1), &gt, 500, Tau::Absolute(0.05))
+            .expect("ok")
+            .expect("non-empty");
+        assert_eq!(other.relation, Relation::Accuracy);
+        assert_eq!(other.shared_vertex_fraction, Some(0.25));
+        assert!((other.area_ratio.expect("area") - 1.21).abs() < 1e-6);
+        assert_eq!((other.tau, other.tau_fraction), (0.05, None));
+        assert!(other.normal_angle_deg.is_some());
+    }
+
+    #[test]
     fn summary_means_equal_direct_means() {
         let m = |c: f64| FrameMetrics {
             chamfer_l1: c,
