@@ -95,6 +95,83 @@ fn tiny_case_writes_every_promised_output() {
     assert!(v > g);
 }
 
+/// With `--gt template` (default thresholds), delaunay's meshes hold the deformed template's
+/// vertices, so its scores are self-consistency; tsdf's and alpha's are accuracy. Each
+/// frame's tau is 0.005 of its ground truth's diagonal; the structure is there.
+#[test]
+fn delaunay_against_its_own_template_is_self_consistency_tsdf_is_not() {
+    let dir = fresh_dir("relation");
+    let out = dir.join("out");
+    let t = figure();
+    let mut args = vec![
+        "extract",
+        "--template",
+        s(&t),
+        "--method",
+        "tsdf,delaunay,alpha",
+        "--frames",
+        "0..2",
+        "--gt",
+        "template",
+        "--targets",
+        "report",
+        "-o",
+        s(&out),
+    ];
+    args.extend(TINY);
+    run_ok(&args);
+    let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    assert_eq!(r["tau_fraction"], 0.005);
+    assert!(r["tau"].is_null());
+    for (m, relation) in [
+        ("tsdf", "accuracy"),
+        ("delaunay", "self-consistency"),
+        ("alpha", "accuracy"),
+    ] {
+        let method = &r["methods"][m];
+        assert_eq!(method["relation"], relation, "{m}");
+        for f in method["frames"].as_array().expect("frames") {
+            let x = &f["metrics"];
+            assert_eq!(x["relation"], relation, "{m}");
+            let shared = x["shared_vertex_fraction"].as_f64().expect("shared");
+            assert_eq!(
+                shared >= 0.5,
+                relation == "self-consistency",
+                "{m}: {shared}"
+            );
+            let diagonal = x["gt_diagonal"].as_f64().expect("diagonal");
+            assert_eq!(x["tau"].as_f64(), Some(0.005 * diagonal), "{m}");
+            assert_eq!(x["tau_fraction"], 0.005);
+            for key in ["normal_angle_deg", "recall", "area_ratio"] {
+                assert!(x[key].as_f64().is_some_and(f64::is_finite), "{m}: {key}");
+            }
+            let st = &x["structure"];
+            assert!(st["components"].as_u64().is_some_and(|c| c >= 1), "{m}");
+            assert!(st["boundary_edges"].as_u64().is_some(), "{m}");
+            assert!(st["area"].as_f64().is_some_and(|a| a > 0.0), "{m}");
+        }
+        assert!(method["mean"]["recall"].as_f64().is_some(), "{m}");
+        assert!(method["mean"]["normal_angle_deg"].as_f64().is_some(), "{m}");
+    }
+    assert_eq!(
+        r["methods"]["delaunay"]["mean"]["self_consistency_frames"],
+        2
+    );
+    assert!(md.contains("| delaunay | **self-consistency** |"), "{md}");
+    assert!(md.contains("| tsdf | accuracy |"), "{md}");
+    assert!(
+        md.contains("**delaunay: self-consistency, not accuracy.**"),
+        "{md}"
+    );
+    assert!(!md.contains("**tsdf: self-consistency"), "{md}");
+    assert!(
+        md.contains("0.005 x each frame's ground-truth bounding-box diagonal"),
+        "{md}"
+    );
+}
+
 #[test]
 fn without_gt_no_metrics_and_rebuild_every_one() {
     let dir = fresh_dir("nogt");
@@ -423,6 +500,57 @@ fn hop_threshold_is_recorded_with_the_delaunay_statistics() {
         let line = one_error_line(&res);
         assert!(line.contains("--hop-threshold"), "{line}");
     }
+}
+
+/// `--tau` is absolute (and replaces the default fraction); a bad `--tau-fraction` is exit 1
+/// naming it; both together are a usage error (exit 2).
+#[test]
+fn absolute_tau_replaces_the_relative_default() {
+    let dir = fresh_dir("tau");
+    let t = figure();
+    let out = dir.join("abs");
+    let base = |out: &str| {
+        let mut a = vec![
+            "extract",
+            "--template",
+            s(&t),
+            "--method",
+            "delaunay",
+            "--frames",
+            "0",
+            "--gt",
+            "template",
+            "--targets",
+            "report",
+            "-o",
+        ];
+        a.push(out);
+        a.extend(TINY);
+        a.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let mut args = base(s(&out));
+    args.extend(["--tau".to_owned(), "0.02".to_owned()]);
+    run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    assert_eq!(r["tau"], 0.02);
+    assert!(r["tau_fraction"].is_null());
+    let m = &r["methods"]["delaunay"]["frames"][0]["metrics"];
+    assert_eq!(m["tau"], 0.02);
+    assert!(m["tau_fraction"].is_null());
+    let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    assert!(md.contains("at tau 0.02 (absolute)"), "{md}");
+    for bad in ["0", "-1", "nan"] {
+        let mut args = base(s(&dir.join("bad")));
+        args.push(format!("--tau-fraction={bad}"));
+        let res = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let line = one_error_line(&res);
+        assert!(line.contains("--tau-fraction"), "{line}");
+    }
+    let mut args = base(s(&dir.join("both")));
+    args.extend(["--tau", "0.02", "--tau-fraction", "0.01"].map(str::to_owned));
+    let res = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(res.status.code(), Some(2));
 }
 
 /// A weights track whose channels match no morph target (ARKit's `tongueOut` on LAM's head):

@@ -11,6 +11,7 @@ pub mod ids;
 pub mod io;
 pub mod mesh;
 pub mod mesh_render;
+pub mod mesh_stats;
 pub mod metrics;
 pub mod points;
 pub mod rng;

@@ -31,13 +31,22 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::mesh::TriMesh;
+use crate::mesh::{Aabb, TriMesh};
 use crate::points::PointCloud;
 use crate::spatial::{PointIndex, SpatialError, TriangleBvh};
 
 /// Default F-score thresholds, in the input's length unit: 1, 2.5, 5 and 10 mm for inputs in
 /// metres (2.5 mm gives the common "Recall@2.5mm").
 pub const DEFAULT_TAUS: [f64; 4] = [0.001, 0.0025, 0.005, 0.01];
+
+/// Default F-score thresholds as fractions of the ground truth's bounding-box diagonal
+/// (`trisplat eval` without `--tau`): 0.1%, 0.25%, 0.5% and 1% of it, so that a threshold
+/// means the same on a 2 m body and a 20 cm head.
+pub const DEFAULT_TAU_FRACTIONS: [f64; 4] = [0.001, 0.0025, 0.005, 0.01];
+
+/// Shared-vertex fraction from which scores are labelled [`Relation::SelfConsistency`]: at
+/// least half of the ground truth's vertices are, bit for bit, vertices of the prediction.
+pub const SELF_CONSISTENCY_MIN_SHARED: f64 = 0.5;
 
 /// Points per chunk of the fixed-order f64 accumulation.
 const SUM_CHUNK: usize = 4096;
@@ -86,8 +95,11 @@ pub enum MetricsError {
 /// Precision, recall and F-score at one threshold.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ThresholdScore {
-    /// The distance threshold.
+    /// The distance threshold (absolute, in the input's unit).
     pub tau: f64,
+    /// The threshold as a fraction of the ground truth's bounding-box diagonal when it was
+    /// asked for that way ([`Tau::Fraction`]); `None` (JSON `null`) when given absolutely.
+    pub tau_fraction: Option<f64>,
     /// Fraction of prediction points with d(p, G) < tau.
     pub precision: f64,
     /// Fraction of ground-truth points with d(g, P) < tau.
@@ -120,6 +132,159 @@ pub struct Metrics {
     pub seconds: f64,
     /// One entry per threshold, in the order given.
     pub thresholds: Vec<ThresholdScore>,
+}
+
+impl Metrics {
+    /// Records on each threshold score the fraction it was asked as (`taus` in the order
+    /// the thresholds were given, as resolved by [`resolve_taus`]).
+    #[must_use]
+    pub fn with_tau_fractions(mut self, taus: &[Tau]) -> Self {
+        for (score, tau) in self.thresholds.iter_mut().zip(taus) {
+            score.tau_fraction = tau.fraction();
+        }
+        self
+    }
+}
+
+/// An F-score threshold as asked for: a distance, or a fraction of the ground truth's
+/// bounding-box diagonal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Tau {
+    /// A distance in the input's unit.
+    Absolute(f64),
+    /// A fraction of the ground truth's bounding-box diagonal.
+    Fraction(f64),
+}
+
+impl Tau {
+    /// The distance this threshold stands for when the ground truth's bounding-box diagonal
+    /// is `diagonal`.
+    #[must_use]
+    pub fn resolve(self, diagonal: f64) -> f64 {
+        match self {
+            Self::Absolute(t) => t,
+            Self::Fraction(f) => f * diagonal,
+        }
+    }
+
+    /// The fraction, for [`Tau::Fraction`].
+    #[must_use]
+    pub fn fraction(self) -> Option<f64> {
+        match self {
+            Self::Absolute(_) => None,
+            Self::Fraction(f) => Some(f),
+        }
+    }
+}
+
+/// The distances of `taus` for a ground truth of bounding-box diagonal `diagonal`.
+///
+/// # Errors
+/// [`MetricsError::BadThreshold`] when a threshold is not a finite positive distance (a
+/// fraction of a zero diagonal among them: a ground truth without extent).
+pub fn resolve_taus(taus: &[Tau], diagonal: f64) -> Result<Vec<f64>, MetricsError> {
+    taus.iter()
+        .map(|t| {
+            let tau = t.resolve(diagonal);
+            if tau.is_finite() && tau > 0.0 {
+                Ok(tau)
+            } else {
+                Err(MetricsError::BadThreshold { tau })
+            }
+        })
+        .collect()
+}
+
+/// Length of the diagonal of the axis-aligned box around `points`, in f64 (0 for no points).
+#[must_use]
+pub fn bbox_diagonal(points: &[Vec3]) -> f64 {
+    Aabb::from_points(points).map_or(0.0, |b| (b.max.as_dvec3() - b.min.as_dvec3()).length())
+}
+
+/// What the scores of a prediction against a ground truth measure.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub enum Relation {
+    /// The prediction was made without the ground truth: the scores are its accuracy.
+    #[default]
+    #[serde(rename = "accuracy")]
+    Accuracy,
+    /// The prediction contains the ground truth's vertices (at least
+    /// [`SELF_CONSISTENCY_MIN_SHARED`] of them, bit for bit): it consumed the mesh it is
+    /// scored against, and the scores say how well it reproduces its own input, not how
+    /// accurate it is.
+    #[serde(rename = "self-consistency")]
+    SelfConsistency,
+}
+
+impl Relation {
+    /// The relation implied by a [`shared_vertex_fraction`] (`None`: not known, accuracy).
+    #[must_use]
+    pub fn from_shared_fraction(shared: Option<f64>) -> Self {
+        match shared {
+            Some(f) if f >= SELF_CONSISTENCY_MIN_SHARED => Self::SelfConsistency,
+            _ => Self::Accuracy,
+        }
+    }
+
+    /// `accuracy` or `self-consistency`, as in JSON.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Accuracy => "accuracy",
+            Self::SelfConsistency => "self-consistency",
+        }
+    }
+}
+
+impl std::fmt::Display for Relation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Fraction of the ground truth's vertices `gt` whose exact f32 position (bit for bit, with
+/// -0 taken as +0) is also a position in `pred` (a prediction's vertices or points); `None`
+/// when `gt` is empty. A prediction that copied the ground truth's vertices scores ~1, one
+/// that re-meshed the surface ~0 (its vertices land on the surface, not on these points).
+///
+/// Sorts the smaller side's positions and looks the other side's up by binary search
+/// (parallel), so the cost is `O((G + P) log min(G, P))`.
+#[must_use]
+pub fn shared_vertex_fraction(gt: &[Vec3], pred: &[Vec3]) -> Option<f64> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    if gt.is_empty() {
+        return None;
+    }
+    let key = |p: &Vec3| [p.x + 0.0, p.y + 0.0, p.z + 0.0].map(f32::to_bits);
+    let shared = if pred.len() <= gt.len() {
+        let mut keys: Vec<[u32; 3]> = pred.par_iter().map(key).collect();
+        keys.par_sort_unstable();
+        keys.dedup();
+        gt.par_iter()
+            .filter(|&p| keys.binary_search(&key(p)).is_ok())
+            .count()
+    } else {
+        // Distinct ground-truth positions with their multiplicity, marked when seen in pred.
+        let mut keys: Vec<[u32; 3]> = gt.par_iter().map(key).collect();
+        keys.par_sort_unstable();
+        let runs: Vec<(&[u32; 3], usize)> = keys
+            .chunk_by(|a, b| a == b)
+            .map(|run| (&run[0], run.len()))
+            .collect();
+        let seen: Vec<AtomicBool> = runs.iter().map(|_| AtomicBool::new(false)).collect();
+        pred.par_iter().for_each(|p| {
+            let k = key(p);
+            if let Ok(i) = runs.binary_search_by(|(r, _)| (*r).cmp(&k)) {
+                seen[i].store(true, Ordering::Relaxed);
+            }
+        });
+        runs.iter()
+            .zip(&seen)
+            .filter(|(_, s)| s.load(Ordering::Relaxed))
+            .map(|((_, n), _)| n)
+            .sum()
+    };
+    Some(shared as f64 / gt.len() as f64)
 }
 
 /// One side of a comparison: points (with optional normals), and for surface mode the mesh
@@ -250,6 +415,7 @@ pub fn evaluate(
             };
             ThresholdScore {
                 tau,
+                tau_fraction: None,
                 precision,
                 recall,
                 fscore,
@@ -608,8 +774,76 @@ mod tests {
         }
         assert!(v["normal_consistency"].is_null());
         let t = &v["thresholds"][0];
-        for key in ["tau", "precision", "recall", "fscore"] {
+        for key in ["tau", "tau_fraction", "precision", "recall", "fscore"] {
             assert!(t.get(key).is_some(), "{key}");
         }
+        assert!(t["tau_fraction"].is_null());
+        let m = m.with_tau_fractions(&[Tau::Fraction(0.01)]);
+        assert_eq!(m.thresholds[0].tau_fraction, Some(0.01));
+    }
+
+    #[test]
+    fn relative_thresholds_resolve_against_the_diagonal() {
+        let diag = bbox_diagonal(&[Vec3::ZERO, Vec3::new(3.0, 4.0, 0.0), Vec3::X]);
+        assert_eq!(diag, 5.0);
+        assert_eq!(
+            resolve_taus(&[Tau::Fraction(0.01), Tau::Absolute(0.2)], diag),
+            Ok(vec![0.05, 0.2])
+        );
+        // A ground truth without extent has no relative threshold.
+        assert_eq!(bbox_diagonal(&[]), 0.0);
+        assert_eq!(
+            resolve_taus(&[Tau::Fraction(0.01)], 0.0),
+            Err(MetricsError::BadThreshold { tau: 0.0 })
+        );
+        assert!(resolve_taus(&[Tau::Absolute(f64::NAN)], 1.0).is_err());
+    }
+
+    /// The definition: each ground-truth vertex looked for among all prediction vertices.
+    fn shared_by_scan(gt: &[Vec3], pred: &[Vec3]) -> Option<f64> {
+        let same = |a: Vec3, b: Vec3| a.x == b.x && a.y == b.y && a.z == b.z;
+        (!gt.is_empty()).then(|| {
+            gt.iter()
+                .filter(|&&g| pred.iter().any(|&p| same(g, p)))
+                .count() as f64
+                / gt.len() as f64
+        })
+    }
+
+    #[test]
+    fn shared_vertices_by_bits_on_both_search_paths() {
+        let mut rng = Rng::new(12);
+        let grid = |rng: &mut Rng| Vec3::new(rng.below(4) as f32, rng.below(4) as f32, 0.0);
+        for case in 0..200 {
+            let g: Vec<Vec3> = (0..case % 30).map(|_| grid(&mut rng)).collect();
+            let p: Vec<Vec3> = (0..(case * 7) % 45).map(|_| grid(&mut rng)).collect();
+            assert_eq!(
+                shared_vertex_fraction(&g, &p),
+                shared_by_scan(&g, &p),
+                "{case}"
+            );
+        }
+        // -0 and +0 are one position; a one-ulp difference is another.
+        let g = [Vec3::new(-0.0, 1.0, 2.0), Vec3::new(1.0, 1.0, 1.0)];
+        let p = [
+            Vec3::new(0.0, 1.0, 2.0),
+            Vec3::new(1.0, 1.0, f32::from_bits(1.0f32.to_bits() + 1)),
+        ];
+        assert_eq!(shared_vertex_fraction(&g, &p), Some(0.5));
+        assert_eq!(shared_vertex_fraction(&[], &p), None);
+        assert_eq!(shared_vertex_fraction(&g, &[]), Some(0.0));
+        assert_eq!(
+            Relation::from_shared_fraction(Some(0.5)),
+            Relation::SelfConsistency
+        );
+        assert_eq!(
+            Relation::from_shared_fraction(Some(0.49)),
+            Relation::Accuracy
+        );
+        assert_eq!(Relation::from_shared_fraction(None), Relation::Accuracy);
+        assert_eq!(
+            serde_json::to_value(Relation::SelfConsistency).expect("json"),
+            "self-consistency"
+        );
     }
 }

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use trisplat_extract::incremental_delaunay::DEFAULT_HOP_THRESHOLD;
 use trisplat_geometry::animation::DEFAULT_FPS;
+use trisplat_geometry::metrics::Tau;
 
 /// Default Gaussians per triangle when the pipeline binds them itself.
 pub const DEFAULT_PER_TRIANGLE: u32 = 4;
@@ -32,8 +33,17 @@ pub const DEFAULT_FOV_DEG: f64 = 40.0;
 pub const DEFAULT_ALPHA_SPACINGS: f64 = 6.0;
 /// Default points sampled on each mesh for the metrics.
 pub const DEFAULT_SAMPLES: usize = 20_000;
-/// Default F-score threshold (input units; 2.5 mm for metres: "Recall@2.5mm").
+/// Absolute F-score threshold when one is asked for without a value of its own (`--tau`
+/// given replaces the fraction; input units, 2.5 mm for metres: "Recall@2.5mm"). Library
+/// callers that pass [`ExtractOptions::tau`] to [`crate::report::measure`] get it.
 pub const DEFAULT_TAU: f64 = 0.0025;
+/// Default F-score threshold of the report as a fraction of each frame's ground-truth
+/// bounding-box diagonal (0.5%: 1 cm on a 2 m body, 1 mm on a 20 cm head).
+pub const DEFAULT_TAU_FRACTION: f64 = 0.005;
+/// [`DEFAULT_TAU_FRACTION`] as the command line's default text (clap's `default_value_t`
+/// cannot give an `Option` field a default that `--tau` then unsets).
+#[cfg(feature = "cli")]
+const DEFAULT_TAU_FRACTION_ARG: &str = "0.005";
 /// Opacity of the Gaussians the pipeline binds itself: opaque enough that the rendered
 /// alpha passes the TSDF's 0.5 mask on the surface (GaussianAvatars' 0.1 is a starting
 /// point for training, not a surface).
@@ -256,8 +266,20 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = DEFAULT_SAMPLES,
         value_parser = parse_positive))]
     pub samples: usize,
-    /// F-score threshold of the report, scene units.
-    #[cfg_attr(feature = "cli", arg(long, value_name = "T", default_value_t = DEFAULT_TAU))]
+    /// F-score threshold of the report as a fraction of each frame's ground-truth
+    /// bounding-box diagonal [default: 0.005 unless --tau is given]; unset, the absolute
+    /// --tau is used.
+    // Declared before `tau`: clap adds defaults in declaration order, so `tau`'s (hidden)
+    // default is not there yet when this default looks whether --tau was given.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "F",
+        default_value = DEFAULT_TAU_FRACTION_ARG,
+        default_value_if("tau", clap::builder::ArgPredicate::IsPresent, None),
+        hide_default_value = true))]
+    pub tau_fraction: Option<f64>,
+    /// Absolute F-score threshold of the report, in scene units, instead of --tau-fraction
+    /// (used only while the fraction is unset).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "T", default_value_t = DEFAULT_TAU,
+        hide_default_value = true, conflicts_with = "tau_fraction"))]
     pub tau: f64,
     /// Refuse a weights track with channels that drive nothing (without it they are listed
     /// once on stderr and in the report, and ignored).
@@ -299,6 +321,14 @@ impl std::fmt::Display for OutputTarget {
 }
 
 impl ExtractOptions {
+    /// The report's F-score threshold: the fraction of each frame's ground-truth diagonal,
+    /// or the absolute `tau` when no fraction is set.
+    #[must_use]
+    pub fn threshold(&self) -> Tau {
+        self.tau_fraction
+            .map_or(Tau::Absolute(self.tau), Tau::Fraction)
+    }
+
     /// Whether `target` is among the outputs asked for.
     #[must_use]
     pub fn writes(&self, target: OutputTarget) -> bool {
@@ -326,6 +356,7 @@ impl Default for ExtractOptions {
             hop_threshold: DEFAULT_HOP_THRESHOLD,
             samples: DEFAULT_SAMPLES,
             tau: DEFAULT_TAU,
+            tau_fraction: Some(DEFAULT_TAU_FRACTION),
             strict: false,
             targets: OutputTarget::ALL.to_vec(),
         }
@@ -384,5 +415,37 @@ impl ExtractConfig {
             .into_iter()
             .filter(|m| self.methods.contains(m))
             .collect()
+    }
+}
+
+#[cfg(all(test, feature = "cli"))]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    #[derive(clap::Parser)]
+    struct Args {
+        #[command(flatten)]
+        options: ExtractOptions,
+    }
+
+    fn parse(args: &[&str]) -> Result<ExtractOptions, clap::Error> {
+        Args::try_parse_from(std::iter::once("extract").chain(args.iter().copied()))
+            .map(|a| a.options)
+    }
+
+    #[test]
+    fn tau_is_relative_by_default_absolute_when_given() {
+        let default = parse(&[]).expect("defaults");
+        assert_eq!(default, ExtractOptions::default());
+        assert_eq!(default.tau_fraction, Some(DEFAULT_TAU_FRACTION));
+        assert_eq!(DEFAULT_TAU_FRACTION_ARG.parse(), Ok(DEFAULT_TAU_FRACTION));
+        assert_eq!(default.threshold(), Tau::Fraction(DEFAULT_TAU_FRACTION));
+        let absolute = parse(&["--tau", "0.01"]).expect("absolute");
+        assert_eq!(absolute.tau_fraction, None);
+        assert_eq!(absolute.threshold(), Tau::Absolute(0.01));
+        let relative = parse(&["--tau-fraction", "0.02"]).expect("relative");
+        assert_eq!(relative.threshold(), Tau::Fraction(0.02));
+        assert!(parse(&["--tau", "0.01", "--tau-fraction", "0.02"]).is_err());
     }
 }

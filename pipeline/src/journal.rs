@@ -275,6 +275,9 @@ mod tests {
         assert!(rewritten.ends_with('\n'));
         // Another configuration, another version, not a journal.
         assert!(problem(Journal::resume(dir.path(), &config(0.01))).contains("other inputs"));
+        let mut relative = c.clone();
+        relative.options.tau_fraction = Some(0.01);
+        assert!(problem(Journal::resume(dir.path(), &relative)).contains("other inputs"));
         let other_version = rewritten.replacen(env!("CARGO_PKG_VERSION"), "0.0.0-other", 1);
         std::fs::write(&path, other_version).expect("write");
         assert!(problem(Journal::resume(dir.path(), &c)).contains("trisplat 0.0.0-other"));

@@ -126,7 +126,7 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
 
 /// The first field (by report name) in which two shard reports are not the same job.
 fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
-    let fields: [(&'static str, bool); 13] = [
+    let fields: [(&'static str, bool); 14] = [
         ("version", a.version == b.version),
         ("template", a.template == b.template),
         (
@@ -141,6 +141,7 @@ fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
         ("ground_truth", a.ground_truth == b.ground_truth),
         ("samples", a.samples == b.samples),
         ("tau", a.tau == b.tau),
+        ("tau_fraction", a.tau_fraction == b.tau_fraction),
         ("resolved", a.resolved == b.resolved),
         (
             "methods",
@@ -194,10 +195,12 @@ fn merged_report(reports: &[(&Path, Report)]) -> Report {
             per_frame.sort_by_key(|f| f.frame);
             DelaunayStats::new(d.charts, d.gaussians, per_frame)
         });
+        let mean = Summary::of(&frames);
         *m = MethodReport {
             method: m.method,
             parameters: m.parameters.clone(),
-            mean: Summary::of(&frames),
+            relation: mean.relation(),
+            mean,
             frames,
             ply_dir: m.ply_dir.clone(),
             glb: m.glb.clone(),

@@ -227,8 +227,15 @@ impl Plan {
                     true,
                     format!(
                         "against {against}: {} samples per mesh, exact distances to the \
-                         triangles, F-score at tau {}",
-                        o.samples, o.tau
+                         triangles, F-score at {}; structure (components, holes, area ratio) \
+                         and the self-consistency check of each mesh",
+                        o.samples,
+                        match o.tau_fraction {
+                            Some(f) => format!(
+                                "tau = {f} x each frame's ground-truth bounding-box diagonal"
+                            ),
+                            None => format!("tau {} (absolute)", o.tau),
+                        }
                     ),
                 );
             }

@@ -2,7 +2,9 @@
 //! bitmap font, written as an 8-bit RGB PNG.
 //!
 //! With a ground truth: Chamfer L1 (y) against milliseconds per frame (x), both on log axes,
-//! one small dot per frame and one large dot (black outline) for each method's mean. Without:
+//! one small dot per frame and one large dot (black outline) for each method's mean; a method
+//! whose scores are self-consistency (its meshes contain the ground truth's vertices) is
+//! starred in the legend, with a footnote saying its scores are not accuracy. Without:
 //! milliseconds per frame (y, log axis) against the frame index (x, linear), one line per
 //! method; the title says there is no ground truth.
 
@@ -13,6 +15,7 @@ use trisplat_geometry::io::{IoError, write_atomically};
 use crate::config::Method;
 use crate::font;
 use crate::report::Report;
+use trisplat_geometry::metrics::Relation;
 
 /// Plot width in pixels.
 pub const WIDTH: usize = 900;
@@ -259,6 +262,8 @@ struct Series {
     method: Method,
     points: Vec<(f64, f64)>,
     mean: Option<(f64, f64)>,
+    /// Its scores are self-consistency (starred in the legend).
+    self_consistency: bool,
 }
 
 /// Draws the plot of `report` (see the module docs).
@@ -279,12 +284,14 @@ pub fn draw(report: &Report) -> Canvas {
                         .filter_map(|r| r.metrics.map(|x| (r.ms, x.chamfer_l1)))
                         .collect(),
                     mean: m.mean.chamfer_l1.map(|c| (m.mean.ms, c)),
+                    self_consistency: m.relation == Some(Relation::SelfConsistency),
                 }
             } else {
                 Series {
                     method: m.method,
                     points: m.frames.iter().map(|r| (r.frame as f64, r.ms)).collect(),
                     mean: None,
+                    self_consistency: false,
                 }
             }
         })
@@ -388,21 +395,41 @@ pub fn draw(report: &Report) -> Canvas {
             c.disc(px(x), py(y), 6, col);
         }
     }
-    // Legend.
+    // Legend; a method scored against the mesh it contains is starred and the star explained.
     let lx = x1 + 20;
+    let mut starred = false;
     for (i, s) in series.iter().enumerate() {
         let y = y0 + 10 + i as i64 * 28;
         c.disc(lx + 8, y + 7, 6, color(s.method));
-        c.text(lx + 22, y, s.method.name(), BLACK, false);
+        let label = if with_error && s.self_consistency {
+            starred = true;
+            format!("{} *", s.method.name())
+        } else {
+            s.method.name().to_owned()
+        };
+        c.text(lx + 22, y, &label, BLACK, false);
     }
     if with_error {
         let y = y0 + 10 + series.len() as i64 * 28 + 10;
         c.disc(lx + 8, y + 7, 8, BLACK);
         c.disc(lx + 8, y + 7, 6, WHITE);
         c.text(lx + 22, y, "mean", BLACK, false);
+        if starred {
+            for (k, line) in SELF_CONSISTENCY_NOTE.iter().enumerate() {
+                c.text(lx, y + 40 + k as i64 * 20, line, BLACK, false);
+            }
+        }
     }
     c
 }
+
+/// The legend's footnote for a starred method (lines fit the 200-pixel margin).
+pub const SELF_CONSISTENCY_NOTE: [&str; 4] = [
+    "* scored on",
+    "its own input:",
+    "self-consist.,",
+    "not accuracy",
+];
 
 /// Draws the plot of `report` and writes it to `path` (PNG, atomically).
 ///
@@ -448,6 +475,127 @@ mod tests {
         assert_eq!(decade_label(-3), "1e-3");
         assert_eq!(decade_label(2), "100");
         assert_eq!(decade_label(-1), "0.1");
+    }
+
+    /// A report of two methods with one measured frame each; delaunay's scores are
+    /// self-consistency when `own`.
+    fn report(own: bool) -> Report {
+        use crate::config::Method;
+        use crate::methods::Resolved;
+        use crate::report::{FrameMetrics, FrameRecord, MethodReport, Summary};
+        use std::collections::BTreeMap;
+        let method = |m: Method, c: f64, relation: Relation| {
+            let frames = vec![FrameRecord {
+                frame: 0,
+                time: 0.0,
+                ms: 10.0 * c,
+                render_ms: None,
+                vertices: 3,
+                faces: 1,
+                watertight: false,
+                metrics: Some(FrameMetrics {
+                    chamfer_l1: c,
+                    chamfer_l2: c * c,
+                    normal_consistency: None,
+                    normal_angle_deg: None,
+                    accuracy: c,
+                    completeness: c,
+                    precision: 1.0,
+                    recall: 1.0,
+                    fscore: 1.0,
+                    tau: 0.01,
+                    tau_fraction: Some(0.005),
+                    gt_diagonal: 2.0,
+                    gt_area: 1.0,
+                    area_ratio: Some(1.0),
+                    shared_vertex_fraction: Some(0.0),
+                    relation,
+                    structure: None,
+                }),
+            }];
+            let mean = Summary::of(&frames);
+            MethodReport {
+                method: m,
+                parameters: BTreeMap::new(),
+                relation: mean.relation(),
+                mean,
+                frames,
+                ply_dir: String::new(),
+                glb: String::new(),
+                glb_parts: Vec::new(),
+                delaunay: None,
+            }
+        };
+        let relation = if own {
+            Relation::SelfConsistency
+        } else {
+            Relation::Accuracy
+        };
+        Report {
+            version: String::new(),
+            template: String::new(),
+            template_vertices: 3,
+            welded_vertices: 3,
+            animation: String::new(),
+            unused_channels: Vec::new(),
+            gaussians: String::new(),
+            gaussian_count: 1,
+            mode: String::new(),
+            frames: vec![0],
+            frame_times: vec![0.0],
+            deform_ms: vec![0.0],
+            failed_frames: Vec::new(),
+            ground_truth: Some("template".to_owned()),
+            samples: 10,
+            tau: None,
+            tau_fraction: Some(0.005),
+            resolved: Resolved {
+                template_radius: 1.0,
+                mean_spacing: 0.1,
+                voxel: 0.01,
+                alpha: 0.6,
+            },
+            serial_methods: false,
+            methods: BTreeMap::from([
+                (
+                    "tsdf".to_owned(),
+                    method(Method::Tsdf, 0.01, Relation::Accuracy),
+                ),
+                (
+                    "delaunay".to_owned(),
+                    method(Method::Delaunay, 0.001, relation),
+                ),
+            ]),
+        }
+    }
+
+    #[test]
+    fn self_consistency_is_starred_and_explained_in_the_legend() {
+        let ink = |c: &Canvas| {
+            let mut n = 0;
+            for y in 0..HEIGHT {
+                for x in WIDTH - RIGHT..WIDTH {
+                    n += usize::from(c.pixel(x, y) == Some(BLACK));
+                }
+            }
+            n
+        };
+        let plain = draw(&report(false));
+        let starred = draw(&report(true));
+        let note: usize = SELF_CONSISTENCY_NOTE
+            .iter()
+            .map(|l| text_width(l) as usize)
+            .sum();
+        assert!(
+            ink(&starred) > ink(&plain) + note,
+            "the star and the note add ink"
+        );
+        let margin = (RIGHT - 20) as i64;
+        assert!(
+            SELF_CONSISTENCY_NOTE
+                .iter()
+                .all(|l| text_width(l) <= margin)
+        );
     }
 
     #[test]

@@ -2,9 +2,17 @@
 //!
 //! Metrics follow docs/conventions.md §8 as `trisplat eval --surface` computes them: both meshes sampled
 //! area-uniformly (`samples` points each, seed 0 for the prediction and `splitmix64(0)` for the
-//! ground truth, as `eval`'s defaults), distances exact to the other side's triangles. So a
-//! frame's numbers equal `trisplat eval DIR/<method>/frame_NNNNNN.ply GT --surface --samples N
-//! --tau T` for a static ground truth.
+//! ground truth, as `eval`'s defaults), distances exact to the other side's triangles, the
+//! threshold a fraction of the ground truth's bounding-box diagonal (or absolute). So a frame's
+//! numbers equal `trisplat eval DIR/<method>/frame_NNNNNN.ply GT --surface --samples N
+//! --tau-fraction F` (or `--tau T`) for a static ground truth, structure, area ratio and the
+//! self-consistency label included.
+//!
+//! Self-consistency: a method whose mesh contains the ground truth's vertices (at least half
+//! of them, bit for bit: the incremental Delaunay's output holds the deformed template's
+//! vertices, so with `--gt template` it is scored against its own input) gets its scores
+//! labelled [`Relation::SelfConsistency`], per frame and per method, in report.json,
+//! report.md and the plot.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -12,7 +20,11 @@ use std::path::Path;
 
 use trisplat_extract::incremental_delaunay::FrameStats;
 use trisplat_geometry::io::{IoError, write_atomically};
-use trisplat_geometry::metrics::{MetricsError, MetricsOptions, Shape, evaluate};
+use trisplat_geometry::mesh_stats::MeshStats;
+use trisplat_geometry::metrics::{
+    MetricsError, MetricsOptions, Relation, Shape, Tau, bbox_diagonal, evaluate,
+    shared_vertex_fraction,
+};
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::spatial::TriangleBvh;
@@ -37,6 +49,10 @@ pub struct GtSamples {
     /// The BVH the predictions' samples are measured against; `None` when the mesh cannot
     /// be indexed (then [`measure`] reports the reason).
     bvh: Option<TriangleBvh>,
+    /// Diagonal of the bounding box of its vertices (relative thresholds scale with it).
+    diagonal: f64,
+    /// Its surface area (f64).
+    area: f64,
 }
 
 impl GtSamples {
@@ -48,11 +64,20 @@ impl GtSamples {
             return None;
         }
         let bvh = TriangleBvh::new(&mesh).ok();
+        let (diagonal, area) = (bbox_diagonal(mesh.positions()), mesh.area());
         Some(Self {
             mesh,
             samples: points,
             bvh,
+            diagonal,
+            area,
         })
+    }
+
+    /// Diagonal of the bounding box of the ground truth's vertices.
+    #[must_use]
+    pub fn diagonal(&self) -> f64 {
+        self.diagonal
     }
 
     /// The ground truth as one side of a comparison.
@@ -64,7 +89,7 @@ impl GtSamples {
     }
 }
 
-/// The metrics of one method on one frame.
+/// The metrics of one method on one frame (docs/conventions.md §8).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameMetrics {
     /// (accuracy + completeness) / 2.
@@ -73,6 +98,9 @@ pub struct FrameMetrics {
     pub chamfer_l2: f64,
     /// Mean |n . n'| both ways (`None` when a side has no normals).
     pub normal_consistency: Option<f64>,
+    /// Mean angle between the normals both ways, degrees (`None` when a side has none).
+    #[serde(default)]
+    pub normal_angle_deg: Option<f64>,
     /// Mean distance from the prediction to the ground truth.
     pub accuracy: f64,
     /// Mean distance from the ground truth to the prediction.
@@ -83,41 +111,98 @@ pub struct FrameMetrics {
     pub recall: f64,
     /// F-score at `tau`.
     pub fscore: f64,
-    /// The F-score threshold.
+    /// The F-score threshold (absolute, scene units): `tau_fraction` x `gt_diagonal` when
+    /// relative.
     pub tau: f64,
+    /// The threshold as a fraction of the ground truth's bounding-box diagonal; `None` when
+    /// it was given absolutely.
+    #[serde(default)]
+    pub tau_fraction: Option<f64>,
+    /// Diagonal of the ground truth's bounding box.
+    #[serde(default)]
+    pub gt_diagonal: f64,
+    /// Surface area of the ground truth.
+    #[serde(default)]
+    pub gt_area: f64,
+    /// The prediction's area over the ground truth's (`None` when the latter is 0).
+    #[serde(default)]
+    pub area_ratio: Option<f64>,
+    /// Fraction of the ground truth's vertices that are (bit for bit) vertices of the mesh.
+    #[serde(default)]
+    pub shared_vertex_fraction: Option<f64>,
+    /// What the scores measure: `accuracy`, or `self-consistency` when the mesh contains
+    /// the ground truth's vertices.
+    #[serde(default)]
+    pub relation: Relation,
+    /// The structure of the mesh: area, components, holes, watertightness.
+    #[serde(default)]
+    pub structure: Option<MeshStats>,
 }
 
-/// Metrics of `pred` against `gt` (surface mode, see the module docs); `Ok(None)` when `pred`
-/// has no surface (an empty mesh is not measured).
+/// Metrics of `pred` against `gt` at the absolute threshold `tau` (see [`measure_with`]).
 ///
 /// # Errors
-/// [`MetricsError`] for coordinates beyond the spatial indexes' range or a bad `tau`.
+/// As [`measure_with`].
 pub fn measure(
     pred: &TriMesh,
     gt: &GtSamples,
     samples: usize,
     tau: f64,
 ) -> Result<Option<FrameMetrics>, MetricsError> {
+    measure_with(pred, gt, samples, Tau::Absolute(tau))
+}
+
+/// Metrics of `pred` against `gt` (surface mode, see the module docs) at threshold `tau`
+/// (a fraction is of `gt`'s bounding-box diagonal), with the structure of `pred`, its area
+/// ratio to `gt` and the self-consistency label; `Ok(None)` when `pred` has no surface (an
+/// empty mesh is not measured).
+///
+/// # Errors
+/// [`MetricsError`] for coordinates beyond the spatial indexes' range or a threshold that is
+/// not a positive distance.
+pub fn measure_with(
+    pred: &TriMesh,
+    gt: &GtSamples,
+    samples: usize,
+    tau: Tau,
+) -> Result<Option<FrameMetrics>, MetricsError> {
     let points = sample_uniform(pred, samples, SAMPLE_SEED);
     if points.is_empty() {
         return Ok(None);
     }
     let options = MetricsOptions {
-        taus: vec![tau],
+        taus: trisplat_geometry::metrics::resolve_taus(&[tau], gt.diagonal)?,
         surface: true,
     };
-    let m = evaluate(Shape::mesh(pred, &points), gt.shape(), &options)?;
+    let (m, (structure, shared)) = rayon::join(
+        || evaluate(Shape::mesh(pred, &points), gt.shape(), &options),
+        || {
+            rayon::join(
+                || MeshStats::of(pred),
+                || shared_vertex_fraction(gt.mesh.positions(), pred.positions()),
+            )
+        },
+    );
+    let m = m?;
     let t = m.thresholds.first().copied();
     Ok(Some(FrameMetrics {
         chamfer_l1: m.chamfer_l1,
         chamfer_l2: m.chamfer_l2,
         normal_consistency: m.normal_consistency,
+        normal_angle_deg: m.normal_angle_deg,
         accuracy: m.accuracy,
         completeness: m.completeness,
         precision: t.map_or(0.0, |t| t.precision),
         recall: t.map_or(0.0, |t| t.recall),
         fscore: t.map_or(0.0, |t| t.fscore),
-        tau,
+        tau: options.taus[0],
+        tau_fraction: tau.fraction(),
+        gt_diagonal: gt.diagonal,
+        gt_area: gt.area,
+        area_ratio: (gt.area > 0.0).then(|| structure.area / gt.area),
+        shared_vertex_fraction: shared,
+        relation: Relation::from_shared_fraction(shared),
+        structure: Some(structure),
     }))
 }
 
@@ -273,8 +358,62 @@ pub struct Summary {
     pub chamfer_l2: Option<f64>,
     /// Mean normal consistency over the measured frames that have it.
     pub normal_consistency: Option<f64>,
+    /// Mean normal angle error (degrees) over the measured frames that have it.
+    #[serde(default)]
+    pub normal_angle_deg: Option<f64>,
+    /// Mean precision at each frame's tau over the measured frames.
+    #[serde(default)]
+    pub precision: Option<f64>,
+    /// Mean recall at each frame's tau over the measured frames.
+    #[serde(default)]
+    pub recall: Option<f64>,
     /// Mean F-score over the measured frames.
     pub fscore: Option<f64>,
+    /// Mean area ratio to the ground truth over the measured frames that have it.
+    #[serde(default)]
+    pub area_ratio: Option<f64>,
+    /// Mean number of connected components over the measured frames.
+    #[serde(default)]
+    pub components: Option<f64>,
+    /// Mean share of the area in the largest component over the measured frames that have
+    /// area.
+    #[serde(default)]
+    pub largest_component_area_fraction: Option<f64>,
+    /// Mean number of boundary edges over the measured frames.
+    #[serde(default)]
+    pub boundary_edges: Option<f64>,
+    /// Mean shared-vertex fraction over the measured frames.
+    #[serde(default)]
+    pub shared_vertex_fraction: Option<f64>,
+    /// Measured frames whose scores are self-consistency (the mesh contains the ground
+    /// truth's vertices).
+    #[serde(default)]
+    pub self_consistency_frames: usize,
+}
+
+/// The "scored as" cell: what a method's or frame's scores measure.
+fn scored_as(relation: Option<Relation>) -> &'static str {
+    match relation {
+        Some(Relation::Accuracy) => "accuracy",
+        Some(Relation::SelfConsistency) => "**self-consistency**",
+        None => "-",
+    }
+}
+
+/// The sentence that tells a method's scores are self-consistency, not accuracy.
+fn self_consistency_note(m: &MethodReport) -> String {
+    format!(
+        "**{}: self-consistency, not accuracy.** Its meshes contain the ground truth's vertices \
+         (mean shared-vertex fraction {:.1}%; {} of {} measured frames at or above {:.0}%): it is \
+         scored against the mesh it was made from, so these scores say how well it reproduces \
+         its own input, not how accurate it is. Score it against a ground truth it did not \
+         consume (`--gt MESH`, `--gt-sequence`) for accuracy.",
+        m.method,
+        100.0 * m.mean.shared_vertex_fraction.unwrap_or(0.0),
+        m.mean.self_consistency_frames,
+        m.mean.measured_frames,
+        100.0 * trisplat_geometry::metrics::SELF_CONSISTENCY_MIN_SHARED,
+    )
 }
 
 fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
@@ -299,6 +438,10 @@ impl Summary {
         let ms: Vec<f64> = records.iter().map(|r| r.ms).collect();
         let metrics: Vec<&FrameMetrics> =
             records.iter().filter_map(|r| r.metrics.as_ref()).collect();
+        let structures: Vec<&MeshStats> = metrics
+            .iter()
+            .filter_map(|m| m.structure.as_ref())
+            .collect();
         Self {
             frames: records.len(),
             ms: mean(ms.iter().copied()).unwrap_or(0.0),
@@ -310,8 +453,35 @@ impl Summary {
             chamfer_l1: mean(metrics.iter().map(|m| m.chamfer_l1)),
             chamfer_l2: mean(metrics.iter().map(|m| m.chamfer_l2)),
             normal_consistency: mean(metrics.iter().filter_map(|m| m.normal_consistency)),
+            normal_angle_deg: mean(metrics.iter().filter_map(|m| m.normal_angle_deg)),
+            precision: mean(metrics.iter().map(|m| m.precision)),
+            recall: mean(metrics.iter().map(|m| m.recall)),
             fscore: mean(metrics.iter().map(|m| m.fscore)),
+            area_ratio: mean(metrics.iter().filter_map(|m| m.area_ratio)),
+            components: mean(structures.iter().map(|s| s.components as f64)),
+            largest_component_area_fraction: mean(
+                structures
+                    .iter()
+                    .filter_map(|s| s.largest_component_area_fraction),
+            ),
+            boundary_edges: mean(structures.iter().map(|s| s.boundary_edges as f64)),
+            shared_vertex_fraction: mean(metrics.iter().filter_map(|m| m.shared_vertex_fraction)),
+            self_consistency_frames: metrics
+                .iter()
+                .filter(|m| m.relation == Relation::SelfConsistency)
+                .count(),
         }
+    }
+
+    /// What the method's scores measure: self-consistency when any measured frame's mesh
+    /// contains the ground truth's vertices, else accuracy; `None` without measured frames.
+    #[must_use]
+    pub fn relation(&self) -> Option<Relation> {
+        (self.measured_frames > 0).then_some(if self.self_consistency_frames > 0 {
+            Relation::SelfConsistency
+        } else {
+            Relation::Accuracy
+        })
     }
 }
 
@@ -326,6 +496,10 @@ pub struct MethodReport {
     pub frames: Vec<FrameRecord>,
     /// Means over the frames.
     pub mean: Summary,
+    /// What its scores measure: `accuracy`, or `self-consistency` when its meshes contain
+    /// the ground truth's vertices ([`Summary::relation`]); `None` without metrics.
+    #[serde(default)]
+    pub relation: Option<Relation>,
     /// Folder of its per-frame PLY files, relative to the output folder.
     pub ply_dir: String,
     /// Its animated glTF, relative to the output folder.
@@ -373,8 +547,12 @@ pub struct Report {
     pub ground_truth: Option<String>,
     /// Samples per mesh for the metrics.
     pub samples: usize,
-    /// F-score threshold.
-    pub tau: f64,
+    /// Absolute F-score threshold when one was asked for (`--tau`); `None` when relative.
+    pub tau: Option<f64>,
+    /// F-score threshold as a fraction of each frame's ground-truth bounding-box diagonal
+    /// (`--tau-fraction`, the default); each frame's absolute `tau` is in its metrics.
+    #[serde(default)]
+    pub tau_fraction: Option<f64>,
     /// Scale-derived parameters.
     pub resolved: Resolved,
     /// Whether the methods of a frame ran one after another (`--serial-methods`: each
@@ -451,8 +629,9 @@ impl Report {
                 let _ = writeln!(
                     s,
                     "- ground truth: `{gt}`; {} samples per mesh, exact point-to-triangle \
-                     distances (docs/conventions.md §8), F-score at tau {}",
-                    self.samples, self.tau
+                     distances (docs/conventions.md §8), precision, recall and F-score at {}",
+                    self.samples,
+                    self.tau_description()
                 );
             }
             None => {
@@ -484,30 +663,50 @@ impl Report {
         let _ = writeln!(s, "## Means over frames\n");
         let _ = writeln!(
             s,
-            "| method | ms/frame | median ms | vertices | faces | watertight | Chamfer L1 | Chamfer L2 | normal consistency | F-score |"
+            "| method | scored as | ms/frame | median ms | vertices | faces | watertight | components | largest piece | boundary edges | area ratio | Chamfer L1 | Chamfer L2 | normal consistency | normal angle ° | recall | F-score |"
         );
-        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        let _ = writeln!(
+            s,
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
         let opt = |v: Option<f64>, digits: usize| {
             v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$e}"))
         };
         let optf = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
+        let fixed = |v: Option<f64>, digits: usize| {
+            v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$}"))
+        };
+        let pct =
+            |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |x| format!("{:.2}%", 100.0 * x));
         for m in self.ordered() {
             let a = &m.mean;
             let _ = writeln!(
                 s,
-                "| {} | {:.2} | {:.2} | {:.0} | {:.0} | {}/{} | {} | {} | {} | {} |",
+                "| {} | {} | {:.2} | {:.2} | {:.0} | {:.0} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 m.method,
+                scored_as(m.relation),
                 a.ms,
                 a.median_ms,
                 a.vertices,
                 a.faces,
                 a.watertight_frames,
                 a.frames,
+                fixed(a.components, 1),
+                pct(a.largest_component_area_fraction),
+                fixed(a.boundary_edges, 1),
+                optf(a.area_ratio),
                 opt(a.chamfer_l1, 4),
                 opt(a.chamfer_l2, 4),
                 optf(a.normal_consistency),
+                fixed(a.normal_angle_deg, 2),
+                optf(a.recall),
                 optf(a.fscore),
             );
+        }
+        for m in self.ordered() {
+            if m.relation == Some(Relation::SelfConsistency) {
+                let _ = writeln!(s, "\n{}", self_consistency_note(m));
+            }
         }
         for m in self.ordered() {
             let params: Vec<String> = m
@@ -527,6 +726,20 @@ impl Report {
                 params.join(", "),
                 m.ply_dir,
             );
+            match m.relation {
+                Some(Relation::SelfConsistency) => {
+                    let _ = writeln!(s, "{}\n", self_consistency_note(m));
+                }
+                Some(Relation::Accuracy) => {
+                    let _ = writeln!(
+                        s,
+                        "scores: accuracy (the meshes do not contain the ground truth's \
+                         vertices: mean shared-vertex fraction {})\n",
+                        pct(m.mean.shared_vertex_fraction)
+                    );
+                }
+                None => {}
+            }
             if let Some(d) = &m.delaunay {
                 let pct = |v: Option<f64>| {
                     v.map_or_else(|| "-".to_owned(), |x| format!("{:.3}%", 100.0 * x))
@@ -551,11 +764,11 @@ impl Report {
             };
             let _ = writeln!(
                 s,
-                "| frame | time s | ms | vertices | faces | watertight | Chamfer L1 | Chamfer L2 | normal consistency | F-score |{extra_head}"
+                "| frame | time s | ms | vertices | faces | watertight | components | largest piece | boundary edges | area ratio | scored as | Chamfer L1 | Chamfer L2 | normal consistency | normal angle ° | tau | recall | F-score |{extra_head}"
             );
             let _ = writeln!(
                 s,
-                "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|{extra_rule}"
+                "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|{extra_rule}"
             );
             let stats: BTreeMap<usize, &DelaunayFrame> = m
                 .delaunay
@@ -564,6 +777,7 @@ impl Report {
                 .collect();
             for r in &m.frames {
                 let mm = r.metrics.as_ref();
+                let st = mm.and_then(|m| m.structure.as_ref());
                 let extra = match (&m.delaunay, stats.get(&r.frame)) {
                     (Some(_), Some(d)) => format!(
                         " {} | {} | {} |",
@@ -576,21 +790,53 @@ impl Report {
                 };
                 let _ = writeln!(
                     s,
-                    "| {} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {} |{extra}",
+                    "| {} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |{extra}",
                     r.frame,
                     r.time,
                     r.ms,
                     r.vertices,
                     r.faces,
                     if r.watertight { "yes" } else { "no" },
+                    st.map_or_else(|| "-".to_owned(), |s| s.components.to_string()),
+                    pct(st.and_then(|s| s.largest_component_area_fraction)),
+                    st.map_or_else(|| "-".to_owned(), |s| s.boundary_edges.to_string()),
+                    optf(mm.and_then(|m| m.area_ratio)),
+                    scored_as(mm.map(|m| m.relation)),
                     opt(mm.map(|m| m.chamfer_l1), 4),
                     opt(mm.map(|m| m.chamfer_l2), 4),
                     optf(mm.and_then(|m| m.normal_consistency)),
+                    fixed(mm.and_then(|m| m.normal_angle_deg), 2),
+                    opt(mm.map(|m| m.tau), 3),
+                    optf(mm.map(|m| m.recall)),
                     optf(mm.map(|m| m.fscore)),
                 );
             }
         }
         s
+    }
+
+    /// The threshold as report.md states it.
+    fn tau_description(&self) -> String {
+        match (self.tau_fraction, self.tau) {
+            (Some(f), _) => {
+                let taus: Vec<f64> = self
+                    .methods
+                    .values()
+                    .flat_map(|m| m.frames.iter().filter_map(|r| r.metrics.map(|x| x.tau)))
+                    .collect();
+                let range = match (
+                    taus.iter().copied().reduce(f64::min),
+                    taus.iter().copied().reduce(f64::max),
+                ) {
+                    (Some(lo), Some(hi)) if lo == hi => format!(" ({lo:.4e})"),
+                    (Some(lo), Some(hi)) => format!(" ({lo:.4e} to {hi:.4e} over the frames)"),
+                    _ => String::new(),
+                };
+                format!("tau = {f} x each frame's ground-truth bounding-box diagonal{range}")
+            }
+            (None, Some(t)) => format!("tau {t} (absolute)"),
+            (None, None) => "-".to_owned(),
+        }
     }
 
     /// Writes report.md atomically.
@@ -671,17 +917,51 @@ mod tests {
     }
 
     #[test]
+    fn measure_labels_a_mesh_that_contains_the_ground_truth() {
+        let gt_mesh = tetra(1.0);
+        let gt = GtSamples::new(gt_mesh.clone(), 500).expect("area");
+        let own = measure_with(&gt_mesh, &gt, 500, Tau::Fraction(0.01))
+            .expect("ok")
+            .expect("non-empty");
+        assert_eq!(own.relation, Relation::SelfConsistency);
+        assert_eq!(own.shared_vertex_fraction, Some(1.0));
+        assert_eq!(own.area_ratio, Some(1.0));
+        assert_eq!(own.tau, 0.01 * gt.diagonal());
+        assert_eq!(own.tau_fraction, Some(0.01));
+        assert_eq!(gt.diagonal(), 3f64.sqrt());
+        let st = own.structure.expect("structure");
+        assert!(st.watertight && st.components == 1);
+        // Scaled by 1.1 about a shared corner: one vertex in four is shared, accuracy.
+        let other = measure_with(&tetra(1.1), &gt, 500, Tau::Absolute(0.05))
+            .expect("ok")
+            .expect("non-empty");
+        assert_eq!(other.relation, Relation::Accuracy);
+        assert_eq!(other.shared_vertex_fraction, Some(0.25));
+        assert!((other.area_ratio.expect("area") - 1.21).abs() < 1e-6);
+        assert_eq!((other.tau, other.tau_fraction), (0.05, None));
+        assert!(other.normal_angle_deg.is_some());
+    }
+
+    #[test]
     fn summary_means_equal_direct_means() {
         let m = |c: f64| FrameMetrics {
             chamfer_l1: c,
             chamfer_l2: c * c,
             normal_consistency: Some(0.9),
+            normal_angle_deg: Some(10.0 * c),
             accuracy: c,
             completeness: c,
             precision: 1.0,
             recall: 0.5,
             fscore: 2.0 / 3.0,
             tau: 0.01,
+            tau_fraction: Some(0.005),
+            gt_diagonal: 2.0,
+            gt_area: 1.0,
+            area_ratio: Some(1.0 + c),
+            shared_vertex_fraction: Some(0.0),
+            relation: Relation::Accuracy,
+            structure: Some(MeshStats::of(&tetra(1.0))),
         };
         let records = vec![
             record(0, 10.0, Some(m(0.1))),
@@ -696,8 +976,22 @@ mod tests {
         assert!((s.chamfer_l1.expect("measured") - 0.2).abs() < 1e-12);
         assert!((s.chamfer_l2.expect("measured") - 0.05).abs() < 1e-12);
         assert_eq!(s.watertight_frames, 2);
+        assert!((s.normal_angle_deg.expect("measured") - 2.0).abs() < 1e-12);
+        assert!((s.area_ratio.expect("measured") - 1.2).abs() < 1e-12);
+        assert_eq!(s.recall, Some(0.5));
+        assert_eq!(s.components, Some(1.0));
+        assert_eq!(s.boundary_edges, Some(0.0));
+        assert_eq!(s.relation(), Some(Relation::Accuracy));
         let none = Summary::of(&[record(0, 1.0, None)]);
         assert_eq!(none.chamfer_l1, None);
+        assert_eq!(none.relation(), None);
+        // One self-consistent frame makes the method's scores self-consistency.
+        let mut own = m(0.0);
+        own.shared_vertex_fraction = Some(1.0);
+        own.relation = Relation::SelfConsistency;
+        let mixed = Summary::of(&[record(0, 1.0, Some(m(0.1))), record(1, 1.0, Some(own))]);
+        assert_eq!(mixed.self_consistency_frames, 1);
+        assert_eq!(mixed.relation(), Some(Relation::SelfConsistency));
         assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
     }
 
@@ -750,6 +1044,7 @@ mod tests {
             method: m,
             parameters: BTreeMap::new(),
             mean: Summary::of(&records),
+            relation: None,
             frames: records.clone(),
             ply_dir: m.name().to_owned(),
             glb: format!("{}.glb", m.name()),
@@ -772,7 +1067,8 @@ mod tests {
             deform_ms: vec![0.0; 3],
             ground_truth: None,
             samples: 10,
-            tau: 0.01,
+            tau: Some(0.01),
+            tau_fraction: None,
             resolved: Resolved {
                 template_radius: 1.0,
                 mean_spacing: 0.1,

@@ -36,7 +36,8 @@ use crate::input::{
 };
 use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
 use crate::plan::{Plan, Stage};
-use crate::report::{FrameMetrics, GtSamples, measure};
+use crate::report::{FrameMetrics, GtSamples, measure_with};
+use trisplat_geometry::metrics::Tau;
 
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
 #[derive(Clone, Debug)]
@@ -108,7 +109,8 @@ pub struct Session {
     /// `--gt-sequence`: the ground-truth mesh file of each animation frame.
     gt_files: Vec<PathBuf>,
     samples: usize,
-    tau: f64,
+    /// The F-score threshold (a fraction is of each frame's ground-truth diagonal).
+    tau: Tau,
     fps: f64,
     input_files: Vec<PathBuf>,
     /// Channels of the driving track that move nothing (reported, see
@@ -319,7 +321,7 @@ impl Session {
             static_gt,
             gt_files,
             samples: o.samples,
-            tau: o.tau,
+            tau: o.threshold(),
             fps: o.fps,
             input_files,
             unused_channels,
@@ -567,7 +569,7 @@ impl Session {
             |(method, mesher): &mut (Method, Mesher)| -> Result<MethodFrame, PipelineError> {
                 let output = mesher.mesh(&input)?;
                 let metrics = match gt {
-                    Some(gt) => measure(&output.mesh, gt, samples, tau).map_err(|source| {
+                    Some(gt) => measure_with(&output.mesh, gt, samples, tau).map_err(|source| {
                         PipelineError::Metrics {
                             gt: gt_label.clone(),
                             frame,
@@ -625,6 +627,15 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             name: "tau",
             value: o.tau,
             expected: "a finite positive distance",
+        });
+    }
+    if let Some(f) = o.tau_fraction
+        && !(f.is_finite() && f > 0.0)
+    {
+        return Err(PipelineError::BadOption {
+            name: "tau-fraction",
+            value: f,
+            expected: "a finite positive fraction of the ground truth's bounding-box diagonal",
         });
     }
     if !(o.hop_threshold.is_finite() && o.hop_threshold >= 0.0) {

@@ -4,7 +4,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::io::{self, Format, ply};
-use trisplat_geometry::metrics::{self, DEFAULT_TAUS, Metrics, MetricsOptions, Shape};
+use trisplat_geometry::mesh_stats::MeshStats;
+use trisplat_geometry::metrics::{
+    self, DEFAULT_TAU_FRACTIONS, Metrics, MetricsOptions, Relation, SELF_CONSISTENCY_MIN_SHARED,
+    Shape, Tau,
+};
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::{PointCloud, TriMesh};
@@ -18,7 +22,8 @@ pub const DEFAULT_SAMPLES: usize = 100_000;
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = "\
 Compare a prediction P with a ground truth G: Chamfer distances, normal consistency and \
-F-score.
+angle, precision / recall / F-score at thresholds relative to G's size, the structure of each \
+mesh (area, pieces, holes, watertight), and whether P contains G (self-consistency).
 
 Inputs: a file with faces (.ply with a face element, .obj, .gltf, .glb) is a mesh and is \
 sampled area-uniformly (--samples points, each with its triangle's unit normal); a .ply \
@@ -39,9 +44,30 @@ no normals. By default d is point-to-point (k-d tree). With --surface, d(x, S) i
 distance to the triangles of S when S is a mesh (n_nn is then the closest triangle's \
 normal), removing the sampling floor of about 0.5 sqrt(area / N).
 
+Thresholds: by default tau = 0.001, 0.0025, 0.005 and 0.01 times the diagonal of G's \
+bounding box (--tau-fraction F, repeatable, sets other fractions), so a threshold means the \
+same on a 2 m body and a 20 cm head; --tau T (repeatable) gives absolute thresholds in the \
+input's unit instead (e.g. 0.0025 for Recall@2.5mm on data in metres); with either option \
+the default fractions are dropped. JSON: every threshold has tau (absolute) and tau_fraction \
+(null when given absolutely); gt_bbox_diagonal is the diagonal used.
+
+Structure of each mesh side (null for a point cloud; docs/conventions.md §8): area (f64 sum \
+of the triangle areas); components: pieces of triangles connected through shared edges (as \
+Open3D's cluster_connected_triangles; trimesh's split counts the pieces around an edge of \
+3+ triangles separately); largest_component_area_fraction; boundary_edges: edges used by \
+one triangle side (the rims of holes); non_manifold_edges: edges used by more than two; \
+watertight: every edge used by exactly two (trimesh is_watertight); winding_consistent: \
+every such edge traversed once each way (trimesh is_winding_consistent). area_ratio = \
+area(P) / area(G) when both are meshes.
+
+Self-consistency: shared_vertex_fraction is the fraction of G's mesh vertices whose exact \
+f32 position is also a vertex (or point) of P (G must be a mesh). When it is at least 0.5, \
+P contains the mesh it is scored against (e.g. it was made from it), the scores measure \
+self-consistency, not accuracy: the table says so and relation is \"self-consistency\" \
+(else \"accuracy\").
+
 Other tools differ: PyTorch3D sums the two squared means without halving; DTU's script \
-drops distances above 20 mm. Thresholds are in the input's unit (metres for most data: \
-the default taus are 1, 2.5, 5 and 10 mm; Recall@2.5mm is recall at 0.0025).")]
+drops distances above 20 mm.")]
 pub struct EvalArgs {
     /// Prediction: mesh (.ply/.obj/.gltf/.glb) or point cloud (.ply without faces).
     pub pred: PathBuf,
@@ -54,9 +80,14 @@ pub struct EvalArgs {
     /// Seed of the surface sampling (the ground truth uses an independent stream of it).
     #[arg(long, default_value_t = 0, value_name = "S")]
     pub seed: u64,
-    /// F-score threshold, repeatable (default: 0.001 0.0025 0.005 0.01).
+    /// Absolute F-score threshold in the input's unit, repeatable (replaces the default
+    /// fractions).
     #[arg(long = "tau", value_name = "T", value_parser = parse_tau)]
     pub taus: Vec<f64>,
+    /// F-score threshold as a fraction of the ground truth's bounding-box diagonal,
+    /// repeatable [default: 0.001 0.0025 0.005 0.01 without --tau].
+    #[arg(long = "tau-fraction", value_name = "F", value_parser = parse_tau)]
+    pub tau_fractions: Vec<f64>,
     /// Exact point-to-triangle distances to the mesh side(s) instead of to their samples.
     #[arg(long)]
     pub surface: bool,
@@ -96,6 +127,62 @@ impl Input {
     fn is_mesh(&self) -> bool {
         matches!(self, Self::Mesh(..))
     }
+
+    fn mesh(&self) -> Option<&TriMesh> {
+        match self {
+            Self::Mesh(mesh, _) => Some(mesh),
+            Self::Points(_) => None,
+        }
+    }
+
+    /// The diagonal of the bounding box of the mesh's vertices or of the points.
+    fn extent(&self) -> f64 {
+        match self {
+            Self::Mesh(mesh, _) => metrics::bbox_diagonal(mesh.positions()),
+            Self::Points(points) => metrics::bbox_diagonal(points.positions()),
+        }
+    }
+
+    /// Fraction of `gt`'s vertices that are vertices (or points) of `self`; `None` unless
+    /// `gt` is a mesh.
+    fn shared_with(&self, gt: &Self) -> Option<f64> {
+        let gt = gt.mesh()?.positions();
+        match self {
+            Self::Mesh(mesh, _) => metrics::shared_vertex_fraction(gt, mesh.positions()),
+            Self::Points(points) => metrics::shared_vertex_fraction(gt, points.positions()),
+        }
+    }
+}
+
+/// The thresholds asked for: absolute ones (`--tau`) then fractions (`--tau-fraction`), or the
+/// default fractions.
+fn thresholds(args: &EvalArgs) -> Vec<Tau> {
+    if args.taus.is_empty() && args.tau_fractions.is_empty() {
+        return DEFAULT_TAU_FRACTIONS.map(Tau::Fraction).to_vec();
+    }
+    let absolute = args.taus.iter().map(|&t| Tau::Absolute(t));
+    absolute
+        .chain(args.tau_fractions.iter().map(|&f| Tau::Fraction(f)))
+        .collect()
+}
+
+/// What `eval` reports beyond [`Metrics`] (docs/conventions.md §8).
+#[derive(Debug, serde::Serialize)]
+struct Report {
+    #[serde(flatten)]
+    metrics: Metrics,
+    /// Diagonal of the ground truth's bounding box (scales relative thresholds).
+    gt_bbox_diagonal: f64,
+    /// Structure of the prediction when it is a mesh.
+    pred_structure: Option<MeshStats>,
+    /// Structure of the ground truth when it is a mesh.
+    gt_structure: Option<MeshStats>,
+    /// area(P) / area(G) when both are meshes and G has area.
+    area_ratio: Option<f64>,
+    /// Fraction of the ground truth's mesh vertices found bit for bit among P's vertices.
+    shared_vertex_fraction: Option<f64>,
+    /// `accuracy`, or `self-consistency` when P contains G.
+    relation: Relation,
 }
 
 /// Reads `path` as a mesh when it has faces, else as a point cloud; samples meshes.
@@ -154,16 +241,30 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
             args.gt.display()
         );
     }
+    let taus = thresholds(&args);
+    let diagonal = gt.extent();
     let options = MetricsOptions {
-        taus: if args.taus.is_empty() {
-            DEFAULT_TAUS.to_vec()
-        } else {
-            args.taus.clone()
-        },
+        taus: metrics::resolve_taus(&taus, diagonal).map_err(|_| {
+            anyhow::anyhow!(
+                "{}: the ground truth's bounding-box diagonal is {diagonal}, so thresholds \
+                 relative to it (--tau-fraction, the default) are not positive; give \
+                 absolute ones with --tau",
+                args.gt.display()
+            )
+        })?,
         surface: args.surface,
     };
     spinner.set_message("eval: computing");
-    let result = metrics::evaluate(pred.shape(), gt.shape(), &options).map_err(|e| {
+    let (result, (pred_structure, gt_structure)) = rayon::join(
+        || metrics::evaluate(pred.shape(), gt.shape(), &options),
+        || {
+            rayon::join(
+                || pred.mesh().map(MeshStats::of),
+                || gt.mesh().map(MeshStats::of),
+            )
+        },
+    );
+    let result = result.map_err(|e| {
         let file = match &e {
             metrics::MetricsError::Empty(metrics::Side::Prediction)
             | metrics::MetricsError::Spatial {
@@ -174,11 +275,25 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
         };
         anyhow::anyhow!("{}: {e}", file.display())
     })?;
+    let shared_vertex_fraction = pred.shared_with(&gt);
+    let area_ratio = match (&pred_structure, &gt_structure) {
+        (Some(p), Some(g)) if g.area > 0.0 => Some(p.area / g.area),
+        _ => None,
+    };
+    let report = Report {
+        metrics: result.with_tau_fractions(&taus),
+        gt_bbox_diagonal: diagonal,
+        pred_structure,
+        gt_structure,
+        area_ratio,
+        shared_vertex_fraction,
+        relation: Relation::from_shared_fraction(shared_vertex_fraction),
+    };
     spinner.finish_and_clear();
     if args.json {
-        println!("{}", serde_json::to_string(&result)?);
+        println!("{}", serde_json::to_string(&report)?);
     } else {
-        print_table(&args, &pred, &gt, &result);
+        print_table(&args, &pred, &gt, &report);
     }
     Ok(())
 }
@@ -191,7 +306,8 @@ fn describe(input: &Input) -> &'static str {
     }
 }
 
-fn print_table(args: &EvalArgs, pred: &Input, gt: &Input, m: &Metrics) {
+fn print_table(args: &EvalArgs, pred: &Input, gt: &Input, r: &Report) {
+    let m = &r.metrics;
     let mode = if args.surface {
         "surface (exact distance to mesh triangles)"
     } else {
@@ -210,6 +326,26 @@ fn print_table(args: &EvalArgs, pred: &Input, gt: &Input, m: &Metrics) {
         m.n_gt
     );
     println!("mode        {mode}");
+    println!("gt bbox diagonal  {}", r.gt_bbox_diagonal);
+    match (r.relation, r.shared_vertex_fraction) {
+        (Relation::SelfConsistency, Some(f)) => {
+            println!(
+                "relation    SELF-CONSISTENCY, NOT ACCURACY: {:.1}% (>= {:.0}%) of the truth's \
+                 vertices are vertices of the\n            prediction, which contains the mesh \
+                 it is scored against: the scores below say how well it\n            reproduces \
+                 its own input, not how accurate it is.",
+                100.0 * f,
+                100.0 * SELF_CONSISTENCY_MIN_SHARED
+            );
+        }
+        (_, Some(f)) => println!(
+            "relation    accuracy ({:.1}% of the truth's vertices are vertices of the prediction)",
+            100.0 * f
+        ),
+        (_, None) => println!(
+            "relation    accuracy (the truth is a point cloud: shared vertices not checked)"
+        ),
+    }
     println!();
     let opt =
         |v: Option<f64>| v.map_or_else(|| "n/a (no normals)".to_owned(), |x| format!("{x:.6}"));
@@ -221,18 +357,53 @@ fn print_table(args: &EvalArgs, pred: &Input, gt: &Input, m: &Metrics) {
     println!("normal_angle_deg    {}", opt(m.normal_angle_deg));
     println!();
     println!(
-        "{:>12}  {:>9}  {:>9}  {:>9}",
-        "tau", "precision", "recall", "fscore"
+        "{:>12}  {:>10}  {:>9}  {:>9}  {:>9}",
+        "tau", "of diag", "precision", "recall", "fscore"
     );
     for t in &m.thresholds {
         println!(
-            "{:>12}  {:>9.4}  {:>9.4}  {:>9.4}",
-            format!("{}", t.tau),
+            "{:>12}  {:>10}  {:>9.4}  {:>9.4}  {:>9.4}",
+            if t.tau_fraction.is_some() {
+                format!("{:.4e}", t.tau)
+            } else {
+                format!("{}", t.tau)
+            },
+            t.tau_fraction
+                .map_or_else(|| "-".to_owned(), |f| format!("{f}")),
             t.precision,
             t.recall,
             t.fscore
         );
     }
+    if r.pred_structure.is_some() || r.gt_structure.is_some() {
+        println!();
+        print_structure(r);
+    }
     println!();
     println!("computed in {:.3} s", m.seconds);
+}
+
+/// The structure of both sides, side by side (`-` for a point cloud).
+fn print_structure(r: &Report) {
+    let (p, g) = (r.pred_structure.as_ref(), r.gt_structure.as_ref());
+    let row = |name: &str, f: &dyn Fn(&MeshStats) -> String| {
+        let cell = |s: Option<&MeshStats>| s.map_or_else(|| "-".to_owned(), f);
+        println!("{name:<20}  {:>14}  {:>14}", cell(p), cell(g));
+    };
+    let yes = |b: bool| if b { "yes" } else { "no" }.to_owned();
+    println!("{:<20}  {:>14}  {:>14}", "structure", "prediction", "truth");
+    row("triangles", &|s| s.triangles.to_string());
+    row("area", &|s| format!("{:.6e}", s.area));
+    row("components", &|s| s.components.to_string());
+    row("largest component", &|s| {
+        s.largest_component_area_fraction
+            .map_or_else(|| "-".to_owned(), |f| format!("{:.2}% area", 100.0 * f))
+    });
+    row("boundary edges", &|s| s.boundary_edges.to_string());
+    row("non-manifold edges", &|s| s.non_manifold_edges.to_string());
+    row("watertight", &|s| yes(s.watertight));
+    row("winding consistent", &|s| yes(s.winding_consistent));
+    if let Some(ratio) = r.area_ratio {
+        println!("area ratio (P / G)    {ratio:.4}");
+    }
 }

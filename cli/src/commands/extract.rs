@@ -9,6 +9,7 @@ use trisplat_pipeline::{
     RunControl,
 };
 
+use trisplat_geometry::metrics::Relation;
 use trisplat_pipeline::avatar::{AvatarFolder, GaussianLayout};
 
 use super::Context;
@@ -54,12 +55,23 @@ nearest-neighbour spacing of the rest-pose means (3 x leaves holes on real templ
 --gt GT: a mesh file (a static ground truth for every frame) or the word `template`: each \
 frame's deformed template; --gt-sequence DIR|PATTERN: one mesh per frame (a folder or pattern of \
 OBJ/PLY files in natural order, file i for animation frame i; scans may differ in topology). Metrics as `trisplat eval --surface` (docs/conventions.md §8): --samples points per \
-mesh, exact point-to-triangle distances, Chamfer L1/L2, normal consistency, F-score at --tau.
+mesh, exact point-to-triangle distances, Chamfer L1/L2, normal consistency and angle, \
+precision, recall and F-score at tau = --tau-fraction (default 0.005) x each frame's \
+ground-truth bounding-box diagonal, or at an absolute --tau; the structure of each mesh \
+(area and area ratio to the ground truth, connected components and the largest one's share \
+of the area, boundary and non-manifold edges, watertight, winding). Self-consistency: when a \
+mesh contains at least half of the ground truth's vertices (bit for bit) it is scored \
+against its own input, and its scores are labelled self-consistency, not accuracy, in \
+report.json (relation), report.md and the plot: the delaunay method's meshes contain the \
+deformed template's vertices, so with --gt template its scores are self-consistency; score \
+it against a ground truth it did not consume (--gt MESH, --gt-sequence).
 
 Outputs in DIR: <method>/frame_NNNNNN.ply (NNNNNN = the animation's frame index), <method>.glb \
 (the animated sequence), journal.jsonl (the run journal), report.json (per method and frame: ms, vertices, faces, watertight, \
-metrics; per-method means), report.md (the same as tables), error_vs_time.png (Chamfer L1 \
-against ms/frame per method, log axes; without --gt: ms per frame). Times cover each method's \
+metrics with each frame's absolute tau, structure and relation; per-method means and relation; \
+tau_fraction or the absolute tau), report.md (the same as tables), error_vs_time.png (Chamfer \
+L1 against ms/frame per method, log axes, self-consistency starred; without --gt: ms per \
+frame). Times cover each method's \
 own work (rendering included for tsdf); deformation is reported separately.
 
 --explain prints the plan and exits without reading or writing anything.
@@ -261,8 +273,9 @@ pub fn run_with_progress(
     Ok(result?)
 }
 
-/// Prints one line per method (ms/frame, Chamfer L1, faces, watertight frames) and the outputs.
-/// `targets`: the outputs written; `journal`: whether a run journal was written too.
+/// Prints one line per method (ms/frame, Chamfer L1 and what it measures, faces, watertight
+/// frames) and the outputs. `targets`: the outputs written; `journal`: whether a run journal
+/// was written too.
 pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], journal: bool) {
     println!(
         "{} frame(s), {} Gaussians, deformation {:.2} ms/frame",
@@ -271,8 +284,8 @@ pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], jour
         report.deform_ms.iter().sum::<f64>() / report.deform_ms.len().max(1) as f64
     );
     println!(
-        "{:<10} {:>10} {:>12} {:>10} {:>11}",
-        "method", "ms/frame", "Chamfer L1", "faces", "watertight"
+        "{:<10} {:>10} {:>12} {:<17} {:>10} {:>11}",
+        "method", "ms/frame", "Chamfer L1", " scored as", "faces", "watertight"
     );
     for m in report.ordered() {
         let a = &m.mean;
@@ -280,13 +293,24 @@ pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], jour
             .chamfer_l1
             .map_or_else(|| "-".to_owned(), |c| format!("{c:.4e}"));
         println!(
-            "{:<10} {:>10.2} {:>12} {:>10.0} {:>11}",
+            "{:<10} {:>10.2} {:>12} {:<17} {:>10.0} {:>11}",
             m.method.name(),
             a.ms,
             chamfer,
+            format!(" {}", m.relation.map_or("-", |r| r.name())),
             a.faces,
             format!("{}/{}", a.watertight_frames, a.frames)
         );
+    }
+    for m in report.ordered() {
+        if m.relation == Some(Relation::SelfConsistency) {
+            println!(
+                "{}: its meshes contain the ground truth's vertices: the scores are \
+                 self-consistency, not accuracy (score it against a ground truth it did not \
+                 consume)",
+                m.method.name()
+            );
+        }
     }
     let mut written = Vec::new();
     if targets.contains(&OutputTarget::Meshes) {
