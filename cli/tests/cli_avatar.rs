@@ -361,3 +361,85 @@ fn deform_reads_an_avatar_folder_and_a_clip_from_another_file() {
     ]));
     assert!(line.contains("--clip-from"), "{line}");
 }
+
+#[test]
+fn gt_gaussians_scores_against_the_surface_of_the_centres() {
+    let dir = fresh_dir("avatar_gt_gaussians");
+    let avatar = fixture("lam_mini");
+    let track = fixture("lam_mini/expression.json");
+    let out = dir.join("run");
+    run_ok(&[
+        "extract",
+        "--avatar",
+        &avatar,
+        "--animation",
+        &track,
+        "--method",
+        "tsdf,delaunay",
+        "--frames",
+        "0..2",
+        "--gt",
+        "gaussians",
+        "--views",
+        "8",
+        "--resolution",
+        "64",
+        "-q",
+        "-o",
+        s(&out),
+    ]);
+    let r = report(&out);
+    assert_eq!(r["ground_truth"], "gaussians", "{r}");
+    // The delaunay meshes hold the Gaussians' centres: scored against themselves.
+    assert_eq!(r["methods"]["delaunay"]["relation"], "self-consistency");
+    assert_eq!(r["methods"]["tsdf"]["relation"], "accuracy");
+    // The ground truth's vertices are the deformed centres `deform` writes.
+    let deformed = dir.join("deformed");
+    run_ok(&[
+        "deform",
+        "--avatar",
+        &avatar,
+        "--animation",
+        &track,
+        "--frames",
+        "0..1",
+        "-q",
+        "-o",
+        s(&deformed),
+    ]);
+    let centres = trisplat_geometry::io::read_points(&deformed.join("frame_000000.ply"))
+        .expect("deformed centres");
+    let (lo, hi) = centres.positions().iter().fold(
+        (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    let diagonal = (hi - lo).as_dvec3().length();
+    let metrics = &r["methods"]["tsdf"]["frames"][0]["metrics"];
+    let gt_diagonal = metrics["gt_diagonal"].as_f64().expect("gt_diagonal");
+    assert!(
+        (gt_diagonal - diagonal).abs() <= 1e-6 * diagonal,
+        "{gt_diagonal} vs {diagonal}"
+    );
+    assert!(metrics["chamfer_l1"].as_f64().expect("chamfer") > 0.0);
+
+    // Gaussians bound here (several per triangle) have no per-vertex surface: refused.
+    let refused = run(&[
+        "extract",
+        "--template",
+        &fixture("lam_mini/skin.glb"),
+        "--animation",
+        &track,
+        "--method",
+        "alpha",
+        "--gt",
+        "gaussians",
+        "-q",
+        "-o",
+        s(&dir.join("refused")),
+    ]);
+    let line = one_error_line(&refused);
+    assert!(
+        line.contains("--gt gaussians") && line.contains("per triangle"),
+        "{line}"
+    );
+}

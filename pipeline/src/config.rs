@@ -163,6 +163,11 @@ impl DepthKind {
 pub enum GroundTruth {
     /// Each frame's deformed template (`--gt template`).
     Template,
+    /// Each frame's surface of the Gaussians' centres (`--gt gaussians`): the template as
+    /// stored with vertex `i` at the deformed centre of Gaussian `i`, for avatars with one
+    /// Gaussian per template vertex (LAM's layout), where the centres sit up to centimetres
+    /// off the skin.
+    Gaussians,
     /// One static mesh for every frame.
     Mesh(PathBuf),
     /// One mesh per frame (`--gt-sequence`): a folder or pattern of OBJ/PLY files, taken in
@@ -177,6 +182,8 @@ impl GroundTruth {
     pub fn parse(value: &str) -> Self {
         if value == "template" {
             Self::Template
+        } else if value == "gaussians" {
+            Self::Gaussians
         } else {
             Self::Mesh(PathBuf::from(value))
         }
@@ -187,6 +194,7 @@ impl GroundTruth {
     pub fn label(&self) -> String {
         match self {
             Self::Template => "template".to_owned(),
+            Self::Gaussians => "gaussians".to_owned(),
             Self::Mesh(p) => p.display().to_string(),
             Self::Sequence(spec) => spec.clone(),
         }

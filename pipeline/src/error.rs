@@ -312,6 +312,15 @@ pub enum PipelineError {
         /// Why.
         problem: String,
     },
+    /// `--gt gaussians` with Gaussians that are not one per template vertex.
+    #[error(
+        "--gt gaussians needs one Gaussian per template vertex (LAM's layout, --avatar or \
+         --layout lam): {problem}"
+    )]
+    GtGaussians {
+        /// Why.
+        problem: String,
+    },
     /// A `--gt-sequence` that cannot serve the frames.
     #[error("--gt-sequence {spec}: {problem}")]
     GtSequence {

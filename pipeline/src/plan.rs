@@ -219,6 +219,11 @@ impl Plan {
             Some(gt) => {
                 let against = match gt {
                     GroundTruth::Template => "each frame's deformed template".to_owned(),
+                    GroundTruth::Gaussians => {
+                        "each frame's surface of the Gaussians' centres (the stored template \
+                         with vertex i at Gaussian i)"
+                            .to_owned()
+                    }
                     GroundTruth::Mesh(p) => format!("the static mesh {}", p.display()),
                     GroundTruth::Sequence(spec) => format!("one mesh per frame from {spec}"),
                 };

@@ -108,6 +108,9 @@ pub struct Session {
     static_gt: Option<GtSamples>,
     /// `--gt-sequence`: the ground-truth mesh file of each animation frame.
     gt_files: Vec<PathBuf>,
+    /// `--gt gaussians`: the stored template's triangles, over the Gaussians (Gaussian `i`
+    /// is stored vertex `i`).
+    gaussian_gt_triangles: Vec<[u32; 3]>,
     samples: usize,
     /// The F-score threshold (a fraction is of each frame's ground-truth diagonal).
     tau: Tau,
@@ -297,6 +300,26 @@ impl Session {
                 ));
             }
         }
+        let gaussian_gt_triangles = match (&config.gt, plan.runs(Stage::Metrics)) {
+            (Some(GroundTruth::Gaussians), true) => {
+                if !matches!(source, GaussianSource::Lam(_)) {
+                    return Err(PipelineError::GtGaussians {
+                        problem: format!("the Gaussians are {}", source_words(&source)),
+                    });
+                }
+                if set.len() != stored.vertex_count() {
+                    return Err(PipelineError::GtGaussians {
+                        problem: format!(
+                            "{} Gaussians for {} template vertices",
+                            set.len(),
+                            stored.vertex_count()
+                        ),
+                    });
+                }
+                stored.triangles().to_vec()
+            }
+            _ => Vec::new(),
+        };
         let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
 
         input_files.push(config.template.clone());
@@ -320,6 +343,7 @@ impl Session {
             gt: config.gt.clone(),
             static_gt,
             gt_files,
+            gaussian_gt_triangles,
             samples: o.samples,
             tau: o.threshold(),
             fps: o.fps,
@@ -539,6 +563,18 @@ impl Session {
                     })?,
                 )
             }
+            (Some(GroundTruth::Gaussians), true) => {
+                let mesh = TriMesh::new_unchecked(
+                    self.scratch.means.clone(),
+                    self.gaussian_gt_triangles.clone(),
+                );
+                Some(
+                    GtSamples::new(mesh, self.samples).ok_or(PipelineError::EmptyGroundTruth {
+                        gt: "gaussians".to_owned(),
+                        frame,
+                    })?,
+                )
+            }
             (Some(GroundTruth::Sequence(_)), true) => {
                 let path = self.gt_files.get(frame).ok_or(PipelineError::Internal {
                     what: "a frame past the checked ground-truth sequence",
@@ -616,6 +652,15 @@ impl Session {
             deform_ms,
             methods,
         })
+    }
+}
+
+/// How the Gaussians came, for an error message.
+fn source_words(source: &GaussianSource) -> String {
+    match source {
+        GaussianSource::File(path) => format!("bound to triangles in {}", path.display()),
+        GaussianSource::Bound(n) => format!("bound here, {n} per triangle"),
+        GaussianSource::Lam(path) => format!("LAM's, from {}", path.display()),
     }
 }
 

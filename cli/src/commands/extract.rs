@@ -52,8 +52,11 @@ and whether the frame was rebuilt.
   alpha     alpha shape of the deformed Gaussian means; --alpha defaults to 6 x the mean \
 nearest-neighbour spacing of the rest-pose means (3 x leaves holes on real templates).
 
---gt GT: a mesh file (a static ground truth for every frame) or the word `template`: each \
-frame's deformed template; --gt-sequence DIR|PATTERN: one mesh per frame (a folder or pattern of \
+--gt GT: a mesh file (a static ground truth for every frame), the word `template`: each \
+frame's deformed template, or the word `gaussians`: each frame's surface of the Gaussians' \
+centres, the template as stored with vertex i at the deformed centre of Gaussian i (avatars \
+with one Gaussian per vertex, LAM's layout, whose centres sit up to centimetres off the skin); \
+--gt-sequence DIR|PATTERN: one mesh per frame (a folder or pattern of \
 OBJ/PLY files in natural order, file i for animation frame i; scans may differ in topology). Metrics as `trisplat eval --surface` (docs/conventions.md §8): --samples points per \
 mesh, exact point-to-triangle distances, Chamfer L1/L2, normal consistency and angle, \
 precision, recall and F-score at tau = --tau-fraction (default 0.005) x each frame's \
@@ -115,7 +118,8 @@ pub struct ExtractArgs {
     /// Frames: `A..B` (B excluded), `A..=B`, `A..`, `..B` or one frame `A` [default: all].
     #[arg(long, value_name = "A..B")]
     pub frames: Option<String>,
-    /// Ground truth: a mesh file, or `template` for each frame's deformed template.
+    /// Ground truth: a mesh file, `template` for each frame's deformed template, or
+    /// `gaussians` for each frame's surface of the Gaussians' centres (LAM avatars).
     #[arg(long, value_name = "GT")]
     pub gt: Option<String>,
     /// Ground truth per frame: a folder or pattern of OBJ/PLY meshes (e.g. scans), the i-th
