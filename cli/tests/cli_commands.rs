@@ -237,3 +237,42 @@ fn sample_counts_are_limited_before_allocation() {
     assert_eq!(zero.status.code(), Some(2));
     assert!(!out.exists());
 }
+
+/// `eval --samples` beyond `--max-samples` is refused before sampling (an allocation abort
+/// before); the limit can be raised.
+#[test]
+fn eval_samples_are_limited_before_allocation() {
+    let mesh = spot();
+    let res = run(&["eval", &mesh, &mesh, "--samples", "100000000000"]);
+    let line = one_error_line(&res);
+    assert!(
+        line.contains("--samples 100000000000: over the limit of 100000000 samples per mesh")
+            && line.contains("--max-samples"),
+        "{line}"
+    );
+    let res = run(&[
+        "eval",
+        &mesh,
+        &mesh,
+        "--samples",
+        "2000",
+        "--max-samples",
+        "1000",
+    ]);
+    assert!(one_error_line(&res).contains("over the limit of 1000"));
+    let res = run(&[
+        "eval",
+        &mesh,
+        &mesh,
+        "--samples",
+        "2000",
+        "--max-samples",
+        "2000",
+        "--json",
+    ]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+}

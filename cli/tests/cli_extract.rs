@@ -610,36 +610,60 @@ fn weights_channels_that_drive_nothing_are_listed_or_refused() {
 #[test]
 fn resource_limits_are_checked_before_anything_runs() {
     let dir = fresh_dir("limits");
+    let (avatar, track) = (fixture("lam_mini"), fixture("lam_mini/expression.json"));
+    let base = |out: &std::path::Path| {
+        vec![
+            "extract".to_owned(),
+            "--avatar".to_owned(),
+            avatar.clone(),
+            "--animation".to_owned(),
+            track.clone(),
+            "--frames".to_owned(),
+            "0..1".to_owned(),
+            "--method".to_owned(),
+            "tsdf".to_owned(),
+            "-q".to_owned(),
+            "-o".to_owned(),
+            s(out).to_owned(),
+        ]
+    };
     for (extra, needle) in [
         (
             &["--views", "100000000"][..],
-            "--views 100000000: at most 4,096",
+            "--views 100000000: over the limit of 4096 views per frame (raise it with \
+             --max-views)",
         ),
-        (&["--voxel", "1e-9"], "at most 65,536 voxels across"),
+        (
+            &["--voxel", "1e-9"],
+            "over the limit of 65536 voxels across the template's bounding sphere (a coarser \
+             --voxel gives fewer) (raise it with --max-voxels)",
+        ),
         (
             &["--samples", "1000000000", "--gt", "template"],
-            "at most 100,000,000 samples",
+            "over the limit of 100000000 samples per mesh (raise it with --max-samples)",
+        ),
+        (
+            &["--views", "30", "--max-views", "20"],
+            "--views 30: over the limit of 20 views per frame",
         ),
     ] {
-        let out = dir.join(extra[0].trim_start_matches('-'));
-        let (avatar, track) = (fixture("lam_mini"), fixture("lam_mini/expression.json"));
-        let mut args = vec![
-            "extract",
-            "--avatar",
-            &avatar,
-            "--animation",
-            &track,
-            "--frames",
-            "0..1",
-            "--method",
-            "tsdf",
-            "-q",
-            "-o",
-            s(&out),
-        ];
-        args.extend(extra);
+        let out = dir.join(format!(
+            "{}_{}",
+            extra[0].trim_start_matches('-'),
+            extra.len()
+        ));
+        let mut args = base(&out);
+        args.extend(extra.iter().map(|a| (*a).to_owned()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let line = one_error_line(&run(&args));
         assert!(line.contains(needle), "{line}");
         assert!(!out.exists(), "{extra:?}: nothing written");
     }
+    // Raised, the same request runs.
+    let out = dir.join("raised");
+    let mut args = base(&out);
+    args.extend(["--views", "30", "--max-views", "40", "--resolution", "16"].map(str::to_owned));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    run_ok(&args);
+    assert!(out.join("report.json").exists());
 }

@@ -2,7 +2,7 @@
 //! files of docs/conventions.md §10, and the refusals (bound Gaussians, bad lists, overwriting an input).
 
 mod common;
-use common::{fixture, fresh_dir, one_error_line, run, s};
+use common::{fixture, fresh_dir, one_error_line, run, run_ok, s};
 
 use trisplat_geometry::io::read_npy;
 
@@ -263,14 +263,66 @@ fn images_past_the_pixel_limit_are_refused_before_anything_is_allocated() {
         );
         assert!(!out.exists(), "nothing written");
     }
-    // `cameras --views` is bounded too (a usage error, exit 2).
-    let o = run(&[
+    // A lower --max-pixels refuses the fixture's own cameras; one above the renderer's
+    // ceiling is a usage error.
+    let (spot, random_cameras) = (
+        fixture("spot_triangulated.obj"),
+        fixture("render/random_cameras.json"),
+    );
+    let line = one_error_line(&run(&[
+        "render",
+        "--mesh",
+        &spot,
+        "--cameras",
+        &random_cameras,
+        "-o",
+        s(&out),
+        "--max-pixels",
+        "100",
+    ]));
+    assert!(
+        line.contains("over the limit of 100 pixels") && line.contains("--max-pixels"),
+        "{line}"
+    );
+    assert!(!out.exists(), "nothing written");
+    let tsdf_out = dir.join("t.ply");
+    let res = run(&[
+        "tsdf",
+        "--cameras",
+        &random_cameras,
+        "--depth",
+        s(&dir),
+        "-o",
+        s(&tsdf_out),
+        "--max-pixels",
+        "1000000000",
+    ]);
+    assert_eq!(res.status.code(), Some(2));
+    // `cameras --views` is bounded by --max-views, which raises it.
+    let cams = dir.join("c.json");
+    let mesh = fixture("spot_triangulated.obj");
+    let line = one_error_line(&run(&[
         "cameras",
-        &fixture("spot_triangulated.obj"),
+        &mesh,
         "--views",
         "1000000000",
         "-o",
-        s(&dir.join("c.json")),
+        s(&cams),
+    ]));
+    assert!(
+        line.contains("over the limit of 100000 views") && line.contains("--max-views"),
+        "{line}"
+    );
+    assert!(!cams.exists());
+    run_ok(&[
+        "cameras",
+        &mesh,
+        "--views",
+        "12",
+        "--max-views",
+        "12",
+        "-o",
+        s(&cams),
     ]);
-    assert_eq!(o.status.code(), Some(2));
+    assert!(cams.exists());
 }

@@ -158,6 +158,43 @@ impl DepthKind {
     }
 }
 
+/// Default of `--max-views`: most TSDF views per frame (each is a depth image rendered and
+/// fused every frame: 4,096 of 256² are 1 GiB of depth).
+pub const DEFAULT_MAX_VIEWS: usize = 4096;
+/// Default of `--max-samples`: most metric samples per mesh (as `sample --max-points`).
+pub const DEFAULT_MAX_SAMPLES: usize = 100_000_000;
+/// Default of `--max-voxels`: most TSDF voxels across the template's bounding sphere.
+pub const DEFAULT_MAX_VOXELS: u64 = 65_536;
+
+/// Resource limits of the main job, checked before anything is allocated; each raised by its
+/// option. They do not change the outputs (a run resumes under other limits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct Limits {
+    /// Most TSDF views per frame (--views).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N",
+        default_value_t = DEFAULT_MAX_VIEWS))]
+    pub max_views: usize,
+    /// Most metric samples per mesh (--samples).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N",
+        default_value_t = DEFAULT_MAX_SAMPLES))]
+    pub max_samples: usize,
+    /// Most TSDF voxels across the template's bounding sphere (--voxel).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N",
+        default_value_t = DEFAULT_MAX_VOXELS))]
+    pub max_voxels: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_views: DEFAULT_MAX_VIEWS,
+            max_samples: DEFAULT_MAX_SAMPLES,
+            max_voxels: DEFAULT_MAX_VOXELS,
+        }
+    }
+}
+
 /// The ground truth of the metrics.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum GroundTruth {
@@ -299,6 +336,9 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_delimiter = ',', value_name = "LIST",
         num_args = 1.., default_values_t = OutputTarget::ALL))]
     pub targets: Vec<OutputTarget>,
+    /// Resource limits.
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub limits: Limits,
 }
 
 /// One kind of output of the main job (`extract --targets`).
@@ -367,6 +407,7 @@ impl Default for ExtractOptions {
             tau_fraction: Some(DEFAULT_TAU_FRACTION),
             strict: false,
             targets: OutputTarget::ALL.to_vec(),
+            limits: Limits::default(),
         }
     }
 }

@@ -64,6 +64,20 @@ pub enum PipelineError {
         /// What it must be.
         expected: &'static str,
     },
+    /// An option asks for more than a resource limit allows (checked before allocating).
+    #[error("--{name} {value}: over the limit of {limit} {what} (raise it with --{option})")]
+    OverLimit {
+        /// The option's name.
+        name: &'static str,
+        /// The value given (for `voxel`: the voxels it gives across the template).
+        value: f64,
+        /// The limit.
+        limit: f64,
+        /// What the limit counts.
+        what: &'static str,
+        /// The option that raises the limit.
+        option: &'static str,
+    },
     /// Two options that do not go together.
     #[error("{problem}")]
     BadCombination {

@@ -79,6 +79,8 @@ pub struct Previous {
 pub fn fingerprint(config: &ExtractConfig) -> String {
     let mut c = config.clone();
     c.output = PathBuf::new();
+    // Limits decide what is refused, not what is written.
+    c.options.limits = crate::config::Limits::default();
     format!("{c:?}")
 }
 

@@ -43,10 +43,6 @@ use crate::error::PipelineError;
 /// and 2DGS).
 pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
-/// Most TSDF voxels across the template's bounding sphere (a given `--voxel` finer than that is
-/// refused: the blocks of one frame would not fit in memory).
-pub const MAX_VOXELS_ACROSS: f64 = 65_536.0;
-
 /// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
 /// point still gets a rig).
 const MIN_RADIUS_REL: f64 = f32::EPSILON as f64;
@@ -133,7 +129,7 @@ impl Resolved {
     ///
     /// # Errors
     /// [`PipelineError::BadOption`] for a given voxel or alpha that is not finite and
-    /// positive, a voxel finer than [`MAX_VOXELS_ACROSS`] allows, or a template without a
+    /// positive, a voxel finer than `--max-voxels` allows, or a template without a
     /// finite extent.
     pub fn new(
         options: &ExtractOptions,
@@ -168,14 +164,16 @@ impl Resolved {
             options.voxel,
             default_voxel(template_radius, spacing),
         )?;
-        // A voxel so fine that the template alone spans more than MAX_VOXELS_ACROSS is refused
+        // A voxel so fine that the template alone spans more than `--max-voxels` is refused
         // before any block is allocated (the default never is: it is at least R / 128).
-        if 2.0 * template_radius / voxel > MAX_VOXELS_ACROSS {
-            return Err(PipelineError::BadOption {
+        let across = 2.0 * template_radius / voxel;
+        if across > options.limits.max_voxels as f64 {
+            return Err(PipelineError::OverLimit {
                 name: "voxel",
                 value: voxel,
-                expected: "a voxel giving at most 65,536 voxels across the template's bounding \
-                           sphere (raise --voxel)",
+                limit: options.limits.max_voxels as f64,
+                what: "voxels across the template's bounding sphere (a coarser --voxel gives fewer)",
+                option: "max-voxels",
             });
         }
         Ok(Self {

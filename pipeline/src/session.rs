@@ -704,27 +704,26 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             expected: "at least one sample",
         });
     }
-    if o.samples > MAX_SAMPLES {
-        return Err(PipelineError::BadOption {
+    if o.samples > o.limits.max_samples {
+        return Err(PipelineError::OverLimit {
             name: "samples",
             value: o.samples as f64,
-            expected: "at most 100,000,000 samples per mesh",
+            limit: o.limits.max_samples as f64,
+            what: "samples per mesh",
+            option: "max-samples",
         });
     }
-    if o.views > MAX_VIEWS {
-        return Err(PipelineError::BadOption {
+    if o.views > o.limits.max_views {
+        return Err(PipelineError::OverLimit {
             name: "views",
             value: o.views as f64,
-            expected: "at most 4,096 views per frame",
+            limit: o.limits.max_views as f64,
+            what: "views per frame",
+            option: "max-views",
         });
     }
     Ok(())
 }
-
-/// Most TSDF views per frame (each is a depth image rendered and fused every frame).
-pub const MAX_VIEWS: usize = 4096;
-/// Most metric samples per mesh (as `sample --max-points`).
-pub const MAX_SAMPLES: usize = 100_000_000;
 
 /// `set` with only the SH degree-0 coefficients and no extra properties: the geometry and
 /// opacity rendering depth needs, so a frame copies 3 SH values per Gaussian instead of up

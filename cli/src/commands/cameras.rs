@@ -19,6 +19,9 @@ pub enum RigArg {
     Orbit,
 }
 
+/// Default of `cameras --max-views`.
+pub const DEFAULT_MAX_VIEWS: u32 = 100_000;
+
 /// Arguments of `trisplat cameras`.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = "\
@@ -35,10 +38,12 @@ pub struct CamerasArgs {
     /// Layout of the views.
     #[arg(long, value_enum, default_value_t = RigArg::Sphere)]
     pub rig: RigArg,
-    /// Number of views (at most 100,000).
-    #[arg(long, default_value_t = 60,
-        value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    /// Number of views (at most --max-views).
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(1..))]
     pub views: u32,
+    /// Most views written (a limit checked before the rig is made).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_VIEWS)]
+    pub max_views: u32,
     /// Image size WxH in pixels.
     #[arg(long, default_value = "512x512", value_parser = parse_size)]
     pub size: (u32, u32),
@@ -64,6 +69,13 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 /// # Errors
 /// An unreadable or empty mesh, an invalid rig, an output equal to the input, a failed write.
 pub fn run(args: CamerasArgs, _ctx: &Context) -> anyhow::Result<()> {
+    if args.views > args.max_views {
+        bail!(
+            "--views {}: over the limit of {} views (raise it with --max-views)",
+            args.views,
+            args.max_views
+        );
+    }
     refuse_to_overwrite(&args.mesh, &args.output)?;
     let points = read_points(&args.mesh)?;
     let Some(bounds) = points.bounds() else {

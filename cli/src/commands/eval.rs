@@ -14,6 +14,7 @@ use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::{PointCloud, TriMesh};
 
 use super::Context;
+use trisplat_pipeline::config::DEFAULT_MAX_SAMPLES;
 
 /// Samples drawn on each mesh input unless `--samples` says otherwise.
 pub const DEFAULT_SAMPLES: usize = 100_000;
@@ -94,6 +95,9 @@ pub struct EvalArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Most samples per mesh (a limit checked before sampling).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SAMPLES)]
+    pub max_samples: usize,
 }
 
 fn parse_samples(s: &str) -> Result<usize, String> {
@@ -227,6 +231,13 @@ fn load(path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
 /// Unreadable inputs, empty inputs (no points or zero area), `--surface` with no mesh input,
 /// coordinates beyond 1e18.
 pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
+    if args.samples > args.max_samples {
+        bail!(
+            "--samples {}: over the limit of {} samples per mesh (raise it with --max-samples)",
+            args.samples,
+            args.max_samples
+        );
+    }
     let spinner = ctx.progress.spinner("eval: loading");
     let gt_seed = splitmix64(args.seed);
     let (pred, gt) = rayon::join(

@@ -71,11 +71,15 @@ fn canonical(path: &Path) -> Option<PathBuf> {
 
 /// Reads a 3DGS cameras.json (a JSON list) or a NeRF transforms.json (an object with `frames`),
 /// told apart by the file's contents; `size` is the image size for a transforms.json without
-/// `w`/`h`.
+/// `w`/`h`. Cameras of more than `max_pixels` pixels are refused before any image exists.
 ///
 /// # Errors
-/// An unreadable or malformed file, or one without cameras.
-pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result<Vec<Camera>> {
+/// An unreadable or malformed file, one without cameras, or a camera over `max_pixels`.
+pub fn read_camera_file(
+    path: &Path,
+    size: Option<(u32, u32)>,
+    max_pixels: u64,
+) -> anyhow::Result<Vec<Camera>> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     let cameras = if text.trim_start().starts_with('{') {
@@ -89,11 +93,11 @@ pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result
     if let Some((i, c)) = cameras
         .iter()
         .enumerate()
-        .find(|(_, c)| u64::from(c.width) * u64::from(c.height) > MAX_IMAGE_PIXELS)
+        .find(|(_, c)| u64::from(c.width) * u64::from(c.height) > max_pixels)
     {
         bail!(
-            "{}: camera {i} ('{}') is {}x{} pixels; images of at most {MAX_IMAGE_PIXELS} pixels \
-             (16384 x 16384) are rendered or read",
+            "{}: camera {i} ('{}') is {}x{} pixels, over the limit of {max_pixels} pixels per \
+             image (raise it with --max-pixels, up to {MAX_IMAGE_PIXELS})",
             path.display(),
             c.name,
             c.width,
@@ -103,9 +107,24 @@ pub fn read_camera_file(path: &Path, size: Option<(u32, u32)>) -> anyhow::Result
     Ok(cameras)
 }
 
-/// Most pixels of one camera's image (`render`, `tsdf`): 16384², checked before any image is
-/// allocated.
+/// Most pixels of one camera's image (`render`, `tsdf`): 16384² (2^28, the renderer's own
+/// ceiling: 1 GiB per float image), the default and the largest value of `--max-pixels`,
+/// checked before any image is allocated.
 pub const MAX_IMAGE_PIXELS: u64 = 16384 * 16384;
+
+/// `--max-pixels N`: a positive number of pixels up to [`MAX_IMAGE_PIXELS`].
+///
+/// # Errors
+/// A value that is not such a number.
+pub fn parse_max_pixels(s: &str) -> Result<u64, String> {
+    match s.parse::<u64>() {
+        Ok(n) if (1..=MAX_IMAGE_PIXELS).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "expected a number of pixels from 1 to {MAX_IMAGE_PIXELS} (the renderer's ceiling), \
+             got '{s}'"
+        )),
+    }
+}
 
 /// A `--clip NAME|INDEX` value: a number is an index, anything else a name; none is the first
 /// (the pipeline's parser, so that every command reads `--clip` alike).

@@ -15,7 +15,7 @@ use trisplat_splat::render::{
     Outputs, RenderImages, RenderMode, RenderOptions, options::DEFAULT_FAR, render,
 };
 
-use super::{Context, read_camera_file, refuse_to_overwrite};
+use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
 
 /// Splatting models.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -96,6 +96,10 @@ pub struct RenderArgs {
     /// Image size WxH for a transforms.json that does not give one.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub image_size: Option<(u32, u32)>,
+    /// Most pixels of one camera's image (a limit checked before any image exists; at most
+    /// 16384 x 16384).
+    #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
+    pub max_pixels: u64,
 }
 
 fn parse_outputs(s: &str) -> Result<Outputs, String> {
@@ -139,7 +143,7 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 /// Unreadable inputs, bound (local) Gaussians, bad options, an output
 /// folder equal to an input, a failed write.
 pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
-    let cameras = read_camera_file(&args.cameras, args.image_size)?;
+    let cameras = read_camera_file(&args.cameras, args.image_size, args.max_pixels)?;
     refuse_shared_names(&args.cameras, &cameras)?;
     // Image files that exist before the run are left alone; on failure the ones this run
     // wrote are removed (nothing half-done is left behind).

@@ -13,7 +13,7 @@ use trisplat_pipeline::config::DepthKind;
 use trisplat_pipeline::methods::rendered_depth;
 use trisplat_splat::ply::read_gaussians;
 
-use super::{Context, read_camera_file, refuse_to_overwrite};
+use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
 
 /// Arguments of `trisplat tsdf`.
 #[derive(Debug, clap::Args)]
@@ -61,6 +61,10 @@ pub struct TsdfArgs {
     /// Also read <img_name>_rgb.npy/.png from the depth folder and colour the vertices.
     #[arg(long)]
     pub colors: bool,
+    /// Most pixels of one camera's image (a limit checked before any image exists; at most
+    /// 16384 x 16384).
+    #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
+    pub max_pixels: u64,
     /// With --gaussians: which rendered depth to fuse (median: where the accumulated alpha
     /// reaches 1/2; expected: the alpha-weighted mean depth).
     #[arg(long, value_enum, default_value_t = DepthKind::default(), requires = "gaussians")]
@@ -77,7 +81,7 @@ pub struct TsdfArgs {
 /// is an input, a failed write.
 pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     refuse_to_overwrite(&args.cameras, &args.output)?;
-    let cameras = read_camera_file(&args.cameras, None)?;
+    let cameras = read_camera_file(&args.cameras, None, args.max_pixels)?;
     let spinner = ctx.progress.spinner("reading depth maps");
     let (depths, colors, source) = match (&args.depth, &args.gaussians) {
         (_, Some(gaussians)) => {
