@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use trisplat_extract::tsdf::{
-    DEFAULT_DEPTH_SCALE, DepthImage, TsdfOptions, fuse, read_color_dir, read_depth_dir,
+    DEFAULT_DEPTH_SCALE, DepthImage, TsdfOptions, find_image, fuse, fuse_streamed, read_color,
+    read_depth,
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
@@ -82,28 +83,35 @@ pub struct TsdfArgs {
 pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     refuse_to_overwrite(&args.cameras, &args.output)?;
     let cameras = read_camera_file(&args.cameras, None, args.max_pixels)?;
-    let spinner = ctx.progress.spinner("reading depth maps");
-    let (depths, colors, source) = match (&args.depth, &args.gaussians) {
+    let spinner = ctx.progress.spinner("fusing");
+    let fused = match (&args.depth, &args.gaussians) {
         (_, Some(gaussians)) => {
             refuse_to_overwrite(gaussians, &args.output)?;
             spinner.set_message("rendering depth maps");
             let depths = render_depths(gaussians, &cameras, args.depth_kind)?;
-            (depths, None, gaussians.clone())
+            spinner.set_message("fusing");
+            fuse(&cameras, &depths, None, &args.options)
+                .with_context(|| format!("{}: fusion failed", gaussians.display()))?
         }
         (Some(dir), None) => {
-            let depths = read_depth_dir(dir, &cameras, args.depth_scale)?;
-            let colors = if args.colors {
-                Some(read_color_dir(dir, &cameras)?)
-            } else {
-                None
+            // Read a batch of views at a time, twice (allocation, integration): memory does
+            // not grow with the number of views.
+            let load = |i: usize| {
+                let camera = &cameras[i];
+                let depth =
+                    read_depth(&find_image(dir, camera, "depth")?, camera, args.depth_scale)?;
+                let color = if args.colors {
+                    Some(read_color(&find_image(dir, camera, "rgb")?, camera)?)
+                } else {
+                    None
+                };
+                Ok((depth, color))
             };
-            (depths, colors, dir.clone())
+            fuse_streamed(&cameras, load, args.colors, &args.options)
+                .with_context(|| format!("{}: fusion failed", dir.display()))?
         }
         (None, None) => anyhow::bail!("give --depth DIR or --gaussians G.ply"),
     };
-    spinner.set_message("fusing");
-    let fused = fuse(&cameras, &depths, colors.as_deref(), &args.options)
-        .with_context(|| format!("{}: fusion failed", source.display()))?;
     spinner.finish_and_clear();
     write_mesh(&args.output, &fused.mesh, WriteOptions::default())?;
     Ok(())

@@ -212,19 +212,55 @@ pub fn fuse(
         })
         .collect();
     let mut volume = TsdfVolume::new(params, colors.is_some())?.with_max_blocks(options.max_blocks);
-    let (allocate_seconds, integrate_seconds) = volume.integrate_timed(&frames)?;
+    let seconds = volume.integrate_timed(&frames)?;
+    Ok(finish(&volume, options, seconds))
+}
+
+/// [`fuse`] with the views produced on demand by `load(i)` (view `i`'s depth image, and its
+/// colour image when `with_color`), a batch at a time ([`TsdfVolume::integrate_streamed`]):
+/// memory does not grow with the number of views, and reading is timed with the fusion. The
+/// mesh is [`fuse`]'s on the same images.
+///
+/// # Errors
+/// `load`'s errors; as [`fuse`].
+pub fn fuse_streamed<L>(
+    cameras: &[Camera],
+    load: L,
+    with_color: bool,
+    options: &TsdfOptions,
+) -> Result<Fused, TsdfError>
+where
+    L: Fn(usize) -> Result<(DepthImage, Option<ColorImage>), TsdfError> + Sync,
+{
+    let params = options.resolve(cameras)?;
+    let mut volume = TsdfVolume::new(params, with_color)?.with_max_blocks(options.max_blocks);
+    let seconds = volume.integrate_streamed(cameras, |i| {
+        let (depth, color) = load(i)?;
+        if with_color && color.is_none() {
+            return Err(TsdfError::NoColor {
+                camera: cameras[i].name.clone(),
+            });
+        }
+        Ok((depth, color.filter(|_| with_color)))
+    })?;
+    Ok(finish(&volume, options, seconds))
+}
+
+/// Marching cubes and clean-up of an integrated volume; `seconds` = (allocation,
+/// integration).
+fn finish(volume: &TsdfVolume, options: &TsdfOptions, seconds: (f64, f64)) -> Fused {
     let start = Instant::now();
     let raw = volume.extract_mesh();
     let mc_seconds = start.elapsed().as_secs_f64();
     let mesh = post_process(&raw, options.keep_clusters);
-    Ok(Fused {
+    Fused {
         mesh,
-        params,
+        params: volume.params(),
         blocks: volume.grid().block_count(),
         raw_triangles: raw.triangle_count(),
-        allocate_seconds,
-        integrate_seconds,
+        allocate_seconds: seconds.0,
+        integrate_seconds: seconds.1,
         marching_cubes_seconds: mc_seconds,
         extract_seconds: start.elapsed().as_secs_f64(),
-    })
+    }
 }

@@ -45,7 +45,7 @@ use trisplat_geometry::{Camera, TriMesh};
 
 pub use self::fuse::{
     DEFAULT_KEEP_CLUSTERS, DEFAULT_TRUNC_VOXELS, DEFAULT_VOXELS_PER_DEPTH_TRUNC, Fused,
-    TsdfOptions, fuse, post_process, scene_radius,
+    TsdfOptions, fuse, fuse_streamed, post_process, scene_radius,
 };
 pub use self::grid::BlockGrid;
 use self::grid::{BLOCK, BLOCK_VOXELS, KeyMap, local_coords};
@@ -81,6 +81,40 @@ const RECIPROCALS: [f64; 256] = {
     }
     out
 };
+
+/// The frames of `cameras` with their loaded `images` (same order).
+fn frames_of<'a>(
+    cameras: &'a [Camera],
+    images: &'a [(DepthImage, Option<ColorImage>)],
+) -> Vec<Frame<'a>> {
+    cameras
+        .iter()
+        .zip(images)
+        .map(|(camera, (depth, color))| Frame {
+            camera,
+            depth,
+            color: color.as_ref(),
+        })
+        .collect()
+}
+
+/// Memory for the per-view tables of one batch of [`TsdfVolume::integrate_streamed`] (the
+/// images, their depth, ray and tile tables: about 25 bytes per pixel, 45 with colour): 60
+/// views of 512² make two batches.
+pub const STREAM_BUDGET_BYTES: usize = 256 << 20;
+
+/// Views per batch of [`TsdfVolume::integrate_streamed`]: as many of the largest camera's
+/// size as fit in [`STREAM_BUDGET_BYTES`], at least one.
+fn views_per_batch(cameras: &[Camera], with_color: bool) -> usize {
+    let per_pixel = if with_color { 45 } else { 25 };
+    let largest = cameras
+        .iter()
+        .map(|c| c.width as usize * c.height as usize)
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    (STREAM_BUDGET_BYTES / (largest * per_pixel)).max(1)
+}
 
 /// Side of the square pixel tiles whose largest depth culls blocks behind the surface.
 const TILE: usize = 16;
@@ -244,7 +278,9 @@ struct Prepared<'a> {
 }
 
 impl<'a> Prepared<'a> {
-    fn new(frame: &Frame<'a>, depth_trunc: f64) -> Result<Self, TsdfError> {
+    /// The tables of `frame`; the per-pixel (depth, ray factor) pairs only `for_integration`
+    /// (allocation needs the depths and tiles alone).
+    fn new(frame: &Frame<'a>, depth_trunc: f64, for_integration: bool) -> Result<Self, TsdfError> {
         let cam = frame.camera;
         let (width, height) = (cam.width as usize, cam.height as usize);
         if (frame.depth.width(), frame.depth.height()) != (cam.width, cam.height) {
@@ -275,15 +311,19 @@ impl<'a> Prepared<'a> {
         let row_sq: Vec<f64> = (0..height)
             .map(|i| ((i as f64 + 0.5 - cam.cy) / cam.fy).powi(2))
             .collect();
-        let samples = depth
-            .chunks_exact(width)
-            .zip(&row_sq)
-            .flat_map(|(row, &y2)| {
-                row.iter()
-                    .zip(&col_sq)
-                    .map(move |(&d, &x2)| [f64::from(d), (1.0 + x2 + y2).sqrt()])
-            })
-            .collect();
+        let samples = if !for_integration {
+            Vec::new()
+        } else {
+            depth
+                .chunks_exact(width)
+                .zip(&row_sq)
+                .flat_map(|(row, &y2)| {
+                    row.iter()
+                        .zip(&col_sq)
+                        .map(move |(&d, &x2)| [f64::from(d), (1.0 + x2 + y2).sqrt()])
+                })
+                .collect()
+        };
         let tiles_x = width.div_ceil(TILE);
         let tiles_y = height.div_ceil(TILE);
         let mut tile_max = vec![0.0f32; tiles_x * tiles_y];
@@ -511,16 +551,31 @@ impl TsdfVolume {
     /// [`TsdfError::OutOfRange`] for points too far from the origin,
     /// [`TsdfError::TooManyBlocks`] past the block cap.
     pub fn allocate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        let prepared = self.prepare(frames)?;
+        let prepared = self.prepare(frames, false)?;
         self.allocate_prepared(&prepared)
     }
 
     /// [`TsdfVolume::allocate`] on frames prepared by [`TsdfVolume::prepare`].
     fn allocate_prepared(&mut self, prepared: &[Prepared<'_>]) -> Result<(), TsdfError> {
-        let limit = self.max_blocks;
-        let params = self.params;
-        let origin = self.grid.origin;
-        let mut all = frame_blocks(prepared, params, origin, limit, DENSE_MARK_CELLS)?;
+        let keys = self.blocks_near(prepared)?;
+        self.add_blocks(keys)
+    }
+
+    /// Keys of the blocks near the observed depth of `prepared`, sorted and unique (existing
+    /// blocks included).
+    fn blocks_near(&self, prepared: &[Prepared<'_>]) -> Result<Vec<IVec3>, TsdfError> {
+        frame_blocks(
+            prepared,
+            self.params,
+            self.grid.origin,
+            self.max_blocks,
+            DENSE_MARK_CELLS,
+        )
+    }
+
+    /// Adds the blocks of `all` (sorted and unique) that do not exist yet, in that order.
+    fn add_blocks(&mut self, mut all: Vec<IVec3>) -> Result<(), TsdfError> {
+        let (limit, params) = (self.max_blocks, self.params);
         all.retain(|k| !self.grid.lookup.contains_key(k));
         if self.grid.block_count() + all.len() > limit {
             return Err(TsdfError::TooManyBlocks {
@@ -540,7 +595,7 @@ impl TsdfVolume {
     /// [`TsdfError::ImageSize`] for an image of the wrong size, [`TsdfError::NoColor`] when
     /// the volume has colour and a frame has none.
     pub fn integrate_allocated(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        let prepared = self.prepare(frames)?;
+        let prepared = self.prepare(frames, true)?;
         self.integrate_prepared(&prepared);
         Ok(())
     }
@@ -590,10 +645,70 @@ impl TsdfVolume {
     /// # Errors
     /// As [`TsdfVolume::allocate`] and [`TsdfVolume::integrate_allocated`].
     pub fn integrate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        let prepared = self.prepare(frames)?;
+        let prepared = self.prepare(frames, true)?;
         self.allocate_prepared(&prepared)?;
         self.integrate_prepared(&prepared);
         Ok(())
+    }
+
+    /// [`TsdfVolume::integrate`] with views produced on demand, a batch at a time, so that
+    /// memory does not grow with the number of views: `load(i)` gives view `i`'s depth image
+    /// (and colour image for a coloured volume), read or made when needed, twice per view
+    /// (allocation, then integration), views of a batch in parallel. Batches hold as many
+    /// views as fit in [`STREAM_BUDGET_BYTES`] of per-view tables (at least one). The result
+    /// is [`TsdfVolume::integrate`]'s on all the views at once. Returns (seconds reading and
+    /// allocating, seconds reading and integrating).
+    ///
+    /// # Errors
+    /// `load`'s errors, and those of [`TsdfVolume::integrate`].
+    pub fn integrate_streamed<L>(
+        &mut self,
+        cameras: &[Camera],
+        load: L,
+    ) -> Result<(f64, f64), TsdfError>
+    where
+        L: Fn(usize) -> Result<(DepthImage, Option<ColorImage>), TsdfError> + Sync,
+    {
+        let batch = views_per_batch(cameras, self.grid.has_color());
+        self.integrate_in_batches(cameras, load, batch)
+    }
+
+    /// [`TsdfVolume::integrate_streamed`] with `batch` views per batch.
+    fn integrate_in_batches<L>(
+        &mut self,
+        cameras: &[Camera],
+        load: L,
+        batch: usize,
+    ) -> Result<(f64, f64), TsdfError>
+    where
+        L: Fn(usize) -> Result<(DepthImage, Option<ColorImage>), TsdfError> + Sync,
+    {
+        let batch = batch.max(1);
+        let load_batch = |views: std::ops::Range<usize>| -> Result<Vec<_>, TsdfError> {
+            views.into_par_iter().map(&load).collect()
+        };
+        let batches: Vec<std::ops::Range<usize>> = (0..cameras.len())
+            .step_by(batch)
+            .map(|start| start..(start + batch).min(cameras.len()))
+            .collect();
+        let start = std::time::Instant::now();
+        let mut keys = Vec::new();
+        for range in &batches {
+            let images = load_batch(range.clone())?;
+            let prepared = self.prepare(&frames_of(&cameras[range.clone()], &images), false)?;
+            keys.extend(self.blocks_near(&prepared)?);
+            keys.par_sort_unstable_by_key(|k| (k.z, k.y, k.x));
+            keys.dedup();
+        }
+        self.add_blocks(keys)?;
+        let allocate = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        for range in &batches {
+            let images = load_batch(range.clone())?;
+            let prepared = self.prepare(&frames_of(&cameras[range.clone()], &images), true)?;
+            self.integrate_prepared(&prepared);
+        }
+        Ok((allocate, start.elapsed().as_secs_f64()))
     }
 
     /// [`TsdfVolume::integrate`], timed: (seconds preparing the frames and allocating,
@@ -603,7 +718,7 @@ impl TsdfVolume {
         frames: &[Frame<'_>],
     ) -> Result<(f64, f64), TsdfError> {
         let start = std::time::Instant::now();
-        let prepared = self.prepare(frames)?;
+        let prepared = self.prepare(frames, true)?;
         self.allocate_prepared(&prepared)?;
         let allocate = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
@@ -619,8 +734,13 @@ impl TsdfVolume {
         marching_cubes(&self.grid)
     }
 
-    /// The per-frame data of `frames` (checked sizes, camera maths, depth and ray tables).
-    fn prepare<'a>(&self, frames: &[Frame<'a>]) -> Result<Vec<Prepared<'a>>, TsdfError> {
+    /// The per-frame data of `frames` (checked sizes, camera maths, depth and tile tables, and
+    /// `for_integration` the ray tables).
+    fn prepare<'a>(
+        &self,
+        frames: &[Frame<'a>],
+        for_integration: bool,
+    ) -> Result<Vec<Prepared<'a>>, TsdfError> {
         let with_color = self.grid.has_color();
         let prepared: Vec<Result<Prepared<'a>, TsdfError>> = frames
             .par_iter()
@@ -630,7 +750,7 @@ impl TsdfVolume {
                         camera: f.camera.name.clone(),
                     });
                 }
-                Prepared::new(f, self.params.depth_trunc)
+                Prepared::new(f, self.params.depth_trunc, for_integration)
             })
             .collect();
         prepared.into_iter().collect()

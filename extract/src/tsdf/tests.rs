@@ -386,7 +386,7 @@ fn dense_and_hashed_allocation_agree() {
         })
         .collect();
     let volume = TsdfVolume::new(params(), false).unwrap();
-    let prepared = volume.prepare(&frames).unwrap();
+    let prepared = volume.prepare(&frames, false).unwrap();
     let origin = volume.grid().origin();
     let dense = frame_blocks(&prepared, params(), origin, 1 << 20, DENSE_MARK_CELLS).unwrap();
     let hashed = frame_blocks(&prepared, params(), origin, 1 << 20, 0).unwrap();
@@ -396,4 +396,60 @@ fn dense_and_hashed_allocation_agree() {
         frame_blocks(&prepared, params(), origin, 10, 0),
         Err(TsdfError::TooManyBlocks { .. })
     ));
+}
+
+#[test]
+fn views_streamed_in_batches_give_the_volume_of_all_at_once() {
+    let cams = sphere_rig(DVec3::ZERO, RADIUS, 9, (48, 40), 50.0).unwrap();
+    let depths: Vec<DepthImage> = cams.iter().map(sphere_depth).collect();
+    let frames: Vec<Frame<'_>> = cams
+        .iter()
+        .zip(&depths)
+        .map(|(camera, depth)| Frame {
+            camera,
+            depth,
+            color: None,
+        })
+        .collect();
+    let mut all = TsdfVolume::new(params(), false).unwrap();
+    all.integrate(&frames).unwrap();
+    for batch in [1, 2, 4, 9] {
+        let loads = std::sync::atomic::AtomicUsize::new(0);
+        let mut streamed = TsdfVolume::new(params(), false).unwrap();
+        streamed
+            .integrate_in_batches(
+                &cams,
+                |i| {
+                    loads.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    Ok((depths[i].clone(), None))
+                },
+                batch,
+            )
+            .unwrap();
+        // Each view read twice (allocation, integration); the same blocks, in the same
+        // order, with the same values.
+        assert_eq!(loads.into_inner(), 2 * cams.len());
+        assert_eq!(streamed.grid().keys(), all.grid().keys(), "batch {batch}");
+        assert_eq!(streamed.grid().value, all.grid().value, "batch {batch}");
+        assert_eq!(streamed.grid().weight, all.grid().weight, "batch {batch}");
+    }
+    // A failing view stops the fusion with its error.
+    let mut failing = TsdfVolume::new(params(), false).unwrap();
+    let err = failing
+        .integrate_in_batches(
+            &cams,
+            |i| {
+                if i == 5 {
+                    Err(TsdfError::MissingImage {
+                        path: "view_5_depth.npy".into(),
+                        camera: cams[i].name.clone(),
+                    })
+                } else {
+                    Ok((depths[i].clone(), None))
+                }
+            },
+            2,
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("view_5_depth.npy"), "{err}");
 }
