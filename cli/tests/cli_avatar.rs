@@ -443,3 +443,40 @@ fn gt_gaussians_scores_against_the_surface_of_the_centres() {
         "{line}"
     );
 }
+
+#[test]
+fn tsdf_colors_reach_the_frame_files_and_the_gltf() {
+    let dir = fresh_dir("avatar_tsdf_colors");
+    let out = dir.join("run");
+    run_ok(&[
+        "extract",
+        "--avatar",
+        &fixture("lam_mini"),
+        "--animation",
+        &fixture("lam_mini/expression.json"),
+        "--method",
+        "tsdf",
+        "--tsdf-colors",
+        "--frames",
+        "0..2",
+        "-q",
+        "-o",
+        s(&out),
+    ]);
+    let mesh = trisplat_geometry::io::read_mesh(&out.join("tsdf/frame_000000.ply")).expect("frame");
+    let colors = mesh.colors().expect("vertex colours");
+    assert_eq!(colors.len(), mesh.vertex_count());
+    // The head's colours, not the black background: bright on average, and varied.
+    let mean = colors.iter().map(|c| c[0] + c[1] + c[2]).sum::<f32>() / (3.0 * colors.len() as f32);
+    let spread = colors
+        .iter()
+        .map(|c| (c[0] - colors[0][0]).abs())
+        .fold(0.0f32, f32::max);
+    assert!(mean > 0.1 && spread > 0.05, "mean {mean}, spread {spread}");
+    let glb = std::fs::read(out.join("tsdf.glb")).expect("glb");
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().expect("4 bytes")) as usize;
+    let json = String::from_utf8_lossy(&glb[20..20 + json_len]);
+    assert!(json.contains("COLOR_0"), "no COLOR_0 in the glTF");
+    let r = report(&out);
+    assert_eq!(r["methods"]["tsdf"]["parameters"]["colors"], 1.0);
+}

@@ -282,6 +282,10 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_name = "KIND",
         default_value_t = DepthKind::default()))]
     pub tsdf_depth: DepthKind,
+    /// TSDF: also render the Gaussians' colours and fuse them into vertex colours (in the
+    /// frame PLYs and the glTF's COLOR_0); slower and 2.5x the volume's memory.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub tsdf_colors: bool,
     /// Alpha-shape radius in scene units [default: 6 x the mean nearest-neighbour spacing of
     /// the rest-pose Gaussian means].
     #[cfg_attr(feature = "cli", arg(long, value_name = "A"))]
@@ -397,6 +401,7 @@ impl Default for ExtractOptions {
             views: DEFAULT_VIEWS,
             resolution: DEFAULT_RESOLUTION,
             tsdf_depth: DepthKind::default(),
+            tsdf_colors: false,
             alpha: None,
             alpha_keep_clusters: 0,
             rebuild_every: 0,

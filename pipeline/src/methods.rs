@@ -24,7 +24,7 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use trisplat_extract::alpha_shape::alpha_shape;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, IncrementalDelaunay};
-use trisplat_extract::tsdf::{DepthImage, TsdfError, TsdfOptions, fuse};
+use trisplat_extract::tsdf::{ColorImage, DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::camera::sphere_rig;
@@ -218,9 +218,24 @@ pub fn rendered_depth(
     camera: &Camera,
     kind: DepthKind,
 ) -> Result<DepthImage, RenderedDepthError> {
+    Ok(rendered_view(world, camera, kind, false)?.0)
+}
+
+/// [`rendered_depth`], and `with_color` the rendered colour where there is depth: the
+/// alpha-composited RGB (SH evaluated toward the camera) divided by the alpha, so that a
+/// half-transparent rim keeps its colour instead of fading to the background.
+///
+/// # Errors
+/// [`RenderedDepthError`].
+pub fn rendered_view(
+    world: &GaussianSet,
+    camera: &Camera,
+    kind: DepthKind,
+    with_color: bool,
+) -> Result<(DepthImage, Option<ColorImage>), RenderedDepthError> {
     let options = RenderOptions {
         outputs: Outputs {
-            rgb: false,
+            rgb: with_color,
             alpha: true,
             depth: kind == DepthKind::Expected,
             median_depth: kind == DepthKind::Median,
@@ -242,7 +257,30 @@ pub fn rendered_depth(
             *d = 0.0;
         }
     }
-    DepthImage::try_new(camera.width, camera.height, depth).map_err(RenderedDepthError::Image)
+    let color = match (with_color, out.images.rgb) {
+        (false, _) => None,
+        (true, Some(rgb)) => {
+            let colors: Vec<[f32; 3]> = rgb
+                .chunks_exact(3)
+                .zip(&alpha)
+                .map(|(c, &a)| {
+                    if a >= RENDERED_ALPHA_MIN {
+                        [0, 1, 2].map(|k| (c[k] / a).clamp(0.0, 1.0))
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect();
+            Some(
+                ColorImage::try_new(camera.width, camera.height, colors)
+                    .map_err(RenderedDepthError::Image)?,
+            )
+        }
+        (true, None) => return Err(RenderedDepthError::Render(RenderError::LocalParameters)),
+    };
+    let depth = DepthImage::try_new(camera.width, camera.height, depth)
+        .map_err(RenderedDepthError::Image)?;
+    Ok((depth, color))
 }
 
 /// TSDF mesher settings.
@@ -252,6 +290,7 @@ pub struct TsdfMesher {
     views: usize,
     resolution: u32,
     depth: DepthKind,
+    colors: bool,
 }
 
 impl TsdfMesher {
@@ -283,30 +322,38 @@ impl TsdfMesher {
             cause: source,
         })?;
         let mut depths = Vec::with_capacity(cameras.len());
+        let mut colors = Vec::with_capacity(if self.colors { cameras.len() } else { 0 });
         for camera in &cameras {
-            let image = rendered_depth(world, camera, self.depth).map_err(|e| match e {
-                RenderedDepthError::Render(source) => PipelineError::Render {
-                    frame,
-                    camera: camera.name.clone(),
-                    cause: source,
-                },
-                RenderedDepthError::Image(source) => PipelineError::Tsdf {
-                    frame,
-                    cause: source,
-                },
-            })?;
+            let (image, color) =
+                rendered_view(world, camera, self.depth, self.colors).map_err(|e| match e {
+                    RenderedDepthError::Render(source) => PipelineError::Render {
+                        frame,
+                        camera: camera.name.clone(),
+                        cause: source,
+                    },
+                    RenderedDepthError::Image(source) => PipelineError::Tsdf {
+                        frame,
+                        cause: source,
+                    },
+                })?;
             depths.push(image);
+            colors.extend(color);
         }
         let render_ms = start.elapsed().as_secs_f64() * 1e3;
         let options = TsdfOptions {
             voxel: Some(self.voxel),
             ..TsdfOptions::default()
         };
-        let fused =
-            fuse(&cameras, &depths, None, &options).map_err(|source| PipelineError::Tsdf {
-                frame,
-                cause: source,
-            })?;
+        let fused = fuse(
+            &cameras,
+            &depths,
+            self.colors.then_some(&colors[..]),
+            &options,
+        )
+        .map_err(|source| PipelineError::Tsdf {
+            frame,
+            cause: source,
+        })?;
         Ok(MethodOutput {
             mesh: fused.mesh,
             ms: start.elapsed().as_secs_f64() * 1e3,
@@ -354,6 +401,7 @@ impl Mesher {
                 views: options.views,
                 resolution: options.resolution,
                 depth: options.tsdf_depth,
+                colors: options.tsdf_colors,
             }),
             Method::Delaunay => {
                 let d_options = DelaunayOptions {

@@ -192,6 +192,7 @@ pub fn run(
                     "median_depth".to_owned(),
                     f64::from(u8::from(o.tsdf_depth == DepthKind::Median)),
                 );
+                parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf_colors)));
             }
             Method::Delaunay => {
                 parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);
