@@ -17,6 +17,12 @@
 //! radius `N` points can have on area `A` (hexagonal packing) and
 //! `d_min = d_max β (1 − (N / M)^γ)` for `M` candidates. Constants from the paper: α = 8,
 //! β = 0.65, γ = 1.5 (Open3D's source uses β = 0.5). Distances are Euclidean in 3D, as in Open3D.
+//! Degenerate sets stay near-linear: when the candidates are at least 4x denser than `A`
+//! says (overlapping or coincident triangles count their area several times), `d_max`
+//! follows their measured density instead (the median distance to the 32nd neighbour of 256
+//! of them, scaled to the ~18 neighbours a candidate has within `d_max` on a surface); when
+//! they lie within `d_max` of an axis-parallel line, neighbours are found through cells of side
+//! `d_max` rather than the k-d tree. Ordinary meshes take neither path.
 //!
 //! # Curvature-weighted sampling
 //! [`sample_curvature`] draws triangles with probability proportional to
@@ -360,36 +366,62 @@ pub fn sample_poisson_disk(
 /// Weighted sample elimination: which of `points` to keep so that `n` remain.
 fn eliminate(points: &[Vec3], n: usize, area: f64) -> Result<Vec<bool>, SamplingError> {
     let m = points.len();
-    let d_max = 2.0 * (area / (2.0 * 3f64.sqrt() * n as f64)).sqrt();
-    let d_min = d_max * POISSON_BETA * (1.0 - (n as f64 / m as f64).powf(POISSON_GAMMA));
     let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
     let tree =
         ImmutableKdTree::<f32, 3>::new_from_slice(&coords).map_err(|e| SamplingError::Index {
             message: e.to_string(),
         })?;
+    let d_max = 2.0 * (area / (2.0 * 3f64.sqrt() * n as f64)).sqrt();
+    // Overlapping or coincident triangles count their area several times: the candidates are
+    // then far denser than `area` says, every one would have thousands of neighbours within
+    // d_max and the lists would grow quadratically (100k copies of one triangle did not end
+    // in 2 minutes). The radius then follows the density the candidates really have.
+    let d_max = match crowded_radius(&tree, &coords) {
+        Some(r) if r < CROWDED_RATIO * d_max => r,
+        _ => d_max,
+    };
+    let d_min = d_max * POISSON_BETA * (1.0 - (n as f64 / m as f64).powf(POISSON_GAMMA));
+    // Each candidate's neighbours within d_max and their weights, sorted by index so sums do
+    // not depend on the visiting order.
+    let weighted = |p: Vec3, i: usize, j: u32, list: &mut Vec<(u32, f32)>| {
+        if j as usize == i {
+            return;
+        }
+        let d = (p.as_dvec3() - points[j as usize].as_dvec3()).length();
+        if d < d_max {
+            let w = (1.0 - d.max(d_min) / d_max).powf(POISSON_ALPHA);
+            list.push((j, w as f32));
+        }
+    };
+    // The k-d tree's radius queries degrade when the candidates lie within d_max of an
+    // axis-parallel line (every split along the two thin axes is crossed: 100k slivers along
+    // a line took 17 s); such sets go through cells of side d_max instead (1.6 s), others
+    // through the tree (1.2-1.5x faster than the cells on planes and ordinary surfaces).
+    let (lo, hi) = points.iter().fold(
+        (glam::DVec3::INFINITY, glam::DVec3::NEG_INFINITY),
+        |(lo, hi), p| (lo.min(p.as_dvec3()), hi.max(p.as_dvec3())),
+    );
+    let extent = hi - lo;
+    let thin_axes = [extent.x, extent.y, extent.z]
+        .iter()
+        .filter(|&&e| e < d_max)
+        .count();
+    let grid = (thin_axes >= 2).then(|| CellGrid::new(points, d_max));
     // kiddo's SquaredEuclidean radius is a squared distance.
     let radius_sq = (d_max * d_max) as f32;
-    // Each candidate's neighbours within d_max and their weights, sorted by index so sums do
-    // not depend on the tree's visiting order.
     let lists: Vec<Vec<(u32, f32)>> = (0..m)
         .into_par_iter()
         .map(|i| {
             let p = points[i];
             let mut list = Vec::new();
-            tree.query(&coords[i])
-                .within::<SquaredEuclidean<f32>>(radius_sq)
-                .unsorted()
-                .visit(|r| {
-                    let j = r.item as usize;
-                    if j == i {
-                        return;
-                    }
-                    let d = (p.as_dvec3() - points[j].as_dvec3()).length();
-                    if d < d_max {
-                        let w = (1.0 - d.max(d_min) / d_max).powf(POISSON_ALPHA);
-                        list.push((r.item, w as f32));
-                    }
-                });
+            match &grid {
+                Some(grid) => grid.visit_near(p, |j| weighted(p, i, j, &mut list)),
+                None => tree
+                    .query(&coords[i])
+                    .within::<SquaredEuclidean<f32>>(radius_sq)
+                    .unsorted()
+                    .visit(|r| weighted(p, i, r.item, &mut list)),
+            }
             list.sort_unstable_by_key(|&(j, _)| j);
             list
         })
@@ -420,6 +452,130 @@ fn eliminate(points: &[Vec3], n: usize, area: f64) -> Result<Vec<bool>, Sampling
         }
     }
     Ok(keep)
+}
+
+/// Points bucketed in cubic cells of a given side: any two points closer than the side lie
+/// in the same or in adjacent cells, however the points are laid out.
+struct CellGrid {
+    /// Corner the cells start from.
+    lo: glam::DVec3,
+    /// Cell side.
+    side: f64,
+    /// Occupied cells, sorted.
+    keys: Vec<[i64; 3]>,
+    /// Points of cell `c`: `order[starts[c]..starts[c + 1]]`.
+    starts: Vec<u32>,
+    order: Vec<u32>,
+}
+
+impl CellGrid {
+    fn new(points: &[Vec3], side: f64) -> Self {
+        let lo = points
+            .iter()
+            .fold(glam::DVec3::INFINITY, |lo, p| lo.min(p.as_dvec3()));
+        let side = side.max(f64::MIN_POSITIVE);
+        let mut grid = Self {
+            lo,
+            side,
+            keys: Vec::new(),
+            starts: Vec::new(),
+            order: Vec::with_capacity(points.len()),
+        };
+        let mut keyed: Vec<([i64; 3], u32)> = points
+            .par_iter()
+            .enumerate()
+            .map(|(i, &p)| (grid.key(p), i as u32))
+            .collect();
+        keyed.par_sort_unstable();
+        for (k, &(key, i)) in keyed.iter().enumerate() {
+            if grid.keys.last() != Some(&key) {
+                grid.keys.push(key);
+                grid.starts.push(k as u32);
+            }
+            grid.order.push(i);
+        }
+        grid.starts.push(keyed.len() as u32);
+        grid
+    }
+
+    /// The cell of `p` (coordinates saturate: far cells merge, which costs time, not pairs).
+    fn key(&self, p: Vec3) -> [i64; 3] {
+        let c = (p.as_dvec3() - self.lo) / self.side;
+        [c.x, c.y, c.z].map(|v| v.floor() as i64)
+    }
+
+    /// Calls `visit` with every point in the cell of `p` and the 26 around it, each once.
+    fn visit_near(&self, p: Vec3, mut visit: impl FnMut(u32)) {
+        let [x, y, z] = self.key(p);
+        let mut cells = [[0i64; 3]; 27];
+        let mut n = 0;
+        for dz in -1..=1i64 {
+            for dy in -1..=1i64 {
+                for dx in -1..=1i64 {
+                    cells[n] = [
+                        x.saturating_add(dx),
+                        y.saturating_add(dy),
+                        z.saturating_add(dz),
+                    ];
+                    n += 1;
+                }
+            }
+        }
+        cells.sort_unstable();
+        let mut previous = None;
+        for cell in cells {
+            if previous == Some(cell) {
+                continue;
+            }
+            previous = Some(cell);
+            if let Ok(c) = self.keys.binary_search(&cell) {
+                for &i in &self.order[self.starts[c] as usize..self.starts[c + 1] as usize] {
+                    visit(i);
+                }
+            }
+        }
+    }
+}
+
+/// Neighbours a candidate has within `d_max` on average when the candidates cover the area
+/// they were drawn on: `5 N / A · π d_max²` with `d_max² = 4 A / (2 √3 N)`, i.e. `10 π / √3`.
+const EXPECTED_NEIGHBOURS: f64 = 18.137_993_642_342_18;
+/// The neighbour rank [`crowded_radius`] measures.
+const PROBE_RANK: usize = 32;
+/// [`PROBE_RANK`] others and the candidate itself.
+const PROBE_NEIGHBOURS: std::num::NonZeroUsize = match std::num::NonZeroUsize::new(PROBE_RANK + 1) {
+    Some(k) => k,
+    None => unreachable!(),
+};
+/// Candidates [`crowded_radius`] looks at, evenly spaced.
+const PROBE_POINTS: usize = 256;
+/// The measured radius replaces the area's only below this fraction of it (candidates at least
+/// 4x denser than the area says): ordinary meshes keep the radius of Yuksel's method.
+const CROWDED_RATIO: f64 = 0.5;
+
+/// The elimination radius the candidates' own density gives: the median distance to the
+/// [`PROBE_RANK`]-th nearest other candidate over [`PROBE_POINTS`] evenly spaced ones, scaled
+/// to [`EXPECTED_NEIGHBOURS`] (neighbour counts grow as the radius squared on a surface);
+/// `None` for too few candidates.
+fn crowded_radius(tree: &ImmutableKdTree<f32, 3>, coords: &[[f32; 3]]) -> Option<f64> {
+    if coords.len() <= 4 * PROBE_RANK {
+        return None;
+    }
+    let step = (coords.len() / PROBE_POINTS).max(1);
+    let mut radii: Vec<f64> = coords
+        .iter()
+        .step_by(step)
+        .map(|c| {
+            tree.query(c)
+                .nearest_n::<SquaredEuclidean<f32>>(PROBE_NEIGHBOURS)
+                .execute()
+                .last()
+                .map_or(0.0, |nn| f64::from(nn.distance).sqrt())
+        })
+        .collect();
+    radii.sort_unstable_by(f64::total_cmp);
+    let median = radii[radii.len() / 2];
+    (median > 0.0).then(|| median * (EXPECTED_NEIGHBOURS / PROBE_RANK as f64).sqrt())
 }
 
 /// A binary max-heap over item weights with in-place decrease-key; ties go to the larger index
@@ -790,6 +946,63 @@ mod tests {
         let d_max = 2.0 * (m.area() / (2.0 * 3f64.sqrt() * 300.0)).sqrt();
         assert!(min_d > 0.5 * d_max, "{min_d} vs d_max {d_max}");
         assert!(sample_poisson_disk(&m, 0, 1).unwrap().is_empty());
+    }
+
+    /// The smallest distance between two of `p` (brute force).
+    fn min_distance(p: &[Vec3]) -> f64 {
+        let mut min_d = f64::INFINITY;
+        for i in 0..p.len() {
+            for j in 0..i {
+                min_d = min_d.min((p[i].as_dvec3() - p[j].as_dvec3()).length());
+            }
+        }
+        min_d
+    }
+
+    #[test]
+    fn poisson_on_coincident_triangles_spreads_over_the_one_surface() {
+        // 20,000 copies of one unit right triangle: the summed area (10,000) is 20,000 times
+        // the surface's, which made every candidate a neighbour of every other (quadratic).
+        let triangles = vec![[0, 1, 2]; 20_000];
+        let m = TriMesh::try_new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], triangles).unwrap();
+        let s = sample_poisson_disk(&m, 500, 3).unwrap();
+        assert_eq!(s.len(), 500);
+        // Spread as 500 Poisson samples of the real area (0.5) would be.
+        let d_max = 2.0 * (0.5 / (2.0 * 3f64.sqrt() * 500.0)).sqrt();
+        let min_d = min_distance(s.points.positions());
+        assert!(min_d > 0.3 * d_max, "{min_d} vs {d_max}");
+    }
+
+    #[test]
+    fn poisson_on_slivers_along_a_line_and_cells_find_every_pair() {
+        // Slivers along the x axis (heights 1e-9): the candidates lie within d_max of a line.
+        let n = 2_000;
+        let positions: Vec<Vec3> = (0..=n)
+            .map(|i| Vec3::new(i as f32 * 1e-3, 1e-9 * (i % 2) as f32, 0.0))
+            .collect();
+        let triangles: Vec<[u32; 3]> = (0..n - 1).map(|i| [i, i + 1, i + 2]).collect();
+        let m = TriMesh::try_new(positions, triangles).unwrap();
+        let s = sample_poisson_disk(&m, 400, 5).unwrap();
+        assert_eq!(s.len(), 400);
+        // The cells see every pair within their side, as a brute-force search does.
+        let mut rng = crate::rng::Rng::stream(7, 0);
+        let mut points: Vec<Vec3> = (0..300)
+            .map(|_| Vec3::new(rng.uniform_f32(), 1e-7 * rng.uniform_f32(), 0.0))
+            .collect();
+        points.extend([Vec3::splat(1e18), Vec3::splat(-1e18), Vec3::splat(1e18)]);
+        let side = 0.01;
+        let grid = CellGrid::new(&points, side);
+        for (i, p) in points.iter().enumerate() {
+            let mut found = Vec::new();
+            grid.visit_near(*p, |j| found.push(j as usize));
+            found.sort_unstable();
+            assert!(found.windows(2).all(|w| w[0] != w[1]), "each point once");
+            for (j, q) in points.iter().enumerate() {
+                if (p.as_dvec3() - q.as_dvec3()).length() < side {
+                    assert!(found.binary_search(&j).is_ok(), "{i} misses {j}");
+                }
+            }
+        }
     }
 
     #[test]
