@@ -41,6 +41,9 @@ fn files(kind: &str, target: Target) -> Vec<PathBuf> {
     files
 }
 
+/// Inputs per target at least (a target with few seeds gets stacked mutations).
+const MIN_INPUTS_PER_TARGET: usize = 3000;
+
 /// splitmix64: a small seeded generator, so the mutations are the same on every run.
 struct Mix(u64);
 
@@ -158,19 +161,38 @@ fn every_reader_survives_its_corpus_mutations_and_regressions() {
             target.name()
         );
         let (mut inputs, mut accepted) = (0usize, 0usize);
+        // Targets with few seeds get mutations of mutations, up to their share of the total.
+        let quota = MIN_INPUTS_PER_TARGET.div_ceil(corpus.len());
         for (s, file) in corpus.iter().enumerate() {
             let seed = std::fs::read(file).expect("read corpus file");
-            for (m, input) in mutations(&seed, s as u64 + 1).iter().enumerate() {
-                inputs += 1;
-                match run(target, input) {
-                    Ok(ok) => accepted += usize::from(ok),
-                    Err(message) => failures.push(format!(
-                        "{}: {} mutation {m}: {message}",
-                        target.name(),
-                        file.display()
-                    )),
-                }
+            let first = mutations(&seed, s as u64 + 1);
+            let mut count = 0;
+            let mut check = |what: String, input: &[u8]| match run(target, input) {
+                Ok(ok) => accepted += usize::from(ok),
+                Err(message) => failures.push(format!(
+                    "{}: {} {what}: {message}",
+                    target.name(),
+                    file.display()
+                )),
+            };
+            for (m, input) in first.iter().enumerate() {
+                check(format!("mutation {m}"), input);
+                count += 1;
             }
+            let mut round = 0;
+            while count < quota {
+                let base = round % first.len();
+                let rng_seed = (s as u64 + 1) * 1_000_003 + round as u64;
+                for (m, input) in mutations(&first[base], rng_seed).iter().enumerate().skip(1) {
+                    if count >= quota {
+                        break;
+                    }
+                    check(format!("mutation {base} then {m} (seed {rng_seed})"), input);
+                    count += 1;
+                }
+                round += 1;
+            }
+            inputs += count;
         }
         for file in files("regressions", target) {
             inputs += 1;
