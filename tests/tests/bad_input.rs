@@ -597,7 +597,10 @@ fn glb_header_length_shorter_than_the_header_is_refused() {
         let p = write(&dir, &format!("short_{length}.glb"), &bytes);
         let (element, message) = malformed(io::read_mesh(&p), &p);
         assert_eq!(element, "GLB header");
-        assert!(message.contains(&format!("total length {length}")), "{message}");
+        assert!(
+            message.contains(&format!("total length {length}")),
+            "{message}"
+        );
         match GltfTemplate::open(&p, &Clip::FirstIfAny) {
             Err(AnimationError::Mesh(IoError::Malformed { path, element, .. })) => {
                 assert_eq!(path, p);
