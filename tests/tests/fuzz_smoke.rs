@@ -58,7 +58,7 @@ impl Mix {
 
     /// A position in `0..len` (`len > 0`); half of them in the first KiB, where headers are.
     fn position(&mut self, len: usize) -> usize {
-        let span = if self.next() % 2 == 0 {
+        let span = if self.next().is_multiple_of(2) {
             len.min(1024)
         } else {
             len
@@ -129,7 +129,7 @@ fn mutations(seed: &[u8], rng_seed: u64) -> Vec<Vec<u8>> {
         let a = rng.position(len);
         let b = (a + 1 + (rng.next() % 64) as usize).min(len);
         let mut m = seed[..a].to_vec();
-        if rng.next() % 2 == 0 {
+        if rng.next().is_multiple_of(2) {
             m.extend_from_slice(&seed[a..b]);
             m.extend_from_slice(&seed[a..b]);
         }
