@@ -615,3 +615,27 @@ fn glb_header_length_shorter_than_the_header_is_refused() {
     assert_eq!(element, "GLB header");
     assert!(message.contains("6 bytes"), "{message}");
 }
+
+/// Found by AFL (`fuzz/regressions/gltf_animated/invalid_utf8_*`): invalid UTF-8 in a string the
+/// `gltf` crate skips made the plain-JSON reference checks see no animations, and a channel with
+/// an unknown path or node then panicked inside the crate. Such a document is refused.
+#[test]
+fn gltf_that_is_not_plain_json_is_refused() {
+    use trisplat_geometry::animation::{AnimationError, Clip, GltfTemplate};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/gltf_animated");
+    for name in [
+        "invalid_utf8_hides_bad_channel_path.gltf",
+        "invalid_utf8_hides_bad_channel_node.gltf",
+    ] {
+        let p = dir.join(name);
+        match GltfTemplate::open(&p, &Clip::FirstIfAny) {
+            Err(AnimationError::Gltf { path, error }) => {
+                assert_eq!(path, p);
+                assert!(error.to_string().contains("line 137"), "{error}");
+            }
+            other => panic!("expected a document error for {name}, got {other:?}"),
+        }
+        let (element, _) = malformed(io::read_mesh(&p), &p);
+        assert_eq!(element, "document");
+    }
+}

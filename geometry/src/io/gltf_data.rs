@@ -59,7 +59,7 @@ pub(crate) struct GltfData {
     path: PathBuf,
     /// The parsed, validated document.
     pub(crate) document: gltf::Document,
-    /// The document's JSON (`Null` when it does not parse as plain JSON), for `extras`.
+    /// The document's JSON, for `extras` and the reference checks.
     pub(crate) json: serde_json::Value,
     buffers: Vec<Vec<u8>>,
 }
@@ -108,7 +108,11 @@ impl GltfData {
         let document = gltf::Gltf::from_slice(&json_bytes)
             .map_err(|e| err(GltfDataErrorKind::Document(e)))?
             .document;
-        let json = serde_json::from_slice(&json_bytes).unwrap_or(serde_json::Value::Null);
+        // The reference checks read this plain JSON, so a document the `gltf` crate accepts
+        // but plain JSON does not (invalid UTF-8 in a string the crate skips) is refused rather
+        // than checked as empty.
+        let json = serde_json::from_slice(&json_bytes)
+            .map_err(|e| err(GltfDataErrorKind::Document(gltf::Error::Deserialize(e))))?;
         let buffers = load_buffers(path, &document, blob).map_err(err)?;
         Ok(Self {
             path: path.to_path_buf(),
