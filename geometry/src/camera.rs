@@ -287,7 +287,15 @@ struct CameraJson {
 /// [`IoError`] naming the file and the camera index at fault.
 pub fn read_cameras_json(path: &Path) -> Result<Vec<Camera>, IoError> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::os(path, e))?;
-    let raw: Vec<CameraJson> = serde_json::from_str(&text)
+    parse_cameras_json(path, &text)
+}
+
+/// Parses the text of a 3DGS `cameras.json` held in memory; `path` only names it in errors.
+///
+/// # Errors
+/// As [`read_cameras_json`], but for an unreadable file.
+pub fn parse_cameras_json(path: &Path, text: &str) -> Result<Vec<Camera>, IoError> {
+    let raw: Vec<CameraJson> = serde_json::from_str(text)
         .map_err(|e| IoError::malformed(path, "cameras", e.to_string()))?;
     raw.into_iter()
         .enumerate()
@@ -370,7 +378,19 @@ pub fn read_transforms_json(
     default_size: Option<(u32, u32)>,
 ) -> Result<Vec<Camera>, IoError> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::os(path, e))?;
-    let raw: TransformsJson = serde_json::from_str(&text)
+    parse_transforms_json(path, &text, default_size)
+}
+
+/// Parses the text of a NeRF `transforms.json` held in memory; `path` only names it in errors.
+///
+/// # Errors
+/// As [`read_transforms_json`], but for an unreadable file.
+pub fn parse_transforms_json(
+    path: &Path,
+    text: &str,
+    default_size: Option<(u32, u32)>,
+) -> Result<Vec<Camera>, IoError> {
+    let raw: TransformsJson = serde_json::from_str(text)
         .map_err(|e| IoError::malformed(path, "transforms", e.to_string()))?;
     raw.frames
         .iter()

@@ -20,3 +20,5 @@ pub fn reference_json(path: &Path) -> serde_json::Value {
 pub fn relative_error(a: f64, b: f64, floor: f64) -> f64 {
     (a - b).abs() / b.abs().max(floor)
 }
+
+pub mod fuzz_harness;

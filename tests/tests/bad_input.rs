@@ -583,3 +583,59 @@ fn non_finite_ply_normals_are_refused() {
         "{e}"
     );
 }
+
+/// Found by AFL (`fuzz/regressions/gltf_animated/glb_header_length_0`): a GLB whose header gives
+/// a total length shorter than the header made the `gltf` crate subtract with overflow (a panic
+/// in builds with overflow checks, as fuzzing and `cargo test` use). Both readers refuse it.
+#[test]
+fn glb_header_length_shorter_than_the_header_is_refused() {
+    use trisplat_geometry::animation::{AnimationError, Clip, GltfTemplate};
+    let dir = tempfile::tempdir().expect("tempdir");
+    for length in [0u8, 11] {
+        let mut bytes = b"glTF\x02\x00\x00\x00".to_vec();
+        bytes.extend_from_slice(&[length, 0, 0, 0]);
+        let p = write(&dir, &format!("short_{length}.glb"), &bytes);
+        let (element, message) = malformed(io::read_mesh(&p), &p);
+        assert_eq!(element, "GLB header");
+        assert!(
+            message.contains(&format!("total length {length}")),
+            "{message}"
+        );
+        match GltfTemplate::open(&p, &Clip::FirstIfAny) {
+            Err(AnimationError::Mesh(IoError::Malformed { path, element, .. })) => {
+                assert_eq!(path, p);
+                assert_eq!(element, "GLB header");
+            }
+            other => panic!("expected a GLB header error, got {other:?}"),
+        }
+    }
+    // Shorter than a header at all.
+    let p = write(&dir, "tiny.glb", b"glTF\x02\x00");
+    let (element, message) = malformed(io::read_mesh(&p), &p);
+    assert_eq!(element, "GLB header");
+    assert!(message.contains("6 bytes"), "{message}");
+}
+
+/// Found by AFL (`fuzz/regressions/gltf_animated/invalid_utf8_*`): invalid UTF-8 in a string the
+/// `gltf` crate skips made the plain-JSON reference checks see no animations, and a channel with
+/// an unknown path or node then panicked inside the crate. Such a document is refused.
+#[test]
+fn gltf_that_is_not_plain_json_is_refused() {
+    use trisplat_geometry::animation::{AnimationError, Clip, GltfTemplate};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/gltf_animated");
+    for name in [
+        "invalid_utf8_hides_bad_channel_path.gltf",
+        "invalid_utf8_hides_bad_channel_node.gltf",
+    ] {
+        let p = dir.join(name);
+        match GltfTemplate::open(&p, &Clip::FirstIfAny) {
+            Err(AnimationError::Gltf { path, error }) => {
+                assert_eq!(path, p);
+                assert!(error.to_string().contains("line 137"), "{error}");
+            }
+            other => panic!("expected a document error for {name}, got {other:?}"),
+        }
+        let (element, _) = malformed(io::read_mesh(&p), &p);
+        assert_eq!(element, "document");
+    }
+}

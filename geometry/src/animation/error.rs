@@ -209,6 +209,7 @@ impl From<crate::io::gltf_data::GltfDataError> for AnimationError {
         match e.kind {
             K::Os(error) => Self::Os { path, error },
             K::Document(error) => Self::Gltf { path, error },
+            K::GlbHeader(message) => Self::Mesh(IoError::malformed(path, "GLB header", message)),
             K::Attribute {
                 mesh,
                 primitive,

@@ -83,6 +83,7 @@ impl From<super::gltf_data::GltfDataError> for IoError {
         match e.kind {
             K::Os(error) => Self::Os { path, error },
             K::Document(error) => Self::malformed(path, "document", error.to_string()),
+            K::GlbHeader(message) => Self::malformed(path, "GLB header", message),
             K::Attribute {
                 mesh,
                 primitive,

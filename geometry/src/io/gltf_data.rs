@@ -25,6 +25,8 @@ pub(crate) enum GltfDataErrorKind {
     Os(std::io::Error),
     /// Not a glTF document (or an invalid one).
     Document(gltf::Error),
+    /// The GLB header is malformed (checked before the `gltf` crate reads it).
+    GlbHeader(String),
     /// A primitive attribute names an accessor the file does not have.
     Attribute {
         mesh: usize,
@@ -57,9 +59,31 @@ pub(crate) struct GltfData {
     path: PathBuf,
     /// The parsed, validated document.
     pub(crate) document: gltf::Document,
-    /// The document's JSON (`Null` when it does not parse as plain JSON), for `extras`.
+    /// The document's JSON, for `extras` and the reference checks.
     pub(crate) json: serde_json::Value,
     buffers: Vec<Vec<u8>>,
+}
+
+/// Size of the GLB header: magic, version, total length (u32 each).
+const GLB_HEADER_BYTES: usize = 12;
+
+/// Checks the GLB header's total length, which `gltf::binary::Glb::from_slice` subtracts the
+/// header size from unchecked (an overflow panic in builds with overflow checks).
+fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+    let Some(length) = bytes.get(8..GLB_HEADER_BYTES) else {
+        return Err(format!(
+            "the file has {} bytes, fewer than the {GLB_HEADER_BYTES} of a GLB header",
+            bytes.len()
+        ));
+    };
+    let length = u32::from_le_bytes([length[0], length[1], length[2], length[3]]);
+    if (length as usize) < GLB_HEADER_BYTES {
+        return Err(format!(
+            "the header's total length {length} is shorter than the header itself \
+             ({GLB_HEADER_BYTES} bytes)"
+        ));
+    }
+    Ok(())
 }
 
 impl GltfData {
@@ -73,6 +97,7 @@ impl GltfData {
         };
         let bytes = std::fs::read(path).map_err(|e| err(GltfDataErrorKind::Os(e)))?;
         let (json_bytes, blob): (Vec<u8>, Option<Vec<u8>>) = if bytes.starts_with(b"glTF") {
+            check_glb_header(&bytes).map_err(|m| err(GltfDataErrorKind::GlbHeader(m)))?;
             let glb = gltf::binary::Glb::from_slice(&bytes)
                 .map_err(|e| err(GltfDataErrorKind::Document(e)))?;
             (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
@@ -83,7 +108,11 @@ impl GltfData {
         let document = gltf::Gltf::from_slice(&json_bytes)
             .map_err(|e| err(GltfDataErrorKind::Document(e)))?
             .document;
-        let json = serde_json::from_slice(&json_bytes).unwrap_or(serde_json::Value::Null);
+        // The reference checks read this plain JSON, so a document the `gltf` crate accepts
+        // but plain JSON does not (invalid UTF-8 in a string the crate skips) is refused rather
+        // than checked as empty.
+        let json = serde_json::from_slice(&json_bytes)
+            .map_err(|e| err(GltfDataErrorKind::Document(gltf::Error::Deserialize(e))))?;
         let buffers = load_buffers(path, &document, blob).map_err(err)?;
         Ok(Self {
             path: path.to_path_buf(),

@@ -25,7 +25,7 @@ pub use gltf_sequence::{
     FrameFiles, FrameSource, GLB_PART_LIMIT, SequenceLayout, write_mesh_sequence, write_sequence,
     write_sequence_parts,
 };
-pub use npy::{NpyArray, read_npy, write_npy};
+pub use npy::{NpyArray, parse_npy, read_npy, write_npy};
 pub use obj::ObjVertices;
 pub use ply::{PlyEncoding, PlyExtras};
 

@@ -23,6 +23,14 @@ const MAGIC: &[u8] = b"\x93NUMPY";
 /// the file does not hold.
 pub fn read_npy(path: &Path) -> Result<NpyArray, IoError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::os(path, e))?;
+    parse_npy(path, &bytes)
+}
+
+/// Parses the bytes of a `.npy` file held in memory; `path` only names it in errors.
+///
+/// # Errors
+/// As [`read_npy`], but for an unreadable file.
+pub fn parse_npy(path: &Path, bytes: &[u8]) -> Result<NpyArray, IoError> {
     let bad = |msg: &str| IoError::malformed(path, "npy header", msg);
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
         return Err(bad("not a .npy file (bad magic)"));
