@@ -645,10 +645,7 @@ impl TsdfVolume {
     /// # Errors
     /// As [`TsdfVolume::allocate`] and [`TsdfVolume::integrate_allocated`].
     pub fn integrate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        let prepared = self.prepare(frames, true)?;
-        self.allocate_prepared(&prepared)?;
-        self.integrate_prepared(&prepared);
-        Ok(())
+        self.integrate_timed(frames).map(|_| ())
     }
 
     /// [`TsdfVolume::integrate`] with views produced on demand, a batch at a time, so that
