@@ -11,7 +11,7 @@
 
 use std::time::Instant;
 
-use glam::{DMat3, DQuat, Vec3};
+use glam::{DMat3, DQuat, DVec3, Vec3};
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::{TriId, TriMesh};
 use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
@@ -82,12 +82,13 @@ pub fn run(args: &DeformBenchArgs) -> anyhow::Result<()> {
         let mut frame = rest.clone();
         let mut times = Vec::with_capacity(args.frames);
         for f in 0..args.frames + WARM_UP {
-            let t = f as f32 * 0.05;
+            let t = f as f64 * 0.05;
             let start = Instant::now();
             // Template evaluation: a smooth non-rigid warp of every vertex.
             for (p, r) in frame.iter_mut().zip(&rest) {
                 *p = *r
-                    + 0.05 * Vec3::new((3.0 * r.y + t).sin(), (2.0 * r.z).cos() * t, 0.2 * r.x * t);
+                    + 0.05
+                        * DVec3::new((3.0 * r.y + t).sin(), (2.0 * r.z).cos() * t, 0.2 * r.x * t);
             }
             deformer.deform_geometry(&set, &frame, &mut out)?;
             if f >= WARM_UP {
@@ -120,7 +121,7 @@ pub fn run(args: &DeformBenchArgs) -> anyhow::Result<()> {
 fn jacobian_errors(
     mesh: &TriMesh,
     set: &GaussianSet,
-    frame: &[Vec3],
+    frame: &[DVec3],
     out: &WorldGeometry,
 ) -> (f64, f64) {
     let opts = FrameOptions::for_positions(mesh.positions());

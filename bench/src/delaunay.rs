@@ -99,7 +99,7 @@ fn make_gaussians(mesh: &TriMesh, args: &DelaunayBenchArgs) -> anyhow::Result<Ga
 /// The animation: vertices below the pivot bend about the x axis through it by up to
 /// `amplitude · sin`, blended smoothly over a band, plus a twist about y.
 struct Animation {
-    rest: Vec<Vec3>,
+    rest: Vec<DVec3>,
     pivot: DVec3,
     height: f64,
     amplitude: f64,
@@ -110,8 +110,8 @@ impl Animation {
     fn new(mesh: &TriMesh, amplitude: f64, frames: usize) -> Self {
         let b = mesh
             .bounds()
-            .map_or((Vec3::ZERO, Vec3::ONE), |b| (b.min, b.max));
-        let (lo, hi) = (b.0.as_dvec3(), b.1.as_dvec3());
+            .map_or((DVec3::ZERO, DVec3::ONE), |b| (b.min, b.max));
+        let (lo, hi) = b;
         Self {
             rest: mesh.positions().to_vec(),
             pivot: DVec3::new(0.5 * (lo.x + hi.x), lo.y + 0.45 * (hi.y - lo.y), lo.z),
@@ -121,14 +121,13 @@ impl Animation {
         }
     }
 
-    fn frame(&self, f: usize) -> Vec<Vec3> {
+    fn frame(&self, f: usize) -> Vec<DVec3> {
         let phase = std::f64::consts::TAU * f as f64 / self.frames as f64;
         let bend = self.amplitude * (0.5 - 0.5 * phase.cos());
         let twist = 0.3 * self.amplitude * phase.sin();
         self.rest
             .iter()
-            .map(|p| {
-                let p = p.as_dvec3();
+            .map(|&p| {
                 let s = (self.pivot.y - p.y) / (0.25 * self.height);
                 let w = s.clamp(0.0, 1.0);
                 let w = w * w * (3.0 - 2.0 * w);
@@ -138,7 +137,7 @@ impl Animation {
                 let t = twist * (p.y - self.pivot.y) / self.height;
                 let (st, ct) = t.sin_cos();
                 let q = DVec3::new(ct * q.x + st * q.z, q.y, -st * q.x + ct * q.z);
-                (q + self.pivot).as_vec3()
+                q + self.pivot
             })
             .collect()
     }
@@ -184,14 +183,14 @@ fn mean(v: &[f64]) -> f64 {
     }
 }
 
-fn flipped_fraction(d: &IncrementalDelaunay, positions: &[Vec3], template: &TriMesh) -> f64 {
+fn flipped_fraction(d: &IncrementalDelaunay, positions: &[DVec3], template: &TriMesh) -> f64 {
     let verts = d.vertices();
     let (mut flipped, mut total) = (0usize, 0usize);
     for (t, tri) in template.triangles().iter().enumerate() {
-        let c = tri.map(|k| positions[k as usize].as_dvec3());
+        let c = tri.map(|k| positions[k as usize]);
         let n = (c[1] - c[0]).cross(c[2] - c[0]);
         for out in d.chart_triangles(t) {
-            let v = out.map(|k| verts[k as usize].as_dvec3());
+            let v = out.map(|k| verts[k as usize]);
             total += 1;
             if (v[1] - v[0]).cross(v[2] - v[0]).dot(n) < 0.0 {
                 flipped += 1;

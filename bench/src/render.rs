@@ -87,8 +87,8 @@ fn scene(n: usize, size: u32) -> anyhow::Result<(GaussianSet, Camera)> {
         sh,
         ..GaussianParts::default()
     })?;
-    let center = ((bounds.min + bounds.max) * 0.5).as_dvec3();
-    let radius = f64::from((bounds.max - bounds.min).length()) * 0.5;
+    let center = (bounds.min + bounds.max) * 0.5;
+    let radius = (bounds.max - bounds.min).length() * 0.5;
     let fov = 30.0f64;
     let distance = radius / (0.5 * fov.to_radians()).sin();
     let camera = Camera::look_at(

@@ -46,7 +46,7 @@ pub fn run(python: Option<&str>) -> anyhow::Result<()> {
         mesh.triangle_count(),
         rayon::current_num_threads()
     );
-    let diag = f64::from(mesh.bounds().map_or(1.0, |b| b.diagonal()));
+    let diag = mesh.bounds().map_or(1.0, |b| b.diagonal());
 
     let script = python_script("smooth_open3d.py");
     let path_str = path.to_str().context("temporary path is not UTF-8")?;
@@ -138,7 +138,7 @@ fn max_abs_diff(ours: &TriMesh, reference: &[DVec3]) -> anyhow::Result<f64> {
         .positions()
         .iter()
         .zip(reference)
-        .map(|(a, b)| (a.as_dvec3() - *b).abs().max_element())
+        .map(|(a, b)| (*a - *b).abs().max_element())
         .fold(0.0, f64::max))
 }
 

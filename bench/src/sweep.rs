@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::bail;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelaunay};
 use trisplat_geometry::TriMesh;
 use trisplat_pipeline::config::DEFAULT_SAMPLES;
@@ -92,7 +92,7 @@ struct Case {
 /// One frame of the animation: deformed template, Gaussian means, ground-truth samples.
 struct Frame {
     index: usize,
-    positions: Vec<Vec3>,
+    positions: Vec<DVec3>,
     means: Vec<Vec3>,
     gt: GtSamples,
 }

@@ -34,7 +34,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
-use glam::Vec3;
+use glam::DVec3;
 use trisplat_extract::tsdf::{DepthImage, Fused, TsdfOptions, fuse, read_depth_dir, scene_radius};
 use trisplat_geometry::camera::{read_cameras_json, sphere_rig, write_cameras_json};
 use trisplat_geometry::io::{read_mesh, write_npy};
@@ -95,9 +95,9 @@ fn spot() -> anyhow::Result<TriMesh> {
     let spot = read_mesh(&trisplat_fixtures::path("reference/smoothing/spot.ply"))?;
     let b = spot.bounds().context("empty mesh")?;
     let extent = (b.max - b.min).max_element();
-    let scale = (SCENE_SIZE / f64::from(extent)) as f32;
+    let scale = SCENE_SIZE / extent;
     let c = b.center();
-    let positions: Vec<Vec3> = spot.positions().iter().map(|&p| (p - c) * scale).collect();
+    let positions: Vec<DVec3> = spot.positions().iter().map(|&p| (p - c) * scale).collect();
     Ok(TriMesh::try_new(positions, spot.triangles().to_vec())?)
 }
 
@@ -107,15 +107,9 @@ fn render_scene(gt: &TriMesh, dir: &Path) -> anyhow::Result<Vec<Camera>> {
     let radius = gt
         .positions()
         .iter()
-        .map(|p| f64::from((*p - b.center()).length()))
+        .map(|p| (*p - b.center()).length())
         .fold(0.0, f64::max);
-    let cameras = sphere_rig(
-        b.center().as_dvec3(),
-        radius,
-        VIEWS,
-        (SIZE, SIZE),
-        FOV_Y_DEG,
-    )?;
+    let cameras = sphere_rig(b.center(), radius, VIEWS, (SIZE, SIZE), FOV_Y_DEG)?;
     let renderer = MeshRenderer::new(gt, MeshRenderOptions::default())?;
     for cam in &cameras {
         let maps = renderer.render(cam);
@@ -216,7 +210,7 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
         }
     };
     let b = gt.bounds().context("empty ground truth")?;
-    let extent = f64::from((b.max - b.min).max_element());
+    let extent = (b.max - b.min).max_element();
     let depths: Vec<DepthImage> = read_depth_dir(&dir, &cameras, 1000.0)?;
     let (_, scene_r) = scene_radius(&cameras).context("cameras do not meet")?;
     let depth_trunc = 2.0 * scene_r;

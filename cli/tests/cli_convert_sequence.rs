@@ -12,12 +12,12 @@ use trisplat_geometry::animation::{Clip, GltfTemplate};
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 
 /// Largest allowed difference between an evaluated and a frame coordinate (f32 storage).
-const POSITION_TOLERANCE: f32 = 1e-6;
+const POSITION_TOLERANCE: f64 = 1e-6;
 
 /// Frame `k`: Spot scaled by `1 + 0.02 k` (same topology for every `k`).
 fn frame(k: usize) -> TriMesh {
     let spot = trisplat_fixtures::spot().expect("spot");
-    let scale = 1.0 + 0.02 * k as f32;
+    let scale = 1.0 + 0.02 * k as f64;
     let positions = spot.positions().iter().map(|p| *p * scale).collect();
     TriMesh::new(positions, spot.triangles().to_vec())
 }
@@ -46,7 +46,7 @@ fn check_plays(output: &Path, files: &[PathBuf], fps: f64) {
                 .iter()
                 .zip(want.positions())
                 .map(|(a, b)| (*a - *b).abs().max_element())
-                .fold(0.0f32, f32::max);
+                .fold(0.0f64, f64::max);
             assert!(d <= POSITION_TOLERANCE, "frame {k} at {t} s: off by {d}");
         }
     }

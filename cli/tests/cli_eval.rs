@@ -5,7 +5,7 @@
 mod common;
 
 use common::{fixture, fresh_dir, one_error_line, run, run_ok, s};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use serde_json::Value;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh, write_points};
 use trisplat_geometry::{PointCloud, TriMesh};
@@ -27,7 +27,7 @@ fn spot() -> TriMesh {
 /// Spot's bounding-box diagonal in f64, as the definition says.
 fn spot_diagonal() -> f64 {
     let b = spot().bounds().expect("vertices");
-    (b.max.as_dvec3() - b.min.as_dvec3()).length()
+    (b.max - b.min).length()
 }
 
 #[test]
@@ -143,7 +143,7 @@ fn an_unrelated_mesh_is_scored_as_accuracy() {
     let dir = fresh_dir("eval_moved");
     let moved = dir.join("moved.ply");
     let m = spot();
-    let positions = m.positions().iter().map(|&p| p + Vec3::X * 0.1).collect();
+    let positions: Vec<_> = m.positions().iter().map(|&p| p + DVec3::X * 0.1).collect();
     write_mesh(
         &moved,
         &TriMesh::new(positions, m.triangles().to_vec()),
@@ -162,7 +162,7 @@ fn points_that_are_the_truth_s_vertices_are_self_consistency() {
     let m = spot();
     write_points(
         &points,
-        &PointCloud::try_new(m.positions().to_vec()).expect("finite"),
+        &PointCloud::try_new(m.positions_f32()).expect("finite"),
         WriteOptions::default(),
     )
     .expect("write");

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use common::{fresh_dir, one_error_line, run, run_ok, s};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
-use trisplat_splat::glam::Vec3;
+use trisplat_splat::glam::DVec3;
 
 /// A template and a folder of six frames of it (a slow stretch), as PLY files.
 fn frames_case(dir: &Path) -> (PathBuf, PathBuf) {
@@ -20,11 +20,11 @@ fn frames_case(dir: &Path) -> (PathBuf, PathBuf) {
     let frames = dir.join("frames");
     std::fs::create_dir_all(&frames).expect("frames folder");
     for k in 0..6 {
-        let s = 1.0 + 0.03 * k as f32;
-        let positions: Vec<Vec3> = rest
+        let s = 1.0 + 0.03 * f64::from(k);
+        let positions: Vec<DVec3> = rest
             .positions()
             .iter()
-            .map(|p| Vec3::new(p.x * s, p.y, p.z / s))
+            .map(|p| DVec3::new(p.x * s, p.y, p.z / s))
             .collect();
         let mesh = TriMesh::new(positions, rest.triangles().to_vec());
         write_mesh(

@@ -110,7 +110,11 @@ fn bind_initialises_and_attaches() {
 
 /// Writes `mesh` moved by `offset` to `path`.
 fn write_moved(mesh: &TriMesh, offset: Vec3, path: &Path) {
-    let moved: Vec<Vec3> = mesh.positions().iter().map(|q| *q + offset).collect();
+    let moved: Vec<_> = mesh
+        .positions()
+        .iter()
+        .map(|q| *q + offset.as_dvec3())
+        .collect();
     let m = TriMesh::new(moved, mesh.triangles().to_vec());
     write_mesh(path, &m, WriteOptions::default()).expect("write frame");
 }
@@ -168,7 +172,7 @@ fn deform_a_sequence_in_every_mode() {
         let shift = offsets[2] - offsets[1];
         for i in 0..f1.len() {
             let d = f2.means()[i] - f1.means()[i] - shift;
-            assert!(d.length() < POSITION_TOL * diag, "{mode} {i}: {d}");
+            assert!(d.length() < POSITION_TOL * diag as f32, "{mode} {i}: {d}");
             // Same covariance (the rotation of equal scales is not unique in jacobian mode).
             let (c1, c2) = (f1.covariance(i), f2.covariance(i));
             let size = c1
@@ -652,12 +656,12 @@ fn flame_binding_matches_float64_gaussian_avatars() {
         p("binding"),
     ]);
     let world = read_gaussians(&out.join("frame_000000.ply")).expect("frame");
-    let diag = f64::from(s_mesh.bounds().expect("bounds").diagonal());
+    let diag = s_mesh.bounds().expect("bounds").diagonal();
     let (mut worst_mean, mut worst_rot, mut worst_scale) = (0.0f64, 0.0f64, 0.0f64);
     let binding = &set.binding().expect("bound").triangles;
     for (i, t) in binding.iter().enumerate() {
         let tri = s_mesh.triangles()[t.index()];
-        let v = tri.map(|j| s_mesh.positions()[j as usize].as_dvec3().to_array());
+        let v = tri.map(|j| s_mesh.positions()[j as usize].to_array());
         let (r, c, k) = ga_frame(v);
         let ml = set.means()[i].as_dvec3().to_array();
         let want = [0, 1, 2].map(|a| k * (0..3).map(|b| r[a][b] * ml[b]).sum::<f64>() + c[a]);

@@ -16,7 +16,7 @@
 //! are numbered block by block in the grid's block order, so the mesh does not depend on the
 //! thread count.
 
-use glam::{DVec3, IVec3, Vec3};
+use glam::{DVec3, IVec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 
@@ -141,7 +141,7 @@ fn crossing(fa: f32, fb: f32) -> f64 {
 #[derive(Default)]
 struct BlockVertices {
     keys: Vec<u16>,
-    positions: Vec<Vec3>,
+    positions: Vec<DVec3>,
     colors: Vec<[f32; 4]>,
 }
 
@@ -196,7 +196,7 @@ fn block_vertices(grid: &BlockGrid, b: usize) -> BlockVertices {
             let g = key * BLOCK + l;
             let p = grid.position(g) + DVec3::AXES[axis] * (t * grid.voxel);
             out.keys.push((local * 3 + axis) as u16);
-            out.positions.push(p.as_vec3());
+            out.positions.push(p);
             if let Some(color) = &grid.color {
                 let (c0, c1) = (color[s0], color[s1]);
                 let mix = |k: usize| ((1.0 - t) * f64::from(c0[k]) + t * f64::from(c1[k])) as f32;
@@ -281,7 +281,7 @@ pub fn marching_cubes(grid: &BlockGrid) -> TriMesh {
     // anyway (each vertex needs a crossed edge of allocated blocks), so this is not reachable
     // in practice. Keep the mesh empty rather than wrap.
     if total > u64::from(u32::MAX) {
-        return TriMesh::new_unchecked(Vec::new(), Vec::new());
+        return TriMesh::default();
     }
     let triangles: Vec<[u32; 3]> = (0..n)
         .into_par_iter()
@@ -353,7 +353,7 @@ mod tests {
         // Every vertex lies on the sphere to within the linear-interpolation error.
         let c = DVec3::splat(1.0);
         for p in mesh.positions() {
-            let r = (p.as_dvec3() - c).length();
+            let r = (*p - c).length();
             assert!((r - 0.63).abs() < 0.01, "{r}");
         }
     }

@@ -5,7 +5,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 
 use crate::TriMesh;
 use crate::topology::TriangleClusters;
@@ -150,7 +150,7 @@ pub fn weld_vertices(mesh: &TriMesh, tolerance: f32) -> (TriMesh, Vec<u32>) {
 }
 
 /// Bit pattern of a position for exact comparison (`-0.0` as `0.0`); `None` with a NaN.
-fn exact_key(p: Vec3) -> Option<[u32; 3]> {
+fn exact_key(p: DVec3) -> Option<[u64; 3]> {
     if p.is_nan() {
         return None;
     }
@@ -159,8 +159,8 @@ fn exact_key(p: Vec3) -> Option<[u32; 3]> {
 }
 
 /// Old-to-new map merging positions that compare equal.
-fn weld_map_exact(positions: &[Vec3]) -> Vec<u32> {
-    let mut seen: HashMap<[u32; 3], u32> = HashMap::with_capacity(positions.len());
+fn weld_map_exact(positions: &[DVec3]) -> Vec<u32> {
+    let mut seen: HashMap<[u64; 3], u32> = HashMap::with_capacity(positions.len());
     let mut next = 0u32;
     positions
         .iter()
@@ -181,17 +181,12 @@ fn weld_map_exact(positions: &[Vec3]) -> Vec<u32> {
 /// Old-to-new map of the greedy rule of [`weld_vertices`] for `tolerance > 0`: a uniform grid
 /// of cells `tolerance` wide finds the candidates (the 27 cells around a vertex); positions
 /// with a non-finite coordinate merge only with equal positions.
-fn weld_map_within(positions: &[Vec3], tolerance: f64) -> Vec<u32> {
+fn weld_map_within(positions: &[DVec3], tolerance: f64) -> Vec<u32> {
     const UNSET: u32 = u32::MAX;
     // Float-to-int casts saturate: far-out cells share a key, which costs time, not accuracy.
-    let cell = |p: Vec3| {
-        (p.as_dvec3() / tolerance)
-            .floor()
-            .to_array()
-            .map(|c| c as i64)
-    };
+    let cell = |p: DVec3| (p / tolerance).floor().to_array().map(|c| c as i64);
     let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
-    let mut non_finite: HashMap<[u32; 3], Vec<u32>> = HashMap::new();
+    let mut non_finite: HashMap<[u64; 3], Vec<u32>> = HashMap::new();
     for (i, &p) in positions.iter().enumerate() {
         if p.is_finite() {
             grid.entry(cell(p)).or_default().push(i as u32);
@@ -239,9 +234,7 @@ fn weld_map_within(positions: &[Vec3], tolerance: f64) -> Vec<u32> {
                     };
                     for &j in members {
                         let q = positions[j as usize];
-                        if map[j as usize] == UNSET
-                            && (q == p || (q.as_dvec3() - p.as_dvec3()).length() <= tolerance)
-                        {
+                        if map[j as usize] == UNSET && (q == p || (q - p).length() <= tolerance) {
                             map[j as usize] = id;
                         }
                     }
@@ -256,7 +249,7 @@ fn weld_map_within(positions: &[Vec3], tolerance: f64) -> Vec<u32> {
 /// `vertex_map` (new vertex i = old vertex `vertex_map[i]`) when given.
 fn rebuild(
     mesh: &TriMesh,
-    positions: Vec<glam::Vec3>,
+    positions: Vec<DVec3>,
     triangles: Vec<[u32; 3]>,
     vertex_map: Option<&[u32]>,
 ) -> TriMesh {
@@ -353,8 +346,8 @@ mod tests {
         assert_eq!(map, vec![0, 1, 2, 0, 2, 3]);
         assert_eq!(w.vertex_count(), 4);
         assert_eq!(
-            w.positions(),
-            &[Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y]
+            w.positions_f32(),
+            [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y]
         );
         assert_eq!(w.triangles(), &[[0, 1, 2], [0, 2, 3]]);
         // Attributes of the first copy.
@@ -406,8 +399,8 @@ mod tests {
         let (w, map) = weld_vertices(&m, 1.0);
         assert_eq!(map, vec![0, 0, 1, 1, 2]);
         assert_eq!(
-            w.positions(),
-            &[
+            w.positions_f32(),
+            [
                 Vec3::ZERO,
                 Vec3::new(1.2, 0.0, 0.0),
                 Vec3::new(5.0, 0.0, 0.0)

@@ -1,4 +1,9 @@
-//! The indexed triangle mesh: f32 positions, u32 triangles, optional per-vertex attributes.
+//! The indexed triangle mesh: f64 positions, u32 triangles, optional per-vertex attributes.
+//!
+//! Positions are f64 from the file to every derived quantity (triangle frames, deformation
+//! gradients, areas): a mesh is small next to the Gaussians and point clouds (f32), and f32
+//! storage of its vertices, amplified by sliver triangles, was the largest error in deformed
+//! covariances (docs/numerics.md).
 
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
@@ -8,34 +13,44 @@ use crate::validation::MeshReport;
 /// Per-vertex RGBA colour in linear `[0, 1]` floats.
 pub type Rgba = [f32; 4];
 
-/// Axis-aligned bounding box.
+/// Axis-aligned bounding box, in f64 (it bounds f32 point sets exactly too).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
     /// Minimum corner.
-    pub min: Vec3,
+    pub min: DVec3,
     /// Maximum corner.
-    pub max: Vec3,
+    pub max: DVec3,
 }
 
 impl Aabb {
-    /// Bounds of `points`, or `None` when there are none (or none finite).
+    /// Bounds of f32 `points`, or `None` when there are none (or none finite).
     #[must_use]
     pub fn from_points(points: &[Vec3]) -> Option<Self> {
-        let mut iter = points.iter().filter(|p| p.is_finite());
-        let first = *iter.next()?;
-        let (min, max) = iter.fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        Self::from_iter(points.iter().map(|p| p.as_dvec3()))
+    }
+
+    /// Bounds of f64 `points`, or `None` when there are none (or none finite).
+    #[must_use]
+    pub fn from_dpoints(points: &[DVec3]) -> Option<Self> {
+        Self::from_iter(points.iter().copied())
+    }
+
+    fn from_iter(points: impl Iterator<Item = DVec3>) -> Option<Self> {
+        let mut iter = points.filter(|p| p.is_finite());
+        let first = iter.next()?;
+        let (min, max) = iter.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p)));
         Some(Self { min, max })
     }
 
     /// Length of the diagonal: the scene scale that relative tolerances refer to.
     #[must_use]
-    pub fn diagonal(&self) -> f32 {
+    pub fn diagonal(&self) -> f64 {
         (self.max - self.min).length()
     }
 
     /// Centre of the box.
     #[must_use]
-    pub fn center(&self) -> Vec3 {
+    pub fn center(&self) -> DVec3 {
         (self.min + self.max) * 0.5
     }
 }
@@ -88,7 +103,7 @@ pub enum MeshError {
 /// [`crate::cleanup`] removes them.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {
-    positions: Vec<Vec3>,
+    positions: Vec<DVec3>,
     triangles: Vec<[u32; 3]>,
     normals: Option<Vec<Vec3>>,
     uvs: Option<Vec<Vec2>>,
@@ -100,7 +115,11 @@ impl TriMesh {
     ///
     /// # Errors
     /// [`MeshError`] naming the first offending vertex or triangle.
-    pub fn try_new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Result<Self, MeshError> {
+    pub fn try_new<P: Into<DVec3>>(
+        positions: Vec<P>,
+        triangles: Vec<[u32; 3]>,
+    ) -> Result<Self, MeshError> {
+        let positions: Vec<DVec3> = positions.into_iter().map(Into::into).collect();
         if u32::try_from(positions.len()).is_err() {
             return Err(MeshError::TooManyVertices {
                 count: positions.len(),
@@ -127,7 +146,7 @@ impl TriMesh {
     /// # Panics
     /// When `try_new` would return an error.
     #[must_use]
-    pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+    pub fn new<P: Into<DVec3>>(positions: Vec<P>, triangles: Vec<[u32; 3]>) -> Self {
         match Self::try_new(positions, triangles) {
             Ok(mesh) => mesh,
             Err(e) => panic!("invalid mesh: {e}"),
@@ -135,11 +154,12 @@ impl TriMesh {
     }
 
     /// Builds a mesh without checks, for trusted hot paths (e.g. output of our own algorithms).
-    /// Indices must be in range and positions finite; other code relies on it.
+    /// Indices must be in range and positions finite; other code relies on it. f32 positions
+    /// are widened exactly.
     #[must_use]
-    pub fn new_unchecked(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+    pub fn new_unchecked<P: Into<DVec3>>(positions: Vec<P>, triangles: Vec<[u32; 3]>) -> Self {
         Self {
-            positions,
+            positions: positions.into_iter().map(Into::into).collect(),
             triangles,
             normals: None,
             uvs: None,
@@ -189,10 +209,17 @@ impl TriMesh {
         }
     }
 
-    /// Vertex positions.
+    /// Vertex positions (f64).
     #[must_use]
-    pub fn positions(&self) -> &[Vec3] {
+    pub fn positions(&self) -> &[DVec3] {
         &self.positions
+    }
+
+    /// Vertex positions rounded to f32, for consumers that store bulk data in f32 (BVHs,
+    /// renderers, point samples). Allocates.
+    #[must_use]
+    pub fn positions_f32(&self) -> Vec<Vec3> {
+        self.positions.iter().map(|p| p.as_vec3()).collect()
     }
 
     /// Triangles as vertex index triples (counter-clockwise = front).
@@ -237,7 +264,8 @@ impl TriMesh {
     /// # Errors
     /// [`MeshError::AttributeLength`] when the count changes, [`MeshError::NonFinitePosition`]
     /// when a position is not finite.
-    pub fn set_positions(&mut self, positions: Vec<Vec3>) -> Result<(), MeshError> {
+    pub fn set_positions<P: Into<DVec3>>(&mut self, positions: Vec<P>) -> Result<(), MeshError> {
+        let positions: Vec<DVec3> = positions.into_iter().map(Into::into).collect();
         if positions.len() != self.positions.len() {
             return Err(MeshError::AttributeLength {
                 attribute: "positions",
@@ -266,7 +294,7 @@ impl TriMesh {
     pub fn into_parts(
         self,
     ) -> (
-        Vec<Vec3>,
+        Vec<DVec3>,
         Vec<[u32; 3]>,
         Option<Vec<Vec3>>,
         Option<Vec<Vec2>>,
@@ -284,7 +312,7 @@ impl TriMesh {
     /// The three corner positions of triangle `t`.
     #[inline]
     #[must_use]
-    pub fn corners(&self, t: usize) -> [Vec3; 3] {
+    pub fn corners(&self, t: usize) -> [DVec3; 3] {
         let [a, b, c] = self.triangles[t];
         [
             self.positions[a as usize],
@@ -297,7 +325,7 @@ impl TriMesh {
     #[inline]
     #[must_use]
     pub fn triangle_cross(&self, t: usize) -> DVec3 {
-        let [a, b, c] = self.corners(t).map(Vec3::as_dvec3);
+        let [a, b, c] = self.corners(t);
         (b - a).cross(c - a)
     }
 
@@ -345,16 +373,16 @@ impl TriMesh {
     /// Axis-aligned bounds of the vertices, `None` for an empty mesh.
     #[must_use]
     pub fn bounds(&self) -> Option<Aabb> {
-        Aabb::from_points(&self.positions)
+        Aabb::from_dpoints(&self.positions)
     }
 
     /// Signed volume enclosed by the mesh (positive for closed, outward-oriented meshes).
     #[must_use]
     pub fn signed_volume(&self) -> f64 {
-        let origin = self.bounds().map_or(DVec3::ZERO, |b| b.center().as_dvec3());
+        let origin = self.bounds().map_or(DVec3::ZERO, |b| b.center());
         (0..self.triangles.len())
             .map(|t| {
-                let [a, b, c] = self.corners(t).map(|p| p.as_dvec3() - origin);
+                let [a, b, c] = self.corners(t).map(|p| p - origin);
                 a.dot(b.cross(c)) / 6.0
             })
             .sum()
@@ -400,8 +428,8 @@ mod tests {
         assert!((m.area() - 6.0).abs() < 1e-12);
         assert!((m.signed_volume() - 1.0).abs() < 1e-12);
         let b = m.bounds().unwrap();
-        assert_eq!((b.min, b.max), (Vec3::ZERO, Vec3::ONE));
-        assert!((b.diagonal() - 3f32.sqrt()).abs() < 1e-6);
+        assert_eq!((b.min, b.max), (DVec3::ZERO, DVec3::ONE));
+        assert!((b.diagonal() - 3f64.sqrt()).abs() < 1e-15);
         assert_eq!(m.face_normals()[0], Vec3::NEG_Z);
         // Corner 7 touches +x, +y, +z faces with equal area: normal along (1,1,1).
         let n7 = m.vertex_normals()[7];

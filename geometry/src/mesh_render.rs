@@ -185,7 +185,6 @@ impl MeshRenderer {
         let Some([a, b, c]) = self.bvh.corners(tri as usize) else {
             return [0.0; 3];
         };
-        let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
         let mut n = (b - a).cross(c - a).normalize_or_zero();
         if self.options.normals == NormalSource::Interpolated
             && let Some(&[i, j, k]) = self.triangles.get(tri as usize)
@@ -270,10 +269,10 @@ mod tests {
     fn tilted_plane_matches_analytic_depth() {
         // The plane z = 0.3 x seen from (0, 0, 4) looking at the origin.
         let mut mesh = square(0.0);
-        let positions: Vec<Vec3> = mesh
+        let positions: Vec<DVec3> = mesh
             .positions()
             .iter()
-            .map(|p| Vec3::new(p.x, p.y, 0.3 * p.x))
+            .map(|p| DVec3::new(p.x, p.y, 0.3 * p.x))
             .collect();
         mesh.set_positions(positions).expect("finite");
         let cam = camera(DVec3::new(0.0, 0.0, 4.0), DVec3::ZERO, (40, 30), 60.0);
@@ -316,7 +315,7 @@ mod tests {
             assert!(len == 0.0 || (len - 1.0).abs() < 1e-6);
         }
         // Empty mesh.
-        let empty = TriMesh::new(Vec::new(), Vec::new());
+        let empty = TriMesh::default();
         let maps = MeshRenderer::new(&empty, MeshRenderOptions::default())
             .expect("empty is fine")
             .render(&grazing);

@@ -198,7 +198,7 @@ pub fn resolve_taus(taus: &[Tau], diagonal: f64) -> Result<Vec<f64>, MetricsErro
 /// Length of the diagonal of the axis-aligned box around `points`, in f64 (0 for no points).
 #[must_use]
 pub fn bbox_diagonal(points: &[Vec3]) -> f64 {
-    Aabb::from_points(points).map_or(0.0, |b| (b.max.as_dvec3() - b.min.as_dvec3()).length())
+    Aabb::from_points(points).map_or(0.0, |b| b.diagonal())
 }
 
 /// What the scores of a prediction against a ground truth measure.
@@ -242,20 +242,25 @@ impl std::fmt::Display for Relation {
     }
 }
 
-/// Fraction of the ground truth's vertices `gt` whose exact f32 position (bit for bit, with
-/// -0 taken as +0) is also a position in `pred` (a prediction's vertices or points); `None`
-/// when `gt` is empty. A prediction that copied the ground truth's vertices scores ~1, one
+/// Fraction of the ground truth's vertices `gt` whose position rounded to f32 (bit for bit, with
+/// -0 taken as +0) is also one of `pred`'s (a prediction's vertices or points, rounded alike);
+/// `None` when `gt` is empty. A prediction that copied the ground truth's vertices scores ~1, one
 /// that re-meshed the surface ~0 (its vertices land on the surface, not on these points).
 ///
 /// Sorts the smaller side's positions and looks the other side's up by binary search
 /// (parallel), so the cost is `O((G + P) log min(G, P))`.
 #[must_use]
-pub fn shared_vertex_fraction(gt: &[Vec3], pred: &[Vec3]) -> Option<f64> {
+pub fn shared_vertex_fraction(gt: &[DVec3], pred: &[DVec3]) -> Option<f64> {
     use std::sync::atomic::{AtomicBool, Ordering};
     if gt.is_empty() {
         return None;
     }
-    let key = |p: &Vec3| [p.x + 0.0, p.y + 0.0, p.z + 0.0].map(f32::to_bits);
+    // At f32 precision: a prediction that carried the vertices through f32 storage (points,
+    // Gaussian means) copied them all the same.
+    let key = |p: &DVec3| {
+        let p = p.as_vec3();
+        [p.x + 0.0, p.y + 0.0, p.z + 0.0].map(f32::to_bits)
+    };
     let shared = if pred.len() <= gt.len() {
         let mut keys: Vec<[u32; 3]> = pred.par_iter().map(key).collect();
         keys.par_sort_unstable();
@@ -800,8 +805,8 @@ mod tests {
     }
 
     /// The definition: each ground-truth vertex looked for among all prediction vertices.
-    fn shared_by_scan(gt: &[Vec3], pred: &[Vec3]) -> Option<f64> {
-        let same = |a: Vec3, b: Vec3| a.x == b.x && a.y == b.y && a.z == b.z;
+    fn shared_by_scan(gt: &[DVec3], pred: &[DVec3]) -> Option<f64> {
+        let same = |a: DVec3, b: DVec3| a.x == b.x && a.y == b.y && a.z == b.z;
         (!gt.is_empty()).then(|| {
             gt.iter()
                 .filter(|&&g| pred.iter().any(|&p| same(g, p)))
@@ -813,10 +818,10 @@ mod tests {
     #[test]
     fn shared_vertices_by_bits_on_both_search_paths() {
         let mut rng = Rng::new(12);
-        let grid = |rng: &mut Rng| Vec3::new(rng.below(4) as f32, rng.below(4) as f32, 0.0);
+        let grid = |rng: &mut Rng| DVec3::new(rng.below(4) as f64, rng.below(4) as f64, 0.0);
         for case in 0..200 {
-            let g: Vec<Vec3> = (0..case % 30).map(|_| grid(&mut rng)).collect();
-            let p: Vec<Vec3> = (0..(case * 7) % 45).map(|_| grid(&mut rng)).collect();
+            let g: Vec<DVec3> = (0..case % 30).map(|_| grid(&mut rng)).collect();
+            let p: Vec<DVec3> = (0..(case * 7) % 45).map(|_| grid(&mut rng)).collect();
             assert_eq!(
                 shared_vertex_fraction(&g, &p),
                 shared_by_scan(&g, &p),
@@ -824,10 +829,10 @@ mod tests {
             );
         }
         // -0 and +0 are one position; a one-ulp difference is another.
-        let g = [Vec3::new(-0.0, 1.0, 2.0), Vec3::new(1.0, 1.0, 1.0)];
+        let g = [DVec3::new(-0.0, 1.0, 2.0), DVec3::new(1.0, 1.0, 1.0)];
         let p = [
-            Vec3::new(0.0, 1.0, 2.0),
-            Vec3::new(1.0, 1.0, f32::from_bits(1.0f32.to_bits() + 1)),
+            DVec3::new(0.0, 1.0, 2.0),
+            DVec3::new(1.0, 1.0, f64::from(f32::from_bits(1.0f32.to_bits() + 1))),
         ];
         assert_eq!(shared_vertex_fraction(&g, &p), Some(0.5));
         assert_eq!(shared_vertex_fraction(&[], &p), None);

@@ -673,7 +673,7 @@ pub fn vertex_mean_curvature(mesh: &TriMesh) -> Vec<f64> {
         if a == b || b == c || a == c {
             continue;
         }
-        let x = mesh.corners(t).map(Vec3::as_dvec3);
+        let x = mesh.corners(t);
         let twice_area = (x[1] - x[0]).cross(x[2] - x[0]).length();
         if twice_area <= 0.0 {
             continue;
@@ -771,7 +771,7 @@ fn sample_distribution(
                 let r1 = rng.uniform_f64();
                 let r2 = rng.uniform_f64();
                 let [wa, wb, wc] = open3d_barycentrics(r1, r2);
-                let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+                let [a, b, c] = mesh.corners(t);
                 let q: DVec3 = a * wa + b * wb + c * wc;
                 *p = q.as_vec3();
                 *nrm = face_normals[t];
@@ -907,7 +907,7 @@ mod tests {
         let positions = fine
             .positions()
             .iter()
-            .map(|p| p.normalize() * radius)
+            .map(|p| p.normalize() * f64::from(radius))
             .collect();
         TriMesh::new(positions, fine.triangles().to_vec())
     }

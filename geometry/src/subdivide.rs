@@ -11,7 +11,7 @@ use crate::topology::edge_key;
 /// every edge (shared by the triangles on both sides). Triangle `(a, b, c)` becomes
 /// `(a, ab, ca)`, `(ab, b, bc)`, `(bc, c, ca)`, `(ab, bc, ca)` at indices `4t..4t+4`, and new
 /// vertices are appended in order of first use, exactly as Open3D. Midpoints are computed in
-/// f64 and rounded to f32. Per-vertex UVs and colours are averaged like the positions; normals
+/// f64. Per-vertex UVs and colours are averaged like the positions; normals
 /// are averaged and re-normalised (Open3D leaves the averages unnormalised).
 ///
 /// # Errors
@@ -33,7 +33,7 @@ pub fn midpoint(mesh: &TriMesh, iterations: usize) -> Result<TriMesh, MeshError>
                     count: positions.len() + 1,
                 })?;
                 let (i, j) = (key.0 as usize, key.1 as usize);
-                positions.push(mid3(positions[i], positions[j]));
+                positions.push((positions[i] + positions[j]) * 0.5);
                 if let Some(n) = normals.as_mut() {
                     let avg = mid3(n[i], n[j]);
                     n.push(avg.normalize_or_zero());
@@ -97,6 +97,6 @@ mod tests {
         assert_eq!(midpoint(&m, 0).unwrap(), m);
         let one = midpoint(&m, 1).unwrap();
         assert_eq!(one.triangles()[0], [0, 4, 6]);
-        assert_eq!(one.positions()[4], Vec3::new(0.5, 0.0, 0.0));
+        assert_eq!(one.positions()[4], glam::DVec3::new(0.5, 0.0, 0.0));
     }
 }

@@ -2,7 +2,7 @@
 
 use std::fmt;
 
-use glam::Vec3;
+use glam::DVec3;
 
 use crate::topology::{Edge, non_manifold_edges};
 
@@ -26,7 +26,7 @@ pub struct MeshReport {
 impl MeshReport {
     /// Checks raw arrays, which may violate the [`crate::TriMesh`] invariants.
     #[must_use]
-    pub fn of_raw(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+    pub fn of_raw(positions: &[DVec3], triangles: &[[u32; 3]]) -> Self {
         let mut report = Self {
             non_finite_vertices: positions
                 .iter()
@@ -49,8 +49,8 @@ impl MeshReport {
                 report.repeated_index_triangles.push(t);
                 continue;
             }
-            let [pa, pb, pc] = [a, b, c].map(|v| positions[v as usize].as_dvec3());
-            if (pb - pa).cross(pc - pa) == glam::DVec3::ZERO {
+            let [pa, pb, pc] = [a, b, c].map(|v| positions[v as usize]);
+            if (pb - pa).cross(pc - pa) == DVec3::ZERO {
                 report.zero_area_triangles.push(t);
             }
         }
@@ -94,7 +94,13 @@ impl fmt::Display for MeshReport {
 
 #[cfg(test)]
 mod tests {
+    use glam::Vec3;
+
     use super::*;
+
+    fn wide(p: &[Vec3]) -> Vec<DVec3> {
+        p.iter().map(|p| p.as_dvec3()).collect()
+    }
 
     #[test]
     fn reports_every_kind_of_problem() {
@@ -115,7 +121,7 @@ mod tests {
             [1, 0, 5], // third on edge (0,1)
             [0, 1, 6], // fourth: (0,1) is non-manifold
         ];
-        let r = MeshReport::of_raw(&p, &tris);
+        let r = MeshReport::of_raw(&wide(&p), &tris);
         assert_eq!(r.non_finite_vertices, vec![4]);
         assert_eq!(r.out_of_range_triangles, vec![1]);
         assert_eq!(r.repeated_index_triangles, vec![2]);
@@ -129,7 +135,7 @@ mod tests {
     fn clean_tetrahedron() {
         let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
         let tris = vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]];
-        let r = MeshReport::of_raw(&p, &tris);
+        let r = MeshReport::of_raw(&wide(&p), &tris);
         assert!(r.is_clean(), "{r}");
     }
 }

@@ -159,7 +159,7 @@ pub fn read_lam_gaussians(
     }
     let mut parts = set.into_parts();
     for (mean, vertex) in parts.means.iter_mut().zip(stored.positions()) {
-        *mean = (mean.as_dvec3() + vertex.as_dvec3()).as_vec3();
+        *mean = (mean.as_dvec3() + *vertex).as_vec3();
     }
     let coeffs = parts.sh.len() / n.max(1);
     for g in 0..n {
@@ -257,11 +257,11 @@ pub fn silhouette_iou(
     let bounds = mesh
         .bounds()
         .ok_or_else(|| bad("the template has no vertices".into()))?;
-    let center = ((bounds.min + bounds.max) * 0.5).as_dvec3();
+    let center = (bounds.min + bounds.max) * 0.5;
     let radius = mesh
         .positions()
         .iter()
-        .map(|p| p.as_dvec3().distance(center))
+        .map(|p| p.distance(center))
         .fold(0.0, f64::max);
     let cameras = sphere_rig(center, radius, views, (resolution, resolution), 40.0)
         .map_err(|e| bad(format!("cameras: {e}")))?;

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_splat::GaussianSet;
@@ -108,7 +108,7 @@ impl Engine {
         &self,
         animation: &Animation,
         set: &GaussianSet,
-        positions: &[Vec3],
+        positions: &[DVec3],
         frame: usize,
         label: &str,
         scratch: &mut WorldGeometry,
@@ -137,7 +137,7 @@ impl Engine {
         &self,
         animation: &Animation,
         set: &GaussianSet,
-        positions: &[Vec3],
+        positions: &[DVec3],
         frame: usize,
         label: &str,
     ) -> Result<GaussianSet, PipelineError> {
@@ -210,12 +210,12 @@ pub fn skinned_gltf<'a>(
             ),
         ));
     }
-    let diag = f64::from(template.bounds().map_or(0.0, |b| b.diagonal()));
+    let diag = template.bounds().map_or(0.0, |b| b.diagonal());
     let worst = template
         .positions()
         .iter()
         .zip(rest)
-        .map(|(a, b)| f64::from((*a - *b).length()))
+        .map(|(a, b)| (*a - *b).length())
         .fold(0.0, f64::max);
     if worst > LBS_REST_TOLERANCE * diag.max(f64::MIN_POSITIVE) {
         return Err(lbs(

@@ -4,7 +4,7 @@
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
     AnimatedTemplate, BlendshapeAnimation, BlendshapeSet, Clip, GltfMorphAnimation, GltfTemplate,
@@ -66,7 +66,7 @@ impl AnimatedTemplate for Still {
     fn frame(
         &self,
         frame: usize,
-    ) -> Result<Vec<Vec3>, trisplat_geometry::animation::AnimationError> {
+    ) -> Result<Vec<DVec3>, trisplat_geometry::animation::AnimationError> {
         if frame == 0 {
             Ok(self.mesh.positions().to_vec())
         } else {
@@ -385,11 +385,11 @@ pub const SCALE_MISMATCH: f64 = 10.0;
 pub fn check_scale(
     template: &TriMesh,
     template_path: &Path,
-    frame: &[Vec3],
+    frame: &[DVec3],
     index: usize,
     label: &str,
 ) -> Result<(), PipelineError> {
-    let radius = |points: &[Vec3]| bounding_sphere(&[points]).map(|(_, r)| r);
+    let radius = |vertices: &[DVec3]| bounding_sphere(vertices, &[]).map(|(_, r)| r);
     let (Some(template_radius), Some(frame_radius)) = (radius(template.positions()), radius(frame))
     else {
         return Err(PipelineError::Topology {
@@ -689,7 +689,7 @@ impl WeldedTemplate {
     /// A frame's positions (one per original vertex) on the welded vertices. `None` when the
     /// frame does not have the stored template's vertex count.
     #[must_use]
-    pub fn positions(&self, frame: Vec<Vec3>) -> Option<Vec<Vec3>> {
+    pub fn positions(&self, frame: Vec<DVec3>) -> Option<Vec<DVec3>> {
         if frame.len() != self.stored_vertices {
             return None;
         }
@@ -735,10 +735,10 @@ mod tests {
 
     fn square() -> TriMesh {
         let p = vec![
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
         ];
         TriMesh::new(p, vec![[0, 1, 2], [0, 2, 3]])
     }
@@ -770,12 +770,12 @@ mod tests {
     fn welded_template_remaps_frames_and_skinning() {
         // The square with its diagonal's vertices duplicated (a UV seam).
         let p = vec![
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
         ];
         let stored = TriMesh::new(p.clone(), vec![[0, 1, 2], [3, 4, 5]]);
         let w = WeldedTemplate::new(&stored);
@@ -784,17 +784,17 @@ mod tests {
         assert_eq!(w.mesh.triangles(), &[[0, 1, 2], [0, 2, 3]]);
         // A frame where the copies moved apart: the first copy wins.
         let mut frame = p.clone();
-        frame[3] = Vec3::splat(9.0);
+        frame[3] = DVec3::splat(9.0);
         let moved = w.positions(frame).expect("six vertices");
         assert_eq!(moved, vec![p[0], p[1], p[2], p[5]]);
-        assert!(w.positions(vec![Vec3::ZERO; 5]).is_none());
+        assert!(w.positions(vec![DVec3::ZERO; 5]).is_none());
         // Skin rows of the first copies (vertex v: one influence, palette entry v).
         let skinning = VertexSkinning {
             offsets: (0..=6).collect(),
             entries: (0..6).collect(),
             weights: vec![1.0; 6],
             palette_len: 6,
-            base_positions: p.iter().map(|v| v.as_dvec3()).collect(),
+            base_positions: p.clone(),
         };
         let s = w.skinning(&skinning).expect("six rows");
         assert_eq!(s.offsets, vec![0, 1, 2, 3, 4]);
@@ -820,7 +820,7 @@ mod tests {
     fn scale_mismatch_is_refused_either_way() {
         let t = square();
         let path = Path::new("t.ply");
-        let scaled = |k: f32| -> Vec<Vec3> { t.positions().iter().map(|&p| p * k).collect() };
+        let scaled = |k: f64| -> Vec<DVec3> { t.positions().iter().map(|&p| p * k).collect() };
         for k in [1.0, 0.5, 2.0, 9.9, 1.0 / 9.9] {
             check_scale(&t, path, &scaled(k), 0, "a").expect("same scale");
         }
@@ -830,7 +830,7 @@ mod tests {
                 panic!("{e}");
             };
             assert_eq!(*frame, 3);
-            assert!((ratio / f64::from(k) - 1.0).abs() < 1e-5, "{ratio} {k}");
+            assert!((ratio / k - 1.0).abs() < 1e-5, "{ratio} {k}");
             let text = e.to_string();
             assert!(
                 text.starts_with("anim: frame 3 ") && text.contains("t.ply"),
@@ -838,7 +838,7 @@ mod tests {
             );
         }
         // A frame without finite vertices is an error, not a pass.
-        let bad = vec![Vec3::NAN; 4];
+        let bad = vec![DVec3::NAN; 4];
         assert!(check_scale(&t, path, &bad, 0, "a").is_err());
     }
 

@@ -53,7 +53,7 @@ pub struct FrameInput<'a> {
     /// Animation frame index.
     pub frame: usize,
     /// Deformed template vertices.
-    pub positions: &'a [Vec3],
+    pub positions: &'a [DVec3],
     /// Deformed Gaussian means.
     pub means: &'a [Vec3],
     /// The whole deformed (world-space) Gaussian set; present when the tsdf method runs.
@@ -73,13 +73,19 @@ pub struct MethodOutput {
     pub delaunay: Option<FrameStats>,
 }
 
-/// Centre and radius of the bounding sphere (about the box centre) of some point sets.
+/// Centre and radius of the bounding sphere (about the box centre) of mesh `vertices` and
+/// `points` together (either may be empty).
 #[must_use]
-pub fn bounding_sphere(sets: &[&[Vec3]]) -> Option<(DVec3, f64)> {
+pub fn bounding_sphere(vertices: &[DVec3], points: &[Vec3]) -> Option<(DVec3, f64)> {
+    let all = || {
+        vertices
+            .iter()
+            .copied()
+            .chain(points.iter().map(|p| p.as_dvec3()))
+    };
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    for p in sets.iter().flat_map(|s| s.iter()) {
-        let p = p.as_dvec3();
+    for p in all() {
         lo = lo.min(p);
         hi = hi.max(p);
     }
@@ -87,11 +93,7 @@ pub fn bounding_sphere(sets: &[&[Vec3]]) -> Option<(DVec3, f64)> {
         return None;
     }
     let center = (lo + hi) * 0.5;
-    let radius = sets
-        .iter()
-        .flat_map(|s| s.iter())
-        .map(|p| (p.as_dvec3() - center).length())
-        .fold(0.0, f64::max);
+    let radius = all().map(|p| (p - center).length()).fold(0.0, f64::max);
     let floor = MIN_RADIUS_REL * center.length().max(1.0);
     Some((center, radius.max(floor)))
 }
@@ -136,7 +138,7 @@ impl Resolved {
         rest: &TriMesh,
         rest_means: &[Vec3],
     ) -> Result<Self, PipelineError> {
-        let Some((_, template_radius)) = bounding_sphere(&[rest.positions()]) else {
+        let Some((_, template_radius)) = bounding_sphere(rest.positions(), &[]) else {
             return Err(PipelineError::BadOption {
                 name: "template",
                 value: f64::NAN,
@@ -302,7 +304,7 @@ impl TsdfMesher {
                 what: "the tsdf method was given no deformed Gaussian set",
             });
         };
-        let Some((center, radius)) = bounding_sphere(&[input.positions, input.means]) else {
+        let Some((center, radius)) = bounding_sphere(input.positions, input.means) else {
             return Ok(MethodOutput {
                 mesh: TriMesh::default(),
                 ms: start.elapsed().as_secs_f64() * 1e3,
@@ -478,12 +480,12 @@ mod tests {
     #[test]
     fn bounding_sphere_of_a_box() {
         let pts = [Vec3::new(-1.0, 0.0, 0.0), Vec3::new(1.0, 2.0, 0.0)];
-        let (c, r) = bounding_sphere(&[&pts]).expect("finite");
+        let (c, r) = bounding_sphere(&[], &pts).expect("finite");
         assert_eq!(c, DVec3::new(0.0, 1.0, 0.0));
         assert!((r - 2f64.sqrt()).abs() < 1e-12);
-        assert!(bounding_sphere(&[&[]]).is_none());
+        assert!(bounding_sphere(&[], &[]).is_none());
         // One point: a tiny positive radius.
-        let (_, r) = bounding_sphere(&[&[Vec3::ONE]]).expect("finite");
+        let (_, r) = bounding_sphere(&[DVec3::ONE], &[]).expect("finite");
         assert!(r > 0.0);
     }
 
@@ -551,7 +553,7 @@ mod tests {
         );
         let input = FrameInput {
             frame: 0,
-            positions: &means,
+            positions: &[],
             means: &means,
             world: None,
         };

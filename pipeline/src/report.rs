@@ -22,8 +22,7 @@ use trisplat_extract::incremental_delaunay::FrameStats;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::{
-    MetricsError, MetricsOptions, Relation, Shape, Tau, bbox_diagonal, evaluate,
-    shared_vertex_fraction,
+    MetricsError, MetricsOptions, Relation, Shape, Tau, evaluate, shared_vertex_fraction,
 };
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
@@ -64,7 +63,8 @@ impl GtSamples {
             return None;
         }
         let bvh = TriangleBvh::new(&mesh).ok();
-        let (diagonal, area) = (bbox_diagonal(mesh.positions()), mesh.area());
+        let diagonal = mesh.bounds().map_or(0.0, |b| b.diagonal());
+        let area = mesh.area();
         Some(Self {
             mesh,
             samples: points,
@@ -857,6 +857,8 @@ mod tests {
     use glam::Vec3;
     use trisplat_geometry::metrics::DEFAULT_TAUS;
 
+    use glam::DVec3;
+
     use super::*;
 
     fn tetra(scale: f32) -> TriMesh {
@@ -1128,9 +1130,9 @@ mod tests {
         // as in trimesh).
         let mut q = tetra(1.0).positions().to_vec();
         q.extend([
-            Vec3::new(-1.0, 0.0, 0.0),
-            Vec3::new(0.0, -1.0, 0.0),
-            Vec3::new(0.0, 0.0, -1.0),
+            DVec3::new(-1.0, 0.0, 0.0),
+            DVec3::new(0.0, -1.0, 0.0),
+            DVec3::new(0.0, 0.0, -1.0),
         ]);
         let two = TriMesh::new(
             q,

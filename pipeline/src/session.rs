@@ -17,7 +17,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::MeshSequence;
@@ -95,7 +95,7 @@ pub struct Session {
     animation: Animation,
     frames: Range<usize>,
     /// The first frame's positions, read while checking the scale.
-    first_positions: Option<Vec<Vec3>>,
+    first_positions: Option<Vec<DVec3>>,
     set: GaussianSet,
     /// `set` without SH beyond degree 0 and without extras: what rendering depth needs.
     render_set: Option<GaussianSet>,
@@ -461,7 +461,7 @@ impl Session {
     ///
     /// # Errors
     /// An animation error, or a frame without the template's vertices.
-    pub fn positions(&mut self, frame: usize) -> Result<Vec<Vec3>, PipelineError> {
+    pub fn positions(&mut self, frame: usize) -> Result<Vec<DVec3>, PipelineError> {
         let stored = match self.first_positions.take() {
             Some(p) if frame == self.frames.start => p,
             _ => self.animation.get().frame(frame)?,
@@ -496,7 +496,7 @@ impl Session {
     ///
     /// # Errors
     /// As [`Session::positions`]; a failed deformation naming the frame.
-    pub fn deform(&mut self, frame: usize) -> Result<(Vec<Vec3>, &[Vec3]), PipelineError> {
+    pub fn deform(&mut self, frame: usize) -> Result<(Vec<DVec3>, &[Vec3]), PipelineError> {
         let positions = self.positions(frame)?;
         self.record(Stage::Deform);
         self.means_into_scratch(frame, &positions)?;
@@ -507,7 +507,7 @@ impl Session {
     fn means_into_scratch(
         &mut self,
         frame: usize,
-        positions: &[Vec3],
+        positions: &[DVec3],
     ) -> Result<(), PipelineError> {
         self.engine.deform_means(
             &self.animation,
@@ -525,7 +525,7 @@ impl Session {
     fn deform_frame(
         &mut self,
         frame: usize,
-    ) -> Result<(Vec<Vec3>, Option<GaussianSet>, f64), PipelineError> {
+    ) -> Result<(Vec<DVec3>, Option<GaussianSet>, f64), PipelineError> {
         let positions = self.positions(frame)?;
         self.record(Stage::Deform);
         let start = Instant::now();

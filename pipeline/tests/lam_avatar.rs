@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::{DQuat, DVec3, Vec3};
+use glam::{DQuat, DVec3};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
     AnimatedTemplate, Clip, GltfMorphAnimation, GltfTemplate, WeightsTrack,
@@ -100,9 +100,9 @@ fn bound_lam_avatar_at_rest_is_vertex_plus_offset_with_rgb_colours() {
     let rest = Deformer::new(&mesh, DeformMode::Binding)
         .deform(&bound, mesh.positions())
         .expect("rest");
-    let diagonal = f64::from(mesh.bounds().expect("bounds").diagonal());
+    let diagonal = mesh.bounds().expect("bounds").diagonal();
     for v in 0..n {
-        let want = mesh.positions()[v].as_dvec3() + raw.means()[v].as_dvec3();
+        let want = mesh.positions()[v] + raw.means()[v].as_dvec3();
         let got = rest.means()[v].as_dvec3();
         assert!(
             got.distance(want) <= 1e-6 * diagonal,
@@ -257,13 +257,13 @@ fn head_only_vertices(template: &GltfTemplate) -> Vec<usize> {
 }
 
 /// Largest `|(a1 - b1) - R (a0 - b0)|` over pairs of `vertices` between two frames.
-fn rigid_residual(vertices: &[usize], before: &[Vec3], after: &[Vec3], r: DQuat) -> f64 {
+fn rigid_residual(vertices: &[usize], before: &[DVec3], after: &[DVec3], r: DQuat) -> f64 {
     let a = vertices[0];
     vertices
         .iter()
         .map(|&b| {
-            let d0 = before[b].as_dvec3() - before[a].as_dvec3();
-            let d1 = after[b].as_dvec3() - after[a].as_dvec3();
+            let d0 = before[b] - before[a];
+            let d1 = after[b] - after[a];
             (d1 - r * d0).length()
         })
         .fold(0.0, f64::max)
@@ -292,7 +292,7 @@ fn head_pose_turns_the_head_joint_by_an_axis_angle_vector_in_radians() {
     let head = head_only_vertices(&template);
     assert!(head.len() > 100, "{} head-only vertices", head.len());
     let axis_angle = DQuat::from_scaled_axis(DVec3::from_array(pose));
-    let size = f64::from(template.rest().bounds().expect("bounds").diagonal());
+    let size = template.rest().bounds().expect("bounds").diagonal();
     let residual = rigid_residual(&head, &rest, &turned, axis_angle);
     assert!(residual < 1e-5 * size, "axis-angle residual {residual}");
     for (name, other) in [

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_pipeline::config::{
@@ -133,8 +133,8 @@ fn config(template: PathBuf, animation: Option<String>, output: PathBuf) -> Extr
     }
 }
 
-fn radius(points: &[Vec3]) -> f64 {
-    trisplat_pipeline::methods::bounding_sphere(&[points]).map_or(0.0, |(_, r)| r)
+fn radius(vertices: &[DVec3]) -> f64 {
+    trisplat_pipeline::methods::bounding_sphere(vertices, &[]).map_or(0.0, |(_, r)| r)
 }
 
 #[test]

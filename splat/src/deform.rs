@@ -235,7 +235,7 @@ impl Deformer {
         }
     }
 
-    fn check_positions(&self, positions: &[Vec3]) -> Result<(), DeformError> {
+    fn check_positions(&self, positions: &[DVec3]) -> Result<(), DeformError> {
         if positions.len() != self.vertex_count {
             return Err(DeformError::VertexCount {
                 expected: self.vertex_count,
@@ -257,7 +257,7 @@ impl Deformer {
     pub fn deform(
         &self,
         set: &GaussianSet,
-        positions: &[Vec3],
+        positions: &[DVec3],
     ) -> Result<GaussianSet, DeformError> {
         let mut geometry = WorldGeometry::default();
         self.deform_geometry(set, positions, &mut geometry)?;
@@ -284,7 +284,7 @@ impl Deformer {
     ///
     /// # Errors
     /// As [`Deformer::deform`].
-    pub fn means(&self, set: &GaussianSet, positions: &[Vec3]) -> Result<Vec<Vec3>, DeformError> {
+    pub fn means(&self, set: &GaussianSet, positions: &[DVec3]) -> Result<Vec<Vec3>, DeformError> {
         let mut geometry = WorldGeometry::default();
         self.deform_geometry(set, positions, &mut geometry)?;
         Ok(geometry.means)
@@ -298,7 +298,7 @@ impl Deformer {
     pub fn deform_geometry(
         &self,
         set: &GaussianSet,
-        positions: &[Vec3],
+        positions: &[DVec3],
         out: &mut WorldGeometry,
     ) -> Result<(), DeformError> {
         self.check(set)?;
@@ -384,7 +384,7 @@ impl Deformer {
         }
     }
 
-    fn binding_triangles(&self, positions: &[Vec3]) -> Vec<BindingTri> {
+    fn binding_triangles(&self, positions: &[DVec3]) -> Vec<BindingTri> {
         self.triangles
             .par_iter()
             .enumerate()
@@ -414,7 +414,7 @@ impl Deformer {
             .collect()
     }
 
-    fn jacobian_triangles(&self, positions: &[Vec3]) -> Vec<JacobianTri> {
+    fn jacobian_triangles(&self, positions: &[DVec3]) -> Vec<JacobianTri> {
         self.triangles
             .par_iter()
             .zip(self.canonical.par_iter())
@@ -607,13 +607,13 @@ mod tests {
     use trisplat_geometry::rng::Rng;
 
     /// A bumpy grid with `side²` vertices and random bound Gaussians.
-    fn scene(side: u32, per_tri: usize) -> (TriMesh, GaussianSet, Vec<Vec3>) {
+    fn scene(side: u32, per_tri: usize) -> (TriMesh, GaussianSet, Vec<DVec3>) {
         let mut rng = Rng::new(11);
         let mut positions = Vec::new();
         for y in 0..side {
             for x in 0..side {
                 let z = rng.uniform_f32() * 0.1;
-                positions.push(Vec3::new(x as f32, y as f32, z) / side as f32);
+                positions.push(Vec3::new(x as f32, y as f32, z).as_dvec3() / f64::from(side));
             }
         }
         let mut triangles = Vec::new();
@@ -642,7 +642,7 @@ mod tests {
         .unwrap_or_else(|e| panic!("{e}"));
         let moved = positions
             .iter()
-            .map(|p| Vec3::new(p.x * 1.5 + p.y * 0.2, p.y, p.z + (p.x * 5.0).sin() * 0.1))
+            .map(|p| DVec3::new(p.x * 1.5 + p.y * 0.2, p.y, p.z + (p.x * 5.0).sin() * 0.1))
             .collect();
         (TriMesh::new(positions, triangles), set, moved)
     }
@@ -671,15 +671,15 @@ mod tests {
         let flat = bumpy
             .positions()
             .iter()
-            .map(|p| Vec3::new(p.x, p.y, 0.0))
-            .collect();
+            .map(|p| DVec3::new(p.x, p.y, 0.0))
+            .collect::<Vec<_>>();
         let mesh = TriMesh::new(flat, bumpy.triangles().to_vec());
         let plain = Deformer::new(&mesh, DeformMode::Binding);
         let adaptive = Deformer::new(&mesh, DeformMode::Binding).with_adaptive_scale(&mesh);
         assert!(adaptive.adaptive_scale() && !plain.adaptive_scale());
         // At rest and under a uniform scaling the two agree (k scales like √area).
-        for factor in [1.0f32, 2.0] {
-            let moved: Vec<Vec3> = mesh.positions().iter().map(|p| *p * factor).collect();
+        for factor in [1.0, 2.0] {
+            let moved: Vec<DVec3> = mesh.positions().iter().map(|p| *p * factor).collect();
             let a = adaptive.deform(&set, &moved).unwrap();
             let b = plain.deform(&set, &moved).unwrap();
             for (x, y) in a.log_scales().iter().zip(b.log_scales()) {
@@ -687,10 +687,10 @@ mod tests {
             }
         }
         // Stretching x by 4 multiplies every area by 4: scales are the rest ones times 2.
-        let stretched: Vec<Vec3> = mesh
+        let stretched: Vec<DVec3> = mesh
             .positions()
             .iter()
-            .map(|p| Vec3::new(4.0 * p.x, p.y, p.z))
+            .map(|p| DVec3::new(4.0 * p.x, p.y, p.z))
             .collect();
         let rest = plain.deform(&set, mesh.positions()).unwrap();
         let a = adaptive.deform(&set, &stretched).unwrap();

@@ -26,7 +26,7 @@
 //!
 //! Every output is finite for finite input.
 
-use glam::{DMat3, DVec3, Vec3};
+use glam::{DMat3, DVec3};
 
 /// Default relative tolerance below which a triangle counts as degenerate (see the module
 /// documentation). Relative to the triangle's own longest edge; far below the `f32` precision
@@ -61,11 +61,10 @@ impl FrameOptions {
     /// Options scaled to a template: `min_scale` = [`DEFAULT_MIN_SCALE_REL`] × the bounding-box
     /// diagonal of `positions` (or [`FALLBACK_MIN_SCALE`] when that is 0 or not finite).
     #[must_use]
-    pub fn for_positions(positions: &[Vec3]) -> Self {
+    pub fn for_positions(positions: &[DVec3]) -> Self {
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for p in positions {
-            let p = p.as_dvec3();
+        for &p in positions {
             lo = lo.min(p);
             hi = hi.max(p);
         }
@@ -103,12 +102,6 @@ pub struct TriangleFrame {
     pub scale: f64,
     /// Whether the degenerate fallback was used.
     pub degenerate: bool,
-}
-
-/// The three corners in `f64`.
-#[must_use]
-pub fn corners(v: [Vec3; 3]) -> [DVec3; 3] {
-    v.map(Vec3::as_dvec3)
 }
 
 /// A unit vector orthogonal to the unit vector `a`: `a` crossed with the coordinate axis least
@@ -320,12 +313,8 @@ pub fn transform_normal(j: DMat3, n: DVec3) -> Option<DVec3> {
 
 /// The corners of triangle `t` in `f64` (0 for an index past `positions`).
 #[must_use]
-pub fn corners_of(positions: &[Vec3], t: [u32; 3]) -> [DVec3; 3] {
-    t.map(|i| {
-        positions
-            .get(i as usize)
-            .map_or(DVec3::ZERO, |p| p.as_dvec3())
-    })
+pub fn corners_of(positions: &[DVec3], t: [u32; 3]) -> [DVec3; 3] {
+    t.map(|i| positions.get(i as usize).copied().unwrap_or(DVec3::ZERO))
 }
 
 #[cfg(test)]
@@ -459,7 +448,7 @@ mod tests {
 
     #[test]
     fn degenerate_triangles_give_finite_frames() {
-        let o = FrameOptions::for_positions(&[Vec3::ZERO, Vec3::ONE]);
+        let o = FrameOptions::for_positions(&[DVec3::ZERO, DVec3::ONE]);
         let p = d(0.5, -0.25, 2.0);
         let cases: Vec<[DVec3; 3]> = vec![
             [p, p, p],                                                     // a point

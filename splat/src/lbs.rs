@@ -148,7 +148,7 @@ fn linear(m: &DMat4) -> DMat3 {
     )
 }
 
-fn triangle_area(positions: &[Vec3], t: [u32; 3]) -> f64 {
+fn triangle_area(positions: &[DVec3], t: [u32; 3]) -> f64 {
     let v = corners_of(positions, t);
     0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length()
 }
@@ -307,7 +307,7 @@ impl LbsDeformer {
         &self,
         set: &GaussianSet,
         palette: &[DMat4],
-        positions: Option<&[Vec3]>,
+        positions: Option<&[DVec3]>,
     ) -> Result<GaussianSet, LbsError> {
         check_palette(palette, self.palette_len)?;
         if set.len() != self.rest.len() {

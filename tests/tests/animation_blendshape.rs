@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
     AnimatedTemplate, AnimationError, BlendshapeAnimation, BlendshapeSet, Clip, GltfMorphAnimation,
@@ -40,14 +40,14 @@ fn write_set(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
     let mut rng = Rng::new(11);
     let mut targets = Vec::new();
     for name in ["jawOpen", "eyeBlink_L", "mouthSmile_L"] {
-        let moved: Vec<Vec3> = base
+        let moved: Vec<DVec3> = base
             .positions()
             .iter()
             .map(|p| {
-                *p + Vec3::new(
-                    rng.uniform_f32() - 0.5,
-                    rng.uniform_f32() - 0.5,
-                    rng.uniform_f32(),
+                *p + DVec3::new(
+                    rng.uniform_f64() - 0.5,
+                    rng.uniform_f64() - 0.5,
+                    rng.uniform_f64(),
                 ) * 0.05
             })
             .collect();
@@ -76,23 +76,21 @@ fn track(text: &str) -> Result<WeightsTrack, AnimationError> {
 /// `neutral + Σ wᵢ (targetᵢ − neutral)` in f64 straight from the files.
 fn expected(neutral: &Path, targets: &[(PathBuf, f64)]) -> Vec<DVec3> {
     let n = read_mesh(neutral).expect("neutral");
-    let mut out: Vec<DVec3> = n.positions().iter().map(|p| p.as_dvec3()).collect();
+    let mut out: Vec<DVec3> = n.positions().to_vec();
     for (path, w) in targets {
         let t = read_mesh(path).expect("target");
         for (o, (tp, np)) in out.iter_mut().zip(t.positions().iter().zip(n.positions())) {
-            *o += *w * (tp.as_dvec3() - np.as_dvec3());
+            *o += *w * (tp - np);
         }
     }
     out
 }
 
-fn max_error(got: &[Vec3], want: &[DVec3]) -> f64 {
+fn max_error(got: &[DVec3], want: &[DVec3]) -> f64 {
     assert_eq!(got.len(), want.len());
     got.iter()
         .zip(want)
-        .flat_map(|(g, w)| {
-            (0..3).map(move |c| trisplat_tests::relative_error(f64::from(g[c]), w[c], 1.0))
-        })
+        .flat_map(|(g, w)| (0..3).map(move |c| trisplat_tests::relative_error(g[c], w[c], 1.0)))
         .fold(0.0, f64::max)
 }
 
@@ -167,20 +165,21 @@ fn sets_check_topology_and_weight_counts() {
     // In memory.
     let base = read_mesh(&neutral).expect("neutral");
     let n = base.vertex_count();
-    let err = BlendshapeSet::from_meshes(base.clone(), vec![("x".into(), vec![Vec3::ZERO; n - 1])])
-        .expect_err("short");
+    let err =
+        BlendshapeSet::from_meshes(base.clone(), vec![("x".into(), vec![DVec3::ZERO; n - 1])])
+            .expect_err("short");
     assert!(
         matches!(err, AnimationError::TopologyMismatch { .. }),
         "{err}"
     );
-    let mut nan = vec![Vec3::ZERO; n];
-    nan[3].x = f32::NAN;
+    let mut nan = vec![DVec3::ZERO; n];
+    nan[3].x = f64::NAN;
     assert!(BlendshapeSet::from_meshes(base.clone(), vec![("x".into(), nan)]).is_err());
-    let ok = BlendshapeSet::from_meshes(base.clone(), vec![("x".into(), vec![Vec3::ONE; n])])
+    let ok = BlendshapeSet::from_meshes(base.clone(), vec![("x".into(), vec![DVec3::ONE; n])])
         .expect("set");
     let half = ok.evaluate(&[0.5]).expect("eval");
     for (h, p) in half.iter().zip(base.positions()) {
-        assert!((*h - (*p + (Vec3::ONE - *p) * 0.5)).length() < 1e-6);
+        assert!((*h - (*p + (DVec3::ONE - *p) * 0.5)).length() < 1e-6);
     }
     // A track whose names match nothing.
     let t = track(r#"{"names": ["tongueOut"], "frames": [{"weights": [1]}]}"#).expect("track");
@@ -275,13 +274,12 @@ fn gltf_morph_targets_by_name() {
     // node's own weights): the stored scene.
     let rest = template.rest().positions();
     let f0 = anim.frame(0).expect("frame");
-    assert!(max_error(&f0, &to_f64(rest)) < BLEND_TOLERANCE);
+    assert!(max_error(&f0, rest) < BLEND_TOLERANCE);
     // Positions are affine in the weights (skinning and node transforms are linear in p):
     // f(1, 2) - f(0, 0.75) = (f(1, 0.75) - f(0, 0.75)) + (f(0, 2) - f(0, 0.75)).
-    let f1 = to_f64(&anim.frame(1).expect("frame"));
-    let f2 = to_f64(&anim.frame(2).expect("frame"));
+    let f1 = anim.frame(1).expect("frame");
+    let f2 = anim.frame(2).expect("frame");
     let f3 = anim.frame(3).expect("frame");
-    let f0 = to_f64(&f0);
     let want: Vec<DVec3> = (0..f0.len()).map(|v| f1[v] + f2[v] - f0[v]).collect();
     assert!(max_error(&f3, &want) < 1e-5);
     // Both meshes moved.
@@ -290,10 +288,6 @@ fn gltf_morph_targets_by_name() {
         "sparse target vertex 3 of mesh 0"
     );
     assert!((f2[20] - f0[20]).length() > 1e-3, "mesh 1");
-}
-
-fn to_f64(p: &[Vec3]) -> Vec<DVec3> {
-    p.iter().map(|v| v.as_dvec3()).collect()
 }
 
 /// The real ICT FaceKit blendshapes and LAM head (too large to commit). Run with
@@ -388,17 +382,14 @@ fn real_face_assets() {
     let anim = GltfMorphAnimation::new(template.clone(), track_data.clone()).expect("LAM anim");
     eprintln!("LAM: unused channels {:?}", anim.unused_channels());
     let names = template.morph_target_names()[0].to_vec();
-    let rest = to_f64(template.rest().positions());
+    let rest = template.rest().positions().to_vec();
     // Δᵢ in world space: the template with target i at weight 1, minus the rest.
     let deltas: Vec<Vec<DVec3>> = (0..names.len())
         .map(|i| {
             let one = template
                 .evaluate_with_weights(None, &|_, t| Some(if t == i { 1.0 } else { 0.0 }))
                 .expect("eval");
-            one.iter()
-                .zip(&rest)
-                .map(|(a, r)| a.as_dvec3() - *r)
-                .collect()
+            one.iter().zip(&rest).map(|(a, r)| a - *r).collect()
         })
         .collect();
     let mut worst = 0.0f64;

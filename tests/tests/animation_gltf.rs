@@ -68,7 +68,7 @@ fn check_model(name: &str) -> f64 {
         for (k, &v) in indices.iter().enumerate() {
             let want = as_f64s(&case["positions"][k]);
             for c in 0..3 {
-                let got = f64::from(positions[v][c]);
+                let got = positions[v][c];
                 let err = trisplat_tests::relative_error(got, want[c], 1.0);
                 case_worst = case_worst.max(err);
             }
@@ -76,7 +76,7 @@ fn check_model(name: &str) -> f64 {
         let sum = as_f64s(&case["sum"]);
         let n = positions.len() as f64;
         for c in 0..3 {
-            let got: f64 = positions.iter().map(|p| f64::from(p[c])).sum();
+            let got: f64 = positions.iter().map(|p| p[c]).sum();
             let mean_err = (got - sum[c]).abs() / n;
             assert!(
                 mean_err < MEAN_TOLERANCE,

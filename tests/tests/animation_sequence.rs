@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, AnimationError, MeshSequence};
 use trisplat_geometry::io::{WriteOptions, write_mesh};
@@ -28,7 +28,7 @@ fn write(dir: &Path, name: &str, mesh: &TriMesh) -> PathBuf {
 }
 
 /// The frame index encoded in a frame's z offset.
-fn signature(positions: &[Vec3]) -> usize {
+fn signature(positions: &[DVec3]) -> usize {
     (positions[0].z / 0.25).round() as usize
 }
 

@@ -499,7 +499,7 @@ fn deep_node_chains_read_without_overflowing_the_stack() {
     use trisplat_geometry::animation::AnimatedTemplate as _;
     assert_eq!(stat.triangle_count(), 1);
     // 19,999 translations of 1 mm each.
-    let x = f64::from(stat.positions()[0].x);
+    let x = stat.positions()[0].x;
     assert!((x - 19.999).abs() < 1e-3, "{x}");
     for (a, b) in stat.positions().iter().zip(posed.rest().positions()) {
         assert!(a.distance(*b) < 1e-4, "{a} vs {b}");

@@ -73,9 +73,9 @@ fn spot_with_gaussians() -> (TriMesh, GaussianSet) {
 }
 
 /// A bend of the lower half about a horizontal axis plus a twist, growing with the frame.
-fn animate(rest: &TriMesh, f: usize) -> Vec<Vec3> {
+fn animate(rest: &TriMesh, f: usize) -> Vec<DVec3> {
     let b = rest.bounds().expect("bounds");
-    let (lo, hi) = (b.min.as_dvec3(), b.max.as_dvec3());
+    let (lo, hi) = (b.min, b.max);
     let pivot = DVec3::new(
         0.5 * (lo.x + hi.x),
         0.5 * (lo.y + hi.y),
@@ -86,13 +86,12 @@ fn animate(rest: &TriMesh, f: usize) -> Vec<Vec3> {
     rest.positions()
         .iter()
         .map(|p| {
-            let p = p.as_dvec3();
             let w = ((pivot.y - p.y) / (0.3 * h)).clamp(0.0, 1.0);
             let (s, c) = (angle * w).sin_cos();
             let d = p - pivot;
             let q = DVec3::new(d.x, c * d.y - s * d.z, s * d.y + c * d.z);
             let (st, ct) = (0.5 * angle * d.y / h).sin_cos();
-            (DVec3::new(ct * q.x + st * q.z, q.y, -st * q.x + ct * q.z) + pivot).as_vec3()
+            DVec3::new(ct * q.x + st * q.z, q.y, -st * q.x + ct * q.z) + pivot
         })
         .collect()
 }
@@ -142,7 +141,8 @@ fn every_frame_equals_a_fresh_triangulation_and_is_watertight() {
         assert_eq!(stats.unmeshed, 0);
         assert_eq!(got.len(), spot.triangle_count() + 2 * set.len());
         assert_eq!(inc.vertices().len(), spot.vertex_count() + set.len());
-        assert_eq!(&inc.vertices()[spot.vertex_count()..], &geometry.means[..]);
+        let widened: Vec<DVec3> = geometry.means.iter().map(|m| m.as_dvec3()).collect();
+        assert_eq!(&inc.vertices()[spot.vertex_count()..], &widened[..]);
     }
     assert!(hops > 0, "the animation must make Gaussians hop");
     assert!(partial > 0, "some frames must redo only some charts");
@@ -189,13 +189,13 @@ fn hysteresis_and_rebuild_period_match_scratch_of_current_assignment() {
 
 /// Every vertex moved by its own random offset of up to `amplitude` (not an affine motion of
 /// any neighbourhood: the motion certificates fail).
-fn shake(rest: &TriMesh, f: usize, amplitude: f32) -> Vec<Vec3> {
+fn shake(rest: &TriMesh, f: usize, amplitude: f64) -> Vec<DVec3> {
     let mut rng = Rng::new(100 + f as u64);
     rest.positions()
         .iter()
         .map(|p| {
-            let mut u = || amplitude * (2.0 * rng.uniform_f32() - 1.0);
-            *p + Vec3::new(u(), u(), u())
+            let mut u = || amplitude * (2.0 * rng.uniform_f64() - 1.0);
+            *p + DVec3::new(u(), u(), u())
         })
         .collect()
 }
@@ -213,7 +213,7 @@ fn costly_updates_are_followed_by_rebuilds() {
     let mut geometry = WorldGeometry::default();
     // Per frame: rebuilt or not; every mesh checked against a triangulation of its assignment
     // (at τ = 0 also against a fresh mesher: the choice never changes the mesh there).
-    let mut run = |tau: f64, auto_rebuild: bool, motion: &dyn Fn(usize) -> Vec<Vec3>| {
+    let mut run = |tau: f64, auto_rebuild: bool, motion: &dyn Fn(usize) -> Vec<DVec3>| {
         let options = DelaunayOptions {
             hop_threshold: tau,
             auto_rebuild,
@@ -253,11 +253,11 @@ fn costly_updates_are_followed_by_rebuilds() {
     assert!(always[1..].iter().all(|&r| !r), "{always:?}");
     // Motion of the whole (rotation, uniform scale, translation) stays on the update path.
     let similar = |f: usize| {
-        let (s, c) = (0.02 * f as f32).sin_cos();
-        let k = 1.0 + 0.01 * f as f32;
+        let (s, c) = (0.02 * f as f64).sin_cos();
+        let k = 1.0 + 0.01 * f as f64;
         spot.positions()
             .iter()
-            .map(|p| k * Vec3::new(c * p.x - s * p.z, p.y, s * p.x + c * p.z) + 0.1 * f as f32)
+            .map(|p| k * DVec3::new(c * p.x - s * p.z, p.y, s * p.x + c * p.z) + 0.1 * f as f64)
             .collect::<Vec<_>>()
     };
     let gentle = run(0.01, true, &similar);
@@ -296,8 +296,7 @@ fn flat_chart_is_delaunay_brute_force() {
                 (u, v) = (1.0 - u, 1.0 - v);
             }
             let p = tri.positions();
-            (p[0].as_dvec3() + (p[1] - p[0]).as_dvec3() * u + (p[2] - p[0]).as_dvec3() * v)
-                .as_vec3()
+            (p[0] + (p[1] - p[0]) * u + (p[2] - p[0]) * v).as_vec3()
         })
         .collect();
     let mut d = IncrementalDelaunay::new(
@@ -311,16 +310,15 @@ fn flat_chart_is_delaunay_brute_force() {
     .expect("mesher");
     d.update(tri.positions(), &means).expect("update");
     // Gaussian vertices as triangulated: shrunk toward the centroid by the interior margin.
-    let centroid = tri.positions().iter().map(|p| p.as_dvec3()).sum::<DVec3>() / 3.0;
+    let centroid = tri.positions().iter().sum::<DVec3>() / 3.0;
     let shrink = 1.0 - 3.0 * DEFAULT_INTERIOR_MARGIN;
     let v: Vec<DVec3> = d
         .vertices()
         .iter()
         .enumerate()
         .map(|(k, p)| {
-            let p = p.as_dvec3();
             if k < 3 {
-                p
+                *p
             } else {
                 centroid + (p - centroid) * shrink
             }
@@ -364,7 +362,7 @@ fn tetrahedron() -> TriMesh {
 #[test]
 fn duplicates_edges_and_vertices_stay_watertight() {
     let tet = tetrahedron();
-    let p = tet.positions();
+    let p = tet.positions_f32();
     let mut means = vec![
         // Exactly on template vertices and edge midpoints.
         p[0],
@@ -396,7 +394,7 @@ fn duplicates_edges_and_vertices_stay_watertight() {
 fn zero_area_triangles_and_empty_sets_do_not_panic() {
     // A closed tetrahedron plus a zero-area triangle (collinear) on its own vertices.
     let mut positions = tetrahedron().positions().to_vec();
-    positions.push(Vec3::new(0.5, 0.5, 0.0)); // midpoint of edge 1-2
+    positions.push(DVec3::new(0.5, 0.5, 0.0)); // midpoint of edge 1-2
     let mut triangles = tetrahedron().triangles().to_vec();
     triangles.push([1, 4, 2]);
     let mesh = TriMesh::try_new(positions, triangles).expect("mesh");
@@ -425,7 +423,7 @@ fn zero_area_triangles_and_empty_sets_do_not_panic() {
         canonical(tetrahedron().triangles().to_vec())
     );
     // Every vertex collapsed to one point in a frame: no panic, still the same topology.
-    let collapsed = vec![Vec3::ONE; mesh.vertex_count()];
+    let collapsed = vec![DVec3::ONE; mesh.vertex_count()];
     let stats = d
         .update(&collapsed, &[Vec3::ONE; 3])
         .expect("collapsed frame");
@@ -494,7 +492,7 @@ fn bad_input_is_an_error() {
         Err(DelaunayError::Count { .. })
     ));
     let mut moved = tet.positions().to_vec();
-    moved[2].y = f32::INFINITY;
+    moved[2].y = f64::INFINITY;
     assert!(matches!(
         d.update(&moved, &means),
         Err(DelaunayError::BadCoordinate { index: 2, .. })
@@ -515,7 +513,7 @@ fn surface_lift_puts_zero_offset_gaussians_on_the_deformed_template() {
     let means: Vec<Vec3> = (0..spot.triangle_count())
         .map(|t| {
             let c = spot.corners(t);
-            (c[0] + c[1] + c[2]) / 3.0
+            ((c[0] + c[1] + c[2]) / 3.0).as_vec3()
         })
         .collect();
     let mut d = IncrementalDelaunay::new(
@@ -533,14 +531,15 @@ fn surface_lift_puts_zero_offset_gaussians_on_the_deformed_template() {
         .triangles()
         .iter()
         .map(|t| {
-            (positions[t[0] as usize] + positions[t[1] as usize] + positions[t[2] as usize]) / 3.0
+            ((positions[t[0] as usize] + positions[t[1] as usize] + positions[t[2] as usize]) / 3.0)
+                .as_vec3()
         })
         .collect();
     d.update(&positions, &deformed).expect("update");
     let nv = spot.vertex_count();
     for (i, (got, want)) in d.vertices()[nv..].iter().zip(&deformed).enumerate() {
         assert!(
-            (*got - *want).length() < 1e-5,
+            (*got - want.as_dvec3()).length() < 1e-5,
             "Gaussian {i}: {got} vs {want}"
         );
     }
@@ -553,7 +552,7 @@ fn surface_lift_puts_zero_offset_gaussians_on_the_deformed_template() {
 fn assert_matches_scratch(
     rest: &TriMesh,
     canonical_means: &[Vec3],
-    frames: &[(Vec<Vec3>, Vec<Vec3>)],
+    frames: &[(Vec<DVec3>, Vec<Vec3>)],
 ) -> (usize, usize) {
     // The update path on every frame (no automatic rebuilds).
     let options = DelaunayOptions {
@@ -595,7 +594,7 @@ fn certificates_survive_jumps_and_non_rigid_motion() {
     let mut rng = Rng::new(11);
     let edge = {
         let c = spot.corners(0);
-        f64::from((c[1] - c[0]).length())
+        (c[1] - c[0]).length()
     };
     let mut frames = Vec::new();
     let steps = [0, 1, 2, 3, 12, 12, 4, 5, 20, 6, 7, 7, 7, 30, 0];
@@ -612,7 +611,7 @@ fn certificates_survive_jumps_and_non_rigid_motion() {
         if k == 10 || k == 11 {
             for p in &mut positions {
                 let mut u = || (2.0 * rng.uniform_f64() - 1.0) * 0.25 * edge;
-                *p += DVec3::new(u(), u(), u()).as_vec3();
+                *p += DVec3::new(u(), u(), u());
             }
         }
         deformer
@@ -674,8 +673,8 @@ fn a_sheet_coming_close_takes_over_gaussians() {
     let split = (n + 1) * (n + 1);
     let mut frames = Vec::new();
     for f in 0..24 {
-        let drop = 2.0 - 0.075 * f as f32;
-        let positions: Vec<Vec3> = rest
+        let drop = 2.0 - 0.075 * f as f64;
+        let positions: Vec<DVec3> = rest
             .positions()
             .iter()
             .enumerate()
@@ -684,7 +683,7 @@ fn a_sheet_coming_close_takes_over_gaussians() {
                     *p
                 } else {
                     // Tilted: the x = 1 side comes down first.
-                    Vec3::new(p.x, p.y, drop - 0.3 * p.x)
+                    DVec3::new(p.x, p.y, drop - 0.3 * p.x)
                 }
             })
             .collect();
@@ -740,7 +739,7 @@ fn gaussians_going_back_and_forth_reuse_meshes_exactly() {
         (true, true),
         (false, false),
     ];
-    let frames: Vec<(Vec<Vec3>, Vec<Vec3>)> = pattern
+    let frames: Vec<(Vec<DVec3>, Vec<Vec3>)> = pattern
         .iter()
         .map(|&(b, c)| (rest.positions().to_vec(), shifted(b, c)))
         .collect();

@@ -60,7 +60,7 @@ fn torus_has_genus_one() {
         "{volume} vs {exact}"
     );
     for p in mesh.positions() {
-        assert!(torus(p.as_dvec3()).abs() < SURFACE_TOL * h, "{p}");
+        assert!(torus(*p).abs() < SURFACE_TOL * h, "{p}");
     }
 }
 

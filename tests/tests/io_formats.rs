@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use trisplat_geometry::io::{
     self, ObjVertices, PlyEncoding, PlyExtras, ReadOptions, WriteOptions, ply,
@@ -120,7 +120,7 @@ fn obj_round_trip() {
 fn points_round_trip() {
     let dir = tempfile::tempdir().expect("tempdir");
     let m = spot();
-    let cloud = PointCloud::try_new(m.positions().to_vec())
+    let cloud = PointCloud::try_new(m.positions_f32())
         .and_then(|c| c.with_normals(m.vertex_normals()))
         .expect("cloud");
     let p = tmp(&dir, "points.ply");
@@ -140,7 +140,7 @@ const QUAD_POSITIONS: [[f32; 3]; 5] = [
 fn check_quad_fixture(name: &str) {
     let m = io::read_mesh(&trisplat_fixtures::path(name)).expect(name);
     let expected: Vec<Vec3> = QUAD_POSITIONS.iter().map(|&p| Vec3::from(p)).collect();
-    assert_eq!(m.positions(), expected.as_slice(), "{name}");
+    assert_eq!(m.positions_f32(), expected, "{name}");
     // The quad is fan-triangulated, then the triangle follows.
     assert_eq!(m.triangles(), &[[0, 1, 2], [0, 2, 3], [3, 2, 4]], "{name}");
 }
@@ -194,7 +194,7 @@ fn ply_point_cloud_float_rgb() {
 fn read_points_of_a_mesh_has_vertex_normals() {
     let c = io::read_points(&trisplat_fixtures::path("spot_triangulated.obj")).expect("points");
     let m = spot();
-    assert_eq!(c.positions(), m.positions());
+    assert_eq!(c.positions(), m.positions_f32());
     assert_eq!(c.normals().expect("normals"), m.vertex_normals().as_slice());
 }
 
@@ -267,11 +267,11 @@ fn counts_match_trimesh() {
             "{name} faces"
         );
         let b = m.bounds().expect("bounds");
-        let scale = f64::from(b.diagonal()).max(1.0);
+        let scale = b.diagonal().max(1.0);
         for (k, corner) in [b.min, b.max].iter().enumerate() {
             for axis in 0..3 {
                 let w = want["bounds"][k][axis].as_f64().expect("bound");
-                let got = f64::from(corner[axis]);
+                let got = corner[axis];
                 assert!(
                     (got - w).abs() <= BOUNDS_TOLERANCE * scale,
                     "{name} bounds[{k}][{axis}]: {got} vs {w}"
@@ -304,7 +304,8 @@ fn round_trip_gltf(name: &str) {
     let p = tmp(&dir, name);
     io::write_mesh(&p, &m, WriteOptions::default()).expect("write");
     let back = io::read_mesh(&p).expect("read back");
-    assert_eq!(back.positions(), m.positions());
+    // glTF stores f32 positions: the round trip is exact at f32.
+    assert_eq!(back.positions_f32(), m.positions_f32());
     assert_eq!(back.triangles(), m.triangles());
     assert_eq!(back.uvs(), m.uvs());
     assert_eq!(back.colors(), m.colors());
@@ -385,9 +386,9 @@ fn gltf_strips_fans_and_node_transforms() {
     // winding.
     // Fan 0 1 2 3: (1 2 0), (2 3 0); mirrored: winding swapped.
     assert_eq!(m.triangles(), &[[0, 1, 2], [2, 1, 3], [5, 4, 6], [6, 4, 7]]);
-    assert_eq!(m.positions()[1], Vec3::new(11.0, 0.0, 0.0));
+    assert_eq!(m.positions()[1], DVec3::new(11.0, 0.0, 0.0));
     // Child: local scale -1 then the parent's translation.
-    assert_eq!(m.positions()[5], Vec3::new(9.0, 0.0, 0.0));
+    assert_eq!(m.positions()[5], DVec3::new(9.0, 0.0, 0.0));
     // The strip keeps facing +z; the first fan triangle (1 2 0) faces +z before the mirror
     // and still does after it, thanks to the winding fix (the second fan triangle of this
     // non-convex fan faces -z either way).

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use serde_json::Value;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate};
@@ -17,7 +17,7 @@ use trisplat_geometry::io::{
 
 /// Largest allowed difference between an evaluated and an input coordinate (metre-sized
 /// meshes; positions are f32 and the morph deltas f32, so a few 1e-7 are expected).
-const POSITION_TOLERANCE: f32 = 1e-6;
+const POSITION_TOLERANCE: f64 = 1e-6;
 
 /// How far from unit length a written normal may be (the validator's own threshold is 5e-4).
 const UNIT_TOLERANCE: f64 = 1e-5;
@@ -31,13 +31,13 @@ fn wave_frames(n: usize, normals: bool) -> Vec<TriMesh> {
     let base = spot();
     (0..n)
         .map(|k| {
-            let phase = 0.7 * k as f32;
-            let positions: Vec<Vec3> = base
+            let phase = 0.7 * k as f64;
+            let positions: Vec<DVec3> = base
                 .positions()
                 .iter()
                 .map(|p| {
                     *p + 0.05
-                        * Vec3::new(
+                        * DVec3::new(
                             (3.0 * p.y + phase).sin(),
                             (2.0 * p.z - phase).cos(),
                             (4.0 * p.x + 0.5 * phase).sin(),
@@ -76,7 +76,7 @@ fn strip(columns: usize, k: usize) -> TriMesh {
 fn mixed_frames() -> Vec<TriMesh> {
     let moved = {
         let s = spot();
-        let p = s.positions().iter().map(|p| *p + Vec3::X).collect();
+        let p: Vec<DVec3> = s.positions().iter().map(|p| *p + DVec3::X).collect();
         TriMesh::new(p, s.triangles().to_vec())
     };
     vec![spot(), strip(3, 1), strip(5, 2), moved, strip(1, 4)]
@@ -86,12 +86,12 @@ fn out_dir() -> tempfile::TempDir {
     tempfile::tempdir().expect("temporary folder")
 }
 
-fn max_difference(a: &[Vec3], b: &[Vec3]) -> f32 {
+fn max_difference(a: &[DVec3], b: &[DVec3]) -> f64 {
     assert_eq!(a.len(), b.len(), "vertex counts");
     a.iter()
         .zip(b)
         .map(|(p, q)| (*p - *q).abs().max_element())
-        .fold(0.0, f32::max)
+        .fold(0.0, f64::max)
 }
 
 /// Times at which frame `k` must be shown: its own time, the middle of its interval (or a
@@ -146,7 +146,7 @@ fn check_node_roundtrip(path: &Path, frames: &[TriMesh], times: &[f64]) {
                     assert!(d <= POSITION_TOLERANCE, "frame {k} at {t} s: off by {d}");
                 } else {
                     assert!(
-                        block.iter().all(|p| *p == Vec3::ZERO),
+                        block.iter().all(|p| *p == DVec3::ZERO),
                         "frame {j} visible at {t} s (frame {k}'s time)"
                     );
                 }
@@ -475,11 +475,7 @@ fn one_frame_and_empty_frames() {
         assert!(max_difference(&got, one[0].positions()) <= POSITION_TOLERANCE);
     }
     // A frame without triangles (an extraction that found nothing) is a node without a mesh.
-    let frames = vec![
-        strip(2, 0),
-        TriMesh::new(Vec::new(), Vec::new()),
-        strip(3, 2),
-    ];
+    let frames = vec![strip(2, 0), TriMesh::default(), strip(3, 2)];
     let times = times_at(30.0, 3);
     let path = dir.path().join("gap.glb");
     write_mesh_sequence(&path, &frames, &times, SequenceLayout::Auto).expect("write");
@@ -601,7 +597,7 @@ fn bad_sequences_are_errors_naming_the_element() {
     );
     let mut nan = wave_frames(2, false);
     let mut p = nan[1].positions().to_vec();
-    p[7] = Vec3::new(0.0, f32::NAN, 0.0);
+    p[7] = DVec3::new(0.0, f64::NAN, 0.0);
     nan[1] = TriMesh::new_unchecked(p, nan[1].triangles().to_vec());
     expect_error(
         write_mesh_sequence(&path, &nan, &[0.0, 1.0], auto),
@@ -794,7 +790,7 @@ fn sequence_writer_error_paths() {
             self.reads.set(self.reads.get() + 1);
             let f = &self.frames[1];
             let mut positions = f.positions().to_vec();
-            positions.extend(std::iter::repeat_n(Vec3::ZERO, self.reads.get()));
+            positions.extend(std::iter::repeat_n(DVec3::ZERO, self.reads.get()));
             Ok(std::borrow::Cow::Owned(TriMesh::new(
                 positions,
                 f.triangles().to_vec(),

@@ -13,7 +13,7 @@
 //!   triangles; with such edges trimesh counts more (its face adjacency skips them), which
 //!   is checked too.
 
-use glam::Vec3;
+use glam::DVec3;
 use serde_json::Value;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::mesh_stats::MeshStats;
@@ -40,7 +40,9 @@ fn indices(v: &Value) -> Vec<usize> {
 /// The case's mesh, built by its recipe (see the script's docs).
 fn build(case: &Value, spot: &TriMesh) -> TriMesh {
     let (mut positions, mut triangles) = if case["base"] == "spot" {
-        (spot.positions().to_vec(), spot.triangles().to_vec())
+        // The references were computed on Spot's f32 values (ref_mesh_stats.py).
+        let f32_valued = spot.positions_f32().iter().map(|p| p.as_dvec3()).collect();
+        (f32_valued, spot.triangles().to_vec())
     } else {
         (Vec::new(), Vec::new())
     };
@@ -53,13 +55,13 @@ fn build(case: &Value, spot: &TriMesh) -> TriMesh {
         triangles.remove(k);
     }
     for p in case["add_vertices"].as_array().into_iter().flatten() {
-        let c: Vec<f32> = p
+        let c: Vec<f64> = p
             .as_array()
             .expect("xyz")
             .iter()
-            .map(|x| x.as_f64().expect("coordinate") as f32)
+            .map(|x| x.as_f64().expect("coordinate"))
             .collect();
-        positions.push(Vec3::new(c[0], c[1], c[2]));
+        positions.push(DVec3::new(c[0], c[1], c[2]));
     }
     for t in case["add_faces"].as_array().into_iter().flatten() {
         let i = indices(t);

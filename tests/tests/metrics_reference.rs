@@ -13,6 +13,7 @@
 //!   compared to [`SURFACE_NORMAL_REL`]: the face normals are stored as f32.
 
 use serde_json::Value;
+use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{read_mesh, read_points};
 use trisplat_geometry::metrics::{Metrics, MetricsOptions, Shape, evaluate, point_metrics};
 use trisplat_geometry::spatial::{TriangleBvh, closest_point_on_triangle};
@@ -123,7 +124,9 @@ fn surface_mode_matches_trimesh() {
     let diag = num(&r, "bbox_diagonal");
     let pred = read_points(&trisplat_fixtures::path("reference/metrics/pred.ply")).expect("pred");
     let gt = read_points(&trisplat_fixtures::path("reference/metrics/gt.ply")).expect("gt");
-    let spot = read_mesh(&trisplat_fixtures::path("spot_triangulated.obj")).expect("spot");
+    // The reference was computed on Spot's f32 values (tests/reference/ref_metrics.py).
+    let decimal = read_mesh(&trisplat_fixtures::path("spot_triangulated.obj")).expect("spot");
+    let spot = TriMesh::new(decimal.positions_f32(), decimal.triangles().to_vec());
 
     // Per-point exact distances.
     let bvh = TriangleBvh::new(&spot).expect("bvh");
@@ -149,7 +152,7 @@ fn surface_mode_matches_trimesh() {
         let t = t.as_u64().expect("id") as u32;
         if f.triangle != t {
             differing += 1;
-            let [a, b, c] = spot.corners(t as usize).map(|p| p.as_dvec3());
+            let [a, b, c] = spot.corners(t as usize).map(|p| p);
             let (p, _) = closest_point_on_triangle(q.as_dvec3(), a, b, c);
             let d = (p - q.as_dvec3()).length();
             assert!(

@@ -217,7 +217,7 @@ fn poisson_disk_spacing() {
         assert!(umin < MIN_NN_OVER_D_MAX);
         // Every point lies on its triangle's plane.
         for (p, t) in s.points.positions().iter().zip(&s.triangles) {
-            let [a, b, c] = mesh.corners(t.index()).map(Vec3::as_dvec3);
+            let [a, b, c] = mesh.corners(t.index());
             let nrm = (b - a).cross(c - a).normalize();
             assert!((p.as_dvec3() - a).dot(nrm).abs() < 1e-6);
         }

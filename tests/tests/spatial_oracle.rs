@@ -20,8 +20,8 @@ fn spot() -> TriMesh {
 
 fn random_queries(mesh: &TriMesh, n: usize, seed: u64, spread: f32) -> Vec<Vec3> {
     let bounds = mesh.bounds().expect("not empty");
-    let centre = bounds.center();
-    let size = (bounds.max - bounds.min) * spread;
+    let centre = bounds.center().as_vec3();
+    let size = ((bounds.max - bounds.min) * f64::from(spread)).as_vec3();
     let mut rng = Rng::new(seed);
     (0..n)
         .map(|_| {
@@ -38,7 +38,7 @@ fn random_queries(mesh: &TriMesh, n: usize, seed: u64, spread: f32) -> Vec<Vec3>
 fn brute_closest(mesh: &TriMesh, q: Vec3) -> f64 {
     (0..mesh.triangle_count())
         .map(|t| {
-            let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+            let [a, b, c] = mesh.corners(t);
             let (p, _) = closest_point_on_triangle(q.as_dvec3(), a, b, c);
             (p - q.as_dvec3()).length()
         })
@@ -50,7 +50,7 @@ fn brute_ray(mesh: &TriMesh, o: Vec3, d: Vec3) -> Option<f64> {
     let (o, d) = (o.as_dvec3(), d.as_dvec3());
     let mut best: Option<f64> = None;
     for t in 0..mesh.triangle_count() {
-        let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+        let [a, b, c] = mesh.corners(t);
         let (e1, e2) = (b - a, c - a);
         let p = d.cross(e2);
         let det = e1.dot(p);
@@ -76,12 +76,12 @@ fn brute_ray(mesh: &TriMesh, o: Vec3, d: Vec3) -> Option<f64> {
 #[test]
 fn kdtree_nearest_on_spot_vertices() {
     let mesh = spot();
-    let index = PointIndex::new(mesh.positions()).expect("valid");
+    let vertices = mesh.positions_f32();
+    let index = PointIndex::new(&vertices).expect("valid");
     let queries = random_queries(&mesh, 2000, 1, 1.5);
     let found = index.nearest_batch(&queries).expect("valid");
     for (q, f) in queries.iter().zip(&found) {
-        let want = mesh
-            .positions()
+        let want = vertices
             .iter()
             .map(|&p| distance_f64(*q, p))
             .fold(f64::INFINITY, f64::min);
@@ -89,11 +89,7 @@ fn kdtree_nearest_on_spot_vertices() {
     }
     // k nearest: sorted, and the k-th distance equals the brute-force k-th.
     for q in queries.iter().take(100) {
-        let mut all: Vec<f64> = mesh
-            .positions()
-            .iter()
-            .map(|&p| distance_f64(*q, p))
-            .collect();
+        let mut all: Vec<f64> = vertices.iter().map(|&p| distance_f64(*q, p)).collect();
         all.sort_by(f64::total_cmp);
         let got = index.k_nearest(*q, 16);
         assert_eq!(got.len(), 16);
@@ -109,7 +105,7 @@ fn bvh_closest_points_on_spot() {
     let bvh = TriangleBvh::new(&mesh).expect("valid");
     let mut queries = random_queries(&mesh, 600, 2, 1.4);
     queries.extend(random_queries(&mesh, 20, 3, 1e4)); // far away
-    queries.extend(mesh.positions().iter().step_by(97).copied()); // on vertices
+    queries.extend(mesh.positions_f32().iter().step_by(97).copied()); // on vertices
     let found = bvh.closest_points(&queries).expect("valid");
     for (q, f) in queries.iter().zip(&found) {
         let want = brute_closest(&mesh, *q);
@@ -118,7 +114,7 @@ fn bvh_closest_points_on_spot() {
             "query {q}: {} vs {want}",
             f.distance
         );
-        let [a, b, c] = mesh.corners(f.triangle as usize).map(Vec3::as_dvec3);
+        let [a, b, c] = mesh.corners(f.triangle as usize);
         let w = f.barycentric;
         assert!((a * w[0] + b * w[1] + c * w[2] - f.point).length() < 1e-9);
         assert!(((f.point - q.as_dvec3()).length() - f.distance).abs() < 1e-12);
@@ -133,8 +129,8 @@ fn bvh_rays_on_spot() {
     let origins = random_queries(&mesh, 1500, 5, 2.0);
     let mut rays = Vec::new();
     for (i, &o) in origins.iter().enumerate() {
-        let v = mesh.positions()[(i * 31) % mesh.vertex_count()];
-        let w = mesh.positions()[(i * 31 + 1) % mesh.vertex_count()];
+        let v = mesh.positions()[(i * 31) % mesh.vertex_count()].as_vec3();
+        let w = mesh.positions()[(i * 31 + 1) % mesh.vertex_count()].as_vec3();
         let d = match i % 5 {
             0 => [
                 Vec3::X,
@@ -156,7 +152,7 @@ fn bvh_rays_on_spot() {
         rays.push((o, d));
     }
     // Axis-aligned rays straight at every 7th vertex.
-    for v in mesh.positions().iter().step_by(7) {
+    for v in mesh.positions_f32().iter().step_by(7) {
         rays.push((*v + Vec3::new(0.0, 0.0, 3.0), Vec3::NEG_Z));
         rays.push((*v - Vec3::new(3.0, 0.0, 0.0), Vec3::X));
     }
@@ -173,7 +169,7 @@ fn bvh_rays_on_spot() {
                     "ray {o} {d}: {} vs {w}",
                     h.t
                 );
-                let [a, b, c] = mesh.corners(h.triangle as usize).map(Vec3::as_dvec3);
+                let [a, b, c] = mesh.corners(h.triangle as usize);
                 let p = a * h.barycentric[0] + b * h.barycentric[1] + c * h.barycentric[2];
                 let along = o.as_dvec3() + d.as_dvec3() * h.t;
                 assert!((p - along).length() < 1e-6, "ray {o} {d}");
@@ -187,7 +183,7 @@ fn bvh_rays_on_spot() {
 #[test]
 fn degenerate_meshes_and_inputs() {
     // Empty mesh: queries answer None, batch queries are errors.
-    let empty = TriMesh::new(Vec::new(), Vec::new());
+    let empty = TriMesh::default();
     let bvh = TriangleBvh::new(&empty).expect("empty builds");
     assert!(bvh.closest_point(Vec3::ZERO).is_none());
     assert_eq!(bvh.closest_points(&[Vec3::ZERO]), Err(SpatialError::Empty));

@@ -24,7 +24,7 @@ fn frob(m: DMat3) -> f64 {
 fn world_set(mesh: &trisplat_geometry::TriMesh, n: usize) -> GaussianSet {
     let mut rng = Rng::new(8);
     let mut u = || rng.uniform_f32() - 0.5;
-    let p = mesh.positions();
+    let p = mesh.positions_f32();
     let means = (0..n)
         .map(|i| p[(i * 7) % p.len()] + Vec3::new(u(), u(), u()) * 0.02)
         .collect();
@@ -44,7 +44,7 @@ fn world_set(mesh: &trisplat_geometry::TriMesh, n: usize) -> GaussianSet {
 #[test]
 fn attach_then_bake_at_rest_gives_the_world_set_back() {
     let mesh = trisplat_fixtures::spot().unwrap();
-    let diag = f64::from(mesh.bounds().unwrap().diagonal());
+    let diag = mesh.bounds().unwrap().diagonal();
     let world = world_set(&mesh, 3000);
     for (convention, mode) in [
         (Convention::GaussianAvatars, DeformMode::Binding),
@@ -99,7 +99,7 @@ fn initial_gaussians_sit_on_their_triangles() {
             .unwrap();
         for (i, m) in baked.means().iter().enumerate() {
             let t = mesh.triangles()[i / per];
-            let [a, b, c] = t.map(|j| mesh.positions()[j as usize].as_dvec3());
+            let [a, b, c] = t.map(|j| mesh.positions()[j as usize]);
             let p = m.as_dvec3();
             // On the plane, inside the triangle (barycentric coordinates in [0, 1]).
             let n = (b - a).cross(c - a);
@@ -139,8 +139,8 @@ fn implausible_attachments_are_refused_with_their_numbers() {
         }
         GaussianSet::try_new(parts).unwrap()
     };
-    let centre = mesh.bounds().unwrap().center();
-    let diag = mesh.bounds().unwrap().diagonal();
+    let centre = mesh.bounds().unwrap().center().as_vec3();
+    let diag = mesh.bounds().unwrap().diagonal() as f32;
     let refused = |set: &GaussianSet| match attach_checked(
         set,
         &mesh,
@@ -161,7 +161,7 @@ fn implausible_attachments_are_refused_with_their_numbers() {
         "{moved}"
     );
     let triangle = mesh.corners(100);
-    let spot = (triangle[0] + triangle[1] + triangle[2]) / 3.0;
+    let spot = ((triangle[0] + triangle[1] + triangle[2]) / 3.0).as_vec3();
     let piled = refused(&with_means(&|i, m| if i % 2 == 0 { spot } else { m }));
     assert!(piled.contains("bind to triangle 100 alone"), "{piled}");
     // The unchecked primitive binds them all the same.

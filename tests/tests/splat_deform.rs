@@ -56,16 +56,14 @@ fn bound_set(triangle_count: usize, per_tri: usize, seed: u64, dims: ScaleDims) 
 }
 
 /// A smooth non-rigid warp plus a rotation and translation.
-fn warp(positions: &[Vec3], t: f64) -> Vec<Vec3> {
+fn warp(positions: &[DVec3], t: f64) -> Vec<DVec3> {
     let q = DQuat::from_euler(trisplat_splat::glam::EulerRot::YXZ, 0.7 * t, -0.3 * t, 0.2);
     positions
         .iter()
-        .map(|p| {
-            let p = p.as_dvec3();
+        .map(|&p| {
             let w =
                 p + 0.08 * DVec3::new((3.0 * p.y).sin(), (2.0 * p.z).cos(), (4.0 * p.x).sin()) * t;
-            (q * (w * DVec3::new(1.0 + 0.3 * t, 1.0, 1.0 - 0.2 * t)) + DVec3::new(0.1, -2.0, 0.5))
-                .as_vec3()
+            q * (w * DVec3::new(1.0 + 0.3 * t, 1.0, 1.0 - 0.2 * t)) + DVec3::new(0.1, -2.0, 0.5)
         })
         .collect()
 }
@@ -130,7 +128,7 @@ fn binding_mode_matches_float64_reference_on_spot() {
     let mesh = spot();
     let set = bound_set(mesh.triangle_count(), 3, 1, ScaleDims::Three);
     let deformer = Deformer::new(&mesh, DeformMode::Binding);
-    let diag = mesh.bounds().unwrap().diagonal() as f64;
+    let diag = mesh.bounds().unwrap().diagonal();
     let (mut worst_mean, mut worst_rot, mut worst_scale) = (0.0f64, 0.0f64, 0.0f64);
     for t in [0.0, 0.5, 1.0] {
         let frame = warp(mesh.positions(), t);
@@ -140,7 +138,7 @@ fn binding_mode_matches_float64_reference_on_spot() {
         assert!(out.report(None).is_valid());
         for i in 0..set.len() {
             let tri = mesh.triangles()[set.binding().unwrap().triangles[i].index()];
-            let v = tri.map(|j| frame[j as usize].as_dvec3().to_array());
+            let v = tri.map(|j| frame[j as usize].to_array());
             let (r, c, k) = ga_reference(v);
             let ml = set.means()[i].as_dvec3().to_array();
             let want: [f64; 3] =
@@ -199,8 +197,8 @@ fn jacobian_mode_means_sigma_prime() {
     let (mut worst_mu, mut worst_cov) = (0.0f64, 0.0f64);
     for i in 0..set.len() {
         let tri = mesh.triangles()[set.binding().unwrap().triangles[i].index()];
-        let c = tri.map(|j| mesh.positions()[j as usize].as_dvec3());
-        let d = tri.map(|j| frame[j as usize].as_dvec3());
+        let c = tri.map(|j| mesh.positions()[j as usize]);
+        let d = tri.map(|j| frame[j as usize]);
         // Independent J: solve J E_c = E_d with E written out here.
         let e = |v: [DVec3; 3]| {
             let n = (v[1] - v[0]).cross(v[2] - v[0]);
@@ -227,7 +225,7 @@ fn jacobian_stretch_on_a_plane() {
     let mut positions = Vec::new();
     for y in 0..4 {
         for x in 0..4 {
-            positions.push(Vec3::new(x as f32 * 0.25, y as f32 * 0.25, 0.0));
+            positions.push(DVec3::new(f64::from(x) * 0.25, f64::from(y) * 0.25, 0.0));
         }
     }
     let mut triangles = Vec::new();
@@ -240,9 +238,9 @@ fn jacobian_stretch_on_a_plane() {
     }
     let mesh = TriMesh::new(positions.clone(), triangles);
     let set = bound_set(mesh.triangle_count(), 2, 3, ScaleDims::Three);
-    let stretched: Vec<Vec3> = positions
+    let stretched: Vec<DVec3> = positions
         .iter()
-        .map(|p| Vec3::new(2.0 * p.x, p.y, p.z))
+        .map(|p| DVec3::new(2.0 * p.x, p.y, p.z))
         .collect();
     let deformer = Deformer::new(&mesh, DeformMode::Jacobian);
     let rest = deformer.deform(&set, &positions).unwrap();
@@ -281,10 +279,10 @@ fn surfels_stay_flat_in_both_modes() {
 #[test]
 fn degenerate_template_triangles_give_finite_output() {
     let positions = vec![
-        Vec3::new(0.0, 0.0, 0.0),
-        Vec3::new(1.0, 0.0, 0.0),
-        Vec3::new(0.0, 1.0, 0.0),
-        Vec3::new(2.0, 0.0, 0.0),
+        DVec3::new(0.0, 0.0, 0.0),
+        DVec3::new(1.0, 0.0, 0.0),
+        DVec3::new(0.0, 1.0, 0.0),
+        DVec3::new(2.0, 0.0, 0.0),
     ];
     // Good, collinear, repeated vertex, collapsed to a point.
     let triangles = vec![[0, 1, 2], [0, 1, 3], [0, 0, 2], [1, 1, 1]];
@@ -293,8 +291,8 @@ fn degenerate_template_triangles_give_finite_output() {
     // Deformed frames: as is, all collapsed to one point, and a real motion.
     let frames = [
         positions.clone(),
-        vec![Vec3::splat(0.5); 4],
-        positions.iter().map(|p| *p * 3.0 + Vec3::Z).collect(),
+        vec![DVec3::splat(0.5); 4],
+        positions.iter().map(|p| *p * 3.0 + DVec3::Z).collect(),
     ];
     for mode in [DeformMode::Binding, DeformMode::Jacobian] {
         let deformer = Deformer::new(&mesh, mode);
@@ -321,7 +319,7 @@ fn bad_input_is_refused() {
         Err(DeformError::VertexCount { .. })
     ));
     let mut nan = frame.clone();
-    nan[17].y = f32::NAN;
+    nan[17].y = f64::NAN;
     assert_eq!(
         deformer.deform(&set, &nan).unwrap_err(),
         DeformError::NonFiniteVertex { index: 17 }
@@ -353,9 +351,9 @@ fn bad_input_is_refused() {
 #[test]
 fn overflowing_results_are_errors_not_infinities() {
     let positions = vec![
-        Vec3::new(0.0, 0.0, 0.0),
-        Vec3::new(3e38, 0.0, 0.0),
-        Vec3::new(0.0, 3e38, 0.0),
+        DVec3::new(0.0, 0.0, 0.0),
+        DVec3::new(3e38, 0.0, 0.0),
+        DVec3::new(0.0, 3e38, 0.0),
     ];
     let mesh = TriMesh::new(positions.clone(), vec![[0, 1, 2]]);
     let mut parts = bound_set(1, 1, 9, ScaleDims::Three).into_parts();
@@ -367,6 +365,105 @@ fn overflowing_results_are_errors_not_infinities() {
             err.unwrap_err(),
             DeformError::NonFiniteOutput { index: 0 },
             "{mode:?}"
+        );
+    }
+}
+
+/// Spot moved off f32 values (× 1.37, + an offset with many decimals) with slivers: every 25th
+/// vertex pulled to 1e-5 .. 1e-3 of an edge length from the line of the opposite edge of one of
+/// its triangles (aspect ratios up to 1e5). `round` rounds the result to f32.
+fn stiff_spot(round: bool) -> TriMesh {
+    let spot = spot();
+    let offset = DVec3::new(0.123_456_789, -2.718_281_828, 31.415_926_5);
+    let mut p: Vec<DVec3> = spot
+        .positions()
+        .iter()
+        .map(|v| *v * 1.37 + offset)
+        .collect();
+    let mut rng = Rng::new(18);
+    let mut moved = vec![false; p.len()];
+    for t in (0..spot.triangle_count()).step_by(25) {
+        let [a, b, c] = spot.triangles()[t].map(|v| v as usize);
+        if moved[a] {
+            continue;
+        }
+        let e = p[c] - p[b];
+        let s = ((p[a] - p[b]).dot(e) / e.length_squared()).clamp(0.2, 0.8);
+        let foot = p[b] + e * s;
+        let ratio = 10f64.powf(-5.0 + 2.0 * rng.uniform_f64());
+        p[a] = foot + (p[a] - foot).normalize() * ratio * e.length();
+        moved[a] = true;
+    }
+    if round {
+        p = p.iter().map(|v| v.as_vec3().as_dvec3()).collect();
+    }
+    TriMesh::new(p, spot.triangles().to_vec())
+}
+
+/// Worst covariance error `|Σ - Σ_ref|_F / |Σ_ref|_F` and mean error over the bounding-box
+/// diagonal of `mode` deforming on `input` under three poses, against the formulas written out
+/// in f64 on `mesh` (the same mesh, or the exact one `input` is a rounding of).
+fn worst_errors(input: &TriMesh, mesh: &TriMesh, mode: DeformMode) -> (f64, f64) {
+    let set = bound_set(mesh.triangle_count(), 3, 5, ScaleDims::Three);
+    let deformer = Deformer::new(input, mode);
+    let opts = FrameOptions::for_positions(mesh.positions());
+    let diag = mesh.bounds().unwrap().diagonal();
+    let (mut worst_cov, mut worst_mu) = (0.0f64, 0.0f64);
+    for t in [0.3, 0.7, 1.0] {
+        let frame = warp(mesh.positions(), t);
+        let rounded: Vec<DVec3> = if input == mesh {
+            frame.clone()
+        } else {
+            frame.iter().map(|v| v.as_vec3().as_dvec3()).collect()
+        };
+        let out = deformer.deform(&set, &rounded).unwrap();
+        for i in 0..set.len() {
+            let tri = mesh.triangles()[set.binding().unwrap().triangles[i].index()];
+            let d = tri.map(|j| frame[j as usize]);
+            let m = match mode {
+                DeformMode::Binding => {
+                    let (r, _, k) = ga_reference(d.map(|v| v.to_array()));
+                    DMat3::from_cols_array_2d(&r).transpose() * k
+                }
+                DeformMode::Jacobian => {
+                    let c = tri.map(|j| mesh.positions()[j as usize]);
+                    let e = |v: [DVec3; 3]| {
+                        let n = (v[1] - v[0]).cross(v[2] - v[0]);
+                        DMat3::from_cols(v[1] - v[0], v[2] - v[0], n / n.length().sqrt())
+                    };
+                    let f = surfhead_frame(c, &opts);
+                    e(d) * e(c).inverse() * f.rotation * f.scale
+                }
+            };
+            let mu = m * set.means()[i].as_dvec3() + (d[0] + d[1] + d[2]) / 3.0;
+            worst_mu = worst_mu.max((out.means()[i].as_dvec3() - mu).length() / diag);
+            let want = m * covariance_of(&set, i) * m.transpose();
+            worst_cov = worst_cov.max(frob(covariance_of(&out, i) - want) / frob(want));
+        }
+    }
+    (worst_cov, worst_mu)
+}
+
+#[test]
+fn stiff_template_off_f32_values_is_deformed_to_f32_precision() {
+    // Issue #18: mesh vertices were f32, which cost 6.4e-4 (binding) and 1.9e-3 (jacobian)
+    // in covariance on a sliver-rich template given in decimals. f64 vertices leave the f32
+    // storage of the Gaussians: 1e-5 is the goal.
+    for mode in [DeformMode::Binding, DeformMode::Jacobian] {
+        let (exact, rounded) = (stiff_spot(false), stiff_spot(true));
+        for (name, mesh) in [("decimal", &exact), ("f32-valued", &rounded)] {
+            let (cov, mu) = worst_errors(mesh, mesh, mode);
+            println!("{mode:?} {name} vertices: covariance {cov:.2e}, mean/diag {mu:.2e}");
+            assert!(cov <= REL_TOL, "{mode:?} {name}: covariance {cov:e}");
+            assert!(mu <= REL_TOL, "{mode:?} {name}: mean {mu:e}");
+        }
+        // What storing the vertices in f32 cost: the same case with the template and the
+        // frames rounded to f32 before deforming, scored against the exact ones.
+        let (cov, mu) = worst_errors(&rounded, &exact, mode);
+        println!("{mode:?} rounded to f32 first: covariance {cov:.2e}, mean/diag {mu:.2e}");
+        assert!(
+            cov > 10.0 * REL_TOL,
+            "{mode:?}: the slivers must make f32 vertices costly"
         );
     }
 }

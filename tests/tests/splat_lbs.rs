@@ -23,7 +23,7 @@ fn times(template: &GltfTemplate) -> Vec<f64> {
 }
 
 fn diagonal(template: &GltfTemplate) -> f64 {
-    f64::from(template.rest().bounds().expect("bounds").diagonal())
+    template.rest().bounds().expect("bounds").diagonal()
 }
 
 fn world_at_vertices(template: &GltfTemplate) -> GaussianSet {
@@ -32,7 +32,7 @@ fn world_at_vertices(template: &GltfTemplate) -> GaussianSet {
     let mut rng = Rng::new(3);
     let mut u = || rng.uniform_f32() - 0.5;
     GaussianSet::try_new(GaussianParts {
-        means: p.to_vec(),
+        means: p.iter().map(|v| v.as_vec3()).collect(),
         log_scales: (0..n).map(|_| Vec3::new(u(), u(), u()) - 4.0).collect(),
         rotations: (0..n).map(|_| [u() + 1.0, u(), u(), u()]).collect(),
         opacity_logits: vec![0.0; n],
@@ -58,7 +58,7 @@ fn check(file: &str) {
             for (k, weight) in skin.influences(v) {
                 p += weight * palette[k].transform_point3(skin.base_positions[v]);
             }
-            worst = worst.max((p - w.as_dvec3()).length() / diag);
+            worst = worst.max((p - w).length() / diag);
         }
         assert!(worst < SKINNING_TOL, "{file} t={t}: {worst}");
     }
@@ -89,7 +89,7 @@ fn check(file: &str) {
         let palette = template.palette_at(Some(t)).expect("palette");
         let moved = rig.deform(&bound, &palette, None).expect("deform");
         for (v, w) in want.iter().enumerate() {
-            let d = (moved.means()[v].as_dvec3() - w.as_dvec3()).length() / diag;
+            let d = (moved.means()[v].as_dvec3() - w).length() / diag;
             worst = worst.max(d);
             // A vertex bound to one joint turns with it: R = polar(P_t P_rest⁻¹) R_rest.
             let infl: Vec<(usize, f64)> = skin.influences(v).collect();

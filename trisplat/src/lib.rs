@@ -30,7 +30,7 @@
 //! // One Gaussian per triangle at its centroid (GaussianAvatars' initialisation).
 //! let bound = init_bound(&mesh, &BindOptions::default())?;
 //! // Move the mesh (here: lift it by 1), and the Gaussians follow their triangles.
-//! let moved: Vec<_> = mesh.positions().iter().map(|p| *p + glam::Vec3::Y).collect();
+//! let moved: Vec<_> = mesh.positions().iter().map(|p| *p + glam::DVec3::Y).collect();
 //! let world = Deformer::new(&mesh, DeformMode::Binding).deform(&bound, &moved)?;
 //! assert_eq!(world.len(), mesh.triangle_count());
 //! # Ok::<(), Box<dyn std::error::Error>>(())
@@ -48,8 +48,8 @@
 //! let bound = init_bound(&mesh, &BindOptions { opacity: 0.9, ..BindOptions::default() })?;
 //! let world = Deformer::new(&mesh, DeformMode::Binding).deform(&bound, mesh.positions())?;
 //! let bounds = mesh.bounds().expect("finite");
-//! let radius = f64::from((bounds.max - bounds.min).length()) / 2.0;
-//! let cameras = sphere_rig(bounds.center().as_dvec3(), radius, 1, (64, 64), 40.0)?;
+//! let radius = (bounds.max - bounds.min).length() / 2.0;
+//! let cameras = sphere_rig(bounds.center(), radius, 1, (64, 64), 40.0)?;
 //! let out = render(&world, &cameras[0], &RenderOptions::default())?;
 //! let depth = out.images.depth.expect("depth is rendered by default");
 //! assert!(depth.iter().any(|&z| z > 0.0));

@@ -81,7 +81,7 @@ pub fn run(args: CamerasArgs, _ctx: &Context) -> anyhow::Result<()> {
     let Some(bounds) = points.bounds() else {
         bail!("{}: no vertices to frame", args.mesh.display());
     };
-    let center = bounds.center().as_dvec3();
+    let center = bounds.center();
     let radius = points
         .positions()
         .iter()

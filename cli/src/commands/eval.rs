@@ -142,7 +142,7 @@ impl Input {
     /// The diagonal of the bounding box of the mesh's vertices or of the points.
     fn extent(&self) -> f64 {
         match self {
-            Self::Mesh(mesh, _) => metrics::bbox_diagonal(mesh.positions()),
+            Self::Mesh(mesh, _) => mesh.bounds().map_or(0.0, |b| b.diagonal()),
             Self::Points(points) => metrics::bbox_diagonal(points.positions()),
         }
     }
@@ -153,7 +153,10 @@ impl Input {
         let gt = gt.mesh()?.positions();
         match self {
             Self::Mesh(mesh, _) => metrics::shared_vertex_fraction(gt, mesh.positions()),
-            Self::Points(points) => metrics::shared_vertex_fraction(gt, points.positions()),
+            Self::Points(points) => {
+                let widened: Vec<_> = points.positions().iter().map(|p| p.as_dvec3()).collect();
+                metrics::shared_vertex_fraction(gt, &widened)
+            }
         }
     }
 }
@@ -205,7 +208,7 @@ fn load(path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
     };
     if mesh.triangle_count() == 0 {
         let normals = mesh.normals().map(<[_]>::to_vec);
-        let (positions, ..) = mesh.into_parts();
+        let positions = mesh.positions_f32();
         let mut points = PointCloud::try_new(positions)
             .with_context(|| format!("{}: vertices", path.display()))?;
         if let Some(n) = normals {

@@ -163,7 +163,7 @@ impl Snapshot {
         triangles: Vec<u32>,
         frontier: Vec<u32>,
         corners: &[[u32; 3]],
-        positions: &[glam::Vec3],
+        positions: &[glam::DVec3],
     ) -> Option<Self> {
         let mut ids: Vec<u32> = triangles
             .iter()
@@ -188,11 +188,11 @@ impl Snapshot {
 
     /// Sets `coords` to the vertices' current positions in `frame`, centred, and the
     /// matching Gram matrix; `false` when it is singular (or a vertex is missing).
-    fn take_coordinates(&mut self, frame: &LocalFrame, positions: &[glam::Vec3]) -> bool {
+    fn take_coordinates(&mut self, frame: &LocalFrame, positions: &[glam::DVec3]) -> bool {
         self.coords.clear();
         for &k in &self.ids {
             match positions.get(k as usize) {
-                Some(p) => self.coords.push(frame.apply(p.as_dvec3())),
+                Some(&p) => self.coords.push(frame.apply(p)),
                 None => return false,
             }
         }
@@ -224,7 +224,7 @@ impl Snapshot {
         &mut self,
         frame: &LocalFrame,
         v: [DVec3; 3],
-        positions: &[glam::Vec3],
+        positions: &[glam::DVec3],
         saved: &mut Vec<DVec3>,
         current: &mut Vec<DVec3>,
     ) -> Option<Fit> {
@@ -249,7 +249,7 @@ impl Snapshot {
     pub(crate) fn fit(
         &self,
         v: [DVec3; 3],
-        positions: &[glam::Vec3],
+        positions: &[glam::DVec3],
         current: &mut Vec<DVec3>,
     ) -> Option<Fit> {
         let normal = (v[1] - v[0]).cross(v[2] - v[0]).try_normalize()?;
@@ -257,7 +257,7 @@ impl Snapshot {
         let mut sum = DVec3::ZERO;
         current.clear();
         for (&k, &s) in self.ids.iter().zip(&self.coords) {
-            let p = positions.get(k as usize)?.as_dvec3();
+            let p = *positions.get(k as usize)?;
             cross += DMat3::from_cols(p * s.x, p * s.y, p * s.z);
             sum += p;
             current.push(p);
@@ -468,23 +468,23 @@ fn round_down(x: f64) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use glam::{DVec3, Vec3};
+    use glam::DVec3;
 
     use super::{LocalFrame, Snapshot};
 
     /// Two triangles of a unit square in z = 0.
-    fn square() -> (Vec<[u32; 3]>, Vec<Vec3>) {
+    fn square() -> (Vec<[u32; 3]>, Vec<DVec3>) {
         let positions = vec![
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
         ];
         (vec![[0, 1, 2], [0, 2, 3]], positions)
     }
 
-    fn corners(positions: &[Vec3], t: [u32; 3]) -> [DVec3; 3] {
-        t.map(|k| positions[k as usize].as_dvec3())
+    fn corners(positions: &[DVec3], t: [u32; 3]) -> [DVec3; 3] {
+        t.map(|k| positions[k as usize])
     }
 
     #[test]
@@ -496,9 +496,9 @@ mod tests {
             Snapshot::new(&frame, vec![0, 1], Vec::new(), &triangles, &rest).expect("snapshot");
         let (mut saved, mut current) = (Vec::new(), Vec::new());
         // Stretched by 20% along x: the old fit follows it with no residual.
-        let moved: Vec<Vec3> = rest
+        let moved: Vec<DVec3> = rest
             .iter()
-            .map(|p| Vec3::new(1.2 * p.x, p.y, p.z))
+            .map(|p| DVec3::new(1.2 * p.x, p.y, p.z))
             .collect();
         let v_moved = corners(&moved, triangles[0]);
         let old = snap.fit(v_moved, &moved, &mut current).expect("fit");
@@ -512,7 +512,7 @@ mod tests {
         assert!((new.sigma_lo - 1.0).abs() < 1e-9 && (new.sigma_hi - 1.0).abs() < 1e-9);
         // Every vertex in one point: no fit, and the snapshot stays as it was.
         let before = snap.clone();
-        let collapsed = vec![Vec3::splat(0.5); 4];
+        let collapsed = vec![DVec3::splat(0.5); 4];
         let v_collapsed = corners(&collapsed, triangles[0]);
         assert!(
             snap.rebase(

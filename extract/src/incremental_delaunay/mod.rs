@@ -366,7 +366,7 @@ impl AutoRebuild {
 /// Shared inputs of the per-chart hop search of one frame.
 struct SearchContext<'a> {
     bvh: &'a TriangleBvh,
-    positions: &'a [Vec3],
+    positions: &'a [DVec3],
     /// Flat triangles (see [`FLAT_RATIO`]); `None` when there are none.
     flat: Option<&'a [bool]>,
 }
@@ -539,7 +539,7 @@ pub struct IncrementalDelaunay {
     /// Hop threshold in world units.
     hop_distance: f64,
     /// Bounding-box diagonal of the rest template (margins of the motion filter).
-    diagonal: f32,
+    diagonal: f64,
     // State after the last update.
     assigned: Vec<u32>,
     anchors: Vec<Anchor>,
@@ -552,7 +552,7 @@ pub struct IncrementalDelaunay {
     bvh: Option<TriangleBvh>,
     /// Per triangle of the deformed template: flat in the sense of [`FLAT_RATIO`].
     flat: Vec<bool>,
-    vertices: Vec<Vec3>,
+    vertices: Vec<DVec3>,
     /// Per chart: its snapshot and its members' certificates (module `certify`), in the
     /// order of `members`; valid only while `certified`.
     states: Vec<ChartState>,
@@ -568,10 +568,12 @@ pub struct IncrementalDelaunay {
 /// scanned without early exit (a branch-free pass the compiler vectorises; rayon's
 /// `position_first` per point cost more than the update it guards), and the offending index
 /// is looked up only in the first bad chunk.
-fn check_coordinates(points: &[Vec3], what: &'static str) -> Result<(), DelaunayError> {
+fn check_coordinates<P: Coordinates>(
+    points: &[P],
+    what: &'static str,
+) -> Result<(), DelaunayError> {
     const CHUNK: usize = 4096;
-    // `max_element` skips NaN, hence the separate finiteness test.
-    let bad = |p: &Vec3| !(p.is_finite() & (p.abs().max_element() <= MAX_COORDINATE));
+    let bad = |p: &P| !p.within_limit();
     let chunk = points
         .par_chunks(CHUNK)
         .position_first(|c| c.iter().fold(false, |any, p| any | bad(p)));
@@ -584,15 +586,32 @@ fn check_coordinates(points: &[Vec3], what: &'static str) -> Result<(), Delaunay
     }
 }
 
+/// Points whose coordinates [`check_coordinates`] checks: template vertices (f64) and
+/// Gaussian means (f32).
+trait Coordinates: Sync {
+    /// Finite and at most [`MAX_COORDINATE`] in magnitude (`max_element` skips NaN, hence the
+    /// separate finiteness test).
+    fn within_limit(&self) -> bool;
+}
+
+impl Coordinates for Vec3 {
+    fn within_limit(&self) -> bool {
+        self.is_finite() & (self.abs().max_element() <= MAX_COORDINATE)
+    }
+}
+
+impl Coordinates for DVec3 {
+    fn within_limit(&self) -> bool {
+        self.is_finite() & (self.abs().max_element() <= f64::from(MAX_COORDINATE))
+    }
+}
+
 /// Per triangle of the BVH: flat in the sense of [`FLAT_RATIO`] (see `certify::is_flat`).
 fn flat_triangles(bvh: &TriangleBvh) -> Vec<bool> {
     (0..bvh.triangle_count())
         .into_par_iter()
         .with_min_len(1024)
-        .map(|t| {
-            bvh.corners(t)
-                .is_none_or(|c| is_flat(c.map(Vec3::as_dvec3)))
-        })
+        .map(|t| bvh.corners(t).is_none_or(is_flat))
         .collect()
 }
 
@@ -649,7 +668,7 @@ impl IncrementalDelaunay {
         check_coordinates(canonical_means, "canonical mean")?;
         let rest_corners: Vec<[DVec3; 3]> = triangles
             .par_iter()
-            .map(|t| t.map(|v| positions[v as usize].as_dvec3()))
+            .map(|t| t.map(|v| positions[v as usize]))
             .collect();
         let frames = rest_corners
             .par_iter()
@@ -727,7 +746,7 @@ impl IncrementalDelaunay {
     /// Vertex positions after the last update: deformed template vertices, then one vertex per
     /// Gaussian (empty before the first update).
     #[must_use]
-    pub fn vertices(&self) -> &[Vec3] {
+    pub fn vertices(&self) -> &[DVec3] {
         &self.vertices
     }
 
@@ -788,7 +807,7 @@ impl IncrementalDelaunay {
     /// for non-finite or huge coordinates; the state is unchanged then.
     pub fn update(
         &mut self,
-        positions: &[Vec3],
+        positions: &[DVec3],
         means: &[Vec3],
     ) -> Result<FrameStats, DelaunayError> {
         let start = Instant::now();
@@ -833,14 +852,14 @@ impl IncrementalDelaunay {
     /// As [`IncrementalDelaunay::update`].
     pub fn rebuild(
         &mut self,
-        positions: &[Vec3],
+        positions: &[DVec3],
         means: &[Vec3],
     ) -> Result<FrameStats, DelaunayError> {
         self.bvh = None;
         self.update(positions, means)
     }
 
-    fn check_frame(&self, positions: &[Vec3], means: &[Vec3]) -> Result<(), DelaunayError> {
+    fn check_frame(&self, positions: &[DVec3], means: &[Vec3]) -> Result<(), DelaunayError> {
         if positions.len() != self.vertex_count {
             return Err(DelaunayError::Count {
                 what: "deformed template",
@@ -861,7 +880,7 @@ impl IncrementalDelaunay {
 
     fn rebuild_now(
         &mut self,
-        positions: &[Vec3],
+        positions: &[DVec3],
         means: &[Vec3],
     ) -> Result<FrameStats, DelaunayError> {
         let bvh = TriangleBvh::from_triangles(positions, &self.triangles)?;
@@ -901,7 +920,7 @@ impl IncrementalDelaunay {
         })
     }
 
-    fn step(&mut self, positions: &[Vec3], means: &[Vec3]) -> Result<FrameStats, DelaunayError> {
+    fn step(&mut self, positions: &[DVec3], means: &[Vec3]) -> Result<FrameStats, DelaunayError> {
         let Some(mut bvh) = self.bvh.take() else {
             return self.rebuild_now(positions, means);
         };
@@ -1033,14 +1052,11 @@ impl IncrementalDelaunay {
         }
         let bvh = cx.bvh;
         let hop = self.hop_distance;
-        let v = bvh
-            .corners(a as usize)
-            .map_or([DVec3::ZERO; 3], |c| c.map(Vec3::as_dvec3));
+        let v = bvh.corners(a as usize).unwrap_or([DVec3::ZERO; 3]);
         let centre = (v[0] + v[1] + v[2]) / 3.0;
         let size = v.iter().map(|p| (*p - centre).length()).fold(0.0, f64::max);
         let margin = SNAPSHOT_MARGIN_REL * size;
-        let slack =
-            FILTER_MARGIN_REL * (f64::from(self.diagonal) + centre.abs().max_element() + size);
+        let slack = FILTER_MARGIN_REL * (self.diagonal + centre.abs().max_element() + size);
         let usable = |snap: &Snapshot| match cx.flat {
             None => true,
             Some(flat) => snap.triangles.iter().all(|&t| !flat[t as usize]),
@@ -1220,7 +1236,7 @@ impl IncrementalDelaunay {
     /// triangle is flat or the new fit fails.
     fn rebase(
         v: [DVec3; 3],
-        positions: &[Vec3],
+        positions: &[DVec3],
         means: &[DVec3],
         state: &mut ChartState,
         scratch: &mut Scratch,
@@ -1505,13 +1521,17 @@ impl IncrementalDelaunay {
         }
     }
 
-    fn lift(&mut self, positions: &[Vec3], means: &[Vec3]) {
+    fn lift(&mut self, positions: &[DVec3], means: &[Vec3]) {
         let nv = self.vertex_count;
-        self.vertices.resize(nv + means.len(), Vec3::ZERO);
+        self.vertices.resize(nv + means.len(), DVec3::ZERO);
         let (template, gaussians) = self.vertices.split_at_mut(nv);
         template.copy_from_slice(positions);
         match self.options.lift {
-            Lift::Means => gaussians.copy_from_slice(means),
+            Lift::Means => gaussians
+                .par_iter_mut()
+                .zip(means.par_iter())
+                .with_min_len(4096)
+                .for_each(|(out, m)| *out = m.as_dvec3()),
             Lift::Surface => {
                 let tris = &self.triangles;
                 gaussians
@@ -1519,12 +1539,12 @@ impl IncrementalDelaunay {
                     .zip(self.assigned.par_iter().zip(self.anchors.par_iter()))
                     .with_min_len(1024)
                     .for_each(|(out, (&t, anchor))| {
-                        let v = tris[t as usize].map(|k| positions[k as usize].as_dvec3());
+                        let v = tris[t as usize].map(|k| positions[k as usize]);
                         let p = v[0] * anchor.bary[0]
                             + v[1] * anchor.bary[1]
                             + v[2] * anchor.bary[2]
                             + unit_normal(v) * anchor.offset;
-                        *out = p.as_vec3();
+                        *out = p;
                     });
             }
         }

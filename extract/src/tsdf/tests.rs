@@ -175,7 +175,7 @@ fn check_against_dense(cams: &[Camera], voxel: f64, half: i32) {
     assert_eq!(ours.triangle_count(), reference.triangle_count());
     assert_eq!(ours.vertex_count(), reference.vertex_count());
     let sorted = |m: &TriMesh| {
-        let mut p: Vec<[f32; 3]> = m.positions().iter().map(|v| v.to_array()).collect();
+        let mut p: Vec<[f64; 3]> = m.positions().iter().map(|v| v.to_array()).collect();
         p.sort_by(|a, b| a.partial_cmp(b).unwrap());
         p
     };
@@ -203,7 +203,7 @@ fn closed_sphere_is_watertight_and_outward() {
     // Near silhouettes a pixel's depth reaches voxels at a grazing angle: errors stay below
     // 1.5 voxels here (pixels are 0.7 voxel wide at the sphere).
     for v in mesh.positions() {
-        assert!((v.as_dvec3().length() - RADIUS).abs() < 1.5 * VOXEL, "{v}");
+        assert!((v.length() - RADIUS).abs() < 1.5 * VOXEL, "{v}");
     }
     // Defaults as 2DGS: the scene radius is the camera distance (the axes meet at the centre).
     let (center, radius) = scene_radius(&cams).unwrap();

@@ -23,7 +23,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use glam::{DQuat, DVec3, Vec3};
+use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 
 use super::sequence::check_topology;
@@ -357,7 +357,7 @@ impl WeightsTrack {
 pub struct BlendshapeSet {
     neutral: TriMesh,
     names: Vec<String>,
-    targets: Vec<Vec<Vec3>>,
+    targets: Vec<Vec<DVec3>>,
 }
 
 impl BlendshapeSet {
@@ -369,7 +369,7 @@ impl BlendshapeSet {
     /// whose vertex count or triangles differ from the neutral.
     pub fn from_files(neutral: &Path, targets: &[PathBuf]) -> Result<Self, AnimationError> {
         let base = read_mesh(neutral)?;
-        let read: Vec<Result<(String, Vec<Vec3>), AnimationError>> = targets
+        let read: Vec<Result<(String, Vec<DVec3>), AnimationError>> = targets
             .par_iter()
             .map(|path| {
                 let mesh = read_mesh(path)?;
@@ -403,7 +403,7 @@ impl BlendshapeSet {
     /// vertex count differs; [`AnimationError::Invalid`] for non-finite positions.
     pub fn from_meshes(
         neutral: TriMesh,
-        targets: Vec<(String, Vec<Vec3>)>,
+        targets: Vec<(String, Vec<DVec3>)>,
     ) -> Result<Self, AnimationError> {
         let mut names = Vec::new();
         let mut positions = Vec::new();
@@ -444,14 +444,14 @@ impl BlendshapeSet {
     ///
     /// # Errors
     /// [`AnimationError::WeightCount`] when `weights` does not have one value per target.
-    pub fn evaluate(&self, weights: &[f64]) -> Result<Vec<Vec3>, AnimationError> {
+    pub fn evaluate(&self, weights: &[f64]) -> Result<Vec<DVec3>, AnimationError> {
         if weights.len() != self.targets.len() {
             return Err(AnimationError::WeightCount {
                 expected: self.targets.len(),
                 found: weights.len(),
             });
         }
-        let active: Vec<(f64, &Vec<Vec3>)> = weights
+        let active: Vec<(f64, &Vec<DVec3>)> = weights
             .iter()
             .zip(&self.targets)
             .filter(|(w, _)| **w != 0.0)
@@ -461,12 +461,12 @@ impl BlendshapeSet {
         Ok((0..neutral.len())
             .into_par_iter()
             .map(|v| {
-                let n = neutral[v].as_dvec3();
+                let n = neutral[v];
                 let mut acc = DVec3::ZERO;
                 for (w, t) in &active {
-                    acc += *w * (t[v].as_dvec3() - n);
+                    acc += *w * (t[v] - n);
                 }
-                (n + acc).as_vec3()
+                n + acc
             })
             .collect())
     }
@@ -578,7 +578,7 @@ impl AnimatedTemplate for BlendshapeAnimation {
         &self.set.neutral
     }
 
-    fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError> {
+    fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
         self.set.evaluate(&self.target_weights(frame)?)
     }
 
@@ -665,7 +665,7 @@ impl AnimatedTemplate for GltfMorphAnimation {
         self.template.rest()
     }
 
-    fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError> {
+    fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
         let (Some(w), Some(t)) = (self.track.weights(frame), self.track.time(frame)) else {
             return Err(AnimationError::FrameOutOfRange {
                 frame,

@@ -24,7 +24,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use glam::{DMat4, DQuat, DVec3, Vec3};
+use glam::{DMat4, DQuat, DVec3};
 use rayon::prelude::*;
 
 use super::sampler::{Interpolation, Sampler};
@@ -557,7 +557,7 @@ impl GltfTemplate {
             clip: None,
             clip_names,
             fps: DEFAULT_FPS,
-            rest: TriMesh::new_unchecked(Vec::new(), Vec::new()),
+            rest: TriMesh::default(),
             unmatched_joints: Vec::new(),
             retargeted: false,
         };
@@ -868,7 +868,7 @@ impl GltfTemplate {
     ///
     /// # Errors
     /// [`AnimationError::BadTime`] when `t` is not finite.
-    pub fn evaluate_at(&self, t: f64) -> Result<Vec<Vec3>, AnimationError> {
+    pub fn evaluate_at(&self, t: f64) -> Result<Vec<DVec3>, AnimationError> {
         if !t.is_finite() {
             return Err(AnimationError::BadTime { time: t });
         }
@@ -884,7 +884,7 @@ impl GltfTemplate {
         &self,
         t: Option<f64>,
         weights: &dyn Fn(usize, usize) -> Option<f64>,
-    ) -> Result<Vec<Vec3>, AnimationError> {
+    ) -> Result<Vec<DVec3>, AnimationError> {
         self.evaluate_turned(t, weights, None)
     }
 
@@ -898,7 +898,7 @@ impl GltfTemplate {
         t: Option<f64>,
         weights: &dyn Fn(usize, usize) -> Option<f64>,
         turn: Option<JointTurn>,
-    ) -> Result<Vec<Vec3>, AnimationError> {
+    ) -> Result<Vec<DVec3>, AnimationError> {
         if let Some(t) = t.filter(|t| !t.is_finite()) {
             return Err(AnimationError::BadTime { time: t });
         }
@@ -1077,7 +1077,7 @@ impl GltfTemplate {
         t: Option<f64>,
         override_weights: Option<&dyn Fn(usize, usize) -> Option<f64>>,
         turn: Option<JointTurn>,
-    ) -> Result<Vec<Vec3>, AnimationError> {
+    ) -> Result<Vec<DVec3>, AnimationError> {
         let (world, anim_weights) = self.pose(t, turn);
         let mut out = Vec::with_capacity(self.rest.vertex_count());
         for &(node, _) in &self.instances {
@@ -1115,11 +1115,11 @@ impl GltfTemplate {
                         }
                     }
                 }
-                let positions: Vec<Vec3> = (0..morphed.len())
+                let positions: Vec<DVec3> = (0..morphed.len())
                     .into_par_iter()
                     .map(|v| {
                         let p = morphed[v];
-                        let q = match (&joint_mats, &prim.influences) {
+                        match (&joint_mats, &prim.influences) {
                             (Some(mats), Some(infl)) => {
                                 let (a, b) =
                                     (infl.offsets[v] as usize, infl.offsets[v + 1] as usize);
@@ -1135,8 +1135,7 @@ impl GltfTemplate {
                                 }
                             }
                             _ => node_world.transform_point3(p),
-                        };
-                        q.as_vec3()
+                        }
                     })
                     .collect();
                 out.extend(positions);
@@ -1318,7 +1317,7 @@ impl AnimatedTemplate for GltfTemplate {
         &self.rest
     }
 
-    fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError> {
+    fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
         let t = self
             .frame_time(frame)
             .ok_or(AnimationError::FrameOutOfRange {

@@ -20,7 +20,7 @@ mod gltf;
 mod sampler;
 mod sequence;
 
-use glam::Vec3;
+use glam::DVec3;
 
 pub use self::blendshape::{
     BlendshapeAnimation, BlendshapeSet, GltfMorphAnimation, WeightsTrack, canonical_target_name,
@@ -53,7 +53,7 @@ pub trait AnimatedTemplate: Send + Sync {
     /// # Errors
     /// [`AnimationError::FrameOutOfRange`] past the last frame; source errors (an unreadable
     /// or mismatched frame file) naming the file.
-    fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError>;
+    fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError>;
 
     /// Channels of the driving track that move nothing (a weights track's names that match no
     /// morph target or blendshape, such as ARKit's `tongueOut` on a head without a tongue

@@ -5,7 +5,7 @@
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::DVec3;
 
 use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS};
 use crate::TriMesh;
@@ -263,7 +263,7 @@ impl AnimatedTemplate for MeshSequence {
         &self.rest
     }
 
-    fn frame(&self, frame: usize) -> Result<Vec<Vec3>, AnimationError> {
+    fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
         let path = self
             .files
             .get(frame)

@@ -321,7 +321,8 @@ fn build(mesh: &TriMesh) -> (serde_json::Value, Vec<u8>) {
         accessors.len() - 1
     };
     if n > 0 {
-        let p = mesh.positions();
+        // glTF positions are f32 (the accessor's min/max are those of the values written).
+        let p = mesh.positions_f32();
         let (lo, hi) = p.iter().fold(
             (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
             |(lo, hi), &q| (lo.min(q), hi.max(q)),

@@ -665,7 +665,7 @@ impl<'s> Builder<'s> {
         shared_indices: Option<usize>,
     ) -> Result<(Value, usize), IoError> {
         let mut attributes = Map::new();
-        let position = self.push(vec3_block(mesh.positions(), Some(ARRAY_BUFFER), true))?;
+        let position = self.push(vec3_block(&mesh.positions_f32(), Some(ARRAY_BUFFER), true))?;
         attributes.insert("POSITION".into(), json!(position));
         if with_normals && let Some(normals) = mesh.normals() {
             let normal = self.push(vec3_block(
@@ -775,7 +775,8 @@ fn build_morph_targets(
                         clippy::cast_possible_truncation,
                         reason = "f32 storage; overflow is checked below"
                     )]
-                    let d = (f64::from(p[c]) - f64::from(q[c])) as f32;
+                    // Relative to the base as stored (f32), so base + delta is the frame.
+                    let d = (p[c] - f64::from(q[c] as f32)) as f32;
                     d
                 })
             })

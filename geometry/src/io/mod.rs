@@ -172,6 +172,7 @@ fn mesh_points(path: &Path, mesh: TriMesh) -> Result<PointCloud, IoError> {
     };
     let (positions, _, _, _, colors) = mesh.into_parts();
     let bad = |e: crate::MeshError| IoError::malformed(path, "vertices", e.to_string());
+    let positions = positions.iter().map(|p| p.as_vec3()).collect();
     let mut cloud = PointCloud::try_new(positions)
         .map_err(bad)?
         .with_normals(normals)

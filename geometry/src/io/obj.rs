@@ -27,7 +27,7 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::Path;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use super::IoError;
 use crate::TriMesh;
@@ -60,7 +60,8 @@ struct Corner {
 /// The raw contents of an OBJ file.
 #[derive(Default)]
 struct ObjData {
-    positions: Vec<Vec3>,
+    /// f64: the file's decimals are read as f64 (meshes store f64 positions).
+    positions: Vec<DVec3>,
     colors: Vec<Rgba>,
     texcoords: Vec<Vec2>,
     normals: Vec<Vec3>,
@@ -116,17 +117,18 @@ fn parse(path: &Path, text: &str) -> Result<ObjData, IoError> {
             "v" => {
                 let vertex = d.positions.len();
                 let values: Vec<&str> = words.collect();
-                let parsed: Option<Vec<f32>> = values.iter().map(|w| w.parse().ok()).collect();
+                let parsed: Option<Vec<f64>> = values.iter().map(|w| w.parse().ok()).collect();
                 let Some(p) = parsed.filter(|p| p.len() >= 3) else {
                     return Err(at(format!("vertex {vertex}"), "needs three numbers x y z"));
                 };
-                let pos = Vec3::new(p[0], p[1], p[2]);
+                let pos = DVec3::new(p[0], p[1], p[2]);
                 if !pos.is_finite() {
                     return Err(at(format!("vertex {vertex}"), "non-finite coordinate"));
                 }
                 d.positions.push(pos);
                 if p.len() >= 6 {
-                    d.colors.push([p[3], p[4], p[5], 1.0]);
+                    #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
+                    d.colors.push([p[3] as f32, p[4] as f32, p[5] as f32, 1.0]);
                 }
             }
             "vt" => {
@@ -372,7 +374,7 @@ pub fn read_obj(path: &Path, mode: ObjVertices) -> Result<TriMesh, IoError> {
 
 /// Writes `mesh` as OBJ text: `v x y z [r g b]`, `vt`, `vn`, and `f` with 1-based corners
 /// (`a/a/a` when both uvs and normals are present). Floats use the shortest text that reads
-/// back to the same f32.
+/// back to the same value (an f32 value as an f32, see [`Coordinate`]).
 ///
 /// # Errors
 /// [`IoError::Os`] when writing fails.
@@ -387,7 +389,13 @@ pub fn write_obj_to(path: &Path, out: &mut dyn Write, mesh: &TriMesh) -> Result<
     s.push_str("# written by trisplat\n");
     let colors = mesh.colors();
     for (i, p) in mesh.positions().iter().enumerate() {
-        let _ = write!(s, "v {} {} {}", p.x, p.y, p.z);
+        let _ = write!(
+            s,
+            "v {} {} {}",
+            Coordinate(p.x),
+            Coordinate(p.y),
+            Coordinate(p.z)
+        );
         if let Some(c) = colors.and_then(|c| c.get(i)) {
             let _ = write!(s, " {} {} {}", c[0], c[1], c[2]);
         }
@@ -430,4 +438,20 @@ pub fn write_obj_to(path: &Path, out: &mut dyn Write, mesh: &TriMesh) -> Result<
         }
     }
     flush(&mut s, out)
+}
+
+/// A vertex coordinate written with the fewest digits that read back as the same f64: an f32
+/// value as an f32 (`0.1`, not `0.10000000149011612`), any other value as an f64.
+struct Coordinate(f64);
+
+impl std::fmt::Display for Coordinate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        #[expect(clippy::cast_possible_truncation, reason = "compared back exactly")]
+        let narrow = self.0 as f32;
+        if f64::from(narrow) == self.0 {
+            write!(f, "{narrow}")
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
 }

@@ -27,7 +27,7 @@ use std::fmt;
 use std::io::Write;
 use std::path::Path;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use super::IoError;
 use crate::mesh::Rgba;
@@ -260,6 +260,18 @@ impl ScalarColumn {
             Self::U16(v) => v.get(i).map(|&x| i64::from(x)),
             Self::I32(v) => v.get(i).map(|&x| i64::from(x)),
             Self::U32(v) => v.get(i).map(|&x| i64::from(x)),
+        }
+    }
+
+    /// All values converted to f64 (exact for every PLY scalar type).
+    #[must_use]
+    pub fn to_f64(&self) -> Vec<f64> {
+        match self {
+            Self::F32(v) => v.iter().map(|&x| f64::from(x)).collect(),
+            Self::F64(v) => v.clone(),
+            other => (0..other.len())
+                .map(|i| other.get_f64(i).unwrap_or(0.0))
+                .collect(),
         }
     }
 
@@ -1361,7 +1373,8 @@ const FACE_INDEX_NAMES: [&str; 2] = ["vertex_indices", "vertex_index"];
 
 /// Vertex data decoded from a `vertex` element.
 struct VertexData {
-    positions: Vec<Vec3>,
+    /// f64: `double` coordinates are kept exactly (meshes store f64 positions).
+    positions: Vec<DVec3>,
     normals: Option<Vec<Vec3>>,
     colors: Option<Vec<Rgba>>,
     uvs: Option<Vec<Vec2>>,
@@ -1385,6 +1398,15 @@ fn zip3(c: [&ScalarColumn; 3]) -> Vec<Vec3> {
         .collect()
 }
 
+fn zip3_f64(c: [&ScalarColumn; 3]) -> Vec<DVec3> {
+    let [x, y, z] = c.map(ScalarColumn::to_f64);
+    x.iter()
+        .zip(&y)
+        .zip(&z)
+        .map(|((&x, &y), &z)| DVec3::new(x, y, z))
+        .collect()
+}
+
 fn decode_vertices(path: &Path, doc: &PlyDocument) -> Result<VertexData, IoError> {
     let Some(v) = doc.element("vertex") else {
         return Err(IoError::malformed(path, "header", "no `vertex` element"));
@@ -1396,7 +1418,7 @@ fn decode_vertices(path: &Path, doc: &PlyDocument) -> Result<VertexData, IoError
             "needs scalar properties `x`, `y` and `z`",
         )
     })?;
-    let positions = zip3(xyz);
+    let positions = zip3_f64(xyz);
     if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
         let p = positions[i];
         return Err(IoError::malformed(
@@ -1607,7 +1629,8 @@ pub fn ply_to_points(path: &Path, doc: &PlyDocument) -> Result<(PointCloud, PlyE
     let v = decode_vertices(path, doc)?;
     let extras = extras_of(doc, &v.used, false);
     let bad = |e: crate::MeshError| IoError::malformed(path, "element vertex", e.to_string());
-    let mut cloud = PointCloud::try_new(v.positions).map_err(bad)?;
+    let positions = v.positions.iter().map(|p| p.as_vec3()).collect();
+    let mut cloud = PointCloud::try_new(positions).map_err(bad)?;
     if let Some(n) = v.normals {
         cloud = cloud.with_normals(n).map_err(bad)?;
     }
@@ -1645,18 +1668,43 @@ fn prop(name: &str, data: PropertyData) -> PlyProperty {
     }
 }
 
+/// `x y z` columns of f32 points.
+fn position_columns_f32(positions: &[Vec3]) -> [PlyProperty; 3] {
+    [
+        prop("x", f32_column(positions.iter().map(|p| p.x))),
+        prop("y", f32_column(positions.iter().map(|p| p.y))),
+        prop("z", f32_column(positions.iter().map(|p| p.z))),
+    ]
+}
+
+/// `x y z` columns of f64 mesh vertices: `float` when every coordinate is an f32 value (the
+/// file is then what an f32 writer would write), else `double`, so nothing is rounded.
+fn position_columns_f64(positions: &[DVec3]) -> [PlyProperty; 3] {
+    let exact_in_f32 = positions.iter().all(|p| p.as_vec3().as_dvec3() == *p);
+    if exact_in_f32 {
+        return position_columns_f32(&positions.iter().map(|p| p.as_vec3()).collect::<Vec<_>>());
+    }
+    let column = |axis: usize| {
+        PropertyData::Scalar(ScalarColumn::F64(
+            positions.iter().map(|p| p[axis]).collect(),
+        ))
+    };
+    [
+        prop("x", column(0)),
+        prop("y", column(1)),
+        prop("z", column(2)),
+    ]
+}
+
 fn vertex_element(
-    positions: &[Vec3],
+    positions: [PlyProperty; 3],
     normals: Option<&[Vec3]>,
     uvs: Option<&[Vec2]>,
     colors: Option<&[Rgba]>,
     extra: &[PlyProperty],
 ) -> PlyElement {
-    let mut props = vec![
-        prop("x", f32_column(positions.iter().map(|p| p.x))),
-        prop("y", f32_column(positions.iter().map(|p| p.y))),
-        prop("z", f32_column(positions.iter().map(|p| p.z))),
-    ];
+    let count = positions[0].data.rows();
+    let mut props = positions.to_vec();
     if let Some(n) = normals {
         props.push(prop("nx", f32_column(n.iter().map(|p| p.x))));
         props.push(prop("ny", f32_column(n.iter().map(|p| p.y))));
@@ -1673,25 +1721,26 @@ fn vertex_element(
         }
     }
     for p in extra {
-        if p.data.rows() == positions.len() && !props.iter().any(|q| q.name == p.name) {
+        if p.data.rows() == count && !props.iter().any(|q| q.name == p.name) {
             props.push(p.clone());
         }
     }
     PlyElement {
         name: "vertex".into(),
-        count: positions.len(),
+        count,
         properties: props,
     }
 }
 
-/// The PLY document for `mesh` plus `extras`: `vertex` (`x y z` float, `nx ny nz`, `s t`,
+/// The PLY document for `mesh` plus `extras`: `vertex` (`x y z` float, or double when a
+/// coordinate is not an f32 value, `nx ny nz`, `s t`,
 /// `red green blue alpha` uchar when present, then extra properties), `face` (`list uchar int
 /// vertex_indices`, then extra face properties when their row count matches), other elements.
 /// Extras whose row count does not match the mesh are left out.
 #[must_use]
 pub fn mesh_to_ply(mesh: &TriMesh, extras: &PlyExtras) -> PlyDocument {
     let vertex = vertex_element(
-        mesh.positions(),
+        position_columns_f64(mesh.positions()),
         mesh.normals(),
         mesh.uvs(),
         mesh.colors(),
@@ -1734,7 +1783,7 @@ pub fn mesh_to_ply(mesh: &TriMesh, extras: &PlyExtras) -> PlyDocument {
 #[must_use]
 pub fn points_to_ply(points: &PointCloud, extras: &PlyExtras) -> PlyDocument {
     let mut elements = vec![vertex_element(
-        points.positions(),
+        position_columns_f32(points.positions()),
         points.normals(),
         None,
         points.colors(),

@@ -38,7 +38,7 @@ use obvhs::ray::{Ray, RayHit as ObvhsRayHit};
 use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 
-use super::{SpatialError, check_points, morton_order};
+use super::{SpatialError, check_dpoints, check_points, morton_order};
 use crate::mesh::TriMesh;
 
 /// Leaf boxes grow by this fraction of the mesh's bounding-box diagonal, plus this fraction of
@@ -102,7 +102,7 @@ pub struct TriangleBvh {
     /// Vertex indices of every triangle (kept for [`TriangleBvh::refit`]).
     triangles: Vec<[u32; 3]>,
     /// Corners of every triangle, indexed by the mesh's triangle id.
-    corners: Vec<[Vec3; 3]>,
+    corners: Vec<[DVec3; 3]>,
     /// Leaf node of each triangle.
     leaf_of: Vec<u32>,
     /// Parent of each node ([`NO_NODE`] for the root).
@@ -141,27 +141,27 @@ impl TriangleBvh {
     /// [`SpatialError::BadIndex`] for a triangle naming a vertex past the end,
     /// [`SpatialError::TooMany`] past `u32::MAX` triangles.
     pub fn from_triangles(
-        positions: &[Vec3],
+        positions: &[DVec3],
         triangles: &[[u32; 3]],
     ) -> Result<Self, SpatialError> {
-        check_points(positions)?;
+        check_dpoints(positions)?;
         check_indices(positions.len(), triangles)?;
         let n = triangles.len();
         if u32::try_from(n).is_err() {
             return Err(SpatialError::TooMany { count: n });
         }
         let corners = gather_corners(positions, triangles);
-        let diagonal = crate::mesh::Aabb::from_points(positions).map_or(0.0, |b| b.diagonal());
-        let padding = diagonal * BOX_PADDING;
+        let diagonal = crate::mesh::Aabb::from_dpoints(positions).map_or(0.0, |b| b.diagonal());
+        let padding = (diagonal * f64::from(BOX_PADDING)) as f32;
         let mut bvh2 = if n == 0 {
             Bvh2::default()
         } else {
             let primitives: Vec<Triangle> = corners
                 .par_iter()
                 .map(|&[a, b, c]| Triangle {
-                    v0: a.into(),
-                    v1: b.into(),
-                    v2: c.into(),
+                    v0: a.as_vec3().into(),
+                    v1: b.as_vec3().into(),
+                    v2: c.as_vec3().into(),
                 })
                 .collect();
             let mut bvh2 = PlocBuilder::with_capacity(n).build(
@@ -197,8 +197,8 @@ impl TriangleBvh {
     /// [`SpatialError::NonFinite`] or [`SpatialError::TooLarge`] naming the first bad vertex,
     /// [`SpatialError::BadIndex`] when `positions` is shorter than the triangles need; the tree
     /// is unchanged then.
-    pub fn refit(&mut self, positions: &[Vec3]) -> Result<(), SpatialError> {
-        check_points(positions)?;
+    pub fn refit(&mut self, positions: &[DVec3]) -> Result<(), SpatialError> {
+        check_dpoints(positions)?;
         check_indices(positions.len(), &self.triangles)?;
         self.corners = gather_corners(positions, &self.triangles);
         set_leaf_boxes(&mut self.bvh2, &self.corners, self.padding);
@@ -221,7 +221,7 @@ impl TriangleBvh {
 
     /// The corners of triangle `t` as stored (mesh order), if it exists.
     #[must_use]
-    pub fn corners(&self, t: usize) -> Option<[Vec3; 3]> {
+    pub fn corners(&self, t: usize) -> Option<[DVec3; 3]> {
         self.corners.get(t).copied()
     }
 
@@ -231,8 +231,7 @@ impl TriangleBvh {
     pub fn distance_sq(&self, q: DVec3, t: u32) -> (f64, [f64; 3]) {
         match self.corners.get(t as usize) {
             Some(&[a, b, c]) => {
-                let (p, bary) =
-                    closest_point_on_triangle(q, a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+                let (p, bary) = closest_point_on_triangle(q, a, b, c);
                 ((p - q).length_squared(), bary)
             }
             None => (f64::INFINITY, [1.0 / 3.0; 3]),
@@ -262,7 +261,7 @@ impl TriangleBvh {
         }
         let q = query.as_dvec3();
         let (d2, triangle) = self.nearest_below(q, (f64::INFINITY, u32::MAX))?;
-        let [a, b, c] = self.corners.get(triangle as usize)?.map(Vec3::as_dvec3);
+        let [a, b, c] = *self.corners.get(triangle as usize)?;
         let (point, barycentric) = closest_point_on_triangle(q, a, b, c);
         Some(ClosestPoint {
             distance: d2.sqrt(),
@@ -501,7 +500,7 @@ impl TriangleBvh {
             let Some(&[a, b, c]) = self.corners.get(tri as usize) else {
                 return f32::INFINITY;
             };
-            match ray_triangle(o, d, a.as_dvec3(), b.as_dvec3(), c.as_dvec3()) {
+            match ray_triangle(o, d, a, b, c) {
                 Some((t, barycentric)) if t <= t_max => {
                     let better = match best {
                         None => true,
@@ -550,11 +549,11 @@ fn check_indices(vertex_count: usize, triangles: &[[u32; 3]]) -> Result<(), Spat
 }
 
 /// The corners of every triangle (indices already checked).
-fn gather_corners(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
+fn gather_corners(positions: &[DVec3], triangles: &[[u32; 3]]) -> Vec<[DVec3; 3]> {
     triangles
         .par_iter()
         .with_min_len(4096)
-        .map(|t| t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO)))
+        .map(|t| t.map(|i| positions.get(i as usize).copied().unwrap_or(DVec3::ZERO)))
         .collect()
 }
 
@@ -584,7 +583,7 @@ fn links(bvh2: &Bvh2, n: usize) -> (Vec<u32>, Vec<u32>) {
 
 /// Sets every leaf's box to the union of its triangles' padded boxes (in parallel over the
 /// nodes; inner boxes are left to `refit_all`).
-fn set_leaf_boxes(bvh2: &mut Bvh2, corners: &[[Vec3; 3]], padding: f32) {
+fn set_leaf_boxes(bvh2: &mut Bvh2, corners: &[[DVec3; 3]], padding: f32) {
     let primitives = &bvh2.primitive_indices;
     bvh2.nodes
         .par_iter_mut()
@@ -602,8 +601,14 @@ fn set_leaf_boxes(bvh2: &mut Bvh2, corners: &[[Vec3; 3]], padding: f32) {
             {
                 let lo = c[0].min(c[1]).min(c[2]);
                 let hi = c[0].max(c[1]).max(c[2]);
-                let pad = Vec3::splat(padding) + lo.abs().max(hi.abs()) * BOX_PADDING;
-                aabb = aabb.union(&BvhAabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad)));
+                // In f64, then rounded to f32: the padding (1e-5 of the magnitude) is far above
+                // the rounding (6e-8 of it).
+                let pad = DVec3::splat(f64::from(padding))
+                    + lo.abs().max(hi.abs()) * f64::from(BOX_PADDING);
+                aabb = aabb.union(&BvhAabb::new(
+                    Vec3A::from((lo - pad).as_vec3()),
+                    Vec3A::from((hi + pad).as_vec3()),
+                ));
             }
             node.set_aabb(aabb);
         });
@@ -809,7 +814,7 @@ mod tests {
     fn brute_closest(mesh: &TriMesh, q: Vec3) -> (f64, u32) {
         let mut best = (f64::INFINITY, u32::MAX);
         for t in 0..mesh.triangle_count() {
-            let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+            let [a, b, c] = mesh.corners(t);
             let (p, _) = closest_point_on_triangle(q.as_dvec3(), a, b, c);
             let d = (p - q.as_dvec3()).length();
             if d < best.0 {
@@ -822,7 +827,7 @@ mod tests {
     fn brute_ray(mesh: &TriMesh, o: Vec3, d: Vec3) -> Option<f64> {
         let mut best: Option<f64> = None;
         for t in 0..mesh.triangle_count() {
-            let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+            let [a, b, c] = mesh.corners(t);
             if let Some((hit, _)) = ray_triangle(o.as_dvec3(), d.as_dvec3(), a, b, c) {
                 best = Some(best.map_or(hit, |b| b.min(hit)));
             }
@@ -883,7 +888,7 @@ mod tests {
         // Far away, and exactly on vertices.
         queries.push(Vec3::new(1e6, -3e5, 2e6));
         queries.push(Vec3::splat(-1e12));
-        queries.extend(mesh.positions().iter().step_by(13).copied());
+        queries.extend(mesh.positions_f32().iter().step_by(13).copied());
         let got = bvh.closest_points(&queries).expect("valid queries");
         for (q, cp) in queries.iter().zip(&got) {
             let (want, _) = brute_closest(&mesh, *q);
@@ -892,7 +897,7 @@ mod tests {
                 "query {q}: {} vs {want}",
                 cp.distance
             );
-            let [a, b, c] = mesh.corners(cp.triangle as usize).map(Vec3::as_dvec3);
+            let [a, b, c] = mesh.corners(cp.triangle as usize);
             let w = cp.barycentric;
             assert!((a * w[0] + b * w[1] + c * w[2] - cp.point).length() < 1e-9);
             assert_eq!(bvh.closest_point(*q), Some(*cp));
@@ -952,8 +957,8 @@ mod tests {
                 1 => Vec3::new(rng.uniform_f32() - 0.5, 0.0, rng.uniform_f32() - 0.5),
                 // Aimed at a vertex or an edge midpoint.
                 2 => {
-                    let v = mesh.positions()[i % mesh.vertex_count()];
-                    let w = mesh.positions()[(i * 7 + 1) % mesh.vertex_count()];
+                    let v = mesh.positions()[i % mesh.vertex_count()].as_vec3();
+                    let w = mesh.positions()[(i * 7 + 1) % mesh.vertex_count()].as_vec3();
                     if i % 8 == 2 { v - o } else { (v + w) * 0.5 - o }
                 }
                 _ => rand_vec(&mut rng, 1.0),
@@ -961,7 +966,7 @@ mod tests {
             rays.push((o, d));
         }
         // Axis-aligned rays straight through vertices.
-        for v in mesh.positions().iter().step_by(5) {
+        for v in mesh.positions_f32().iter().step_by(5) {
             rays.push((*v - Vec3::new(0.0, 0.0, 5.0), Vec3::Z));
             rays.push((*v + Vec3::new(3.0, 0.0, 0.0), Vec3::NEG_X));
         }
@@ -1032,7 +1037,7 @@ mod tests {
 
     #[test]
     fn empty_and_bad_inputs() {
-        let empty = TriMesh::new(Vec::new(), Vec::new());
+        let empty = TriMesh::default();
         let bvh = TriangleBvh::new(&empty).expect("empty is fine");
         assert_eq!(bvh.closest_point(Vec3::ZERO), None);
         assert!(bvh.closest_points(&[Vec3::ZERO]).is_err());
@@ -1073,17 +1078,21 @@ mod tests {
 
     /// Squared distance from `q` to triangle `t` of `mesh`, brute force in f64.
     fn brute_d2(mesh: &TriMesh, q: DVec3, t: usize) -> f64 {
-        let [a, b, c] = mesh.corners(t).map(Vec3::as_dvec3);
+        let [a, b, c] = mesh.corners(t);
         (closest_point_on_triangle(q, a, b, c).0 - q).length_squared()
     }
 
     /// The mesh moved far from its build pose: every vertex displaced, the whole mesh
     /// stretched and sent away from the origin.
-    fn moved(mesh: &TriMesh, seed: u64) -> Vec<Vec3> {
+    fn moved(mesh: &TriMesh, seed: u64) -> Vec<DVec3> {
         let mut rng = Rng::new(seed);
         mesh.positions()
             .iter()
-            .map(|&p| p * Vec3::new(3.0, 0.5, 1.0) + rand_vec(&mut rng, 0.3) + Vec3::splat(50.0))
+            .map(|&p| {
+                p * DVec3::new(3.0, 0.5, 1.0)
+                    + rand_vec(&mut rng, 0.3).as_dvec3()
+                    + DVec3::splat(50.0)
+            })
             .collect()
     }
 
@@ -1123,7 +1132,7 @@ mod tests {
             Err(SpatialError::BadIndex { .. })
         ));
         let mut bad = positions.clone();
-        bad[7] = Vec3::NAN;
+        bad[7] = DVec3::NAN;
         assert_eq!(bvh.refit(&bad), Err(SpatialError::NonFinite { index: 7 }));
         assert_eq!(bvh.closest_point(Vec3::splat(50.0)), before);
         assert!(matches!(

@@ -74,6 +74,20 @@ pub(crate) fn check_points(points: &[Vec3]) -> Result<(), SpatialError> {
     }
 }
 
+/// [`check_points`] for f64 points (mesh vertices).
+pub(crate) fn check_dpoints(points: &[glam::DVec3]) -> Result<(), SpatialError> {
+    let limit = f64::from(MAX_COORDINATE);
+    let bad = points
+        .par_iter()
+        .with_min_len(4096)
+        .position_first(|p| !p.is_finite() || p.abs().max_element() > limit);
+    match bad {
+        None => Ok(()),
+        Some(index) if points[index].is_finite() => Err(SpatialError::TooLarge { index }),
+        Some(index) => Err(SpatialError::NonFinite { index }),
+    }
+}
+
 /// Spreads the low 21 bits of `v` to every third bit (for 63-bit Morton codes).
 fn spread_bits(v: u64) -> u64 {
     let mut x = v & 0x1f_ffff;
@@ -91,8 +105,8 @@ pub(crate) fn morton_order(points: &[Vec3]) -> Vec<u32> {
     let Some(bounds) = crate::mesh::Aabb::from_points(points) else {
         return Vec::new();
     };
-    let lo = bounds.min.as_dvec3();
-    let extent = (bounds.max.as_dvec3() - lo).max_element();
+    let lo = bounds.min;
+    let extent = (bounds.max - lo).max_element();
     let scale = if extent > 0.0 {
         f64::from((1u32 << 21) - 1) / extent
     } else {
