@@ -374,7 +374,7 @@ fn overflowing_results_are_errors_not_infinities() {
 /// its triangles (aspect ratios up to 1e5). `round` rounds the result to f32.
 fn stiff_spot(round: bool) -> TriMesh {
     let spot = spot();
-    let offset = DVec3::new(0.123_456_789, -2.718_281_828, 31.415_926_5);
+    let offset = DVec3::new(0.123_456_789, -2.753_918_421, 31.405_926_5);
     let mut p: Vec<DVec3> = spot
         .positions()
         .iter()
