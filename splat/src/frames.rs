@@ -1,7 +1,8 @@
 //! Triangle frames for the two binding conventions of docs/conventions.md §4, computed in `f64`.
 //!
 //! **GaussianAvatars** ([`gaussian_avatars_frame`]), from the posed triangle `(v0, v1, v2)`:
-//! `a0 = normalize(v1 - v0)`, `a1 = normalize(a0 × (v2 - v0))` (the normal, local y),
+//! `a0 = normalize(v1 - v0)`, `a1 = normalize(a0 × (v2 - v0))` (the normal, local y; computed
+//! as `a0 × (v2 - v1)`, the same vector, when that edge is shorter, which keeps needles accurate),
 //! `a2 = -normalize(a1 × a0)`, `R = [a0 | a1 | a2]`, origin the centroid,
 //! `k = (|v1 - v0| + |a2 · (v2 - v0)|) / 2`.
 //!
@@ -118,6 +119,18 @@ fn orthogonal_unit(a: DVec3) -> DVec3 {
     a.cross(axis).normalize_or(DVec3::Y)
 }
 
+/// `e2 = v2 - v0` or `e3 = v2 - v1`, whichever is shorter: `e1 × e2 = e1 × e3` (as
+/// `e2 = e1 + e3`), but for a needle whose short edge is `v1 v2` the long `e2` is nearly parallel
+/// to `e1` and their cross product cancels to ~`ε L / |e3|` relative error (1e-10 at aspect
+/// ratio 1e6), while `e1 × e3` keeps full precision (docs/numerics.md).
+fn shorter_side(e2: DVec3, e3: DVec3) -> DVec3 {
+    if e3.length_squared() < e2.length_squared() {
+        e3
+    } else {
+        e2
+    }
+}
+
 /// Edge direction and unit normal of a triangle, with the degenerate fallback.
 /// Returns `(a0, normal, degenerate, first edge length, longest edge length)`.
 fn edge_and_normal(v: [DVec3; 3], tol: f64) -> (DVec3, DVec3, bool, f64, f64) {
@@ -126,13 +139,15 @@ fn edge_and_normal(v: [DVec3; 3], tol: f64) -> (DVec3, DVec3, bool, f64, f64) {
     let e3 = v[2] - v[1];
     let (l1, l2, l3) = (e1.length(), e2.length(), e3.length());
     let longest = l1.max(l2).max(l3);
-    let n = e1.cross(e2);
+    let other = shorter_side(e2, e3);
+    let n = e1.cross(other);
     let n_len = n.length();
     let ok = longest > 0.0 && l1 > tol * longest && n_len > tol * longest * longest;
     if ok {
         let a0 = e1 / l1;
-        // a1 = normalize(a0 × e2) = n / |n| up to rounding; follow the published formula.
-        let a1 = a0.cross(e2).normalize_or(n / n_len);
+        // a1 = normalize(a0 × e2) = n / |n| up to rounding (the published formula, with e2
+        // replaced by the equal cross product of `shorter_side`).
+        let a1 = a0.cross(other).normalize_or(n / n_len);
         return (a0, a1, false, l1, longest);
     }
     let a0 = if longest > 0.0 && l1 > tol * longest {
@@ -206,7 +221,7 @@ pub fn frame(convention: Convention, v: [DVec3; 3], o: &FrameOptions) -> Triangl
 pub fn edge_matrix(v: [DVec3; 3]) -> DMat3 {
     let e1 = v[1] - v[0];
     let e2 = v[2] - v[0];
-    let n = e1.cross(e2);
+    let n = e1.cross(shorter_side(e2, v[2] - v[1]));
     let len = n.length();
     let third = if len > 0.0 && len.is_finite() {
         n / len.sqrt()

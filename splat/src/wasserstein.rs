@@ -8,8 +8,8 @@
 //! for similar Gaussians and loses several percent in `f32`. Everything is computed in `f64`.
 
 use glam::{DMat3, DVec3};
-use nalgebra::Matrix3;
 
+use crate::deform::{JACOBI_MAX_SWEEPS, JACOBI_SMALL_ROTATION, JACOBI_TOL};
 use crate::gaussians::GaussianSet;
 
 /// Covariance axes `L = R diag(s)` of Gaussian `i` (activated scales and rotation, `f64`).
@@ -27,19 +27,67 @@ pub fn covariance_axes(set: &GaussianSet, i: usize) -> DMat3 {
 /// Wasserstein distance requires), by the explicit residual.
 #[must_use]
 pub fn bures_sq(l1: DMat3, l2: DMat3) -> f64 {
-    let k = l2.transpose() * l1;
-    let m = Matrix3::from_column_slice(&k.to_cols_array());
-    let svd = m.svd(true, true);
-    let u = match (svd.u, svd.v_t) {
-        (Some(p), Some(qt)) => {
-            let pq = p * qt;
-            DMat3::from_cols_slice(pq.as_slice())
-        }
-        // nalgebra's SVD of a finite 3×3 always converges; a non-finite input lands here.
-        _ => DMat3::IDENTITY,
-    };
+    let u = polar_factor(l2.transpose() * l1);
     let r = l1 - l2 * u;
     r.to_cols_array().iter().map(|v| v * v).sum()
+}
+
+/// An orthogonal `U` maximising `tr(Uᵀ k)`: the polar factor `P Qᵀ` of the SVD `k = P S Qᵀ`
+/// (identity for a non-finite `k`).
+///
+/// One-sided Jacobi on the columns of `k` (the iteration of
+/// [`crate::deform::rotation_and_scales`]) with the rotations accumulated in `Q`, so that
+/// `k Q = [σ_i p_i]`. For nearly singular covariances `k = L2ᵀ L1` is strongly graded; a
+/// bidiagonalising SVD (nalgebra's) is accurate to `ε σ_max` absolute only, which garbles the
+/// smallest singular triple and cost `B²` up to 1.6e-4 relative for Gaussians with scale ratio
+/// 1e8 differing by 1e-6, where this keeps ~1e-10 (docs/numerics.md, `w2` rows).
+fn polar_factor(k: DMat3) -> DMat3 {
+    if !k.is_finite() {
+        return DMat3::IDENTITY;
+    }
+    let mut c = [k.x_axis, k.y_axis, k.z_axis];
+    let mut q = [DVec3::X, DVec3::Y, DVec3::Z];
+    for _sweep in 0..JACOBI_MAX_SWEEPS {
+        let mut largest_t = 0.0f64;
+        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+            let a = c[i].length_squared();
+            let b = c[j].length_squared();
+            let g = c[i].dot(c[j]);
+            if g * g <= JACOBI_TOL * JACOBI_TOL * a * b {
+                continue;
+            }
+            let zeta = (b - a) / (2.0 * g);
+            let t = if zeta.abs() > 1e100 {
+                0.5 / zeta
+            } else {
+                zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt())
+            };
+            largest_t = largest_t.max(t.abs());
+            let cs = 1.0 / (1.0 + t * t).sqrt();
+            let sn = cs * t;
+            for m in [&mut c, &mut q] {
+                let (x, y) = (m[i], m[j]);
+                m[i] = x * cs - y * sn;
+                m[j] = x * sn + y * cs;
+            }
+        }
+        if largest_t < JACOBI_SMALL_ROTATION {
+            break;
+        }
+    }
+    // p_i = c_i / σ_i, largest first; vanishing columns are completed orthonormally (their
+    // singular value is 0, so their sign does not change tr(Uᵀ k)).
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| c[b].length_squared().total_cmp(&c[a].length_squared()));
+    let [i0, i1, i2] = order;
+    let p0 = c[i0].try_normalize().unwrap_or(DVec3::X);
+    let p1 = (c[i1] - p0 * p0.dot(c[i1]))
+        .try_normalize()
+        .unwrap_or_else(|| p0.any_orthonormal_vector());
+    let n = p0.cross(p1);
+    let p2 = if n.dot(c[i2]) < 0.0 { -n } else { n };
+    let outer = |p: DVec3, q: DVec3| DMat3::from_cols(p * q.x, p * q.y, p * q.z);
+    outer(p0, q[i0]) + outer(p1, q[i1]) + outer(p2, q[i2])
 }
 
 /// `W2²` between the Gaussians `(mu1, l1)` and `(mu2, l2)`.
