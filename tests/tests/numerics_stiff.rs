@@ -452,13 +452,9 @@ fn deform_one(
     gaussians: &[Value],
     surfel: bool,
 ) -> GaussianSet {
-    let f32_exact = |v: DVec3| {
-        let w = v.as_vec3();
-        assert_eq!(w.as_dvec3(), v, "fixture corners are f32-exact");
-        w
-    };
-    let template = TriMesh::new(canonical.map(f32_exact).to_vec(), vec![[0, 1, 2]]);
-    let positions: Vec<Vec3> = deformed.map(f32_exact).to_vec();
+    // Mesh vertices are f64: the corners go in as the fixture gives them.
+    let template = TriMesh::new(canonical.to_vec(), vec![[0, 1, 2]]);
+    let positions: Vec<DVec3> = deformed.to_vec();
     let n = gaussians.len();
     let vec3 = |v: &Value| Vec3::from_slice(&f32s(v));
     let set = GaussianSet::try_new(GaussianParts {
