@@ -217,3 +217,76 @@ fn a_truth_without_extent_needs_an_absolute_tau() {
     assert_eq!(v["gt_bbox_diagonal"], 0.0);
     assert_eq!(v["thresholds"][0]["tau"], 0.5);
 }
+
+/// Issue #15, item 4: the same two meshes moved by up to 1e6 in every axis score the same
+/// within 1e-6 relative (both sides go to the ground truth's centre in f64 before anything is
+/// sampled in f32). Before, Spot against itself at +1e6 scored F 0.827.
+#[test]
+fn scores_do_not_depend_on_the_origin() {
+    let dir = fresh_dir("eval_far");
+    let gt = spot();
+    // A non-rigid change, so that every metric is away from its ideal value.
+    let bent: Vec<DVec3> = gt
+        .positions()
+        .iter()
+        .map(|p| DVec3::new(1.03 * p.x, p.y + 0.02 * (5.0 * p.z).sin(), p.z))
+        .collect();
+    let pred = TriMesh::new(bent, gt.triangles().to_vec());
+    let write = |name: &str, mesh: &TriMesh, offset: DVec3| {
+        let mut m = mesh.clone();
+        m.translate(offset);
+        let path = dir.join(name);
+        write_mesh(&path, &m, WriteOptions::default()).expect("write");
+        s(&path).to_owned()
+    };
+    let metrics = |v: &Value| {
+        let mut out = vec![];
+        for key in [
+            "accuracy",
+            "completeness",
+            "chamfer_l1",
+            "chamfer_l2",
+            "normal_consistency",
+            "gt_bbox_diagonal",
+            "area_ratio",
+        ] {
+            out.push((key.to_owned(), v[key].as_f64().expect(key)));
+        }
+        for t in v["thresholds"].as_array().expect("thresholds") {
+            for key in ["tau", "precision", "recall", "fscore"] {
+                out.push((
+                    format!("{key}@{}", t["tau_fraction"]),
+                    t[key].as_f64().expect(key),
+                ));
+            }
+        }
+        out
+    };
+    let here = metrics(&eval_json(&[
+        &write("pred.ply", &pred, DVec3::ZERO),
+        &write("gt.ply", &gt, DVec3::ZERO),
+    ]));
+    assert!(here[2].1 > 1e-3, "the change must show: {here:?}");
+    for offset in [
+        DVec3::splat(1e6),
+        DVec3::new(1e6, -1e6, 3e5),
+        DVec3::new(-7e5, 2.5e5, 1e6),
+    ] {
+        let there = metrics(&eval_json(&[
+            &write("pred_far.ply", &pred, offset),
+            &write("gt_far.ply", &gt, offset),
+        ]));
+        for ((key, a), (_, b)) in here.iter().zip(&there) {
+            assert!(
+                (a - b).abs() <= 1e-6 * a.abs().max(1e-9),
+                "{key} at {offset}: {a} here, {b} there"
+            );
+        }
+    }
+    // Spot against itself at +1e6, exact distances to the surface: a perfect score.
+    let far = write("spot_far.ply", &gt, DVec3::splat(1e6));
+    let v = eval_json(&[&far, &far, "--surface"]);
+    for t in v["thresholds"].as_array().expect("thresholds") {
+        assert_eq!(t["fscore"].as_f64(), Some(1.0), "{t}");
+    }
+}

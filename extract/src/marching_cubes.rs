@@ -196,9 +196,7 @@ fn block_vertices(grid: &BlockGrid, b: usize) -> BlockVertices {
             let g = key * BLOCK + l;
             let p = grid.position(g) + DVec3::AXES[axis] * (t * grid.voxel);
             out.keys.push((local * 3 + axis) as u16);
-            // Rounded to f32: an interpolated vertex is good to a fraction of a voxel, and f32
-            // keeps the files of large extracted meshes `float` (the writers keep f64 exactly).
-            out.positions.push(p.as_vec3().as_dvec3());
+            out.positions.push(p);
             if let Some(color) = &grid.color {
                 let (c0, c1) = (color[s0], color[s1]);
                 let mix = |k: usize| ((1.0 - t) * f64::from(c0[k]) + t * f64::from(c1[k])) as f32;

@@ -4,6 +4,9 @@
 //!
 //! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
 
+/// The vector types of the API (positions are `glam::DVec3`, bulk data `glam::Vec3`).
+pub use glam;
+
 pub mod animation;
 pub mod camera;
 pub mod cleanup;

@@ -280,6 +280,13 @@ impl TriMesh {
         Ok(())
     }
 
+    /// Moves every vertex by `offset` (f64). Metrics move both sides to the ground truth's
+    /// centre this way before anything is stored in f32 (docs/conventions.md §8), so scores do
+    /// not depend on how far from the origin the meshes are.
+    pub fn translate(&mut self, offset: DVec3) {
+        self.positions.par_iter_mut().for_each(|p| *p += offset);
+    }
+
     /// Drops stored vertex normals (they go stale when positions change).
     pub fn clear_normals(&mut self) {
         self.normals = None;

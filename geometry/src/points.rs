@@ -88,6 +88,14 @@ impl PointCloud {
         self.colors.as_deref()
     }
 
+    /// Moves every point by `offset`, computed in f64 and stored as f32 (see
+    /// [`crate::TriMesh::translate`]).
+    pub fn translate(&mut self, offset: glam::DVec3) {
+        for p in &mut self.positions {
+            *p = (p.as_dvec3() + offset).as_vec3();
+        }
+    }
+
     /// Number of points.
     #[must_use]
     pub fn len(&self) -> usize {

@@ -18,6 +18,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+use glam::DVec3;
 use trisplat_extract::incremental_delaunay::FrameStats;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::mesh_stats::MeshStats;
@@ -43,7 +44,13 @@ pub const SAMPLE_SEED: u64 = 0;
 pub struct GtSamples {
     /// The mesh.
     pub mesh: TriMesh,
-    /// Its area-uniform samples with face normals.
+    /// The mesh moved by `-origin`: what is sampled and indexed (in f32) and what the
+    /// predictions, moved the same way, are measured against.
+    local: TriMesh,
+    /// Centre of the mesh's bounding box: both sides of a comparison are moved to it in f64
+    /// first, so the scores do not depend on how far from the origin the meshes are.
+    origin: DVec3,
+    /// Area-uniform samples of `local` with face normals.
     pub samples: PointCloud,
     /// The BVH the predictions' samples are measured against; `None` when the mesh cannot
     /// be indexed (then [`measure`] reports the reason).
@@ -58,15 +65,21 @@ impl GtSamples {
     /// Samples and indexes `mesh`; `None` when it has no area.
     #[must_use]
     pub fn new(mesh: TriMesh, samples: usize) -> Option<Self> {
-        let points = sample_uniform(&mesh, samples, splitmix64(SAMPLE_SEED));
+        let bounds = mesh.bounds()?;
+        let origin = bounds.center();
+        let mut local = mesh.clone();
+        local.translate(-origin);
+        let points = sample_uniform(&local, samples, splitmix64(SAMPLE_SEED));
         if points.is_empty() {
             return None;
         }
-        let bvh = TriangleBvh::new(&mesh).ok();
-        let diagonal = mesh.bounds().map_or(0.0, |b| b.diagonal());
+        let bvh = TriangleBvh::new(&local).ok();
+        let diagonal = bounds.diagonal();
         let area = mesh.area();
         Some(Self {
             mesh,
+            local,
+            origin,
             samples: points,
             bvh,
             diagonal,
@@ -83,8 +96,8 @@ impl GtSamples {
     /// The ground truth as one side of a comparison.
     fn shape(&self) -> Shape<'_> {
         match &self.bvh {
-            Some(bvh) => Shape::indexed_mesh(&self.mesh, &self.samples, bvh),
-            None => Shape::mesh(&self.mesh, &self.samples),
+            Some(bvh) => Shape::indexed_mesh(&self.local, &self.samples, bvh),
+            None => Shape::mesh(&self.local, &self.samples),
         }
     }
 }
@@ -166,7 +179,9 @@ pub fn measure_with(
     samples: usize,
     tau: Tau,
 ) -> Result<Option<FrameMetrics>, MetricsError> {
-    let points = sample_uniform(pred, samples, SAMPLE_SEED);
+    let mut local = pred.clone();
+    local.translate(-gt.origin);
+    let points = sample_uniform(&local, samples, SAMPLE_SEED);
     if points.is_empty() {
         return Ok(None);
     }
@@ -175,7 +190,7 @@ pub fn measure_with(
         surface: true,
     };
     let (m, (structure, shared)) = rayon::join(
-        || evaluate(Shape::mesh(pred, &points), gt.shape(), &options),
+        || evaluate(Shape::mesh(&local, &points), gt.shape(), &options),
         || {
             rayon::join(
                 || MeshStats::of(pred),

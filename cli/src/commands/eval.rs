@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
+use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::{self, Format, ply};
 use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::{
@@ -193,7 +194,8 @@ struct Report {
 }
 
 /// Reads `path` as a mesh when it has faces, else as a point cloud; samples meshes.
-fn load(path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
+/// Reads `path` as a mesh (its samples left empty, see [`sample`]) or a point cloud.
+fn read_input(path: &Path) -> anyhow::Result<Input> {
     let mesh = if Format::from_path(path)? == Format::Ply {
         let doc = ply::read_ply_document(path)?;
         let has_faces = doc.element("face").is_some_and(|f| f.count > 0)
@@ -218,6 +220,14 @@ fn load(path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
         }
         return Ok(Input::Points(points));
     }
+    Ok(Input::Mesh(mesh, PointCloud::default()))
+}
+
+/// Samples a mesh input (`samples` points, seeded); point clouds pass through.
+fn sample(input: Input, path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
+    let Input::Mesh(mesh, _) = input else {
+        return Ok(input);
+    };
     let sampled = sample_uniform(&mesh, samples, seed);
     if sampled.is_empty() {
         bail!(
@@ -226,6 +236,22 @@ fn load(path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
         );
     }
     Ok(Input::Mesh(mesh, sampled))
+}
+
+/// Centre of the bounding box of a mesh's vertices (f64) or of the points.
+fn centre(input: &Input) -> Option<DVec3> {
+    match input {
+        Input::Mesh(mesh, _) => mesh.bounds().map(|b| b.center()),
+        Input::Points(points) => points.bounds().map(|b| b.center()),
+    }
+}
+
+/// Moves an input by `offset` (meshes in f64, points computed in f64 and stored as f32).
+fn translate(input: &mut Input, offset: DVec3) {
+    match input {
+        Input::Mesh(mesh, _) => mesh.translate(offset),
+        Input::Points(points) => points.translate(offset),
+    }
 }
 
 /// Runs `trisplat eval`.
@@ -243,9 +269,20 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
     }
     let spinner = ctx.progress.spinner("eval: loading");
     let gt_seed = splitmix64(args.seed);
+    let (pred, gt) = rayon::join(|| read_input(&args.pred), || read_input(&args.gt));
+    let (mut pred, mut gt) = (pred?, gt?);
+    // Shared vertices are compared where they are, before moving anything.
+    let shared_vertex_fraction = pred.shared_with(&gt);
+    // Both sides move to the ground truth's centre in f64 before any sample is stored in
+    // f32: the scores do not depend on how far from the origin the files are
+    // (docs/conventions.md §8).
+    if let Some(c) = centre(&gt) {
+        translate(&mut pred, -c);
+        translate(&mut gt, -c);
+    }
     let (pred, gt) = rayon::join(
-        || load(&args.pred, args.samples, args.seed),
-        || load(&args.gt, args.samples, gt_seed),
+        || sample(pred, &args.pred, args.samples, args.seed),
+        || sample(gt, &args.gt, args.samples, gt_seed),
     );
     let (pred, gt) = (pred?, gt?);
     if args.surface && !pred.is_mesh() && !gt.is_mesh() {
@@ -289,7 +326,6 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
         };
         anyhow::anyhow!("{}: {e}", file.display())
     })?;
-    let shared_vertex_fraction = pred.shared_with(&gt);
     let area_ratio = match (&pred_structure, &gt_structure) {
         (Some(p), Some(g)) if g.area > 0.0 => Some(p.area / g.area),
         _ => None,

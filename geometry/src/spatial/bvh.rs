@@ -251,15 +251,16 @@ impl TriangleBvh {
             })
     }
 
-    /// The closest point of the surface to `query`; `None` for an empty mesh or a query that is
-    /// not finite. Exact up to f64 rounding: the answer equals the minimum over all triangles
+    /// The closest point of the surface to `query` (f32 or f64: an f64 query far from the
+    /// origin is answered exactly too); `None` for an empty mesh or a query that is not
+    /// finite. Exact up to f64 rounding: the answer equals the minimum over all triangles
     /// of [`closest_point_on_triangle`].
     #[must_use]
-    pub fn closest_point(&self, query: Vec3) -> Option<ClosestPoint> {
-        if !query.is_finite() {
+    pub fn closest_point(&self, query: impl Into<DVec3>) -> Option<ClosestPoint> {
+        let q: DVec3 = query.into();
+        if !q.is_finite() {
             return None;
         }
-        let q = query.as_dvec3();
         let (d2, triangle) = self.nearest_below(q, (f64::INFINITY, u32::MAX))?;
         let [a, b, c] = *self.corners.get(triangle as usize)?;
         let (point, barycentric) = closest_point_on_triangle(q, a, b, c);
