@@ -908,11 +908,16 @@ mod tests {
         let got = measure(&pred, &gt, 2000, tau)
             .expect("ok")
             .expect("non-empty");
-        let p = sample_uniform(&pred, 2000, SAMPLE_SEED);
-        let g = sample_uniform(&gt_mesh, 2000, splitmix64(SAMPLE_SEED));
+        // Both sides at the ground truth's centre, as `measure` puts them.
+        let centre = gt_mesh.bounds().expect("bounds").center();
+        let (mut pred_local, mut gt_local) = (pred.clone(), gt_mesh.clone());
+        pred_local.translate(-centre);
+        gt_local.translate(-centre);
+        let p = sample_uniform(&pred_local, 2000, SAMPLE_SEED);
+        let g = sample_uniform(&gt_local, 2000, splitmix64(SAMPLE_SEED));
         let m = evaluate(
-            Shape::mesh(&pred, &p),
-            Shape::mesh(&gt_mesh, &g),
+            Shape::mesh(&pred_local, &p),
+            Shape::mesh(&gt_local, &g),
             &MetricsOptions {
                 taus: vec![tau],
                 surface: true,
