@@ -28,6 +28,9 @@ pub struct GlobalArgs {
     /// No progress bars.
     #[arg(long, short, global = true)]
     pub quiet: bool,
+    /// Worker threads (default: all cores, or RAYON_NUM_THREADS). Results do not depend on it.
+    #[arg(long, global = true, value_name = "N")]
+    pub threads: Option<std::num::NonZeroUsize>,
 }
 
 /// The commands.
@@ -63,6 +66,10 @@ pub enum Command {
     Demo(commands::demo::DemoArgs),
     /// Join extract runs over disjoint frame ranges (shards) into one run folder.
     Merge(commands::merge::MergeArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(commands::completions::CompletionsArgs),
+    /// Print the manual page (roff) of trisplat or of one command.
+    Man(commands::man::ManArgs),
 }
 
 /// Runs the command line and maps errors to the exit codes of the CLI contract.
@@ -133,6 +140,12 @@ fn quiet_on_closed_stdout() {
 /// # Errors
 /// Whatever the command reports: bad input files or failed writes.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    if let Some(n) = cli.global.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.get())
+            .build_global()
+            .map_err(|e| anyhow::anyhow!("--threads {n}: {e}"))?;
+    }
     let ctx = commands::Context {
         progress: progress::Progress::new(cli.global.quiet),
         quiet: cli.global.quiet,
@@ -153,5 +166,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Extract(args) => commands::extract::run(*args, &ctx),
         Command::Demo(args) => commands::demo::run(args, &ctx),
         Command::Merge(args) => commands::merge::run(args, &ctx),
+        Command::Completions(args) => commands::completions::run(&args),
+        Command::Man(args) => commands::man::run(&args),
     }
 }

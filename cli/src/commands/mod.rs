@@ -3,12 +3,14 @@
 pub mod alpha_shape;
 pub mod bind;
 pub mod cameras;
+pub mod completions;
 pub mod convert;
 pub mod deform;
 pub mod demo;
 pub mod densify;
 pub mod eval;
 pub mod extract;
+pub mod man;
 pub mod merge;
 pub mod prune;
 pub mod render;
