@@ -28,6 +28,9 @@ pub struct GlobalArgs {
     /// No progress bars.
     #[arg(long, short, global = true)]
     pub quiet: bool,
+    /// The result as one JSON object on stdout (keys: docs/conventions.md §10) instead of text.
+    #[arg(long, global = true)]
+    pub json: bool,
     /// Worker threads (default: all cores, or RAYON_NUM_THREADS). Results do not depend on it.
     #[arg(long, global = true, value_name = "N")]
     pub threads: Option<std::num::NonZeroUsize>,
@@ -149,6 +152,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     let ctx = commands::Context {
         progress: progress::Progress::new(cli.global.quiet),
         quiet: cli.global.quiet,
+        json: cli.global.json,
     };
     match cli.command {
         Command::Eval(args) => commands::eval::run(args, &ctx),
@@ -166,7 +170,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Extract(args) => commands::extract::run(*args, &ctx),
         Command::Demo(args) => commands::demo::run(args, &ctx),
         Command::Merge(args) => commands::merge::run(args, &ctx),
-        Command::Completions(args) => commands::completions::run(&args),
-        Command::Man(args) => commands::man::run(&args),
+        Command::Completions(args) => commands::completions::run(&args, &ctx),
+        Command::Man(args) => commands::man::run(&args, &ctx),
     }
 }

@@ -82,5 +82,15 @@ pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
         );
     }
     write_mesh(&args.output, &mesh, WriteOptions::default())?;
-    Ok(())
+    ctx.emit(
+        "alpha-shape",
+        serde_json::json!({
+            "output": args.output,
+            "alpha": args.alpha,
+            "vertices": mesh.vertex_count(),
+            "triangles": mesh.triangle_count(),
+            "pieces": pieces,
+            "kept_pieces": TriangleClusters::of(&mesh).count(),
+        }),
+    )
 }

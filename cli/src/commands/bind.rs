@@ -160,6 +160,12 @@ pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     spinner.finish_and_clear();
     write_gaussians(&args.output, &bound, &PlyWriteOptions::default())?;
+    let mut result = serde_json::json!({
+        "output": args.output,
+        "template": mesh_path,
+        "gaussians": bound.len(),
+        "triangles": mesh.triangle_count(),
+    });
     if layout == WorldLayout::Lam && gaussians.is_some() && args.check_views > 0 {
         let mode = match convention {
             Convention::GaussianAvatars => DeformMode::Binding,
@@ -176,17 +182,26 @@ pub fn run(args: BindArgs, ctx: &Context) -> anyhow::Result<()> {
             let list: Vec<String> = values.iter().map(|v| format!("{v:.3}")).collect();
             format!("min {min:.3}, mean {mean:.3} ({})", list.join(" "))
         };
-        println!(
-            "rest pose against {} over {} views (Gaussians: alpha >= 0.5):\n  silhouette IoU     \
-             {}\n  Gaussians on mesh  {}\n  mesh covered       {}",
-            mesh_path.display(),
-            views.len(),
-            stat(|s| s.iou),
-            stat(|s| s.inside),
-            stat(|s| s.covered)
-        );
+        let per_view = |f: fn(&Silhouettes) -> f64| views.iter().map(f).collect::<Vec<f64>>();
+        result["rest_pose"] = serde_json::json!({
+            "views": views.len(),
+            "silhouette_iou": per_view(|s| s.iou),
+            "gaussians_on_mesh": per_view(|s| s.inside),
+            "mesh_covered": per_view(|s| s.covered),
+        });
+        if !ctx.json {
+            println!(
+                "rest pose against {} over {} views (Gaussians: alpha >= 0.5):\n  silhouette \
+                 IoU     {}\n  Gaussians on mesh  {}\n  mesh covered       {}",
+                mesh_path.display(),
+                views.len(),
+                stat(|s| s.iou),
+                stat(|s| s.inside),
+                stat(|s| s.covered)
+            );
+        }
     }
-    Ok(())
+    ctx.emit("bind", result)
 }
 
 /// The template and Gaussians of the LAM avatar folder `dir`.

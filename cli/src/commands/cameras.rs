@@ -68,7 +68,7 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 ///
 /// # Errors
 /// An unreadable or empty mesh, an invalid rig, an output equal to the input, a failed write.
-pub fn run(args: CamerasArgs, _ctx: &Context) -> anyhow::Result<()> {
+pub fn run(args: CamerasArgs, ctx: &Context) -> anyhow::Result<()> {
     if args.views > args.max_views {
         bail!(
             "--views {}: over the limit of {} views (raise it with --max-views)",
@@ -106,5 +106,13 @@ pub fn run(args: CamerasArgs, _ctx: &Context) -> anyhow::Result<()> {
     }
     .with_context(|| format!("{}: cannot build the camera rig", args.mesh.display()))?;
     write_cameras_json(&args.output, &cameras)?;
-    Ok(())
+    ctx.emit(
+        "cameras",
+        serde_json::json!({
+            "output": args.output,
+            "views": cameras.len(),
+            "center": center.to_array(),
+            "radius": radius,
+        }),
+    )
 }

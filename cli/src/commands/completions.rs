@@ -13,12 +13,20 @@ pub struct CompletionsArgs {
     pub shell: Shell,
 }
 
-/// Writes the completion script to stdout.
+/// Writes the completion script to stdout (with `--json`: `{"shell", "script"}`).
 ///
 /// # Errors
-/// None: writing to stdout is the only effect (a closed stdout ends the run quietly).
-pub fn run(args: &CompletionsArgs) -> anyhow::Result<()> {
+/// A script that is not UTF-8 (a bug).
+pub fn run(args: &CompletionsArgs, ctx: &super::Context) -> anyhow::Result<()> {
     let mut cmd = crate::Cli::command();
-    clap_complete::generate(args.shell, &mut cmd, "trisplat", &mut std::io::stdout());
-    Ok(())
+    if !ctx.json {
+        clap_complete::generate(args.shell, &mut cmd, "trisplat", &mut std::io::stdout());
+        return Ok(());
+    }
+    let mut script = Vec::new();
+    clap_complete::generate(args.shell, &mut cmd, "trisplat", &mut script);
+    ctx.emit(
+        "completions",
+        serde_json::json!({ "shell": args.shell.to_string(), "script": String::from_utf8(script)? }),
+    )
 }

@@ -75,18 +75,26 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
             ..ExtractOptions::default()
         },
     };
-    println!(
-        "trisplat demo: {} (bundled; CC BY 4.0, (c) Cesium), methods tsdf, delaunay, alpha, \
-         ground truth: the deformed template",
-        config.template.display()
-    );
+    if !ctx.json {
+        println!(
+            "trisplat demo: {} (bundled; CC BY 4.0, (c) Cesium), methods tsdf, delaunay, alpha, \
+             ground truth: the deformed template",
+            config.template.display()
+        );
+    }
     // The demo always starts over in its folder.
     let control = RunControl {
         force: true,
         ..RunControl::default()
     };
     let report = run_with_progress(&config, control, ctx)?;
-    print_summary(&report, &config.output, &config.options.targets, true);
+    print_summary(
+        &report,
+        &config.output,
+        &config.options.targets,
+        true,
+        ("demo", ctx),
+    )?;
     fail_on_failed_frames(&report)
 }
 

@@ -253,10 +253,22 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
     write_gaussians(&args.output, &result.set, &PlyWriteOptions::default())?;
     let n_split = split_mask.iter().filter(|&&s| s).count();
     let n_clone = clone.iter().filter(|&&s| s).count();
-    println!(
-        "densify: {n} -> {} Gaussians ({n_clone} cloned, {n_split} split into {} each)",
-        result.set.len(),
-        args.children
-    );
-    Ok(())
+    if !ctx.json {
+        println!(
+            "densify: {n} -> {} Gaussians ({n_clone} cloned, {n_split} split into {} each)",
+            result.set.len(),
+            args.children
+        );
+    }
+    ctx.emit(
+        "densify",
+        serde_json::json!({
+            "output": args.output,
+            "before": n,
+            "after": result.set.len(),
+            "cloned": n_clone,
+            "split": n_split,
+            "children": args.children,
+        }),
+    )
 }

@@ -93,9 +93,6 @@ pub struct EvalArgs {
     /// Exact point-to-triangle distances to the mesh side(s) instead of to their samples.
     #[arg(long)]
     pub surface: bool,
-    /// Print one JSON object instead of a table.
-    #[arg(long)]
-    pub json: bool,
     /// Most samples per mesh (a limit checked before sampling).
     #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SAMPLES)]
     pub max_samples: usize,
@@ -340,8 +337,8 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
         relation: Relation::from_shared_fraction(shared_vertex_fraction),
     };
     spinner.finish_and_clear();
-    if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+    if ctx.json {
+        ctx.emit("eval", serde_json::to_value(&report)?)?;
     } else {
         print_table(&args, &pred, &gt, &report);
     }

@@ -199,11 +199,27 @@ pub fn run(args: ExtractArgs, ctx: &Context) -> anyhow::Result<()> {
     let control = args.control;
     let config = args.config()?;
     if explain {
-        print!("{}", Plan::new(&config));
-        return Ok(());
+        let plan = Plan::new(&config);
+        if !ctx.json {
+            print!("{plan}");
+        }
+        let stages: Vec<serde_json::Value> = plan
+            .stages
+            .iter()
+            .map(
+                |s| serde_json::json!({"stage": s.stage.to_string(), "runs": s.runs, "why": s.why}),
+            )
+            .collect();
+        return ctx.emit("extract", serde_json::json!({ "plan": stages }));
     }
     let report = run_with_progress(&config, control, ctx)?;
-    print_summary(&report, &config.output, &config.options.targets, true);
+    print_summary(
+        &report,
+        &config.output,
+        &config.options.targets,
+        true,
+        ("extract", ctx),
+    )?;
     fail_on_failed_frames(&report)
 }
 
@@ -280,7 +296,41 @@ pub fn run_with_progress(
 /// Prints one line per method (ms/frame, Chamfer L1 and what it measures, faces, watertight
 /// frames) and the outputs. `targets`: the outputs written; `journal`: whether a run journal
 /// was written too.
-pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], journal: bool) {
+///
+/// With `--json`, one object instead: `output`, `frames`, `gaussians`, `deform_ms`, `failed_frames`,
+/// `methods` (per method its mean summary as in report.json, and `relation`) and `files`.
+///
+/// # Errors
+/// None in practice (a summary that does not serialise is a bug).
+pub fn print_summary(
+    report: &Report,
+    out: &Path,
+    targets: &[OutputTarget],
+    journal: bool,
+    (command, ctx): (&str, &Context),
+) -> anyhow::Result<()> {
+    let written = written_files(targets, journal);
+    if ctx.json {
+        let mut methods = serde_json::Map::new();
+        for m in report.ordered() {
+            let mut summary = serde_json::to_value(&m.mean)?;
+            summary["relation"] = serde_json::to_value(m.relation)?;
+            methods.insert(m.method.name().to_owned(), summary);
+        }
+        return ctx.emit(
+            command,
+            serde_json::json!({
+                "output": out,
+                "frames": report.frames.len(),
+                "gaussians": report.gaussian_count,
+                "deform_ms": report.deform_ms.iter().sum::<f64>()
+                    / report.deform_ms.len().max(1) as f64,
+                "failed_frames": report.failed_frames.len(),
+                "methods": methods,
+                "files": written,
+            }),
+        );
+    }
     println!(
         "{} frame(s), {} Gaussians, deformation {:.2} ms/frame",
         report.frames.len(),
@@ -316,6 +366,12 @@ pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], jour
             );
         }
     }
+    println!("outputs: {}/{{{}}}", out.display(), written.join(", "));
+    Ok(())
+}
+
+/// The files a run writes in its folder, as patterns.
+fn written_files(targets: &[OutputTarget], journal: bool) -> Vec<&'static str> {
     let mut written = Vec::new();
     if targets.contains(&OutputTarget::Meshes) {
         written.push("<method>/frame_*.ply");
@@ -329,5 +385,5 @@ pub fn print_summary(report: &Report, out: &Path, targets: &[OutputTarget], jour
     if journal {
         written.push("journal.jsonl");
     }
-    println!("outputs: {}/{{{}}}", out.display(), written.join(", "));
+    written
 }

@@ -14,11 +14,11 @@ pub struct ManArgs {
     pub command: Option<String>,
 }
 
-/// Writes the page to stdout.
+/// Writes the page to stdout (with `--json`: `{"page"}`).
 ///
 /// # Errors
 /// An unknown command name; a failed write.
-pub fn run(args: &ManArgs) -> anyhow::Result<()> {
+pub fn run(args: &ManArgs, ctx: &super::Context) -> anyhow::Result<()> {
     let root = crate::Cli::command();
     let cmd = match &args.command {
         None => root,
@@ -34,6 +34,14 @@ pub fn run(args: &ManArgs) -> anyhow::Result<()> {
                 .display_name(format!("trisplat-{name}"))
         }
     };
+    if ctx.json {
+        let mut page = Vec::new();
+        clap_mangen::Man::new(cmd).render(&mut page)?;
+        return ctx.emit(
+            "man",
+            serde_json::json!({ "page": String::from_utf8(page)? }),
+        );
+    }
     let mut out = std::io::stdout().lock();
     match clap_mangen::Man::new(cmd).render(&mut out) {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {

@@ -52,6 +52,7 @@ pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
         &args.output,
         &trisplat_pipeline::OutputTarget::ALL,
         false,
-    );
+        ("merge", ctx),
+    )?;
     fail_on_failed_frames(&report)
 }

@@ -39,6 +39,28 @@ pub struct Context {
     pub progress: Progress,
     /// `--quiet`: no notes on stderr (warnings and errors still print).
     pub quiet: bool,
+    /// `--json`: the result as one JSON object on stdout instead of text.
+    pub json: bool,
+}
+
+impl Context {
+    /// With `--json`, prints the command's result: `fields` (an object) with `"command"` set
+    /// to `command`, on one line (docs/conventions.md §10 lists the keys of each command).
+    /// Without it, nothing: the command prints its text.
+    ///
+    /// # Errors
+    /// `fields` is not a JSON object (a bug).
+    pub fn emit(&self, command: &str, fields: serde_json::Value) -> anyhow::Result<()> {
+        if !self.json {
+            return Ok(());
+        }
+        let serde_json::Value::Object(mut object) = fields else {
+            anyhow::bail!("internal: the result of {command} is not a JSON object");
+        };
+        object.insert("command".into(), command.into());
+        println!("{}", serde_json::Value::Object(object));
+        Ok(())
+    }
 }
 
 /// Refuses an output path that names the input file (also through links or `..`).

@@ -124,10 +124,21 @@ pub fn run(args: PruneArgs, ctx: &Context) -> anyhow::Result<()> {
         &PlyWriteOptions::default(),
     )?;
     let n_flagged = flagged.iter().filter(|&&f| f).count();
-    println!(
-        "prune: {n} -> {} Gaussians ({n_flagged} flagged, {} kept so no triangle is emptied)",
-        pruned.result.set.len(),
-        pruned.spared
-    );
-    Ok(())
+    if !ctx.json {
+        println!(
+            "prune: {n} -> {} Gaussians ({n_flagged} flagged, {} kept so no triangle is emptied)",
+            pruned.result.set.len(),
+            pruned.spared
+        );
+    }
+    ctx.emit(
+        "prune",
+        serde_json::json!({
+            "output": args.output,
+            "before": n,
+            "after": pruned.result.set.len(),
+            "flagged": n_flagged,
+            "spared": pruned.spared,
+        }),
+    )
 }

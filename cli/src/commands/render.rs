@@ -158,7 +158,16 @@ pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
             let _ = std::fs::remove_file(file);
         }
     }
-    result
+    result?;
+    let written: Vec<&PathBuf> = files.iter().filter(|f| f.exists()).collect();
+    ctx.emit(
+        "render",
+        serde_json::json!({
+            "output": args.output,
+            "views": cameras.len(),
+            "files": written,
+        }),
+    )
 }
 
 /// Refuses two cameras whose images would have the same file names (`render` would write one

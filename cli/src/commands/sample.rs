@@ -71,5 +71,12 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
         .with_context(|| format!("{}: sampling failed", args.mesh.display()))?;
     spinner.finish_and_clear();
     write_points(&args.output, &samples.points, WriteOptions::default())?;
-    Ok(())
+    ctx.emit(
+        "sample",
+        serde_json::json!({
+            "output": args.output,
+            "points": samples.points.len(),
+            "mesh_area": area,
+        }),
+    )
 }

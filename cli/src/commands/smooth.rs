@@ -36,5 +36,12 @@ pub fn run(args: SmoothArgs, ctx: &Context) -> anyhow::Result<()> {
         .with_context(|| format!("{}: smoothing failed", args.mesh.display()))?;
     spinner.finish_and_clear();
     write_mesh(&args.output, &smoothed, WriteOptions::default())?;
-    Ok(())
+    ctx.emit(
+        "smooth",
+        serde_json::json!({
+            "output": args.output,
+            "vertices": smoothed.vertex_count(),
+            "triangles": smoothed.triangle_count(),
+        }),
+    )
 }

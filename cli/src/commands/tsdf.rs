@@ -114,7 +114,15 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     spinner.finish_and_clear();
     write_mesh(&args.output, &fused.mesh, WriteOptions::default())?;
-    Ok(())
+    ctx.emit(
+        "tsdf",
+        serde_json::json!({
+            "output": args.output,
+            "views": cameras.len(),
+            "vertices": fused.mesh.vertex_count(),
+            "triangles": fused.mesh.triangle_count(),
+        }),
+    )
 }
 
 /// Depth maps (of `kind`) of world-space Gaussians, zero where alpha is below
