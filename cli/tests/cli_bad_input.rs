@@ -202,3 +202,53 @@ fn converts_every_format_pair() {
     assert!(head.contains("element face 5856"), "{head}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Hostile suite finds (tests/hostile/hostile.py): errors that did not name the file at fault.
+#[test]
+fn meshing_and_fusion_errors_name_the_file_at_fault() {
+    let dir = fresh_dir("hostile_names");
+    // A vertex finite but beyond the spatial indexes' range (1e18): Delaunay refuses it.
+    let template = dir.join("far_vertex.obj");
+    std::fs::write(
+        &template,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e30\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .expect("write");
+    let out = Command::new(BIN)
+        .args(["extract", "--template"])
+        .arg(&template)
+        .args(["--method", "delaunay", "-q", "-o"])
+        .arg(dir.join("x"))
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("far_vertex.obj") && err.contains("delaunay"),
+        "{err}"
+    );
+    // Cameras 1e12 away: the depth points are out of the volume's range; the cameras file is
+    // named.
+    let cameras = dir.join("far_cameras.json");
+    std::fs::write(
+        &cameras,
+        r#"[{"id": 0, "img_name": "wide", "width": 32, "height": 24,
+             "position": [1e12, 0, 0], "rotation": [[1,0,0],[0,1,0],[0,0,1]],
+             "fx": 30, "fy": 30, "cx": 16, "cy": 12}]"#,
+    )
+    .expect("write");
+    let gaussians = trisplat_fixtures::path("render/random_deg3.ply");
+    let out = Command::new(BIN)
+        .args(["tsdf", "--gaussians"])
+        .arg(&gaussians)
+        .arg("--cameras")
+        .arg(&cameras)
+        .arg("-o")
+        .arg(dir.join("t.ply"))
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("far_cameras.json"), "{err}");
+    assert!(!dir.join("t.ply").exists());
+}

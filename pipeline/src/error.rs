@@ -254,6 +254,15 @@ pub enum PipelineError {
         /// Why.
         cause: AlphaError,
     },
+    /// A meshing error ([`PipelineError::Delaunay`], [`PipelineError::Alpha`]) on the vertices
+    /// of `input`: the template (when a mesher is built) or the animation (per frame).
+    #[error("{input}: {cause}")]
+    Meshing {
+        /// The template file or the animation's label.
+        input: String,
+        /// The meshing error.
+        cause: Box<PipelineError>,
+    },
     /// Metrics against the ground truth failed.
     #[error("{gt}: frame {frame}, method {method}: {cause}")]
     Metrics {
@@ -366,6 +375,21 @@ pub(crate) fn first_error_in_order<T: Send, E: Send>(
 ) -> Result<Vec<T>, E> {
     // rayon collects into a Vec in the source order.
     results.collect::<Vec<_>>().into_iter().collect()
+}
+
+impl PipelineError {
+    /// A Delaunay or alpha-shape error names `input`, whose vertices it came from; other errors
+    /// name their files already and pass through.
+    #[must_use]
+    pub fn on_vertices_of(self, input: &str) -> Self {
+        match self {
+            Self::Delaunay { .. } | Self::Alpha { .. } => Self::Meshing {
+                input: input.to_owned(),
+                cause: Box::new(self),
+            },
+            other => other,
+        }
+    }
 }
 
 #[cfg(test)]

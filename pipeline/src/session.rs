@@ -296,7 +296,8 @@ impl Session {
             if plan.runs(Stage::Mesh(m)) {
                 meshers.push((
                     m,
-                    Mesher::new(m, o, &resolved, template, &rest_means, frames.start)?,
+                    Mesher::new(m, o, &resolved, template, &rest_means, frames.start)
+                        .map_err(|e| e.on_vertices_of(&config.template.display().to_string()))?,
                 ));
             }
         }
@@ -597,13 +598,14 @@ impl Session {
         };
         let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
         let (samples, tau) = (self.samples, self.tau);
+        let label = self.label.as_str();
         let gt_label = self
             .gt
             .as_ref()
             .map_or_else(String::new, GroundTruth::label);
         let mesh_and_measure =
             |(method, mesher): &mut (Method, Mesher)| -> Result<MethodFrame, PipelineError> {
-                let output = mesher.mesh(&input)?;
+                let output = mesher.mesh(&input).map_err(|e| e.on_vertices_of(label))?;
                 let metrics = match gt {
                     Some(gt) => measure_with(&output.mesh, gt, samples, tau).map_err(|source| {
                         PipelineError::Metrics {

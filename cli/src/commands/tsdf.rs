@@ -90,8 +90,13 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
             spinner.set_message("rendering depth maps");
             let depths = render_depths(gaussians, &cameras, args.depth_kind)?;
             spinner.set_message("fusing");
-            fuse(&cameras, &depths, None, &args.options)
-                .with_context(|| format!("{}: fusion failed", gaussians.display()))?
+            fuse(&cameras, &depths, None, &args.options).with_context(|| {
+                format!(
+                    "{} seen by the cameras of {}: fusion failed",
+                    gaussians.display(),
+                    args.cameras.display()
+                )
+            })?
         }
         (Some(dir), None) => {
             // Read a batch of views at a time, twice (allocation, integration): memory does
@@ -107,8 +112,13 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
                 };
                 Ok((depth, color))
             };
-            fuse_streamed(&cameras, load, args.colors, &args.options)
-                .with_context(|| format!("{}: fusion failed", dir.display()))?
+            fuse_streamed(&cameras, load, args.colors, &args.options).with_context(|| {
+                format!(
+                    "{} with the cameras of {}: fusion failed",
+                    dir.display(),
+                    args.cameras.display()
+                )
+            })?
         }
         (None, None) => anyhow::bail!("give --depth DIR or --gaussians G.ply"),
     };
