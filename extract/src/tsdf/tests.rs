@@ -453,3 +453,37 @@ fn views_streamed_in_batches_give_the_volume_of_all_at_once() {
         .unwrap_err();
     assert!(err.to_string().contains("view_5_depth.npy"), "{err}");
 }
+
+/// Issue #15, item 4: the same views with the cameras moved by 1e6 (a whole number of voxels,
+/// so the grid moves with them) give the same mesh moved by 1e6: voxel centres, camera
+/// positions and the marching-cubes vertices are f64, so nothing is lost far from the origin.
+#[test]
+fn far_from_the_origin_the_mesh_moves_with_the_cameras() {
+    let voxel = 1.0 / 64.0;
+    let offset = DVec3::new(1e6, -1e6, 1e6);
+    let here = sphere_rig(DVec3::ZERO, RADIUS, 7, (40, 32), 50.0).unwrap();
+    let there = sphere_rig(offset, RADIUS, 7, (40, 32), 50.0).unwrap();
+    // The views are the same relative to the sphere: one set of depth images serves both.
+    let depths: Vec<DepthImage> = here.iter().map(sphere_depth).collect();
+    let options = TsdfOptions {
+        voxel: Some(voxel),
+        trunc: Some(4.0 * voxel),
+        depth_trunc: Some(10.0),
+        ..TsdfOptions::default()
+    };
+    let a = fuse(&here, &depths, None, &options).unwrap().mesh;
+    let b = fuse(&there, &depths, None, &options).unwrap().mesh;
+    assert!(a.triangle_count() > 500);
+    assert_eq!(a.triangle_count(), b.triangle_count());
+    let sorted = |m: &TriMesh, o: DVec3| {
+        let mut p: Vec<[f64; 3]> = m.positions().iter().map(|v| (*v - o).to_array()).collect();
+        p.sort_by(|x, y| x.partial_cmp(y).unwrap());
+        p
+    };
+    let worst = sorted(&a, DVec3::ZERO)
+        .iter()
+        .zip(sorted(&b, offset))
+        .map(|(p, q)| (DVec3::from(*p) - DVec3::from(q)).length())
+        .fold(0.0, f64::max);
+    assert!(worst <= 1e-6 * voxel, "{worst:e}");
+}
