@@ -228,7 +228,11 @@ def concurrency_and_interrupts(binary, fixtures, work, timeout):
         shutil.rmtree(work / "busy", ignore_errors=True)
         first = subprocess.Popen([binary] + args, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.PIPE)
-        time.sleep(0.5)
+        # Wait for the first run to take the folder's lock (it makes the lock file then).
+        deadline = time.time() + timeout
+        while not (work / "busy" / ".trisplat.lock").exists() and time.time() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.2)
         second = subprocess.run([binary] + args, capture_output=True, timeout=timeout)
         err = second.stderr.decode(errors="replace")
         refused = (
