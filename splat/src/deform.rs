@@ -506,6 +506,15 @@ pub const JACOBI_MAX_SWEEPS: usize = 24;
 #[must_use]
 pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
     let mut c = [l.x_axis, l.y_axis, l.z_axis];
+    jacobi_orthogonalise(&mut c, None);
+    finish(c)
+}
+
+/// One-sided (Hestenes) Jacobi sweeps: rotates pairs of the columns `c` until they are
+/// orthogonal (to [`JACOBI_TOL`]), at most [`JACOBI_MAX_SWEEPS`] sweeps; `along`, when given,
+/// takes the same rotations (it accumulates the right factor of the SVD when it starts as the
+/// identity).
+pub(crate) fn jacobi_orthogonalise(c: &mut [DVec3; 3], mut along: Option<&mut [DVec3; 3]>) {
     for _sweep in 0..JACOBI_MAX_SWEEPS {
         #[cfg(test)]
         SWEEPS.with(|s| s.set(s.get() + 1));
@@ -526,9 +535,15 @@ pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
             largest_t = largest_t.max(t.abs());
             let cs = 1.0 / (1.0 + t * t).sqrt();
             let sn = cs * t;
-            let (cp, cq) = (c[p], c[q]);
-            c[p] = cp * cs - cq * sn;
-            c[q] = cp * sn + cq * cs;
+            let rotate = |m: &mut [DVec3; 3]| {
+                let (mp, mq) = (m[p], m[q]);
+                m[p] = mp * cs - mq * sn;
+                m[q] = mp * sn + mq * cs;
+            };
+            rotate(c);
+            if let Some(m) = along.as_deref_mut() {
+                rotate(m);
+            }
         }
         // Rotations this small leave off-diagonal terms of order t² (below JACOBI_TOL): the
         // columns are orthogonal without another checking sweep.
@@ -536,7 +551,6 @@ pub fn rotation_and_scales(l: DMat3) -> (DMat3, DVec3) {
             break;
         }
     }
-    finish(c)
 }
 
 /// Rotation and descending singular values from mutually orthogonal columns.

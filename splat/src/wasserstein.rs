@@ -9,7 +9,7 @@
 
 use glam::{DMat3, DVec3};
 
-use crate::deform::{JACOBI_MAX_SWEEPS, JACOBI_SMALL_ROTATION, JACOBI_TOL};
+use crate::deform::jacobi_orthogonalise;
 use crate::gaussians::GaussianSet;
 
 /// Covariance axes `L = R diag(s)` of Gaussian `i` (activated scales and rotation, `f64`).
@@ -47,34 +47,7 @@ fn polar_factor(k: DMat3) -> DMat3 {
     }
     let mut c = [k.x_axis, k.y_axis, k.z_axis];
     let mut q = [DVec3::X, DVec3::Y, DVec3::Z];
-    for _sweep in 0..JACOBI_MAX_SWEEPS {
-        let mut largest_t = 0.0f64;
-        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-            let a = c[i].length_squared();
-            let b = c[j].length_squared();
-            let g = c[i].dot(c[j]);
-            if g * g <= JACOBI_TOL * JACOBI_TOL * a * b {
-                continue;
-            }
-            let zeta = (b - a) / (2.0 * g);
-            let t = if zeta.abs() > 1e100 {
-                0.5 / zeta
-            } else {
-                zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt())
-            };
-            largest_t = largest_t.max(t.abs());
-            let cs = 1.0 / (1.0 + t * t).sqrt();
-            let sn = cs * t;
-            for m in [&mut c, &mut q] {
-                let (x, y) = (m[i], m[j]);
-                m[i] = x * cs - y * sn;
-                m[j] = x * sn + y * cs;
-            }
-        }
-        if largest_t < JACOBI_SMALL_ROTATION {
-            break;
-        }
-    }
+    jacobi_orthogonalise(&mut c, Some(&mut q));
     // p_i = c_i / σ_i, largest first; vanishing columns are completed orthonormally (their
     // singular value is 0, so their sign does not change tr(Uᵀ k)).
     let mut order = [0usize, 1, 2];
