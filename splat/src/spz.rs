@@ -359,8 +359,18 @@ fn unpack_legacy(path: &Path, bytes: &[u8]) -> Result<(Packed, Vec<u8>), SpzErro
         }
         arrays.push(got);
     }
+    // Read to the end of the stream, which checks its CRC and length (a cut or corrupted
+    // trailer is an error, as in the reference's zlib).
+    let trailing = read_limited(&mut gz, MAX_TRAILING_EXTENSIONS + 1).map_err(gzip_error)?;
+    if trailing.len() as u64 > MAX_TRAILING_EXTENSIONS {
+        return Err(malformed(
+            path,
+            "gzip stream",
+            format!("more than {MAX_TRAILING_EXTENSIONS} bytes follow the attribute arrays"),
+        ));
+    }
     let trailing = if h.flags & FLAG_EXTENSIONS != 0 {
-        read_limited(&mut gz, MAX_TRAILING_EXTENSIONS).map_err(gzip_error)?
+        trailing
     } else {
         Vec::new()
     };
@@ -633,7 +643,8 @@ fn smallest_three(r: &[u8]) -> [f32; 4] {
 
 /// Unpacks a first-three rotation (w ≥ 0) into `[x, y, z, w]`.
 fn first_three(r: &[u8]) -> [f32; 4] {
-    let [x, y, z] = [r[0], r[1], r[2]].map(|v| f32::from(v) / 127.5 - 1.0);
+    // The reference multiplies by 1/127.5 (rounded to f32), not divides.
+    let [x, y, z] = [r[0], r[1], r[2]].map(|v| f32::from(v) * (1.0 / 127.5) - 1.0);
     let w = (1.0 - (x * x + y * y + z * z)).max(0.0).sqrt();
     [x, y, z, w]
 }
