@@ -339,7 +339,9 @@ fn round_trips_stay_within_the_quantisation() {
         } else {
             (component_v3, angle_v3)
         };
-        let bounds = [position, log_scale, opacity, dc, sh1, sh_rest, rot, component];
+        let bounds = [
+            position, log_scale, opacity, dc, sh1, sh_rest, rot, component,
+        ];
         let names = [
             "position",
             "log-scale",

@@ -9,6 +9,7 @@ pub mod demo;
 pub mod densify;
 pub mod eval;
 pub mod extract;
+pub mod gaussian_io;
 pub mod merge;
 pub mod prune;
 pub mod render;
