@@ -8,7 +8,7 @@ secs=${1:-300}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(ply_mesh ply_gaussians obj gltf gltf_animated cameras_json expression_json npy)
+    targets=(ply_mesh ply_gaussians obj gltf gltf_animated cameras_json expression_json npy spz gltf_splats)
 fi
 export AFL_NO_UI=1 AFL_SKIP_CPUFREQ=1 AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES=1
 for t in "${targets[@]}"; do

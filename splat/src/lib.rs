@@ -8,16 +8,19 @@
 /// The math types of this crate's API (glam 0.34), re-exported so callers use the same version.
 pub use glam;
 
+pub mod axes;
 pub mod bind;
 pub mod deform;
 pub mod densify;
 pub mod frames;
 pub mod gaussians;
+pub mod gltf_splat;
 pub mod lanes;
 pub mod lbs;
 pub mod ply;
 pub mod render;
 pub mod sh;
+pub mod spz;
 pub mod wasserstein;
 
 pub use gaussians::{

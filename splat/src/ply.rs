@@ -624,3 +624,38 @@ fn binding_column(ty: ScalarType, binding: &[TriId]) -> PropertyValues {
         ScalarType::F64 => PropertyValues::F64(ids.map(f64::from).collect()),
     }
 }
+
+/// Whether the PLY file at `path` holds 3DGS Gaussians: its header (the first 64 KiB are
+/// looked at) declares the vertex properties `x`, `opacity`, `f_dc_0`, `scale_0` and `rot_0`.
+/// `false` when the file cannot be read or is not such a PLY.
+#[must_use]
+pub fn is_gaussian_ply(path: &Path) -> bool {
+    use std::io::Read as _;
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut head = Vec::new();
+    if file.take(64 * 1024).read_to_end(&mut head).is_err() {
+        return false;
+    }
+    let text = String::from_utf8_lossy(&head);
+    let Some(end) = text.find("end_header") else {
+        return false;
+    };
+    let mut in_vertex = false;
+    let mut found = [false; 5];
+    const NEEDED: [&str; 5] = ["x", "opacity", "f_dc_0", "scale_0", "rot_0"];
+    for line in text[..end].lines() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["element", name, ..] => in_vertex = *name == "vertex",
+            ["property", .., name] if in_vertex => {
+                if let Some(i) = NEEDED.iter().position(|n| n == name) {
+                    found[i] = true;
+                }
+            }
+            _ => {}
+        }
+    }
+    found.iter().all(|&f| f)
+}

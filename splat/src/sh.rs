@@ -4,7 +4,7 @@
 //! Basis order within a degree follows 3DGS `eval_sh`: for degree 1 `(-C1 y, C1 z, -C1 x)`, and so
 //! on. Colour: `rgb = max(Σ_k sh_k Y_k(dir) + 0.5, 0)` with `dir = normalize(mean - camera)`.
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 
 use crate::gaussians::sh_coeffs_per_channel;
 
@@ -96,6 +96,93 @@ pub fn eval_rgb(degree: u8, coeffs: &[f32], dir: DVec3) -> [f32; 3] {
 #[must_use]
 pub fn rgb_to_dc(rgb: f32) -> f32 {
     ((f64::from(rgb) - 0.5) / SH_C0) as f32
+}
+
+/// Entries of a band's change matrix this close to 0 or ±1 are set to it, so that sign flips
+/// and permutations map coefficients exactly (the least-squares fit leaves about 1e-15).
+const SNAP: f64 = 1e-12;
+
+/// The change of SH coefficients under an orthogonal change of axes `m` (a rotation or a
+/// mirror, `p_new = m p_old`): the new coefficients `c'` give `f'(d) = f(mᵀ d)`, the same
+/// colour for the same physical direction. Band by band (degree 0 is unchanged), each a
+/// `(2l+1)²` matrix found by least squares on 64 directions spread over the sphere (exact in
+/// exact arithmetic: the band is closed under rotations), entries near 0 and ±1 snapped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShChange {
+    degree: u8,
+    /// Per band l = 1..=degree, row-major `(2l+1) x (2l+1)`: `c'_k = Σ_j t[k][j] c_j`.
+    bands: Vec<Vec<f64>>,
+}
+
+impl ShChange {
+    /// The change for coefficients up to `degree` (at most 3) under `m`.
+    #[must_use]
+    pub fn new(degree: u8, m: DMat3) -> Self {
+        let degree = degree.min(3);
+        const N: usize = 64;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let dirs: Vec<DVec3> = (0..N)
+            .map(|i| {
+                let z = 1.0 - (i as f64 + 0.5) * 2.0 / N as f64;
+                let r = (1.0 - z * z).sqrt();
+                let phi = golden * i as f64;
+                DVec3::new(r * phi.cos(), r * phi.sin(), z)
+            })
+            .collect();
+        let mt = m.transpose();
+        let bands = (1..=usize::from(degree))
+            .map(|l| {
+                let nb = 2 * l + 1;
+                let first = l * l;
+                let a =
+                    nalgebra::DMatrix::from_fn(N, nb, |j, k| sh_basis(degree, dirs[j])[first + k]);
+                let b = nalgebra::DMatrix::from_fn(N, nb, |j, k| {
+                    sh_basis(degree, mt * dirs[j])[first + k]
+                });
+                let ata = a.transpose() * &a;
+                let atb = a.transpose() * b;
+                let t = ata
+                    .cholesky()
+                    .map(|c| c.solve(&atb))
+                    .unwrap_or_else(|| nalgebra::DMatrix::identity(nb, nb));
+                let mut out = Vec::with_capacity(nb * nb);
+                for k in 0..nb {
+                    for j in 0..nb {
+                        let v = t[(k, j)];
+                        let snapped = [0.0, 1.0, -1.0]
+                            .into_iter()
+                            .find(|s| (v - s).abs() < SNAP)
+                            .unwrap_or(v);
+                        out.push(snapped);
+                    }
+                }
+                out
+            })
+            .collect();
+        Self { degree, bands }
+    }
+
+    /// Applies the change to one Gaussian's `3 (degree + 1)²` coefficients in file order
+    /// (`f_dc_0..2`, then `f_rest` channel-major), in f64, rounding each result once.
+    #[expect(clippy::cast_possible_truncation, reason = "f32 storage of SH")]
+    pub fn apply(&self, coeffs: &mut [f32]) {
+        let k_all = sh_coeffs_per_channel(self.degree);
+        if coeffs.len() < 3 * k_all {
+            return;
+        }
+        for c in 0..3 {
+            let at = |j: usize| 3 + c * (k_all - 1) + (j - 1);
+            for (band, t) in self.bands.iter().enumerate() {
+                let l = band + 1;
+                let nb = 2 * l + 1;
+                let old: Vec<f64> = (0..nb).map(|k| f64::from(coeffs[at(l * l + k)])).collect();
+                for k in 0..nb {
+                    let v: f64 = (0..nb).map(|j| t[k * nb + j] * old[j]).sum();
+                    coeffs[at(l * l + k)] = v as f32;
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -231,6 +318,64 @@ mod tests {
                     (f64::from(got[c]) - want[c]).abs() < HAND_TOL,
                     "{got:?} vs {want:?}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn sh_change_keeps_colours_under_rotations_and_mirrors() {
+        use crate::axes::Axes;
+        let coeffs: Vec<f32> = (0..48)
+            .map(|i| ((i * 37 % 23) as f32 - 11.0) / 13.0)
+            .collect();
+        let turn = DMat3::from_quat(glam::DQuat::from_axis_angle(
+            DVec3::new(0.3, -0.5, 0.8).normalize(),
+            1.1,
+        ));
+        let cases = [
+            turn,
+            Axes::Rdf.to(Axes::Rub),
+            Axes::Lbd.to(Axes::Rub),
+            Axes::Luf.to(Axes::Rfu),
+            DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0)),
+        ];
+        for m in cases {
+            let change = ShChange::new(3, m);
+            let mut new = coeffs.clone();
+            change.apply(&mut new);
+            for d in [
+                DVec3::new(0.2, 0.9, -0.4),
+                DVec3::new(-0.7, 0.1, 0.6),
+                DVec3::Z,
+            ] {
+                let before = eval_rgb(3, &coeffs, d);
+                let after = eval_rgb(3, &new, m * d);
+                for c in 0..3 {
+                    assert!(
+                        (before[c] - after[c]).abs() < 1e-5,
+                        "{m}: {before:?} {after:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sh_change_of_axis_flips_is_exact() {
+        use crate::axes::Axes;
+        // RDF -> RUB (y and z negated): per basis function the sign of Y_k(x, -y, -z) / Y_k.
+        let signs = [
+            1.0f32, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, -1.0, 1.0, -1.0,
+            1.0,
+        ];
+        let coeffs: Vec<f32> = (0..48).map(|i| (i as f32 * 0.731).sin()).collect();
+        let mut new = coeffs.clone();
+        ShChange::new(3, Axes::Rdf.to(Axes::Rub)).apply(&mut new);
+        for c in 0..3 {
+            assert_eq!(new[c], coeffs[c]);
+            for (j, sign) in signs.iter().enumerate().skip(1) {
+                let at = 3 + c * 15 + (j - 1);
+                assert_eq!(new[at], sign * coeffs[at], "channel {c} coefficient {j}");
             }
         }
     }

@@ -34,11 +34,17 @@ pub enum Target {
     ExpressionJson,
     /// `.npy` arrays (`parse_npy`).
     Npy,
+    /// splat's SPZ reader (`decode_spz`), on the bytes and, when they are neither gzip nor a
+    /// version-4 header, on them gzip-wrapped (so mutations of a decompressed payload reach
+    /// the parser behind the checksum).
+    Spz,
+    /// splat's glTF reader of `KHR_gaussian_splatting` primitives (`read_gltf_gaussians`).
+    GltfSplats,
 }
 
 impl Target {
     /// Every target, in the order of `fuzz/README.md`.
-    pub const ALL: [Self; 8] = [
+    pub const ALL: [Self; 10] = [
         Self::PlyMesh,
         Self::PlyGaussians,
         Self::Obj,
@@ -47,6 +53,8 @@ impl Target {
         Self::CamerasJson,
         Self::ExpressionJson,
         Self::Npy,
+        Self::Spz,
+        Self::GltfSplats,
     ];
 
     /// The target's name: its AFL binary and its folders `fuzz/corpus/<name>` and
@@ -62,6 +70,8 @@ impl Target {
             Self::CamerasJson => "cameras_json",
             Self::ExpressionJson => "expression_json",
             Self::Npy => "npy",
+            Self::Spz => "spz",
+            Self::GltfSplats => "gltf_splats",
         }
     }
 
@@ -77,6 +87,8 @@ impl Target {
             Self::CamerasJson => cameras_json(data),
             Self::ExpressionJson => expression_json(data),
             Self::Npy => npy(data),
+            Self::Spz => spz(data),
+            Self::GltfSplats => gltf_splats(data),
         }
     }
 }
@@ -157,6 +169,29 @@ pub fn expression_json(data: &[u8]) -> bool {
 #[must_use]
 pub fn npy(data: &[u8]) -> bool {
     parse_npy(Path::new("fuzz.npy"), data).is_ok()
+}
+
+/// SPZ bytes, and a raw payload gzip-wrapped.
+#[must_use]
+pub fn spz(data: &[u8]) -> bool {
+    use trisplat_splat::spz::{SpzReadOptions, decode_spz};
+    let path = Path::new("fuzz.spz");
+    let options = SpzReadOptions::default();
+    let direct = decode_spz(data, path, &options).is_ok();
+    if data.starts_with(&[0x1f, 0x8b]) || data.starts_with(b"NGSP") {
+        return direct;
+    }
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    let wrapped = std::io::Write::write_all(&mut gz, data)
+        .and_then(|()| gz.finish())
+        .is_ok_and(|bytes| decode_spz(&bytes, path, &options).is_ok());
+    direct || wrapped
+}
+
+/// glTF/GLB Gaussians (`KHR_gaussian_splatting`).
+#[must_use]
+pub fn gltf_splats(data: &[u8]) -> bool {
+    trisplat_splat::gltf_splat::read_gltf_gaussians(&input_file(data)).is_ok()
 }
 
 /// External buffers of the seed corpus's `.gltf` files, copied beside the fuzzed input.

@@ -1,5 +1,6 @@
-//! `trisplat convert`: PLY, OBJ, glTF and GLB meshes from one format to another, and a
-//! folder or pattern of same-topology OBJ/PLY frames to one animated glTF/GLB.
+//! `trisplat convert`: PLY, OBJ, glTF and GLB meshes from one format to another, Gaussians
+//! between INRIA PLY, SPZ and glTF/GLB with `KHR_gaussian_splatting`, and a folder or pattern
+//! of same-topology OBJ/PLY frames to one animated glTF/GLB.
 
 use std::path::{Path, PathBuf};
 
@@ -12,6 +13,7 @@ use trisplat_geometry::io::{
     self, Format, ObjVertices, PlyEncoding, ReadOptions, SequenceLayout, WriteOptions,
 };
 
+use super::gaussian_io::{GaussianFormatArgs, read_gaussian_file, write_gaussian_file};
 use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
 
 /// Arguments of `trisplat convert`.
@@ -28,7 +30,15 @@ use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
     glTF: every frame must have the vertex count and triangles of the first; frame 0 is the \
     base mesh, each later frame a morph target, and a STEP weights track shows frame k at \
     k / FPS seconds (--fps, default 30). With --any-topology the frames may differ (one node \
-    per frame, each shown by a STEP scale track at its time)."
+    per frame, each shown by a STEP scale track at its time).\n\n\
+    Gaussians: an .spz input or output, a .glb/.gltf input with KHR_gaussian_splatting \
+    primitives, or a 3DGS PLY (vertex properties x, opacity, f_dc_0, scale_0, rot_0) converted \
+    to .spz/.glb/.gltf converts Gaussians between INRIA PLY (lossless), Niantic SPZ (quantised: \
+    positions to 1/4096, log-scales to 1/16, opacity and colour to 8 bits, SH to 5/4 bits, \
+    rotations to 8 or 10 bits) and glTF with KHR_gaussian_splatting (float: means, rotations \
+    and SH exact; scales and opacities through exp/sigmoid rounded once). SPZ stores RUB axes: \
+    --axes names the axes of the other side (default rdf, the INRIA training frame). Only \
+    world-space Gaussians go to SPZ and glTF (bound ones: `trisplat deform` first)."
 )]
 pub struct ConvertArgs {
     /// Input mesh (.ply, .obj, .gltf, .glb), or a folder or pattern of OBJ/PLY frames.
@@ -53,6 +63,9 @@ pub struct ConvertArgs {
     /// share the first's topology still become morph targets.
     #[arg(long)]
     pub any_topology: bool,
+    /// Gaussian formats.
+    #[command(flatten)]
+    pub gaussian: GaussianFormatArgs,
 }
 
 /// A `--fps` value: finite and > 0.
@@ -91,6 +104,9 @@ pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         ))
         .into());
     }
+    if is_gaussian_conversion(&args.input, &args.output) {
+        return convert_gaussians(&args, ctx);
+    }
     if args.clip.is_some() || args.time.is_some() {
         return convert_animated(&args, ctx);
     }
@@ -120,6 +136,47 @@ pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     spinner.finish_and_clear();
     result?;
     Ok(())
+}
+
+/// Whether `convert` moves Gaussians: SPZ on either side, a glTF/GLB input with
+/// `KHR_gaussian_splatting`, or a 3DGS PLY to glTF/GLB (PLY to PLY keeps the mesh path, which
+/// keeps every property and element).
+fn is_gaussian_conversion(input: &Path, output: &Path) -> bool {
+    use super::gaussian_io::GaussianFormat as F;
+    let (i, o) = (F::from_path(input), F::from_path(output));
+    matches!(i, Some(F::Spz))
+        || matches!(o, Some(F::Spz))
+        || (matches!(i, Some(F::Glb | F::Gltf))
+            && trisplat_splat::gltf_splat::has_gaussian_splats(input))
+        || (matches!(i, Some(F::Ply))
+            && matches!(o, Some(F::Glb | F::Gltf))
+            && trisplat_splat::ply::is_gaussian_ply(input))
+}
+
+/// `convert` of Gaussians between PLY, SPZ and glTF/GLB.
+fn convert_gaussians(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
+    if args.clip.is_some() || args.time.is_some() {
+        return Err(UsageError(format!(
+            "--clip/--time evaluate a mesh animation; {} holds Gaussians",
+            args.input.display()
+        ))
+        .into());
+    }
+    refuse_to_overwrite(&args.input, &args.output)?;
+    let spinner = ctx
+        .progress
+        .spinner(&format!("converting {}", args.input.display()));
+    let result = read_gaussian_file(&args.input, &args.gaussian).and_then(|read| {
+        write_gaussian_file(
+            &args.output,
+            &read.set,
+            &args.gaussian,
+            read.antialiased,
+            args.ascii,
+        )
+    });
+    spinner.finish_and_clear();
+    result
 }
 
 /// `convert` of a glTF/GLB clip evaluated at `--time`: skins, morph targets and node

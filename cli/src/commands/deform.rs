@@ -1,16 +1,15 @@
 //! `trisplat deform (--template T --gaussians G | --avatar DIR) --animation A -o DIR
 //! [--mode binding|jacobian|lbs] [--frames A..B] [--clip NAME|INDEX] [--clip-from A.glb] [--fps F]
-//! [--targets DIR] [--adaptive-scale]`.
+//! [--targets DIR] [--adaptive-scale] [--format ply|spz|glb|gltf]`.
 
 use std::path::PathBuf;
 
+use super::Context;
+use super::extract::avatar_files;
+use super::gaussian_io::{GaussianFormat, GaussianFormatArgs, write_gaussian_file};
 use anyhow::Context as _;
 use trisplat_pipeline::output::{Created, Inputs, frame_file};
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Mode, Session, SessionOptions};
-use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
-
-use super::Context;
-use super::extract::avatar_files;
 
 /// Arguments of `trisplat deform`.
 #[derive(Debug, clap::Args)]
@@ -40,6 +39,9 @@ use super::extract::avatar_files;
     rotation by the polar part of the blended transform; local parameters as for binding).\n\n\
     --adaptive-scale (binding and lbs): Gaussian scales follow the square root of their \
     triangle's area ratio to T (3DFilmPCA). Off by default.\n\n\
+    --format spz|glb|gltf writes each frame as Niantic SPZ (quantised; --axes names the \
+    frame of the Gaussians, stored as SPZ's RUB: use --axes rub for a Y-up glTF template) or \
+    glTF with KHR_gaussian_splatting instead of PLY: DIR/frame_000000.spz, ...\n\n\
     Each file is written atomically; if a frame fails, the files this run created are removed."
 )]
 pub struct DeformArgs {
@@ -86,6 +88,13 @@ pub struct DeformArgs {
     /// listed once on stderr and ignored).
     #[arg(long)]
     pub strict: bool,
+    /// Format of the frame files: ply (INRIA 3DGS, lossless), spz (Niantic SPZ), glb or gltf
+    /// (KHR_gaussian_splatting).
+    #[arg(long, value_enum, default_value_t = GaussianFormat::Ply)]
+    pub format: GaussianFormat,
+    /// Gaussian format options.
+    #[command(flatten)]
+    pub gaussian: GaussianFormatArgs,
 }
 
 /// Runs `trisplat deform`.
@@ -146,17 +155,22 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("{}: cannot create the output folder", args.output.display()))?;
     let inputs = Inputs::new(session.input_files());
+    let frame_path = |f: usize| {
+        args.output
+            .join(frame_file(f))
+            .with_extension(args.format.extension())
+    };
     for f in frames.clone() {
-        inputs.check(&args.output.join(frame_file(f)))?;
+        inputs.check(&frame_path(f))?;
     }
     let bar = ctx.progress.bar(frames.len() as u64, "deforming");
     let mut created = Created::default();
     let result = (|| -> anyhow::Result<()> {
         for f in frames.clone() {
-            let out = args.output.join(frame_file(f));
+            let out = frame_path(f);
             let existed = out.exists();
             let world = session.world(f)?;
-            write_gaussians(&out, &world, &PlyWriteOptions::default())?;
+            write_gaussian_file(&out, &world, &args.gaussian, false, false)?;
             created.note(&out, existed);
             bar.inc(1);
         }

@@ -205,15 +205,14 @@ fn add_primitive(
     Ok(())
 }
 
-/// Adds the meshes of `root` and its descendants, depth first in file order, with their
-/// world transforms. Iterative (an explicit stack): a chain of 20,000 nested nodes must not
-/// overflow the thread's stack.
+/// Calls `each` for the mesh of `root` and of each of its descendants, depth first in file
+/// order, with its world transform. Iterative (an explicit stack): a chain of 20,000 nested
+/// nodes must not overflow the thread's stack.
 fn visit(
     path: &Path,
-    out: &mut Gathered,
     root: gltf::Node<'_>,
-    data: &GltfData,
     max_depth: usize,
+    each: &mut dyn FnMut(&gltf::Mesh<'_>, &DMat4) -> Result<(), IoError>,
 ) -> Result<(), IoError> {
     let mut stack = vec![(root, DMat4::IDENTITY, 0usize)];
     while let Some((node, parent, depth)) = stack.pop() {
@@ -227,9 +226,7 @@ fn visit(
         let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
         let world = parent * local;
         if let Some(mesh) = node.mesh() {
-            for prim in mesh.primitives() {
-                add_primitive(path, out, &mesh, &prim, &world, data)?;
-            }
+            each(&mesh, &world)?;
         }
         let children: Vec<gltf::Node<'_>> = node.children().collect();
         stack.extend(children.into_iter().rev().map(|c| (c, world, depth + 1)));
@@ -237,21 +234,10 @@ fn visit(
     Ok(())
 }
 
-/// Reads the static (rest-state) mesh of a glTF or GLB file; see the module docs.
-///
-/// # Errors
-/// [`IoError::Os`] when the file cannot be read, [`IoError::MissingReference`] when an external
-/// buffer is missing, [`IoError::Malformed`] naming the accessor, primitive or node at fault.
-pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
-    let data = GltfData::open(path)?;
-    let doc = &data.document;
-    let mut out = Gathered {
-        all_normals: true,
-        all_uvs: true,
-        all_colors: true,
-        ..Gathered::default()
-    };
-    let roots: Vec<gltf::Node<'_>> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+/// The root nodes read: those of the document's `scene`, else of scene 0, else every node
+/// that is no other node's child.
+fn scene_roots(doc: &gltf::Document) -> Vec<gltf::Node<'_>> {
+    match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(scene) => scene.nodes().collect(),
         None => {
             let mut is_child = vec![false; doc.nodes().len()];
@@ -264,11 +250,41 @@ pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
             }
             doc.nodes().filter(|n| !is_child[n.index()]).collect()
         }
-    };
-    let max_depth = doc.nodes().len();
-    for root in roots {
-        visit(path, &mut out, root, &data, max_depth)?;
     }
+}
+
+/// Calls `each` for every mesh instance of the scene read (see the module docs), in order.
+fn for_each_instance(
+    data: &GltfData,
+    each: &mut dyn FnMut(&gltf::Mesh<'_>, &DMat4) -> Result<(), IoError>,
+) -> Result<(), IoError> {
+    let doc = &data.document;
+    let max_depth = doc.nodes().len();
+    for root in scene_roots(doc) {
+        visit(data.path(), root, max_depth, each)?;
+    }
+    Ok(())
+}
+
+/// Reads the static (rest-state) mesh of a glTF or GLB file; see the module docs.
+///
+/// # Errors
+/// [`IoError::Os`] when the file cannot be read, [`IoError::MissingReference`] when an external
+/// buffer is missing, [`IoError::Malformed`] naming the accessor, primitive or node at fault.
+pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
+    let data = GltfData::open(path)?;
+    let mut out = Gathered {
+        all_normals: true,
+        all_uvs: true,
+        all_colors: true,
+        ..Gathered::default()
+    };
+    for_each_instance(&data, &mut |mesh, world| {
+        for prim in mesh.primitives() {
+            add_primitive(path, &mut out, mesh, &prim, world, &data)?;
+        }
+        Ok(())
+    })?;
     let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
     let has = out.primitives > 0;
     let mut mesh = TriMesh::try_new(out.positions, out.triangles).map_err(bad)?;
@@ -282,6 +298,94 @@ pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
         mesh = mesh.with_colors(out.colors).map_err(bad)?;
     }
     Ok(mesh)
+}
+
+/// A glTF/GLB file opened for readers of other crates (the Gaussian splats reader of
+/// `trisplat-splat`): the document's JSON, its accessors decoded with the checks of this
+/// module, and its mesh instances with their world transforms.
+pub struct GltfFile {
+    data: GltfData,
+}
+
+/// What an accessor holds (before decoding).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AccessorInfo {
+    /// The glTF component type code (5120 byte ... 5126 float).
+    pub component_type: u32,
+    /// Whether integer components are normalised.
+    pub normalized: bool,
+    /// Components per element (1 for SCALAR, 3 for VEC3, ...).
+    pub components: usize,
+    /// Elements.
+    pub count: usize,
+}
+
+impl GltfFile {
+    /// Opens `path` (`.gltf` with data-URI or external buffers, or `.glb`) and loads every
+    /// buffer.
+    ///
+    /// # Errors
+    /// As [`read_gltf`].
+    pub fn open(path: &Path) -> Result<Self, IoError> {
+        Ok(Self {
+            data: GltfData::open(path)?,
+        })
+    }
+
+    /// The file's path.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        self.data.path()
+    }
+
+    /// The document's JSON (as in the file).
+    #[must_use]
+    pub fn json(&self) -> &serde_json::Value {
+        &self.data.json
+    }
+
+    /// What accessor `index` holds, `None` when the file has no such accessor.
+    #[must_use]
+    pub fn accessor_info(&self, index: usize) -> Option<AccessorInfo> {
+        let a = self.data.document.accessors().nth(index)?;
+        Some(AccessorInfo {
+            component_type: a.data_type().as_gl_enum(),
+            normalized: a.normalized(),
+            components: a.dimensions().multiplicity(),
+            count: a.count(),
+        })
+    }
+
+    /// Accessor `index` decoded as `count × components` f64 values (normalised integers per
+    /// the glTF spec, sparse substitution applied; f32 values exactly; non-finite floats
+    /// refused), every offset, stride and count checked against the bytes present.
+    ///
+    /// # Errors
+    /// [`IoError::Malformed`] naming the accessor.
+    pub fn read_accessor(&self, index: usize) -> Result<Vec<f64>, IoError> {
+        let Some(a) = self.data.document.accessors().nth(index) else {
+            return Err(IoError::malformed(
+                self.path(),
+                format!("accessor {index}"),
+                "the file has no such accessor",
+            ));
+        };
+        Ok(self.data.read(&a)?)
+    }
+
+    /// Every mesh instance of the scene read (the same nodes and order as [`read_gltf`]): the
+    /// mesh index and its node's world transform.
+    ///
+    /// # Errors
+    /// [`IoError::Malformed`] when the node hierarchy has a cycle.
+    pub fn mesh_instances(&self) -> Result<Vec<(usize, DMat4)>, IoError> {
+        let mut out = Vec::new();
+        for_each_instance(&self.data, &mut |mesh, world| {
+            out.push((mesh.index(), *world));
+            Ok(())
+        })?;
+        Ok(out)
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -398,12 +502,25 @@ fn build(mesh: &TriMesh) -> (serde_json::Value, Vec<u8>) {
 /// # Errors
 /// [`IoError::Unsupported`] when the buffer exceeds the 4 GiB a GLB can hold.
 pub fn glb_bytes(path: &Path, mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
-    let (doc, mut bin) = build(mesh);
+    let (doc, bin) = build(mesh);
+    glb_from_parts(path, &doc, bin)
+}
+
+/// A GLB file of a JSON document and the binary chunk holding its buffer 0 (`bin`, padded
+/// here to 4 bytes; none when empty). `path` only names the file in errors.
+///
+/// # Errors
+/// [`IoError::Unsupported`] when the file would exceed the 4 GiB a GLB can hold.
+pub fn glb_from_parts(
+    path: &Path,
+    doc: &serde_json::Value,
+    mut bin: Vec<u8>,
+) -> Result<Vec<u8>, IoError> {
     let mut json = doc.to_string().into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let has_bin = !bin.is_empty();
@@ -433,11 +550,18 @@ pub fn glb_bytes(path: &Path, mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
 /// Writes `mesh` as `.gltf` JSON text with the buffer embedded as a base64 data URI.
 #[must_use]
 pub fn gltf_text(mesh: &TriMesh) -> String {
-    let (mut doc, bin) = build(mesh);
+    let (doc, bin) = build(mesh);
+    gltf_text_from_parts(doc, &bin)
+}
+
+/// `.gltf` JSON text of a document whose buffer 0 (if it has `buffers`) is `bin`, embedded as
+/// a base64 data URI.
+#[must_use]
+pub fn gltf_text_from_parts(mut doc: serde_json::Value, bin: &[u8]) -> String {
     if doc.get("buffers").is_some() {
         let uri = format!(
             "data:application/octet-stream;base64,{}",
-            base64::engine::general_purpose::STANDARD.encode(&bin)
+            base64::engine::general_purpose::STANDARD.encode(bin)
         );
         doc["buffers"] = json!([{"byteLength": bin.len(), "uri": uri}]);
     }

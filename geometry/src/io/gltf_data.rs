@@ -105,9 +105,21 @@ impl GltfData {
             (bytes, None)
         };
         check_attribute_indices(&json_bytes).map_err(err)?;
-        let document = gltf::Gltf::from_slice(&json_bytes)
-            .map_err(|e| err(GltfDataErrorKind::Document(e)))?
-            .document;
+        let document = match gltf::Gltf::from_slice(&json_bytes) {
+            Ok(g) => g.document,
+            // Extension-defined attribute semantics (`KHR_gaussian_splatting:SCALE`) are valid
+            // glTF, but the `gltf` crate's validation knows only the core names and `_`-prefixed
+            // ones: validate a copy in which they are renamed `_...` (readers look attributes
+            // up in the file's own JSON).
+            Err(e) => match renamed_extension_semantics(&json_bytes) {
+                Some(renamed) => {
+                    gltf::Gltf::from_slice(&renamed)
+                        .map_err(|e| err(GltfDataErrorKind::Document(e)))?
+                        .document
+                }
+                None => return Err(err(GltfDataErrorKind::Document(e))),
+            },
+        };
         // The reference checks read this plain JSON, so a document the `gltf` crate accepts
         // but plain JSON does not (invalid UTF-8 in a string the crate skips) is refused rather
         // than checked as empty.
@@ -349,6 +361,43 @@ impl GltfData {
         )]
         Ok(self.read(accessor)?.into_iter().map(|v| v as u32).collect())
     }
+}
+
+/// The JSON with every primitive attribute (and morph target) name that holds a `:` renamed
+/// `_` + the name with `:` as `_`; `None` when there is none (or the JSON does not parse).
+fn renamed_extension_semantics(json_bytes: &[u8]) -> Option<Vec<u8>> {
+    let mut json: serde_json::Value = serde_json::from_slice(json_bytes).ok()?;
+    let mut renamed = false;
+    let mut rename = |map: &mut serde_json::Map<String, serde_json::Value>| {
+        let names: Vec<String> = map.keys().filter(|k| k.contains(':')).cloned().collect();
+        for name in names {
+            if let Some(v) = map.remove(&name) {
+                map.insert(format!("_{}", name.replace(':', "_")), v);
+                renamed = true;
+            }
+        }
+    };
+    for mesh in json.get_mut("meshes")?.as_array_mut()? {
+        let Some(primitives) = mesh.get_mut("primitives").and_then(|p| p.as_array_mut()) else {
+            continue;
+        };
+        for primitive in primitives {
+            if let Some(map) = primitive
+                .get_mut("attributes")
+                .and_then(|a| a.as_object_mut())
+            {
+                rename(map);
+            }
+            if let Some(targets) = primitive.get_mut("targets").and_then(|t| t.as_array_mut()) {
+                for target in targets {
+                    if let Some(map) = target.as_object_mut() {
+                        rename(map);
+                    }
+                }
+            }
+        }
+    }
+    renamed.then(|| json.to_string().into_bytes())
 }
 
 /// Refuses a primitive attribute that names an accessor the file does not have (the `gltf`
