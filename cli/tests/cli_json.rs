@@ -130,8 +130,34 @@ fn every_command_prints_one_json_object() {
         ]),
         &["before", "after", "flagged"],
     );
+    has(
+        &json(&["convert", &spot, &p("spot.glb")]),
+        &["input", "output", "bytes"],
+    );
+    has(
+        &json(&["convert", &world_gaussians(), &p("g.spz")]),
+        &["input", "output", "bytes"],
+    );
+    let d = json(&[
+        "deform",
+        "--template",
+        &spot,
+        "--gaussians",
+        &p("bound.ply"),
+        "--animation",
+        &spot,
+        "-o",
+        &p("frames"),
+    ]);
+    has(&d, &["output", "frames", "gaussians", "format"]);
+    assert_eq!(d["frames"], 1, "{d}");
     has(&json(&["completions", "bash"]), &["shell", "script"]);
     has(&json(&["man", "eval"]), &["page"]);
+}
+
+/// A world-space Gaussian file of the fixtures.
+fn world_gaussians() -> String {
+    fixture("render/random_deg3.ply")
 }
 
 #[test]

@@ -94,6 +94,17 @@ fn is_sequence_input(input: &Path) -> bool {
 /// Unknown formats, unreadable or malformed input, an output equal to the input, a failed
 /// write, animation options on a non-glTF input or a glTF without that clip.
 pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
+    convert_any(&args, ctx)?;
+    let bytes = std::fs::metadata(&args.output).map(|m| m.len()).ok();
+    ctx.emit(
+        "convert",
+        serde_json::json!({ "input": args.input, "output": args.output, "bytes": bytes }),
+    )
+}
+
+/// The conversion `args` asks for: a frame sequence to an animated glTF, Gaussians between
+/// their formats, a posed glTF frame, or a mesh between formats.
+fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     if is_sequence_input(&args.input) {
         return convert_sequence(&args, ctx);
     }

@@ -180,5 +180,14 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
     if result.is_err() {
         created.remove();
     }
-    result
+    result?;
+    ctx.emit(
+        "deform",
+        serde_json::json!({
+            "output": args.output,
+            "frames": frames.len(),
+            "gaussians": session.gaussians().len(),
+            "format": args.format.extension(),
+        }),
+    )
 }
