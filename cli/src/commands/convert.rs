@@ -106,7 +106,7 @@ pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
 /// their formats, a posed glTF frame, or a mesh between formats.
 fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     if is_sequence_input(&args.input) {
-        return convert_sequence(&args, ctx);
+        return convert_sequence(args, ctx);
     }
     if args.fps.is_some() {
         return Err(UsageError(format!(
@@ -116,10 +116,10 @@ fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         .into());
     }
     if is_gaussian_conversion(&args.input, &args.output) {
-        return convert_gaussians(&args, ctx);
+        return convert_gaussians(args, ctx);
     }
     if args.clip.is_some() || args.time.is_some() {
-        return convert_animated(&args, ctx);
+        return convert_animated(args, ctx);
     }
     let in_format = Format::from_path(&args.input)?;
     let out_format = Format::from_path(&args.output)?;
