@@ -330,13 +330,19 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "T", default_value_t = DEFAULT_TAU,
         hide_default_value = true, conflicts_with = "tau_fraction"))]
     pub tau: f64,
+    /// Colour the vertices of the frame meshes (PLYs and glTF) by their distance to the
+    /// ground truth: viridis from 0 (dark purple) to 2 x the frame's F-score threshold tau
+    /// (yellow, and beyond). Needs --gt or --gt-sequence; not with --tsdf-colors.
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "tsdf_colors"))]
+    pub error_colors: bool,
     /// Refuse a weights track with channels that drive nothing (without it they are listed
     /// once on stderr and in the report, and ignored).
     #[cfg_attr(feature = "cli", arg(long))]
     pub strict: bool,
     /// What to write, comma-separated: meshes (per-frame PLYs), glb (the animated sequence;
     /// its frames are written to assemble it and removed after unless meshes is asked too),
-    /// report (report.json, report.md, the plot). The run journal is always written.
+    /// report (report.json, report.md, report.html with its thumbnails, the plot as SVG and
+    /// PNG). The run journal is always written.
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_delimiter = ',', value_name = "LIST",
         num_args = 1.., default_values_t = OutputTarget::ALL))]
     pub targets: Vec<OutputTarget>,
@@ -353,7 +359,8 @@ pub enum OutputTarget {
     Meshes,
     /// `<method>.glb` (or its parts), the animated sequence.
     Glb,
-    /// `report.json`, `report.md` and `error_vs_time.png`.
+    /// `report.json`, `report.md`, `report.html` with `thumbnails/`, `error_vs_time.svg` and
+    /// `error_vs_time.png`.
     Report,
 }
 
@@ -411,6 +418,7 @@ impl Default for ExtractOptions {
             tau: DEFAULT_TAU,
             tau_fraction: Some(DEFAULT_TAU_FRACTION),
             strict: false,
+            error_colors: false,
             targets: OutputTarget::ALL.to_vec(),
             limits: Limits::default(),
         }

@@ -31,7 +31,8 @@
 //!    deformed template (`--gt template`) or one static mesh (`--gt FILE`).
 //! 7. **write**: `DIR/<method>/frame_NNNNNN.ply` (NNNNNN = animation frame index) and
 //!    `DIR/<method>.glb`, the animated sequence.
-//! 8. **report**: `DIR/report.json`, `DIR/report.md`, `DIR/error_vs_time.png`.
+//! 8. **report**: `DIR/report.json`, `DIR/report.md`, `DIR/report.html` (with the
+//!    thumbnails in `DIR/thumbnails/`), `DIR/error_vs_time.svg` and `DIR/error_vs_time.png`.
 //!
 //! # Defaults, derived from the (world-space) template so that any scale works
 //! - TSDF voxel: the rest-pose Gaussians' mean nearest-neighbour spacing, clamped to template
@@ -62,7 +63,7 @@ pub mod avatar;
 pub mod config;
 pub mod deform;
 pub mod error;
-mod font;
+pub mod html;
 pub mod input;
 pub mod journal;
 pub mod lock;
@@ -75,6 +76,7 @@ pub mod plot;
 pub mod report;
 pub mod run;
 pub mod session;
+pub mod thumbnail;
 
 pub use config::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl,

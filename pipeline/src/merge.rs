@@ -8,7 +8,8 @@
 //! and no frame may be in two shards. The merged folder gets every shard's frame files (hard
 //! links where the file system allows, else copies), one animated glTF per method assembled
 //! from them (in parts past 4 GiB), and a report whose frames, per-frame records, failures,
-//! means and Delaunay statistics are those of all shards in frame order. Frame files, and
+//! means and Delaunay statistics are those of all shards in frame order, with the thumbnails
+//! of the shard whose pictured frame is nearest the middle of all frames. Frame files, and
 //! hence the glTF, are byte-identical to one run's at the default `--hop-threshold 0` (each
 //! shard's incremental Delaunay starts with a rebuild, which equals the incremental update
 //! there); the report differs only in the timings.
@@ -21,8 +22,9 @@ use trisplat_geometry::io::IoError;
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
 use crate::lock::FolderLock;
-use crate::report::{DelaunayStats, MethodReport, Report, Summary};
+use crate::report::{DelaunayStats, MethodReport, Report, Summary, Thumbnails};
 use crate::run::{FrameFilesByMethod, REPORT_JSON, frame_file, refuse_used_output, write_outputs};
+use crate::thumbnail::THUMBNAIL_DIR;
 
 /// Merges the finished shard runs in `shards` into `out` (see the module docs); returns the
 /// merged report. `force`: start over in an output folder that holds a run.
@@ -120,8 +122,49 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
             frame_files.entry(m.method).or_default().push(dst);
         }
     }
+    merged.thumbnails = link_thumbnails(&reports, out, &merged.frames)?;
     write_outputs(out, &mut merged, &frame_files, &OutputTarget::ALL)?;
     Ok(merged)
+}
+
+/// Links (or copies) into `out` the thumbnails of the shard whose thumbnail frame is nearest
+/// the middle of the merged `frames` (each shard pictures its own middle frame); `None` when
+/// no shard has thumbnails.
+fn link_thumbnails(
+    reports: &[(&Path, Report)],
+    out: &Path,
+    frames: &[usize],
+) -> Result<Option<Thumbnails>, PipelineError> {
+    let middle = frames
+        .get(frames.len().saturating_sub(1) / 2)
+        .copied()
+        .unwrap_or(0);
+    let Some((shard, t)) = reports
+        .iter()
+        .filter_map(|(shard, r)| r.thumbnails.as_ref().map(|t| (*shard, t)))
+        .min_by_key(|(_, t)| t.frame.abs_diff(middle))
+    else {
+        return Ok(None);
+    };
+    let dir = out.join(THUMBNAIL_DIR);
+    std::fs::create_dir_all(&dir).map_err(|cause| PipelineError::OutputDir {
+        path: dir.clone(),
+        cause,
+    })?;
+    for file in t.ground_truth.iter().chain(t.methods.values()) {
+        let (src, dst) = (shard.join(file), out.join(file));
+        if !src.is_file() {
+            return Err(PipelineError::Merge {
+                path: src,
+                problem: "thumbnail listed in the shard's report is missing".to_owned(),
+            });
+        }
+        let _ = std::fs::remove_file(&dst);
+        if std::fs::hard_link(&src, &dst).is_err() {
+            std::fs::copy(&src, &dst).map_err(|e| PipelineError::Io(IoError::os(&dst, e)))?;
+        }
+    }
+    Ok(Some(t.clone()))
 }
 
 /// The first field (by report name) in which two shard reports are not the same job.

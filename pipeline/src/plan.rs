@@ -27,7 +27,7 @@ pub enum Stage {
     Metrics,
     /// Per-frame PLY files and one animated glTF per method.
     Write,
-    /// report.json, report.md and error_vs_time.png.
+    /// report.json, report.md, report.html (with thumbnails/), error_vs_time.svg and .png.
     Report,
 }
 
@@ -279,7 +279,10 @@ impl Plan {
             Stage::Report,
             report,
             if report {
-                format!("report.json, report.md, error_vs_time.png ({plot})")
+                format!(
+                    "report.json, report.md, report.html with a thumbnail of each method's mesh \
+                     at the middle frame, error_vs_time.svg and .png ({plot})"
+                )
             } else {
                 "--targets without report (the journal still records every frame)".to_owned()
             },

@@ -1,289 +1,168 @@
-//! error_vs_time.png: a small scatter plot drawn with our own rasteriser and the embedded
-//! bitmap font, written as an 8-bit RGB PNG.
+//! The plot of a run, drawn with `plotters`: `error_vs_time.svg` (text left to the viewer's
+//! sans-serif font) and `error_vs_time.png` (text drawn with the DejaVu Sans cut bundled in
+//! `pipeline/assets/`, so no system font is needed).
 //!
-//! With a ground truth: Chamfer L1 (y) against milliseconds per frame (x), both on log axes,
-//! one small dot per frame and one large dot (black outline) for each method's mean; a method
-//! whose scores are self-consistency (its meshes contain the ground truth's vertices) is
-//! starred in the legend, with a footnote saying its scores are not accuracy. Without:
-//! milliseconds per frame (y, log axis) against the frame index (x, linear), one line per
-//! method; the title says there is no ground truth.
+//! With a ground truth: Chamfer L1 (y) against milliseconds per frame (x), both on log axes
+//! snapped to whole decades. Per method (its own colour and marker shape): a small
+//! translucent mark per frame (every k-th frame past [`MAX_FRAME_MARKS`] frames, said in the
+//! legend), a large outlined mark at the means over the frames, labelled with the method's
+//! name, and bars from the smallest to the largest value over the frames in each direction. A
+//! method whose scores are self-consistency (its meshes contain the ground truth's vertices)
+//! is starred, with a footnote saying its scores are not accuracy. Without a ground truth:
+//! milliseconds per frame (y, log axis) against the frame index (x), one line per method; the
+//! title says there is no ground truth. The legend is a panel right of the chart.
 
 use image::ImageEncoder;
 use image::codecs::png::PngEncoder;
+use plotters::coord::{CoordTranslate, Shift};
+use plotters::prelude::*;
+use plotters::style::FontStyle;
 use trisplat_geometry::io::{IoError, write_atomically};
-
-use crate::config::Method;
-use crate::font;
-use crate::report::Report;
 use trisplat_geometry::metrics::Relation;
 
-/// Plot width in pixels.
-pub const WIDTH: usize = 900;
-/// Plot height in pixels.
-pub const HEIGHT: usize = 600;
-/// Text is drawn at this many pixels per font pixel.
-const TEXT_SCALE: usize = 2;
-const LEFT: usize = 110;
-const RIGHT: usize = 200;
-const TOP: usize = 50;
-const BOTTOM: usize = 70;
+use crate::config::Method;
+use crate::report::Report;
 
-type Rgb = [u8; 3];
-const WHITE: Rgb = [255, 255, 255];
-const BLACK: Rgb = [0, 0, 0];
-const GRID: Rgb = [225, 225, 225];
+/// Plot width in pixels (the PNG's; the SVG's view box).
+pub const WIDTH: u32 = 960;
+/// Plot height in pixels.
+pub const HEIGHT: u32 = 560;
+/// Width of the legend panel right of the chart.
+const LEGEND: u32 = 230;
+/// Past this many frames per method, only every k-th frame gets a mark (the means and bars
+/// cover every frame): the SVG stays small.
+pub const MAX_FRAME_MARKS: usize = 400;
+/// The font family the plot asks for: the SVG names it (the viewer's sans-serif), the PNG
+/// draws it with the bundled font.
+const FAMILY: &str = "sans-serif";
+
+/// DejaVu Sans, cut to Latin-1 and a few symbols (licence and recipe in
+/// `pipeline/assets/DejaVuSans-LICENSE.txt`): lays out the text of both files and draws the
+/// PNG's.
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans-subset.ttf");
+
+/// Registers [`FONT`] as plotters' sans-serif, once; false if the font does not parse.
+fn font_ready() -> bool {
+    static READY: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *READY.get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok())
+}
 
 /// The colour of a method's marks.
 #[must_use]
-pub fn color(method: Method) -> Rgb {
+pub fn color(method: Method) -> RGBColor {
     match method {
-        Method::Tsdf => [31, 119, 180],
-        Method::Delaunay => [255, 127, 14],
-        Method::Alpha => [44, 160, 44],
+        Method::Tsdf => RGBColor(31, 119, 180),
+        Method::Delaunay => RGBColor(230, 110, 0),
+        Method::Alpha => RGBColor(44, 160, 44),
     }
 }
 
-/// An RGB raster.
-#[derive(Clone, Debug)]
-pub struct Canvas {
-    width: usize,
-    height: usize,
-    data: Vec<u8>,
+/// The colour of a method as CSS (`#1f77b4`), for report.html.
+#[must_use]
+pub fn css_color(method: Method) -> String {
+    let c = color(method);
+    format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
 }
 
-impl Canvas {
-    /// A white canvas.
-    #[must_use]
-    pub fn new(width: usize, height: usize) -> Self {
-        Self {
-            width,
-            height,
-            data: vec![255; width * height * 3],
+/// Draws `method`'s marker (a circle for tsdf, a triangle for delaunay, a square for alpha)
+/// of `size` pixels (half-width) at each of `points` in `chart`'s coordinates.
+fn chart_marks<DB, CT>(
+    chart: &mut ChartContext<'_, DB, CT>,
+    method: Method,
+    points: &[CT::From],
+    size: i32,
+    style: ShapeStyle,
+) -> DrawResult<DB::ErrorType>
+where
+    DB: DrawingBackend,
+    CT: CoordTranslate,
+    CT::From: Clone + 'static,
+{
+    let at = |p: &CT::From| EmptyElement::at(p.clone());
+    match method {
+        Method::Tsdf => chart.draw_series(
+            points
+                .iter()
+                .map(|p| at(p) + Circle::new((0, 0), size, style)),
+        ),
+        Method::Delaunay => chart.draw_series(
+            points
+                .iter()
+                .map(|p| at(p) + TriangleMarker::new((0, 0), size + size / 3, style)),
+        ),
+        Method::Alpha => chart.draw_series(
+            points
+                .iter()
+                .map(|p| at(p) + Rectangle::new([(-size, -size), (size, size)], style)),
+        ),
+    }
+    .map(|_| ())
+}
+
+/// Draws `method`'s marker at pixel `at` of `area` (the legend).
+fn legend_mark<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    method: Method,
+    at: (i32, i32),
+    size: i32,
+    style: ShapeStyle,
+) -> DrawResult<DB::ErrorType> {
+    let base = EmptyElement::at(at);
+    match method {
+        Method::Tsdf => area.draw(&(base + Circle::new((0, 0), size, style))),
+        Method::Delaunay => {
+            area.draw(&(base + TriangleMarker::new((0, 0), size + size / 3, style)))
         }
-    }
-
-    /// The pixels, row-major RGB.
-    #[must_use]
-    pub fn data(&self) -> &[u8] {
-        &self.data
-    }
-
-    /// The colour at `(x, y)`, `None` outside.
-    #[must_use]
-    pub fn pixel(&self, x: usize, y: usize) -> Option<Rgb> {
-        (x < self.width && y < self.height).then(|| {
-            let i = (y * self.width + x) * 3;
-            [self.data[i], self.data[i + 1], self.data[i + 2]]
-        })
-    }
-
-    fn set(&mut self, x: i64, y: i64, c: Rgb) {
-        if x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height {
-            let i = (y as usize * self.width + x as usize) * 3;
-            self.data[i..i + 3].copy_from_slice(&c);
-        }
-    }
-
-    fn rect(&mut self, x0: i64, y0: i64, x1: i64, y1: i64, c: Rgb) {
-        for y in y0.min(y1)..=y0.max(y1) {
-            for x in x0.min(x1)..=x0.max(x1) {
-                self.set(x, y, c);
-            }
-        }
-    }
-
-    /// A line (Bresenham), `thick` pixels wide.
-    fn line(&mut self, (x0, y0): (i64, i64), (x1, y1): (i64, i64), c: Rgb, thick: i64) {
-        let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
-        let (sx, sy) = (if x0 < x1 { 1 } else { -1 }, if y0 < y1 { 1 } else { -1 });
-        let (mut x, mut y, mut err) = (x0, y0, dx + dy);
-        let half = thick / 2;
-        loop {
-            self.rect(
-                x - half,
-                y - half,
-                x - half + thick - 1,
-                y - half + thick - 1,
-                c,
-            );
-            if x == x1 && y == y1 {
-                break;
-            }
-            let e2 = 2 * err;
-            if e2 >= dy {
-                err += dy;
-                x += sx;
-            }
-            if e2 <= dx {
-                err += dx;
-                y += sy;
-            }
-        }
-    }
-
-    fn disc(&mut self, cx: i64, cy: i64, r: i64, c: Rgb) {
-        for y in -r..=r {
-            for x in -r..=r {
-                if x * x + y * y <= r * r {
-                    self.set(cx + x, cy + y, c);
-                }
-            }
-        }
-    }
-
-    /// Text with its top-left corner at `(x, y)`; `vertical` turns it 90° counter-clockwise
-    /// (reading upward, `(x, y)` then is its bottom-left corner).
-    fn text(&mut self, x: i64, y: i64, s: &str, c: Rgb, vertical: bool) {
-        let k = TEXT_SCALE as i64;
-        for (n, ch) in s.chars().enumerate() {
-            let g = font::glyph(ch);
-            let advance = n as i64 * (font::WIDTH as i64 + 1) * k;
-            for (row, bits) in g.iter().enumerate() {
-                for (col, b) in bits.bytes().enumerate() {
-                    if b != b'#' {
-                        continue;
-                    }
-                    let (u, v) = (advance + col as i64 * k, row as i64 * k);
-                    for a in 0..k {
-                        for b in 0..k {
-                            if vertical {
-                                self.set(x + v + b, y - u - a, c);
-                            } else {
-                                self.set(x + u + a, y + v + b, c);
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        Method::Alpha => area.draw(&(base + Rectangle::new([(-size, -size), (size, size)], style))),
     }
 }
 
-/// Width of `s` in pixels as drawn.
-fn text_width(s: &str) -> i64 {
-    (s.chars().count() * (font::WIDTH + 1) * TEXT_SCALE) as i64
-}
+/// A mean point `(x, y)` with the smallest and largest x and y over the frames.
+type Mean = ((f64, f64), (f64, f64), (f64, f64));
 
-/// An axis mapping data to pixels, log10 or linear.
-#[derive(Clone, Copy, Debug)]
-struct Axis {
-    lo: f64,
-    hi: f64,
-    log: bool,
-}
-
-impl Axis {
-    /// Covers `values` (finite; positive for log axes); log axes snap to whole decades.
-    fn new(values: &[f64], log: bool) -> Self {
-        let v: Vec<f64> = values
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite() && (!log || *v > 0.0))
-            .map(|v| if log { v.log10() } else { v })
-            .collect();
-        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-        let (lo, hi) = if log {
-            let (a, b) = (lo.floor(), hi.ceil());
-            (a, if b > a { b } else { a + 1.0 })
-        } else if hi > lo {
-            (lo, hi)
-        } else {
-            (lo - 0.5, lo + 0.5)
-        };
-        Self { lo, hi, log }
-    }
-
-    /// Position in `[0, 1]` of `v`.
-    fn unit(&self, v: f64) -> f64 {
-        let v = if self.log {
-            v.max(f64::MIN_POSITIVE).log10()
-        } else {
-            v
-        };
-        ((v - self.lo) / (self.hi - self.lo)).clamp(0.0, 1.0)
-    }
-
-    /// Major ticks: (value, label).
-    fn ticks(&self) -> Vec<(f64, String)> {
-        if self.log {
-            let (a, b) = (self.lo as i32, self.hi as i32);
-            return (a..=b).map(|e| (10f64.powi(e), decade_label(e))).collect();
-        }
-        let span = self.hi - self.lo;
-        let step = nice_step(span / 6.0);
-        let first = (self.lo / step).ceil() as i64;
-        let last = (self.hi / step).floor() as i64;
-        (first..=last)
-            .map(|i| {
-                let v = i as f64 * step;
-                (v, format!("{}", (v * 1e6).round() / 1e6))
-            })
-            .collect()
-    }
-
-    /// Minor ticks (2..9 times each decade) of a log axis.
-    fn minor(&self) -> Vec<f64> {
-        if !self.log {
-            return Vec::new();
-        }
-        (self.lo as i32..self.hi as i32)
-            .flat_map(|e| (2..10).map(move |k| f64::from(k) * 10f64.powi(e)))
-            .collect()
-    }
-}
-
-/// `10^e` as a short label: plain for 1e-2..1e4, else `1e-5`.
-fn decade_label(e: i32) -> String {
-    if (-2..=4).contains(&e) {
-        let v = 10f64.powi(e);
-        format!("{}", (v * 100.0).round() / 100.0)
-    } else {
-        format!("1e{e}")
-    }
-}
-
-/// 1, 2 or 5 times a power of ten, at least `raw`.
-fn nice_step(raw: f64) -> f64 {
-    if !(raw.is_finite() && raw > 0.0) {
-        return 1.0;
-    }
-    let p = 10f64.powf(raw.log10().floor());
-    [1.0, 2.0, 5.0, 10.0]
-        .into_iter()
-        .map(|k| k * p)
-        .find(|s| *s >= raw)
-        .unwrap_or(10.0 * p)
-}
-
-/// One series: a method's points and its mean point.
+/// One method's series.
 struct Series {
     method: Method,
+    /// (x, y) per frame.
     points: Vec<(f64, f64)>,
-    mean: Option<(f64, f64)>,
-    /// Its scores are self-consistency (starred in the legend).
+    /// The mean point, with the range over the frames in x and in y.
+    mean: Option<Mean>,
+    /// Its scores are self-consistency (starred).
     self_consistency: bool,
 }
 
-/// Draws the plot of `report` (see the module docs).
-#[must_use]
-pub fn draw(report: &Report) -> Canvas {
-    let with_error = report.ground_truth.is_some()
-        && report.ordered().iter().any(|m| m.mean.chamfer_l1.is_some());
-    let series: Vec<Series> = report
+/// Smallest and largest of `v`.
+fn span(v: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    v.fold(None, |acc, x| match acc {
+        None => Some((x, x)),
+        Some((lo, hi)) => Some((lo.min(x), hi.max(x))),
+    })
+}
+
+/// The series of `report`: errors against time (with a ground truth), else times per frame.
+fn series(report: &Report) -> Vec<Series> {
+    let with_error = report.has_errors();
+    report
         .ordered()
         .iter()
         .map(|m| {
             if with_error {
+                let points: Vec<(f64, f64)> = m
+                    .frames
+                    .iter()
+                    .filter_map(|r| r.metrics.map(|x| (r.ms, x.chamfer_l1)))
+                    .collect();
+                let mean = m.mean.chamfer_l1.and_then(|c| {
+                    Some((
+                        (m.mean.ms, c),
+                        span(points.iter().map(|p| p.0))?,
+                        span(points.iter().map(|p| p.1))?,
+                    ))
+                });
                 Series {
                     method: m.method,
-                    points: m
-                        .frames
-                        .iter()
-                        .filter_map(|r| r.metrics.map(|x| (r.ms, x.chamfer_l1)))
-                        .collect(),
-                    mean: m.mean.chamfer_l1.map(|c| (m.mean.ms, c)),
+                    points,
+                    mean,
                     self_consistency: m.relation == Some(Relation::SelfConsistency),
                 }
             } else {
@@ -295,156 +174,345 @@ pub fn draw(report: &Report) -> Canvas {
                 }
             }
         })
-        .collect();
-    let xs: Vec<f64> = series
-        .iter()
-        .flat_map(|s| s.points.iter().map(|p| p.0))
-        .collect();
-    let ys: Vec<f64> = series
-        .iter()
-        .flat_map(|s| s.points.iter().map(|p| p.1))
-        .collect();
-    let x_axis = Axis::new(&xs, with_error);
-    let y_axis = Axis::new(&ys, true);
-    let (title, x_label, y_label) = if with_error {
-        (
-            format!(
-                "Chamfer L1 vs time per frame ({} frames, gt: {})",
-                report.frames.len(),
-                report.ground_truth.as_deref().unwrap_or("-")
-            ),
-            "ms per frame (log)",
-            "Chamfer L1 (log)",
-        )
-    } else {
-        (
-            format!(
-                "Time per frame - no ground truth, no error ({} frames)",
-                report.frames.len()
-            ),
-            "frame",
-            "ms per frame (log)",
-        )
-    };
-
-    let mut c = Canvas::new(WIDTH, HEIGHT);
-    let (x0, x1) = (LEFT as i64, (WIDTH - RIGHT) as i64);
-    let (y0, y1) = (TOP as i64, (HEIGHT - BOTTOM) as i64);
-    let px = |v: f64| x0 + (x_axis.unit(v) * (x1 - x0) as f64).round() as i64;
-    let py = |v: f64| y1 - (y_axis.unit(v) * (y1 - y0) as f64).round() as i64;
-
-    // Grid and ticks.
-    for v in x_axis.minor() {
-        c.line((px(v), y0), (px(v), y1), GRID, 1);
-    }
-    for v in y_axis.minor() {
-        c.line((x0, py(v)), (x1, py(v)), GRID, 1);
-    }
-    for (v, label) in x_axis.ticks() {
-        let x = px(v);
-        c.line((x, y0), (x, y1), GRID, 1);
-        c.line((x, y1), (x, y1 + 6), BLACK, 1);
-        c.text(x - text_width(&label) / 2, y1 + 10, &label, BLACK, false);
-    }
-    for (v, label) in y_axis.ticks() {
-        let y = py(v);
-        c.line((x0, y), (x1, y), GRID, 1);
-        c.line((x0 - 6, y), (x0, y), BLACK, 1);
-        c.text(x0 - 10 - text_width(&label), y - 7, &label, BLACK, false);
-    }
-    // Frame.
-    c.line((x0, y0), (x1, y0), BLACK, 1);
-    c.line((x0, y1), (x1, y1), BLACK, 1);
-    c.line((x0, y0), (x0, y1), BLACK, 1);
-    c.line((x1, y0), (x1, y1), BLACK, 1);
-    // Labels.
-    c.text(
-        (WIDTH as i64 - text_width(&title)) / 2,
-        14,
-        &title,
-        BLACK,
-        false,
-    );
-    c.text(
-        (x0 + x1 - text_width(x_label)) / 2,
-        y1 + 40,
-        x_label,
-        BLACK,
-        false,
-    );
-    c.text(
-        14,
-        (y0 + y1 + text_width(y_label)) / 2,
-        y_label,
-        BLACK,
-        true,
-    );
-    // Data.
-    for s in &series {
-        let col = color(s.method);
-        if !with_error {
-            for w in s.points.windows(2) {
-                c.line((px(w[0].0), py(w[0].1)), (px(w[1].0), py(w[1].1)), col, 2);
-            }
-        }
-        for &(x, y) in &s.points {
-            c.disc(px(x), py(y), 3, col);
-        }
-        if let Some((x, y)) = s.mean {
-            c.disc(px(x), py(y), 8, BLACK);
-            c.disc(px(x), py(y), 6, col);
-        }
-    }
-    // Legend; a method scored against the mesh it contains is starred and the star explained.
-    let lx = x1 + 20;
-    let mut starred = false;
-    for (i, s) in series.iter().enumerate() {
-        let y = y0 + 10 + i as i64 * 28;
-        c.disc(lx + 8, y + 7, 6, color(s.method));
-        let label = if with_error && s.self_consistency {
-            starred = true;
-            format!("{} *", s.method.name())
-        } else {
-            s.method.name().to_owned()
-        };
-        c.text(lx + 22, y, &label, BLACK, false);
-    }
-    if with_error {
-        let y = y0 + 10 + series.len() as i64 * 28 + 10;
-        c.disc(lx + 8, y + 7, 8, BLACK);
-        c.disc(lx + 8, y + 7, 6, WHITE);
-        c.text(lx + 22, y, "mean", BLACK, false);
-        if starred {
-            for (k, line) in SELF_CONSISTENCY_NOTE.iter().enumerate() {
-                c.text(lx, y + 40 + k as i64 * 20, line, BLACK, false);
-            }
-        }
-    }
-    c
+        .collect()
 }
 
-/// The legend's footnote for a starred method (lines fit the 200-pixel margin).
-pub const SELF_CONSISTENCY_NOTE: [&str; 4] = [
-    "* scored on",
-    "its own input:",
-    "self-consist.,",
-    "not accuracy",
-];
+/// A log axis over the positive values of `v`, snapped out to whole decades (at least one).
+fn log_range(v: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = span(v.filter(|x| x.is_finite() && *x > 0.0)).unwrap_or((1.0, 10.0));
+    let (a, b) = (lo.log10().floor(), hi.log10().ceil());
+    let b = if b > a { b } else { a + 1.0 };
+    10f64.powf(a)..10f64.powf(b)
+}
 
-/// Draws the plot of `report` and writes it to `path` (PNG, atomically).
+/// A tick label: plain decimals from 0.001 to 99,999, else `2e-5`.
+fn tick(v: f64) -> String {
+    if v == 0.0 {
+        return "0".to_owned();
+    }
+    if (1e-3..1e5).contains(&v.abs()) {
+        // Up to 3 significant digits, no trailing zeros.
+        let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_owned()
+        } else {
+            s
+        }
+    } else {
+        let s = format!("{v:.0e}");
+        s.replace("e-0", "e-")
+    }
+}
+
+/// The title of the plot.
+fn title(report: &Report) -> String {
+    if report.has_errors() {
+        format!(
+            "Chamfer L1 against time per frame \u{2014} {} frames, ground truth: {}",
+            report.frames.len(),
+            report.ground_truth.as_deref().unwrap_or("-")
+        )
+    } else {
+        format!(
+            "Time per frame \u{2014} {} frames, no ground truth (no error to plot)",
+            report.frames.len()
+        )
+    }
+}
+
+/// The note under the legend for a starred method.
+pub const SELF_CONSISTENCY_NOTE: &str = "* scored against the mesh it was made from: \
+     self-consistency, not accuracy";
+
+type DrawResult<E> = Result<(), DrawingAreaErrorKind<E>>;
+
+/// Draws the plot of `report` on `root` (see the module docs).
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    report: &Report,
+) -> DrawResult<DB::ErrorType> {
+    root.fill(&WHITE)?;
+    let (chart_area, legend_area) = root.split_horizontally(WIDTH - LEGEND);
+    let series = series(report);
+    let every = series
+        .iter()
+        .map(|s| s.points.len().div_ceil(MAX_FRAME_MARKS).max(1))
+        .max()
+        .unwrap_or(1);
+    let text = |size: f64| (FAMILY, size).into_font().color(&BLACK);
+    if report.has_errors() {
+        draw_errors(&chart_area, report, &series, every)?;
+    } else {
+        draw_times(&chart_area, report, &series, every)?;
+    }
+    // The legend.
+    let mut y = 60;
+    let x = 14;
+    for s in &series {
+        let c = color(s.method);
+        legend_mark(&legend_area, s.method, (x + 7, y), 8, BLACK.filled())?;
+        legend_mark(&legend_area, s.method, (x + 7, y), 6, c.filled())?;
+        let star = if s.self_consistency { " *" } else { "" };
+        legend_area.draw(&Text::new(
+            format!("{}{star}", s.method.name()),
+            (x + 20, y - 8),
+            text(19.0),
+        ))?;
+        y += 26;
+    }
+    y += 8;
+    let grey = RGBColor(90, 90, 90);
+    let small = (FAMILY, 16.0).into_font().color(&grey);
+    let mut notes: Vec<String> = Vec::new();
+    if report.has_errors() {
+        notes.push(
+            "large mark: mean over the frames; bars: smallest to largest over the frames"
+                .to_owned(),
+        );
+        notes.push(if every > 1 {
+            format!("small marks: every {} frame", ordinal(every))
+        } else {
+            "small marks: one per frame".to_owned()
+        });
+    } else if every > 1 {
+        notes.push(format!("marks: every {} frame", ordinal(every)));
+    }
+    notes.push(if report.serial_methods {
+        "ms: each method alone (--serial-methods)".to_owned()
+    } else {
+        "ms: methods ran side by side, sharing the cores".to_owned()
+    });
+    if series.iter().any(|s| s.self_consistency) {
+        notes.push(SELF_CONSISTENCY_NOTE.to_owned());
+    }
+    let width = LEGEND as i32 - 2 * x;
+    for note in notes {
+        for line in wrap(&legend_area, &note, &small, width) {
+            legend_area.draw(&Text::new(line, (x, y), small.clone()))?;
+            y += 17;
+        }
+        y += 8;
+    }
+    root.present()
+}
+
+/// `n` as an English ordinal: 2nd, 3rd, 11th, 21st.
+fn ordinal(n: usize) -> String {
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
+}
+
+/// `text` broken into lines no wider than `width` pixels as drawn in `style`.
+fn wrap<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    text: &str,
+    style: &TextStyle<'_>,
+    width: i32,
+) -> Vec<String> {
+    let fits = |s: &str| {
+        area.estimate_text_size(s, style)
+            .is_ok_and(|(w, _)| w as i32 <= width)
+    };
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        let candidate = if line.is_empty() {
+            word.to_owned()
+        } else {
+            format!("{line} {word}")
+        };
+        if line.is_empty() || fits(&candidate) {
+            line = candidate;
+        } else {
+            lines.push(std::mem::replace(&mut line, word.to_owned()));
+        }
+    }
+    if !line.is_empty() {
+        lines.push(line);
+    }
+    lines
+}
+
+/// Chamfer L1 against ms per frame, log-log.
+fn draw_errors<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    report: &Report,
+    series: &[Series],
+    every: usize,
+) -> DrawResult<DB::ErrorType> {
+    let all = || series.iter().flat_map(|s| s.points.iter().copied());
+    let xr = log_range(all().map(|p| p.0));
+    let yr = log_range(all().map(|p| p.1));
+    let (ylo, yhi) = (yr.start, yr.end);
+    let mut chart = ChartBuilder::on(area)
+        .caption(title(report), (FAMILY, 23))
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(84)
+        .build_cartesian_2d(xr.log_scale(), yr.log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("time per frame, ms (log scale)")
+        .y_desc("Chamfer L1 to the ground truth, scene units (log scale)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 18))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .light_line_style(RGBColor(240, 240, 240))
+        .draw()?;
+    let clamp = |y: f64| y.clamp(ylo, yhi);
+    for s in series {
+        let c = color(s.method);
+        let points: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .step_by(every)
+            .map(|&(x, y)| (x, clamp(y)))
+            .collect();
+        chart_marks(&mut chart, s.method, &points, 3, c.mix(0.45).filled())?;
+    }
+    for s in series {
+        let Some(((mx, my), (x0, x1), (y0, y1))) = s.mean else {
+            continue;
+        };
+        let c = color(s.method);
+        let bar = c.stroke_width(2);
+        chart.draw_series([
+            PathElement::new(vec![(x0, clamp(my)), (x1, clamp(my))], bar),
+            PathElement::new(vec![(mx, clamp(y0)), (mx, clamp(y1))], bar),
+        ])?;
+        let at = [(mx, clamp(my))];
+        // Outlined: a larger black mark under the coloured one (plotters fills triangles).
+        chart_marks(&mut chart, s.method, &at, 10, BLACK.filled())?;
+        chart_marks(&mut chart, s.method, &at, 8, c.filled())?;
+        let star = if s.self_consistency { " *" } else { "" };
+        chart.draw_series([EmptyElement::at((mx, clamp(my)))
+            + Text::new(
+                format!("{}{star}", s.method.name()),
+                (12, -24),
+                (FAMILY, 18).into_font().color(&BLACK),
+            )])?;
+    }
+    Ok(())
+}
+
+/// ms per frame (log) against the frame index.
+fn draw_times<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    report: &Report,
+    series: &[Series],
+    every: usize,
+) -> DrawResult<DB::ErrorType> {
+    let all = || series.iter().flat_map(|s| s.points.iter().copied());
+    let (f0, f1) = span(all().map(|p| p.0)).unwrap_or((0.0, 1.0));
+    let (f0, f1) = if f1 > f0 {
+        (f0, f1)
+    } else {
+        (f0 - 0.5, f0 + 0.5)
+    };
+    let yr = log_range(all().map(|p| p.1));
+    let (ylo, yhi) = (yr.start, yr.end);
+    let mut chart = ChartBuilder::on(area)
+        .caption(title(report), (FAMILY, 23))
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(84)
+        .build_cartesian_2d(f0..f1, yr.log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("animation frame")
+        .y_desc("time per frame, ms (log scale)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 18))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .light_line_style(RGBColor(240, 240, 240))
+        .draw()?;
+    for s in series {
+        let c = color(s.method);
+        let points: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .map(|&(x, y)| (x, y.clamp(ylo, yhi)))
+            .collect();
+        chart.draw_series(LineSeries::new(points.iter().copied(), c.stroke_width(2)))?;
+        let marks: Vec<(f64, f64)> = points.iter().step_by(every).copied().collect();
+        chart_marks(&mut chart, s.method, &marks, 4, c.filled())?;
+    }
+    Ok(())
+}
+
+/// Why the plot could not be drawn (a font that does not parse, a backend failure).
+fn plot_error(path: &std::path::Path, what: impl std::fmt::Display) -> IoError {
+    IoError::os(
+        path,
+        std::io::Error::other(format!("drawing the plot: {what}")),
+    )
+}
+
+/// The plot of `report` as an SVG document (text in the viewer's sans-serif font).
 ///
 /// # Errors
-/// [`IoError`] when the file cannot be written.
-pub fn write_plot(path: &std::path::Path, report: &Report) -> Result<(), IoError> {
-    let canvas = draw(report);
+/// A message when plotters fails (it does not for a report `run` made).
+pub fn svg(report: &Report) -> Result<String, String> {
+    if !font_ready() {
+        return Err("the bundled font does not parse".to_owned());
+    }
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, (WIDTH, HEIGHT)).into_drawing_area();
+        draw(&root, report).map_err(|e| e.to_string())?;
+    }
+    Ok(out)
+}
+
+/// The plot of `report` as 8-bit RGB pixels, [`WIDTH`] x [`HEIGHT`], row-major.
+///
+/// # Errors
+/// A message when plotters fails (it does not for a report `run` made).
+pub fn pixels(report: &Report) -> Result<Vec<u8>, String> {
+    if !font_ready() {
+        return Err("the bundled font does not parse".to_owned());
+    }
+    let mut buf = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (WIDTH, HEIGHT)).into_drawing_area();
+        draw(&root, report).map_err(|e| e.to_string())?;
+    }
+    Ok(buf)
+}
+
+/// Writes the plot of `report` as SVG to `path` (atomically); returns the SVG.
+///
+/// # Errors
+/// [`IoError`] when it cannot be drawn or written.
+pub fn write_svg(path: &std::path::Path, report: &Report) -> Result<String, IoError> {
+    let text = svg(report).map_err(|e| plot_error(path, e))?;
+    write_atomically(path, |w| {
+        w.write_all(text.as_bytes())
+            .map_err(|e| IoError::os(path, e))
+    })?;
+    Ok(text)
+}
+
+/// Writes the plot of `report` as PNG to `path` (atomically).
+///
+/// # Errors
+/// [`IoError`] when it cannot be drawn or written.
+pub fn write_png(path: &std::path::Path, report: &Report) -> Result<(), IoError> {
+    let buf = pixels(report).map_err(|e| plot_error(path, e))?;
     write_atomically(path, |w| {
         PngEncoder::new(w)
-            .write_image(
-                canvas.data(),
-                WIDTH as u32,
-                HEIGHT as u32,
-                image::ExtendedColorType::Rgb8,
-            )
+            .write_image(&buf, WIDTH, HEIGHT, image::ExtendedColorType::Rgb8)
             .map_err(|e| IoError::os(path, std::io::Error::other(e.to_string())))
     })
 }
@@ -454,65 +522,80 @@ mod tests {
     use super::*;
 
     #[test]
-    fn log_axis_snaps_to_decades() {
-        let a = Axis::new(&[0.003, 0.02], true);
-        assert_eq!((a.lo, a.hi), (-3.0, -1.0));
-        assert_eq!(a.ticks().len(), 3);
-        assert!((a.unit(0.01) - 0.5).abs() < 1e-12);
-        // One value: one decade around it; no values: a default range; never NaN.
-        let one = Axis::new(&[5.0], true);
-        assert_eq!((one.lo, one.hi), (0.0, 1.0));
-        let none = Axis::new(&[f64::NAN, -1.0], true);
-        assert!(none.unit(3.0).is_finite());
+    fn log_ranges_snap_to_decades_and_ticks_read_well() {
+        assert_eq!(log_range([0.003, 0.02].into_iter()), 0.001..0.1);
+        assert_eq!(log_range([5.0].into_iter()), 1.0..10.0);
+        assert_eq!(log_range([f64::NAN, -1.0, 0.0].into_iter()), 1.0..10.0);
+        assert_eq!(tick(0.001), "0.001");
+        assert_eq!(tick(0.002), "0.002");
+        assert_eq!(tick(0.0001), "1e-4");
+        assert_eq!(tick(2e-5), "2e-5");
+        assert_eq!(tick(100.0), "100");
+        assert_eq!(tick(250.0), "250");
+        assert_eq!(tick(1e6), "1e6");
+        assert_eq!(tick(0.5), "0.5");
+        assert_eq!(tick(0.0), "0");
+        let ords: Vec<String> = [2, 3, 4, 11, 12, 13, 21, 22, 101].map(ordinal).into();
+        assert_eq!(
+            ords,
+            [
+                "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "101st"
+            ]
+        );
     }
 
     #[test]
-    fn linear_ticks_are_nice() {
-        let a = Axis::new(&[0.0, 9.0], false);
-        let t: Vec<f64> = a.ticks().into_iter().map(|t| t.0).collect();
-        assert_eq!(t, vec![0.0, 2.0, 4.0, 6.0, 8.0]);
-        assert_eq!(nice_step(0.13), 0.2);
-        assert_eq!(decade_label(-3), "1e-3");
-        assert_eq!(decade_label(2), "100");
-        assert_eq!(decade_label(-1), "0.1");
+    fn the_bundled_font_registers_and_lays_out_text() {
+        assert!(font_ready());
+        let mut s = String::new();
+        let root = SVGBackend::with_string(&mut s, (100, 100)).into_drawing_area();
+        let style: TextStyle<'_> = (FAMILY, 16).into_font().into();
+        let (short, _) = root.estimate_text_size("ms", &style).expect("layout");
+        let (long, _) = root
+            .estimate_text_size("milliseconds", &style)
+            .expect("layout");
+        assert!(short > 0 && long > 3 * short, "{short} {long}");
+        let lines = wrap(&root, SELF_CONSISTENCY_NOTE, &style, 180);
+        assert!(lines.len() > 1 && lines.join(" ") == SELF_CONSISTENCY_NOTE);
     }
 
     /// A report of two methods with one measured frame each; delaunay's scores are
-    /// self-consistency when `own`.
-    fn report(own: bool) -> Report {
-        use crate::config::Method;
+    /// self-consistency when `own`; without metrics when not `measured`.
+    pub(crate) fn report(own: bool, measured: bool) -> Report {
         use crate::methods::Resolved;
         use crate::report::{FrameMetrics, FrameRecord, MethodReport, Summary};
         use std::collections::BTreeMap;
         let method = |m: Method, c: f64, relation: Relation| {
-            let frames = vec![FrameRecord {
-                frame: 0,
-                time: 0.0,
-                ms: 10.0 * c,
-                render_ms: None,
-                vertices: 3,
-                faces: 1,
-                watertight: false,
-                metrics: Some(FrameMetrics {
-                    chamfer_l1: c,
-                    chamfer_l2: c * c,
-                    normal_consistency: None,
-                    normal_angle_deg: None,
-                    accuracy: c,
-                    completeness: c,
-                    precision: 1.0,
-                    recall: 1.0,
-                    fscore: 1.0,
-                    tau: 0.01,
-                    tau_fraction: Some(0.005),
-                    gt_diagonal: 2.0,
-                    gt_area: 1.0,
-                    area_ratio: Some(1.0),
-                    shared_vertex_fraction: Some(0.0),
-                    relation,
-                    structure: None,
-                }),
-            }];
+            let frames: Vec<FrameRecord> = (0..3)
+                .map(|f| FrameRecord {
+                    frame: f,
+                    time: f as f64 / 3.0,
+                    ms: 10.0 * c * (1.0 + f as f64),
+                    render_ms: None,
+                    vertices: 3,
+                    faces: 1,
+                    watertight: false,
+                    metrics: measured.then_some(FrameMetrics {
+                        chamfer_l1: c * (1.0 + 0.1 * f as f64),
+                        chamfer_l2: c * c,
+                        normal_consistency: None,
+                        normal_angle_deg: None,
+                        accuracy: c,
+                        completeness: c,
+                        precision: 1.0,
+                        recall: 1.0,
+                        fscore: 1.0,
+                        tau: 0.01,
+                        tau_fraction: Some(0.005),
+                        gt_diagonal: 2.0,
+                        gt_area: 1.0,
+                        area_ratio: Some(1.0),
+                        shared_vertex_fraction: Some(0.0),
+                        relation,
+                        structure: None,
+                    }),
+                })
+                .collect();
             let mean = Summary::of(&frames);
             MethodReport {
                 method: m,
@@ -520,8 +603,8 @@ mod tests {
                 relation: mean.relation(),
                 mean,
                 frames,
-                ply_dir: String::new(),
-                glb: String::new(),
+                ply_dir: m.name().to_owned(),
+                glb: format!("{}.glb", m.name()),
                 glb_parts: Vec::new(),
                 delaunay: None,
             }
@@ -533,19 +616,19 @@ mod tests {
         };
         Report {
             version: String::new(),
-            template: String::new(),
+            template: "t.glb".to_owned(),
             template_vertices: 3,
             welded_vertices: 3,
-            animation: String::new(),
+            animation: "t.glb".to_owned(),
             unused_channels: Vec::new(),
             gaussians: String::new(),
             gaussian_count: 1,
-            mode: String::new(),
-            frames: vec![0],
-            frame_times: vec![0.0],
-            deform_ms: vec![0.0],
+            mode: "binding".to_owned(),
+            frames: vec![0, 1, 2],
+            frame_times: vec![0.0; 3],
+            deform_ms: vec![0.0; 3],
             failed_frames: Vec::new(),
-            ground_truth: Some("template".to_owned()),
+            ground_truth: measured.then(|| "template".to_owned()),
             samples: 10,
             tau: None,
             tau_fraction: Some(0.005),
@@ -566,45 +649,49 @@ mod tests {
                     method(Method::Delaunay, 0.001, relation),
                 ),
             ]),
+            thumbnails: None,
         }
     }
 
     #[test]
-    fn self_consistency_is_starred_and_explained_in_the_legend() {
-        let ink = |c: &Canvas| {
-            let mut n = 0;
-            for y in 0..HEIGHT {
-                for x in WIDTH - RIGHT..WIDTH {
-                    n += usize::from(c.pixel(x, y) == Some(BLACK));
-                }
-            }
-            n
-        };
-        let plain = draw(&report(false));
-        let starred = draw(&report(true));
-        let note: usize = SELF_CONSISTENCY_NOTE
-            .iter()
-            .map(|l| text_width(l) as usize)
-            .sum();
-        assert!(
-            ink(&starred) > ink(&plain) + note,
-            "the star and the note add ink"
-        );
-        let margin = (RIGHT - 20) as i64;
-        assert!(
-            SELF_CONSISTENCY_NOTE
-                .iter()
-                .all(|l| text_width(l) <= margin)
-        );
+    fn the_svg_names_each_method_its_axes_and_the_self_consistency() {
+        let plain = svg(&report(false, true)).expect("svg");
+        assert!(plain.starts_with("<svg"), "{}", &plain[..60]);
+        assert!(plain.trim_end().ends_with("</svg>"));
+        for label in [
+            ">\ntsdf\n</text>",
+            ">\ndelaunay\n</text>",
+            "time per frame, ms (log scale)",
+            "Chamfer L1 to the ground truth, scene units (log scale)",
+            "ground truth: template",
+        ] {
+            assert!(plain.contains(label), "{label} missing");
+        }
+        assert!(!plain.contains("self-consistency"));
+        let starred = svg(&report(true, true)).expect("svg");
+        assert!(starred.contains(">\ndelaunay *\n</text>"));
+        assert!(starred.contains("self-consistency, not"), "the footnote");
+        // Without metrics: time per frame against the frame.
+        let times = svg(&report(false, false)).expect("svg");
+        assert!(times.contains("animation frame") && times.contains("no ground truth"));
+        assert!(!times.contains("Chamfer L1 to"));
     }
 
     #[test]
-    fn text_and_lines_leave_ink() {
-        let mut c = Canvas::new(60, 30);
-        c.text(1, 1, "A1", BLACK, false);
-        assert_eq!(c.pixel(1, 3), Some(BLACK)); // left stroke of A
-        c.line((0, 29), (59, 29), [1, 2, 3], 1);
-        assert_eq!(c.pixel(30, 29), Some([1, 2, 3]));
-        assert_eq!(c.pixel(60, 0), None);
+    fn the_png_has_text_and_each_method_colour() {
+        let px = pixels(&report(true, true)).expect("pixels");
+        assert_eq!(px.len(), (WIDTH * HEIGHT * 3) as usize);
+        let has = |c: RGBColor| px.chunks_exact(3).any(|p| p == [c.0, c.1, c.2]);
+        assert!(has(color(Method::Tsdf)) && has(color(Method::Delaunay)));
+        assert!(!has(color(Method::Alpha)), "no alpha in this report");
+        // Text in the legend panel: dark pixels right of the chart, where only the legend is.
+        let dark = (0..HEIGHT as usize)
+            .flat_map(|y| ((WIDTH - LEGEND) as usize + 30..WIDTH as usize).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let i = 3 * (y * WIDTH as usize + x);
+                px[i] < 100 && px[i + 1] < 100 && px[i + 2] < 100
+            })
+            .count();
+        assert!(dark > 300, "legend text drawn: {dark} dark pixels");
     }
 }

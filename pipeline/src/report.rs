@@ -33,6 +33,7 @@ use trisplat_geometry::{PointCloud, TriMesh};
 
 use crate::config::Method;
 use crate::methods::Resolved;
+use crate::run::{PLOT_PNG, PLOT_SVG, REPORT_HTML};
 
 /// Seed of the prediction's surface samples (the ground truth uses `splitmix64` of it), as
 /// `trisplat eval`'s default.
@@ -91,6 +92,27 @@ impl GtSamples {
     #[must_use]
     pub fn diagonal(&self) -> f64 {
         self.diagonal
+    }
+
+    /// Euclidean distance from `point` (world space, f64) to the ground truth's surface, exact
+    /// up to f64 rounding (the closest point on its triangles); `None` when the mesh could not
+    /// be indexed or `point` is not finite.
+    #[must_use]
+    pub fn distance(&self, point: DVec3) -> Option<f64> {
+        let bvh = self.bvh.as_ref()?;
+        bvh.closest_point(point - self.origin).map(|c| c.distance)
+    }
+
+    /// [`GtSamples::distance`] of every point, in parallel; `None` when the mesh could not be
+    /// indexed or a point is not finite.
+    #[must_use]
+    pub fn distances(&self, points: &[DVec3]) -> Option<Vec<f64>> {
+        use rayon::prelude::*;
+        points
+            .par_iter()
+            .with_min_len(256)
+            .map(|&p| self.distance(p))
+            .collect()
     }
 
     /// The ground truth as one side of a comparison.
@@ -406,12 +428,117 @@ pub struct Summary {
     pub self_consistency_frames: usize,
 }
 
-/// The "scored as" cell: what a method's or frame's scores measure.
-fn scored_as(relation: Option<Relation>) -> &'static str {
+/// The "scored as" cell: what a method's or frame's scores measure (self-consistency in
+/// bold).
+fn scored_as(relation: Option<Relation>) -> Cell {
     match relation {
-        Some(Relation::Accuracy) => "accuracy",
-        Some(Relation::SelfConsistency) => "**self-consistency**",
-        None => "-",
+        Some(Relation::Accuracy) => Cell::plain("accuracy".to_owned()),
+        Some(Relation::SelfConsistency) => Cell {
+            text: "self-consistency".to_owned(),
+            strong: true,
+        },
+        None => Cell::plain("-".to_owned()),
+    }
+}
+
+/// `v` in scientific notation with `digits` decimals, `-` when absent.
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$e}"))
+}
+
+/// `v` with 4 decimals, `-` when absent.
+fn optf(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"))
+}
+
+/// `v` with `digits` decimals, `-` when absent.
+fn fixed(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$}"))
+}
+
+/// The fraction `v` as a percentage with 2 decimals, `-` when absent.
+fn pct(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".to_owned(), |x| format!("{:.2}%", 100.0 * x))
+}
+
+/// `v` with at most 6 significant digits, without trailing zeros (`24`, `0.00603532`; the
+/// exact value is in report.json).
+fn significant(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let decimals = (5 - v.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        s
+    }
+}
+
+/// One cell of a report table.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Cell {
+    /// Its text (plain, not escaped).
+    pub text: String,
+    /// Shown in bold (report.md `**…**`, report.html `<strong>`).
+    pub strong: bool,
+}
+
+impl Cell {
+    /// A cell in normal weight.
+    #[must_use]
+    pub fn plain(text: String) -> Self {
+        Self {
+            text,
+            strong: false,
+        }
+    }
+}
+
+/// A table of the report, as report.md and report.html print it (the same cells in both).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Table {
+    /// Column titles.
+    pub header: Vec<String>,
+    /// Per column: aligned right (numbers) rather than left.
+    pub right: Vec<bool>,
+    /// The rows, each with one cell per column.
+    pub rows: Vec<Vec<Cell>>,
+}
+
+impl Table {
+    /// An empty table with these columns (title, aligned right).
+    fn new(columns: &[(&str, bool)]) -> Self {
+        Self {
+            header: columns.iter().map(|c| c.0.to_owned()).collect(),
+            right: columns.iter().map(|c| c.1).collect(),
+            rows: Vec::new(),
+        }
+    }
+
+    /// The table in Markdown (GitHub's pipe tables), one line per row.
+    #[must_use]
+    pub fn markdown(&self) -> String {
+        let mut s = format!("| {} |\n|", self.header.join(" | "));
+        for &right in &self.right {
+            s.push_str(if right { "---:|" } else { "---|" });
+        }
+        s.push('\n');
+        for row in &self.rows {
+            let cells: Vec<String> = row
+                .iter()
+                .map(|c| {
+                    if c.strong {
+                        format!("**{}**", c.text)
+                    } else {
+                        c.text.clone()
+                    }
+                })
+                .collect();
+            let _ = writeln!(s, "| {} |", cells.join(" | "));
+        }
+        s
     }
 }
 
@@ -577,6 +704,27 @@ pub struct Report {
     pub serial_methods: bool,
     /// One entry per method, by name.
     pub methods: BTreeMap<String, MethodReport>,
+    /// Thumbnails of one frame's meshes, shown in report.html (absent when that frame
+    /// failed or the report was written by an older version).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thumbnails: Option<Thumbnails>,
+}
+
+/// Thumbnails of one frame's meshes: each method's mesh and the ground truth seen from the
+/// same camera, coloured by the distance of each visible point to the ground truth's surface
+/// (module [`crate::thumbnail`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Thumbnails {
+    /// The animation frame shown.
+    pub frame: usize,
+    /// The distance at the top of the colour scale (2 x the frame's F-score threshold tau,
+    /// scene units; farther points take the top colour); `None` without a ground truth (the
+    /// meshes are shaded grey).
+    pub scale: Option<f64>,
+    /// The ground truth's picture, relative to the output folder, when there is one.
+    pub ground_truth: Option<String>,
+    /// Each method's picture, by method name, relative to the output folder.
+    pub methods: BTreeMap<String, String>,
 }
 
 impl Report {
@@ -586,6 +734,13 @@ impl Report {
         let mut v: Vec<&MethodReport> = self.methods.values().collect();
         v.sort_by_key(|m| m.method);
         v
+    }
+
+    /// Whether there are errors to plot: a ground truth and at least one measured frame
+    /// (else the plot shows the time per frame).
+    #[must_use]
+    pub fn has_errors(&self) -> bool {
+        self.ground_truth.is_some() && self.methods.values().any(|m| m.mean.chamfer_l1.is_some())
     }
 
     /// Writes report.json atomically.
@@ -602,35 +757,31 @@ impl Report {
         })
     }
 
-    /// The Markdown report.
+    /// The lines above the tables (template, animation, Gaussians, frames, timing, ground
+    /// truth, failures, deformation), as Markdown list items without the leading `- `.
     #[must_use]
-    pub fn markdown(&self) -> String {
-        let mut s = String::new();
-        let _ = writeln!(s, "# trisplat extract report\n");
-        let _ = writeln!(
-            s,
-            "- template: `{}` ({} vertices, {} after welding seams by position)",
+    pub fn facts(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        v.push(format!(
+            "template: `{}` ({} vertices, {} after welding seams by position)",
             self.template, self.template_vertices, self.welded_vertices
-        );
-        let _ = writeln!(s, "- animation: `{}`", self.animation);
-        let _ = writeln!(
-            s,
-            "- Gaussians: {} ({} Gaussians), mode {}",
+        ));
+        v.push(format!("animation: `{}`", self.animation));
+        v.push(format!(
+            "Gaussians: {} ({} Gaussians), mode {}",
             self.gaussians, self.gaussian_count, self.mode
-        );
+        ));
         let (first, last) = (
             self.frames.first().copied().unwrap_or(0),
             self.frames.last().copied().unwrap_or(0),
         );
-        let _ = writeln!(s, "- frames: {} ({first}..={last})", self.frames.len());
-        let _ = writeln!(
-            s,
-            "- template radius {:.6}, mean Gaussian spacing {:.6}",
+        v.push(format!("frames: {} ({first}..={last})", self.frames.len()));
+        v.push(format!(
+            "template radius {:.6}, mean Gaussian spacing {:.6}",
             self.resolved.template_radius, self.resolved.mean_spacing
-        );
-        let _ = writeln!(
-            s,
-            "- timing: {}",
+        ));
+        v.push(format!(
+            "timing: {}",
             if self.serial_methods {
                 "the methods ran one after another (--serial-methods): each method's ms/frame \
                  is its time alone"
@@ -638,185 +789,148 @@ impl Report {
                 "the methods ran side by side: each method's ms/frame includes waiting for the \
                  cores the others held (--serial-methods times each alone)"
             }
-        );
+        ));
         match &self.ground_truth {
-            Some(gt) => {
-                let _ = writeln!(
-                    s,
-                    "- ground truth: `{gt}`; {} samples per mesh, exact point-to-triangle \
-                     distances (docs/conventions.md §8), precision, recall and F-score at {}",
-                    self.samples,
-                    self.tau_description()
-                );
-            }
-            None => {
-                let _ = writeln!(s, "- ground truth: none (no metrics)");
-            }
+            Some(gt) => v.push(format!(
+                "ground truth: `{gt}`; {} samples per mesh, exact point-to-triangle \
+                 distances (docs/conventions.md §8), precision, recall and F-score at {}",
+                self.samples,
+                self.tau_description()
+            )),
+            None => v.push("ground truth: none (no metrics)".to_owned()),
         }
         if !self.failed_frames.is_empty() {
-            let _ = writeln!(
-                s,
-                "- **failed frames** ({}; not in the tables below):",
+            let mut line = format!(
+                "**failed frames** ({}; not in the tables below):",
                 self.failed_frames.len()
             );
             for f in &self.failed_frames {
-                let _ = writeln!(s, "  - frame {}: {}", f.frame, f.error);
+                let _ = write!(line, "\n  - frame {}: {}", f.frame, f.error);
             }
+            v.push(line);
         }
         if !self.unused_channels.is_empty() {
-            let _ = writeln!(
-                s,
-                "- channels of the animation that drive no morph target (ignored): {}",
+            v.push(format!(
+                "channels of the animation that drive no morph target (ignored): {}",
                 self.unused_channels.join(", ")
-            );
+            ));
         }
         let deform = mean(self.deform_ms.iter().copied()).unwrap_or(0.0);
-        let _ = writeln!(
-            s,
-            "- deformation: {deform:.2} ms/frame (not included below)\n"
-        );
-        let _ = writeln!(s, "## Means over frames\n");
-        let _ = writeln!(
-            s,
-            "| method | scored as | ms/frame | median ms | vertices | faces | watertight | components | largest piece | boundary edges | area ratio | Chamfer L1 | Chamfer L2 | normal consistency | normal angle ° | recall | F-score |"
-        );
-        let _ = writeln!(
-            s,
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-        );
-        let opt = |v: Option<f64>, digits: usize| {
-            v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$e}"))
-        };
-        let optf = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
-        let fixed = |v: Option<f64>, digits: usize| {
-            v.map_or_else(|| "-".to_owned(), |x| format!("{x:.digits$}"))
-        };
-        let pct =
-            |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |x| format!("{:.2}%", 100.0 * x));
+        v.push(format!(
+            "deformation: {deform:.2} ms/frame (not included below)"
+        ));
+        v
+    }
+
+    /// The table of means over the frames, one row per method (report.md's and
+    /// report.html's "Means over frames").
+    #[must_use]
+    pub fn summary_table(&self) -> Table {
+        let mut t = Table::new(&[
+            ("method", false),
+            ("scored as", false),
+            ("ms/frame", true),
+            ("median ms", true),
+            ("vertices", true),
+            ("faces", true),
+            ("watertight", true),
+            ("components", true),
+            ("largest piece", true),
+            ("boundary edges", true),
+            ("area ratio", true),
+            ("Chamfer L1", true),
+            ("Chamfer L2", true),
+            ("normal consistency", true),
+            ("normal angle °", true),
+            ("recall", true),
+            ("F-score", true),
+        ]);
         for m in self.ordered() {
             let a = &m.mean;
-            let _ = writeln!(
-                s,
-                "| {} | {} | {:.2} | {:.2} | {:.0} | {:.0} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                m.method,
-                scored_as(m.relation),
-                a.ms,
-                a.median_ms,
-                a.vertices,
-                a.faces,
-                a.watertight_frames,
-                a.frames,
-                fixed(a.components, 1),
-                pct(a.largest_component_area_fraction),
-                fixed(a.boundary_edges, 1),
-                optf(a.area_ratio),
-                opt(a.chamfer_l1, 4),
-                opt(a.chamfer_l2, 4),
-                optf(a.normal_consistency),
-                fixed(a.normal_angle_deg, 2),
-                optf(a.recall),
-                optf(a.fscore),
+            let mut row = vec![Cell::plain(m.method.to_string()), scored_as(m.relation)];
+            row.extend(
+                [
+                    format!("{:.2}", a.ms),
+                    format!("{:.2}", a.median_ms),
+                    format!("{:.0}", a.vertices),
+                    format!("{:.0}", a.faces),
+                    format!("{}/{}", a.watertight_frames, a.frames),
+                    fixed(a.components, 1),
+                    pct(a.largest_component_area_fraction),
+                    fixed(a.boundary_edges, 1),
+                    optf(a.area_ratio),
+                    opt(a.chamfer_l1, 4),
+                    opt(a.chamfer_l2, 4),
+                    optf(a.normal_consistency),
+                    fixed(a.normal_angle_deg, 2),
+                    optf(a.recall),
+                    optf(a.fscore),
+                ]
+                .map(Cell::plain),
             );
+            t.rows.push(row);
         }
-        for m in self.ordered() {
-            if m.relation == Some(Relation::SelfConsistency) {
-                let _ = writeln!(s, "\n{}", self_consistency_note(m));
-            }
+        t
+    }
+
+    /// The per-frame table of method `m` (with the incremental update's columns for
+    /// delaunay).
+    #[must_use]
+    pub fn frame_table(m: &MethodReport) -> Table {
+        let mut columns = vec![
+            ("frame", true),
+            ("time s", true),
+            ("ms", true),
+            ("vertices", true),
+            ("faces", true),
+            ("watertight", false),
+            ("components", true),
+            ("largest piece", true),
+            ("boundary edges", true),
+            ("area ratio", true),
+            ("scored as", false),
+            ("Chamfer L1", true),
+            ("Chamfer L2", true),
+            ("normal consistency", true),
+            ("normal angle °", true),
+            ("tau", true),
+            ("recall", true),
+            ("F-score", true),
+        ];
+        // Delaunay adds what its update did.
+        if m.delaunay.is_some() {
+            columns.extend([
+                ("hopped", true),
+                ("charts redone", true),
+                ("rebuilt", false),
+            ]);
         }
-        for m in self.ordered() {
-            let params: Vec<String> = m
-                .parameters
-                .iter()
-                .map(|(k, v)| format!("{k} {v}"))
-                .collect();
-            let glb = if m.glb_parts.is_empty() {
-                m.glb.clone()
-            } else {
-                m.glb_parts.join("`, `")
-            };
-            let _ = writeln!(
-                s,
-                "\n## {}\n\nparameters: {}; files: `{}/`, `{glb}`\n",
-                m.method,
-                params.join(", "),
-                m.ply_dir,
-            );
-            match m.relation {
-                Some(Relation::SelfConsistency) => {
-                    let _ = writeln!(s, "{}\n", self_consistency_note(m));
-                }
-                Some(Relation::Accuracy) => {
-                    let _ = writeln!(
-                        s,
-                        "scores: accuracy (the meshes do not contain the ground truth's \
-                         vertices: mean shared-vertex fraction {})\n",
-                        pct(m.mean.shared_vertex_fraction)
-                    );
-                }
-                None => {}
-            }
-            if let Some(d) = &m.delaunay {
-                let pct = |v: Option<f64>| {
-                    v.map_or_else(|| "-".to_owned(), |x| format!("{:.3}%", 100.0 * x))
-                };
-                let _ = writeln!(
-                    s,
-                    "incremental updates: {} of {} frames rebuilt from scratch; per other frame, \
-                     Gaussians hopped {} (of {}), charts redone {} (of {})\n",
-                    d.rebuilt_frames,
-                    d.frames.len(),
-                    pct(d.hopped_fraction),
-                    d.gaussians,
-                    pct(d.charts_redone_fraction),
-                    d.charts
-                );
-            }
-            // Delaunay adds what its update did.
-            let (extra_head, extra_rule) = if m.delaunay.is_some() {
-                (" hopped | charts redone | rebuilt |", "---:|---:|---|")
-            } else {
-                ("", "")
-            };
-            let _ = writeln!(
-                s,
-                "| frame | time s | ms | vertices | faces | watertight | components | largest piece | boundary edges | area ratio | scored as | Chamfer L1 | Chamfer L2 | normal consistency | normal angle ° | tau | recall | F-score |{extra_head}"
-            );
-            let _ = writeln!(
-                s,
-                "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|{extra_rule}"
-            );
-            let stats: BTreeMap<usize, &DelaunayFrame> = m
-                .delaunay
-                .iter()
-                .flat_map(|d| d.frames.iter().map(|f| (f.frame, f)))
-                .collect();
-            for r in &m.frames {
-                let mm = r.metrics.as_ref();
-                let st = mm.and_then(|m| m.structure.as_ref());
-                let extra = match (&m.delaunay, stats.get(&r.frame)) {
-                    (Some(_), Some(d)) => format!(
-                        " {} | {} | {} |",
-                        d.hopped,
-                        d.charts_redone,
-                        if d.rebuilt { "yes" } else { "no" }
-                    ),
-                    (Some(_), None) => " - | - | - |".to_owned(),
-                    (None, _) => String::new(),
-                };
-                let _ = writeln!(
-                    s,
-                    "| {} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |{extra}",
-                    r.frame,
-                    r.time,
-                    r.ms,
-                    r.vertices,
-                    r.faces,
-                    if r.watertight { "yes" } else { "no" },
-                    st.map_or_else(|| "-".to_owned(), |s| s.components.to_string()),
-                    pct(st.and_then(|s| s.largest_component_area_fraction)),
-                    st.map_or_else(|| "-".to_owned(), |s| s.boundary_edges.to_string()),
-                    optf(mm.and_then(|m| m.area_ratio)),
-                    scored_as(mm.map(|m| m.relation)),
+        let mut t = Table::new(&columns);
+        let stats: BTreeMap<usize, &DelaunayFrame> = m
+            .delaunay
+            .iter()
+            .flat_map(|d| d.frames.iter().map(|f| (f.frame, f)))
+            .collect();
+        for r in &m.frames {
+            let mm = r.metrics.as_ref();
+            let st = mm.and_then(|m| m.structure.as_ref());
+            let mut row: Vec<Cell> = [
+                r.frame.to_string(),
+                format!("{:.3}", r.time),
+                format!("{:.2}", r.ms),
+                r.vertices.to_string(),
+                r.faces.to_string(),
+                (if r.watertight { "yes" } else { "no" }).to_owned(),
+                st.map_or_else(|| "-".to_owned(), |s| s.components.to_string()),
+                pct(st.and_then(|s| s.largest_component_area_fraction)),
+                st.map_or_else(|| "-".to_owned(), |s| s.boundary_edges.to_string()),
+                optf(mm.and_then(|m| m.area_ratio)),
+            ]
+            .map(Cell::plain)
+            .into();
+            row.push(scored_as(mm.map(|m| m.relation)));
+            row.extend(
+                [
                     opt(mm.map(|m| m.chamfer_l1), 4),
                     opt(mm.map(|m| m.chamfer_l2), 4),
                     optf(mm.and_then(|m| m.normal_consistency)),
@@ -824,8 +938,114 @@ impl Report {
                     opt(mm.map(|m| m.tau), 3),
                     optf(mm.map(|m| m.recall)),
                     optf(mm.map(|m| m.fscore)),
-                );
+                ]
+                .map(Cell::plain),
+            );
+            match (&m.delaunay, stats.get(&r.frame)) {
+                (Some(_), Some(d)) => row.extend(
+                    [
+                        d.hopped.to_string(),
+                        d.charts_redone.to_string(),
+                        (if d.rebuilt { "yes" } else { "no" }).to_owned(),
+                    ]
+                    .map(Cell::plain),
+                ),
+                (Some(_), None) => row.extend(["-", "-", "-"].map(|s| Cell::plain(s.to_owned()))),
+                (None, _) => {}
             }
+            t.rows.push(row);
+        }
+        t
+    }
+
+    /// The sentences under a method's heading: its parameters and files, what its scores
+    /// measure, what its incremental updates did (delaunay); Markdown.
+    #[must_use]
+    pub fn method_notes(m: &MethodReport) -> Vec<String> {
+        let mut v = Vec::new();
+        let params: Vec<String> = m
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{k} {}", significant(*v)))
+            .collect();
+        let glb = if m.glb_parts.is_empty() {
+            m.glb.clone()
+        } else {
+            m.glb_parts.join("`, `")
+        };
+        v.push(format!(
+            "parameters: {}; files: `{}/`, `{glb}`",
+            params.join(", "),
+            m.ply_dir,
+        ));
+        match m.relation {
+            Some(Relation::SelfConsistency) => v.push(self_consistency_note(m)),
+            Some(Relation::Accuracy) => v.push(format!(
+                "scores: accuracy (the meshes do not contain the ground truth's \
+                 vertices: mean shared-vertex fraction {})",
+                pct(m.mean.shared_vertex_fraction)
+            )),
+            None => {}
+        }
+        if let Some(d) = &m.delaunay {
+            let pct =
+                |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |x| format!("{:.3}%", 100.0 * x));
+            v.push(format!(
+                "incremental updates: {} of {} frames rebuilt from scratch; per other frame, \
+                 Gaussians hopped {} (of {}), charts redone {} (of {})",
+                d.rebuilt_frames,
+                d.frames.len(),
+                pct(d.hopped_fraction),
+                d.gaussians,
+                pct(d.charts_redone_fraction),
+                d.charts
+            ));
+        }
+        v
+    }
+
+    /// The self-consistency notes of the methods whose scores are self-consistency
+    /// (Markdown), in report order.
+    #[must_use]
+    pub fn self_consistency_notes(&self) -> Vec<String> {
+        self.ordered()
+            .into_iter()
+            .filter(|m| m.relation == Some(Relation::SelfConsistency))
+            .map(self_consistency_note)
+            .collect()
+    }
+
+    /// The Markdown report.
+    #[must_use]
+    pub fn markdown(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "# trisplat extract report\n");
+        for line in self.facts() {
+            let _ = writeln!(s, "- {line}");
+        }
+        let _ = writeln!(s);
+        let alt = if self.has_errors() {
+            "Chamfer L1 against time per frame"
+        } else {
+            "time per frame (no ground truth)"
+        };
+        let _ = writeln!(
+            s,
+            "![{alt}]({PLOT_SVG})\n\nthe plot also as \
+             [`{PLOT_PNG}`]({PLOT_PNG}); these tables with a thumbnail of each method's mesh, \
+             coloured by its distance to the ground truth: [`{REPORT_HTML}`]({REPORT_HTML})\n"
+        );
+        let _ = writeln!(s, "## Means over frames\n");
+        s.push_str(&self.summary_table().markdown());
+        for note in self.self_consistency_notes() {
+            let _ = writeln!(s, "\n{note}");
+        }
+        for m in self.ordered() {
+            let _ = writeln!(s, "\n## {}\n", m.method);
+            for note in Self::method_notes(m) {
+                let _ = writeln!(s, "{note}\n");
+            }
+            s.push_str(&Self::frame_table(m).markdown());
         }
         s
     }
@@ -1102,6 +1322,7 @@ mod tests {
                 ("delaunay".to_owned(), method(Method::Delaunay, Some(d))),
                 ("alpha".to_owned(), method(Method::Alpha, None)),
             ]),
+            thumbnails: None,
         };
         let md = report.markdown();
         assert!(
@@ -1111,6 +1332,10 @@ mod tests {
         assert!(md.contains("| - | 0 | 10 | yes |\n"), "{md}");
         assert!(md.contains("| - | 6 | 3 | no |\n"), "{md}");
         assert!(md.contains("Gaussians hopped 10.000% (of 40), charts redone 20.000% (of 10)"));
+        assert_eq!(significant(0.006_035_319_638_385_869), "0.00603532");
+        assert_eq!(significant(24.0), "24");
+        assert_eq!(significant(123_456_789.0), "123456789");
+        assert_eq!(significant(0.5), "0.5");
         // Only the delaunay table has the columns.
         assert_eq!(md.matches("| hopped |").count(), 1);
         let json = serde_json::to_value(&report).expect("json");

@@ -19,16 +19,23 @@ use crate::lock::FolderLock;
 use crate::output::Inputs;
 use crate::plot;
 use crate::report::{
-    DelaunayFrame, DelaunayStats, FrameRecord, MethodReport, Report, Summary, is_watertight,
+    DelaunayFrame, DelaunayStats, FrameRecord, GtSamples, MethodReport, Report, Summary,
+    Thumbnails, is_watertight,
 };
-use crate::session::{MethodFrame, Session};
+use crate::session::{FrameResult, MethodFrame, Session};
+use crate::thumbnail::{self, Colouring, Picture, THUMBNAIL_DIR, thumbnail_file};
+use trisplat_geometry::metrics::Tau;
 
 /// File name of the JSON report in the output folder.
 pub const REPORT_JSON: &str = "report.json";
 /// File name of the Markdown report.
 pub const REPORT_MD: &str = "report.md";
-/// File name of the plot.
+/// File name of the plot as PNG.
 pub const PLOT_PNG: &str = "error_vs_time.png";
+/// File name of the plot as SVG.
+pub const PLOT_SVG: &str = "error_vs_time.svg";
+/// File name of the HTML report.
+pub const REPORT_HTML: &str = "report.html";
 
 /// Progress of a run, for a progress bar.
 #[derive(Clone, Debug, PartialEq)]
@@ -108,6 +115,14 @@ pub fn run(
     progress(Progress::Started { frames: total });
     // The frame files: asked for, or the glTF is assembled from them.
     let frame_files_wanted = o.writes(OutputTarget::Meshes) || o.writes(OutputTarget::Glb);
+    // report.html shows the meshes of the middle frame.
+    let thumbnail_frame = frames.start + frames.len().saturating_sub(1) / 2;
+    let extras = |f: usize| FrameExtras {
+        write_files: frame_files_wanted,
+        error_colors: o.error_colors,
+        thumbnails: o.writes(OutputTarget::Report) && f == thumbnail_frame,
+        threshold: o.threshold(),
+    };
     let mut done_frames = previous.done;
     let mut failed: Vec<FailedFrame> = Vec::new();
     for (done, f) in frames.clone().enumerate() {
@@ -120,7 +135,7 @@ pub fn run(
         });
         let mut method_ms = Vec::new();
         if !finished {
-            match run_frame(&mut session, out, f, frame_files_wanted) {
+            match run_frame(&mut session, out, f, &extras(f)) {
                 Ok(entry) => {
                     method_ms = Method::ALL
                         .into_iter()
@@ -259,7 +274,11 @@ pub fn run(
         resolved,
         serial_methods: control.serial_methods,
         methods: method_reports,
+        thumbnails: None,
     };
+    if o.writes(OutputTarget::Report) {
+        report.thumbnails = thumbnails_of(out, thumbnail_frame, &report);
+    }
     write_outputs(out, &mut report, &frame_files, &o.targets)?;
     if o.writes(OutputTarget::Glb) && !o.writes(OutputTarget::Meshes) {
         // Written only to assemble the glTF.
@@ -270,14 +289,61 @@ pub fn run(
     Ok(report)
 }
 
-/// One frame: meshed by every method, each mesh written (atomically) to its frame file.
+/// What a frame writes besides its numbers.
+struct FrameExtras {
+    /// The frame files.
+    write_files: bool,
+    /// Vertex colours by distance to the ground truth (`--error-colors`).
+    error_colors: bool,
+    /// The thumbnails of report.html.
+    thumbnails: bool,
+    /// The F-score threshold: the colour scale is twice it.
+    threshold: Tau,
+}
+
+/// One frame: meshed by every method, each mesh written (atomically) to its frame file, with
+/// the colours and thumbnails `extras` asks for.
 fn run_frame(
     session: &mut Session,
     out: &Path,
     f: usize,
-    write_files: bool,
+    extras: &FrameExtras,
 ) -> Result<FrameEntry, PipelineError> {
-    let result = session.frame(f)?;
+    let write_files = extras.write_files;
+    let (result, pictures) = session.frame_with(f, |r, gt| {
+        let scale = gt.map(|g| 2.0 * extras.threshold.resolve(g.diagonal()));
+        if extras.error_colors
+            && let (Some(gt), Some(scale)) = (gt, scale)
+        {
+            for m in &mut r.methods {
+                let Some(d) = gt.distances(m.output.mesh.positions()) else {
+                    continue;
+                };
+                let mesh = std::mem::take(&mut m.output.mesh);
+                m.output.mesh = mesh
+                    .with_colors(thumbnail::error_colors(&d, scale))
+                    .map_err(|_| PipelineError::Internal {
+                        what: "one error colour per vertex",
+                    })?;
+            }
+        }
+        Ok::<_, PipelineError>(if extras.thumbnails {
+            frame_pictures(r, gt, scale)
+        } else {
+            Vec::new()
+        })
+    })?;
+    let pictures = pictures?;
+    if !pictures.is_empty() {
+        let dir = out.join(THUMBNAIL_DIR);
+        std::fs::create_dir_all(&dir).map_err(|cause| PipelineError::OutputDir {
+            path: dir.clone(),
+            cause,
+        })?;
+        for (name, picture) in &pictures {
+            picture.write_png(&out.join(thumbnail_file(name, f)))?;
+        }
+    }
     let mut entry = FrameEntry {
         frame: f,
         time: result.time,
@@ -320,6 +386,77 @@ fn run_frame(
     Ok(entry)
 }
 
+/// The name of the ground truth's thumbnail (beside the methods' names).
+const GT_THUMBNAIL: &str = "ground_truth";
+
+/// The thumbnails of one frame: the ground truth (grey) and each method's mesh (coloured by
+/// the distance to it up to `scale`, or grey without one), from one camera fitted to the
+/// ground truth (else to the meshes). A mesh that cannot be pictured (beyond the spatial
+/// index's range) is left out.
+fn frame_pictures(
+    r: &FrameResult,
+    gt: Option<&GtSamples>,
+    scale: Option<f64>,
+) -> Vec<(String, Picture)> {
+    let points: Vec<glam::DVec3> = match gt {
+        Some(g) => g.mesh.positions().to_vec(),
+        None => r
+            .methods
+            .iter()
+            .flat_map(|m| m.output.mesh.positions().iter().copied())
+            .collect(),
+    };
+    let Some((camera, origin)) = thumbnail::frame_camera(&points) else {
+        return Vec::new();
+    };
+    let colouring = match (gt, scale) {
+        (Some(gt), Some(scale)) => Colouring::Distance { gt, scale },
+        _ => Colouring::Grey,
+    };
+    let mut pictures = Vec::new();
+    if let Some(g) = gt
+        && let Ok(p) = thumbnail::render(&g.mesh, &camera, origin, Colouring::Grey)
+    {
+        pictures.push((GT_THUMBNAIL.to_owned(), p));
+    }
+    for m in &r.methods {
+        if let Ok(p) = thumbnail::render(&m.output.mesh, &camera, origin, colouring) {
+            pictures.push((m.method.name().to_owned(), p));
+        }
+    }
+    pictures
+}
+
+/// The thumbnails of frame `frame` in `out` (written by this run or the one it resumes), as
+/// the report lists them; `None` when there are none.
+fn thumbnails_of(out: &Path, frame: usize, report: &Report) -> Option<Thumbnails> {
+    let exists = |name: &str| out.join(thumbnail_file(name, frame)).is_file();
+    let methods: BTreeMap<String, String> = report
+        .ordered()
+        .iter()
+        .map(|m| m.method.name())
+        .filter(|name| exists(name))
+        .map(|name| (name.to_owned(), thumbnail_file(name, frame)))
+        .collect();
+    let ground_truth = exists(GT_THUMBNAIL).then(|| thumbnail_file(GT_THUMBNAIL, frame));
+    if methods.is_empty() && ground_truth.is_none() {
+        return None;
+    }
+    // The colour scale: twice the frame's threshold, as its metrics recorded it.
+    let scale = report
+        .methods
+        .values()
+        .flat_map(|m| m.frames.iter())
+        .find(|r| r.frame == frame && r.metrics.is_some())
+        .and_then(|r| r.metrics.map(|x| 2.0 * x.tau));
+    Some(Thumbnails {
+        frame,
+        scale,
+        ground_truth,
+        methods,
+    })
+}
+
 /// The journal of this run: refuses a folder that holds another run unless told to resume it
 /// (then the frames it lists are done) or to start over (then its outputs are removed first).
 fn open_journal(
@@ -358,7 +495,8 @@ pub(crate) fn refuse_used_output(out: &Path, force: bool) -> Result<(), Pipeline
 /// Removes the temporary files (`.trisplat-*.tmp`) a run killed in the middle of an atomic
 /// write left in `out` and its method folders (best effort).
 fn remove_stale_temporaries(out: &Path) {
-    let folders = std::iter::once(out.to_path_buf())
+    let folders = [out.to_path_buf(), out.join(THUMBNAIL_DIR)]
+        .into_iter()
         .chain([Method::Tsdf, Method::Delaunay, Method::Alpha].map(|m| out.join(m.name())));
     for dir in folders {
         let Ok(listing) = std::fs::read_dir(&dir) else {
@@ -376,8 +514,23 @@ fn remove_stale_temporaries(out: &Path) {
 /// Removes what a previous run wrote into `out`: journal, reports, plot, every method's frame
 /// files and sequences (best effort; files that cannot be removed are overwritten later).
 fn remove_previous_outputs(out: &Path) {
-    for name in [JOURNAL, REPORT_JSON, REPORT_MD, PLOT_PNG] {
+    for name in [
+        JOURNAL,
+        REPORT_JSON,
+        REPORT_MD,
+        REPORT_HTML,
+        PLOT_SVG,
+        PLOT_PNG,
+    ] {
         let _ = std::fs::remove_file(out.join(name));
+    }
+    if let Ok(listing) = std::fs::read_dir(out.join(THUMBNAIL_DIR)) {
+        for e in listing.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.ends_with(".png") && name.contains("_frame_") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
     }
     for m in [Method::Tsdf, Method::Delaunay, Method::Alpha] {
         let dir = out.join(m.name());
@@ -418,7 +571,7 @@ fn check_outputs(
         }
         inputs.check(&out.join(format!("{}.glb", m.name())))?;
     }
-    for name in [REPORT_JSON, REPORT_MD, PLOT_PNG] {
+    for name in [REPORT_JSON, REPORT_MD, REPORT_HTML, PLOT_SVG, PLOT_PNG] {
         inputs.check(&out.join(name))?;
     }
     for m in methods {
@@ -432,7 +585,7 @@ fn check_outputs(
 }
 
 /// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
-/// report), the report files and the plot.
+/// report), the report files (JSON, Markdown, HTML) and the plot (SVG, PNG).
 pub(crate) fn write_outputs(
     out: &Path,
     report: &mut Report,
@@ -467,7 +620,9 @@ pub(crate) fn write_outputs(
     if targets.contains(&OutputTarget::Report) {
         report.write_json(&out.join(REPORT_JSON))?;
         report.write_markdown(&out.join(REPORT_MD))?;
-        plot::write_plot(&out.join(PLOT_PNG), report)?;
+        let svg = plot::write_svg(&out.join(PLOT_SVG), report)?;
+        plot::write_png(&out.join(PLOT_PNG), report)?;
+        crate::html::write_html(&out.join(REPORT_HTML), report, &svg)?;
     }
     Ok(())
 }

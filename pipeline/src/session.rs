@@ -551,6 +551,21 @@ impl Session {
     /// # Errors
     /// As [`Session::positions`]; a failed deformation, method or metric, naming the frame.
     pub fn frame(&mut self, frame: usize) -> Result<FrameResult, PipelineError> {
+        self.frame_with(frame, |_, _| ()).map(|(result, ())| result)
+    }
+
+    /// [`Session::frame`], then `after` with the frame's result (its meshes may be changed,
+    /// e.g. coloured) and its ground truth, sampled and indexed (`None` when the plan does not
+    /// measure): per-vertex distances or pictures that need the ground truth are made here,
+    /// without building it again.
+    ///
+    /// # Errors
+    /// As [`Session::frame`].
+    pub fn frame_with<T>(
+        &mut self,
+        frame: usize,
+        after: impl FnOnce(&mut FrameResult, Option<&GtSamples>) -> T,
+    ) -> Result<(FrameResult, T), PipelineError> {
         let time = self.frame_time(frame);
         let (positions, world, deform_ms) = self.deform_frame(frame)?;
         let frame_gt = match (&self.gt, self.plan.runs(Stage::Metrics)) {
@@ -645,15 +660,23 @@ impl Session {
                 ran.push(Stage::Metrics);
             }
         }
+        let measured = gt.is_some();
         for stage in ran {
             self.record(stage);
         }
-        Ok(FrameResult {
+        let mut result = FrameResult {
             frame,
             time,
             deform_ms,
             methods,
-        })
+        };
+        let gt = if measured {
+            frame_gt.as_ref().or(self.static_gt.as_ref())
+        } else {
+            None
+        };
+        let extra = after(&mut result, gt);
+        Ok((result, extra))
     }
 }
 
@@ -697,6 +720,17 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             name: "fps",
             value: o.fps,
             expected: "a positive number of frames per second",
+        });
+    }
+    if o.error_colors && config.gt.is_none() {
+        return Err(PipelineError::BadCombination {
+            problem: "--error-colors colours the meshes by their distance to the ground truth: \
+                      give --gt or --gt-sequence",
+        });
+    }
+    if o.error_colors && o.tsdf_colors {
+        return Err(PipelineError::BadCombination {
+            problem: "--error-colors and --tsdf-colors both colour the vertices: choose one",
         });
     }
     if o.samples == 0 {
