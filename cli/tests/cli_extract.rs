@@ -60,6 +60,17 @@ fn tiny_case_writes_every_promised_output() {
     }
     let png = std::fs::read(out.join("error_vs_time.png")).expect("png written");
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let svg = std::fs::read_to_string(out.join("error_vs_time.svg")).expect("svg written");
+    assert!(svg.starts_with("<svg") && svg.contains(">\ndelaunay *\n</text>"));
+    let html = std::fs::read_to_string(out.join("report.html")).expect("report.html");
+    for m in ["tsdf", "delaunay", "alpha"] {
+        let thumbnail = format!("thumbnails/{m}_frame_000000.png");
+        assert!(
+            html.contains(&format!("src=\"{thumbnail}\"")),
+            "{thumbnail}"
+        );
+        assert!(out.join(&thumbnail).is_file(), "{thumbnail}");
+    }
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
     assert!(md.contains("| delaunay |"), "{md}");
     let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
@@ -200,6 +211,8 @@ fn without_gt_no_metrics_and_rebuild_every_one() {
     assert!(r["methods"]["tsdf"].is_null(), "only the asked method");
     assert!(!out.join("tsdf").exists());
     assert!(out.join("error_vs_time.png").is_file());
+    assert!(out.join("error_vs_time.svg").is_file());
+    assert!(out.join("report.html").is_file());
 }
 
 #[test]
@@ -254,6 +267,28 @@ fn bad_inputs_exit_with_one_line() {
         s(&out),
     ]);
     assert_eq!(res.status.code(), Some(2));
+    // Error colours without a ground truth to measure, or beside the TSDF's own colours:
+    // usage errors, exit 2, nothing written.
+    for extra in [
+        &["--error-colors"][..],
+        &["--error-colors", "--gt", "template", "--tsdf-colors"],
+    ] {
+        let mut args = vec![
+            "extract",
+            "--template",
+            s(&t),
+            "--method",
+            "delaunay",
+            "-o",
+            s(&out),
+        ];
+        args.extend(extra);
+        let res = run(&args);
+        assert_eq!(res.status.code(), Some(2), "{extra:?}");
+        let stderr = String::from_utf8_lossy(&res.stderr);
+        assert!(stderr.contains("--error-colors"), "{extra:?}: {stderr}");
+        assert!(!out.join("report.json").exists());
+    }
     // Frames out of range: exit 1, names --frames.
     let res = run(&[
         "extract",

@@ -72,9 +72,12 @@ it against a ground truth it did not consume (--gt MESH, --gt-sequence).
 Outputs in DIR: <method>/frame_NNNNNN.ply (NNNNNN = the animation's frame index), <method>.glb \
 (the animated sequence), journal.jsonl (the run journal), report.json (per method and frame: ms, vertices, faces, watertight, \
 metrics with each frame's absolute tau, structure and relation; per-method means and relation; \
-tau_fraction or the absolute tau), report.md (the same as tables), error_vs_time.png (Chamfer \
-L1 against ms/frame per method, log axes, self-consistency starred; without --gt: ms per \
-frame). Times cover each method's \
+tau_fraction or the absolute tau), report.md (the same as tables), error_vs_time.svg and \
+error_vs_time.png (Chamfer L1 against ms/frame per method, log axes, self-consistency starred; \
+without --gt: ms per frame), report.html (the plot, the tables and a thumbnail of each \
+method's mesh and the ground truth at the middle frame, coloured by the distance to the ground \
+truth; the pictures in thumbnails/). --error-colors colours the frame meshes' vertices the same \
+way. Times cover each method's \
 own work (rendering included for tsdf); deformation is reported separately.
 
 --explain prints the plan and exits without reading or writing anything.
@@ -141,6 +144,14 @@ impl ExtractArgs {
     /// The run's configuration; an avatar folder (`--avatar DIR`, or `--template DIR` when it
     /// holds one) stands for its template and per-vertex Gaussians.
     fn config(self) -> anyhow::Result<ExtractConfig> {
+        if self.options.error_colors && self.gt.is_none() && self.gt_sequence.is_none() {
+            return Err(super::UsageError(
+                "--error-colors colours the meshes by their distance to the ground truth: give \
+                 --gt or --gt-sequence"
+                    .to_owned(),
+            )
+            .into());
+        }
         let mut options = self.options;
         let (template, gaussians) = match (self.avatar, self.template) {
             (Some(dir), _) => avatar_files(&dir, self.gaussians.as_deref(), &mut options)?,
@@ -380,7 +391,14 @@ fn written_files(targets: &[OutputTarget], journal: bool) -> Vec<&'static str> {
         written.push("<method>.glb");
     }
     if targets.contains(&OutputTarget::Report) {
-        written.extend(["report.json", "report.md", "error_vs_time.png"]);
+        written.extend([
+            "report.json",
+            "report.md",
+            "report.html",
+            "thumbnails/*.png",
+            "error_vs_time.svg",
+            "error_vs_time.png",
+        ]);
     }
     if journal {
         written.push("journal.jsonl");

@@ -12,8 +12,9 @@ use super::extract::{fail_on_failed_frames, print_summary};
 Joins shards of one extract job, each run into its own folder with its own --frames A..B (on \
 one machine or many: a Slurm array or a Kubernetes indexed job runs shard i with --frames \
 i*N..(i+1)*N, then one merge), into DIR: every shard's frame files (hard links where possible), \
-one animated glTF per method assembled from them, and report.json/report.md/error_vs_time.png \
-over all frames. The shards must be the same job (same inputs, options and version; only \
+one animated glTF per method assembled from them, and report.json, report.md, report.html and \
+error_vs_time.svg/.png over all frames (report.html with the thumbnails of the shard whose \
+pictured frame is nearest the middle). The shards must be the same job (same inputs, options and version; only \
 --frames differs) and no frame may be in two shards. Frame files and glTF are then \
 byte-identical to one run over all frames (at the default --hop-threshold 0); the report \
 differs only in the timings. See docs/shards.md.")]
