@@ -60,6 +60,10 @@ fn tiny_case_writes_every_promised_output() {
     }
     let png = std::fs::read(out.join("error_vs_time.png")).expect("png written");
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    assert!(
+        stdout.contains("report.html (open it in a browser)"),
+        "{stdout}"
+    );
     let svg = std::fs::read_to_string(out.join("error_vs_time.svg")).expect("svg written");
     assert!(svg.starts_with("<svg") && svg.contains(">\ndelaunay *\n</text>"));
     let html = std::fs::read_to_string(out.join("report.html")).expect("report.html");

@@ -447,10 +447,10 @@ fn thumbnails_html(report: &Report, t: &crate::report::Thumbnails) -> String {
             let _ = writeln!(
                 s,
                 "<p class=\"note\">Each mesh seen from the same camera; the colour of a point is \
-                 its distance to the ground truth's surface (the frame's {}), from 0 to 2&tau;, \
+                 its distance to the ground truth's surface ({}), from 0 to 2&tau;, \
                  twice the F-score threshold (points farther than 2&tau; are yellow too); \
                  shading follows the surface's angle to the camera. The ground truth is grey.</p>",
-                escape(report.ground_truth.as_deref().unwrap_or("ground truth"))
+                escape(&gt_words(report.ground_truth.as_deref().unwrap_or("-")))
             );
             let _ = writeln!(
                 s,
@@ -476,10 +476,10 @@ fn thumbnails_html(report: &Report, t: &crate::report::Thumbnails) -> String {
         let _ = writeln!(
             s,
             "<figure><img src=\"{0}\" alt=\"ground truth, frame {1}\"><figcaption><strong>ground \
-             truth</strong> ({2})</figcaption></figure>",
+             truth</strong><br>{2}</figcaption></figure>",
             escape(file),
             t.frame,
-            escape(report.ground_truth.as_deref().unwrap_or("-"))
+            escape(&gt_words(report.ground_truth.as_deref().unwrap_or("-")))
         );
     }
     for m in report.ordered() {
@@ -511,6 +511,16 @@ fn thumbnails_html(report: &Report, t: &crate::report::Thumbnails) -> String {
     }
     s.push_str("</div>\n");
     s
+}
+
+/// The ground truth as words: `template` and `gaussians` said out, a file or sequence as
+/// given.
+fn gt_words(label: &str) -> String {
+    match label {
+        "template" => "the frame's deformed template".to_owned(),
+        "gaussians" => "the frame's surface of the Gaussians' centres".to_owned(),
+        other => other.to_owned(),
+    }
 }
 
 /// A distance with 3 significant digits (`0.00852`, `1.23e-5`).

@@ -378,6 +378,12 @@ pub fn print_summary(
         }
     }
     println!("outputs: {}/{{{}}}", out.display(), written.join(", "));
+    if targets.contains(&OutputTarget::Report) {
+        println!(
+            "report: {} (open it in a browser)",
+            out.join("report.html").display()
+        );
+    }
     Ok(())
 }
 
