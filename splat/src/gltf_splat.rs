@@ -45,6 +45,9 @@ use crate::gaussians::{
 };
 use crate::sh::{SH_C0, ShChange};
 pub use crate::spz::{OPAQUE_LOGIT, TRANSPARENT_LOGIT};
+use trisplat_geometry::io::gltf_codes::{
+    ARRAY_BUFFER, BYTE, FLOAT, POINTS, SHORT, UNSIGNED_BYTE, UNSIGNED_SHORT,
+};
 
 /// The extension's name.
 pub const EXTENSION: &str = "KHR_gaussian_splatting";
@@ -54,14 +57,6 @@ pub const ZERO_LOG_SCALE: f32 = -110.0;
 
 /// The colour space written: 3DGS trains on sRGB pictures, display-referred.
 pub const COLOR_SPACE: &str = "srgb_rec709_display";
-
-const POINTS: u32 = 0;
-const ARRAY_BUFFER: u32 = 34962;
-const FLOAT: u32 = 5126;
-const BYTE: u32 = 5120;
-const UNSIGNED_BYTE: u32 = 5121;
-const SHORT: u32 = 5122;
-const UNSIGNED_SHORT: u32 = 5123;
 
 /// Errors of reading and writing glTF Gaussians.
 #[derive(Debug, thiserror::Error)]

@@ -32,6 +32,7 @@ use gltf::mesh::{Mode, Semantic};
 use serde_json::json;
 
 use super::IoError;
+use super::gltf_codes::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UNSIGNED_INT};
 use super::gltf_data::GltfData;
 use crate::TriMesh;
 use crate::mesh::Rgba;
@@ -390,11 +391,6 @@ impl GltfFile {
 
 // ---------------------------------------------------------------------------------------------
 // Writing
-
-const ARRAY_BUFFER: u32 = 34962;
-const ELEMENT_ARRAY_BUFFER: u32 = 34963;
-const FLOAT: u32 = 5126;
-const UNSIGNED_INT: u32 = 5125;
 
 /// Builds the JSON document and the single binary buffer for `mesh`.
 fn build(mesh: &TriMesh) -> (serde_json::Value, Vec<u8>) {

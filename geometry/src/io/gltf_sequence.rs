@@ -76,14 +76,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 
+use super::gltf_codes::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, TRIANGLES, UNSIGNED_INT};
 use super::{Format, IoError, write_atomically};
 use crate::TriMesh;
 
-const ARRAY_BUFFER: u32 = 34962;
-const ELEMENT_ARRAY_BUFFER: u32 = 34963;
-const FLOAT: u32 = 5126;
-const UNSIGNED_INT: u32 = 5125;
-const TRIANGLES: u32 = 4;
 /// Name of the animation, of the morph-target mesh and of the node-per-frame root.
 const SEQUENCE_NAME: &str = "sequence";
 

@@ -11,6 +11,7 @@
 mod atomic;
 mod error;
 pub mod gltf;
+pub mod gltf_codes;
 pub(crate) mod gltf_data;
 pub mod gltf_sequence;
 mod npy;
