@@ -449,23 +449,27 @@ struct MassProperties {
 
 impl MassProperties {
     fn of(positions: &[DVec3], triangles: &[[u32; 3]]) -> Self {
-        let (x_integral, first_moments) = triangles
-            .par_iter()
-            .map(|&[a, b, c]| {
-                let (p0, p1, p2) = (
-                    positions[a as usize],
-                    positions[b as usize],
-                    positions[c as usize],
-                );
-                let cross = (p1 - p0).cross(p2 - p0);
-                let f1 = p0 + p1 + p2;
-                let f2 = p0 * p0 + p1 * p1 + p0 * p1 + p2 * f1;
-                (cross.x * f1.x, cross * f2)
+        // Summed over fixed chunks, then the chunks in order: the same sums whatever the
+        // threads (rayon's `reduce` splits where work is stolen, which moves the last bits).
+        const CHUNK: usize = 4096;
+        let add = |(v0, m0): (f64, DVec3), (v1, m1): (f64, DVec3)| (v0 + v1, m0 + m1);
+        let partials: Vec<(f64, DVec3)> = triangles
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                chunk.iter().fold((0.0, DVec3::ZERO), |acc, &[a, b, c]| {
+                    let (p0, p1, p2) = (
+                        positions[a as usize],
+                        positions[b as usize],
+                        positions[c as usize],
+                    );
+                    let cross = (p1 - p0).cross(p2 - p0);
+                    let f1 = p0 + p1 + p2;
+                    let f2 = p0 * p0 + p1 * p1 + p0 * p1 + p2 * f1;
+                    add(acc, (cross.x * f1.x, cross * f2))
+                })
             })
-            .reduce(
-                || (0.0, DVec3::ZERO),
-                |(v0, m0), (v1, m1)| (v0 + v1, m0 + m1),
-            );
+            .collect();
+        let (x_integral, first_moments) = partials.into_iter().fold((0.0, DVec3::ZERO), add);
         let volume = x_integral / 6.0;
         Self {
             volume,
