@@ -7,7 +7,7 @@ use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{DeformError, Deformer, WorldGeometry};
+use trisplat_splat::deform::{Collapsed, DeformError, Deformer, FrameHold, WorldGeometry};
 use trisplat_splat::lbs::LbsDeformer;
 
 use crate::config::Mode;
@@ -21,10 +21,62 @@ pub const LBS_REST_TOLERANCE: f64 = 1e-5;
 /// How frames are deformed.
 #[derive(Debug)]
 pub enum Engine {
-    /// `binding` or `jacobian`: from each frame's template positions.
-    Frames(Deformer),
+    /// `binding` or `jacobian`: from each frame's template positions, a collapsed triangle
+    /// keeping its last valid frame (docs/numerics.md, "The degenerate-triangle policy").
+    Frames(FrameEngine),
     /// `lbs`: from each frame's skinning palette (the animation is a skinned glTF).
     Lbs(Box<LbsDeformer>),
+}
+
+/// The `binding`/`jacobian` engine: the deformer and the last valid frame of every triangle.
+#[derive(Debug)]
+pub struct FrameEngine {
+    /// The deformer.
+    pub deformer: Deformer,
+    hold: FrameHold,
+    /// The frame the hold was last updated with.
+    last: Option<usize>,
+}
+
+impl FrameEngine {
+    /// Whether deforming `frame` next needs the hold filled from earlier frames first (the
+    /// first frame deformed, or a jump): see [`FrameEngine::fill_from_history`].
+    #[must_use]
+    pub fn needs_history(&self, frame: usize) -> bool {
+        frame > 0 && !matches!(self.last, Some(l) if l == frame || l + 1 == frame)
+    }
+
+    /// Starts the hold over for `frame` (template at `positions`): for each triangle
+    /// degenerate there, its last valid frame among `frame - 1, frame - 2, …, 0`, whose
+    /// positions `earlier` gives, stopping as soon as every such triangle has one. Results
+    /// then do not depend on where a run starts (shards, `--resume`).
+    ///
+    /// # Errors
+    /// What `earlier` returns; a deformation error naming the frame.
+    pub fn fill_from_history(
+        &mut self,
+        frame: usize,
+        positions: &[DVec3],
+        label: &str,
+        mut earlier: impl FnMut(usize) -> Result<Vec<DVec3>, PipelineError>,
+    ) -> Result<(), PipelineError> {
+        self.hold = FrameHold::new();
+        let mut wanted = self
+            .deformer
+            .degenerate_triangles(positions)
+            .map_err(deform_error(label, frame))?;
+        let mut f = frame;
+        while !wanted.is_empty() && f > 0 {
+            f -= 1;
+            let p = earlier(f)?;
+            wanted = self
+                .deformer
+                .fill_hold(&p, &mut self.hold, &wanted)
+                .map_err(deform_error(label, f))?;
+        }
+        self.last = frame.checked_sub(1);
+        Ok(())
+    }
 }
 
 /// What an [`Engine`] is built from.
@@ -72,7 +124,11 @@ impl Engine {
                 d = d.with_adaptive_scale(template);
             }
             check_set(&d, set, inputs.gaussians_path, inputs.template_path)?;
-            return Ok(Self::Frames(d));
+            return Ok(Self::Frames(FrameEngine {
+                deformer: d,
+                hold: FrameHold::new(),
+                last: None,
+            }));
         }
         let a_path = PathBuf::from(inputs.label);
         let g = skinned_gltf(animation, inputs.stored, inputs.template_path, inputs.label)?;
@@ -105,44 +161,57 @@ impl Engine {
     /// # Errors
     /// As [`Engine::deform`].
     pub fn deform_means(
-        &self,
+        &mut self,
         animation: &Animation,
         set: &GaussianSet,
         positions: &[DVec3],
         frame: usize,
         label: &str,
         scratch: &mut WorldGeometry,
-    ) -> Result<(), PipelineError> {
+    ) -> Result<Collapsed, PipelineError> {
         match self {
-            Self::Frames(d) => d
-                .deform_geometry(set, positions, scratch)
-                .map_err(deform_error(label, frame)),
+            Self::Frames(e) => {
+                let collapsed = e
+                    .deformer
+                    .deform_geometry_held(set, positions, &mut e.hold, scratch)
+                    .map_err(deform_error(label, frame))?;
+                e.last = Some(frame);
+                Ok(collapsed)
+            }
             Self::Lbs(_) => {
-                let world = self.deform(animation, set, positions, frame, label)?;
+                let (world, collapsed) = self.deform(animation, set, positions, frame, label)?;
                 scratch.means.clear();
                 scratch.means.extend_from_slice(world.means());
-                Ok(())
+                Ok(collapsed)
             }
         }
     }
 
     /// The world-space Gaussians of animation frame `frame`, whose template positions are
-    /// `positions` (used by `lbs` only for its adaptive scale); `label` names the animation
-    /// in errors.
+    /// `positions` (used by `lbs` only for its adaptive scale), and the frame's collapsed
+    /// triangles (none in `lbs`); `label` names the animation in errors. Frames are expected
+    /// in order: see [`FrameEngine::needs_history`].
     ///
     /// # Errors
     /// [`PipelineError::Deform`] or [`PipelineError::Skinning`] naming the frame; an animation
     /// error evaluating the palette.
     pub fn deform(
-        &self,
+        &mut self,
         animation: &Animation,
         set: &GaussianSet,
         positions: &[DVec3],
         frame: usize,
         label: &str,
-    ) -> Result<GaussianSet, PipelineError> {
+    ) -> Result<(GaussianSet, Collapsed), PipelineError> {
         match self {
-            Self::Frames(d) => d.deform(set, positions).map_err(deform_error(label, frame)),
+            Self::Frames(e) => {
+                let out = e
+                    .deformer
+                    .deform_held(set, positions, &mut e.hold)
+                    .map_err(deform_error(label, frame))?;
+                e.last = Some(frame);
+                Ok(out)
+            }
             Self::Lbs(rig) => {
                 let Animation::Gltf(g) = animation else {
                     return Err(PipelineError::Internal {
@@ -152,6 +221,7 @@ impl Engine {
                 let palette = g.frame_palette(frame)?;
                 let positions = rig.adaptive_scale().then_some(positions);
                 rig.deform(set, &palette, positions)
+                    .map(|set| (set, Collapsed::default()))
                     .map_err(|source| PipelineError::Skinning {
                         path: PathBuf::from(label),
                         frame,

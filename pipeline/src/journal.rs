@@ -9,7 +9,7 @@
 //! never mix their outputs.
 //!
 //! Lines: first `{"kind":"run","version":…,"config":…}`, then per frame either
-//! `{"kind":"frame","frame":F,"time":…,"deform_ms":…,"methods":{NAME: FrameRecord},"delaunay":…}`
+//! `{"kind":"frame","frame":F,"time":…,"deform_ms":…,"collapsed_triangles":…,"methods":{NAME: FrameRecord},"delaunay":…}`
 //! or `{"kind":"failed","frame":F,"error":"…"}`.
 
 use std::collections::BTreeMap;
@@ -35,6 +35,10 @@ pub struct FrameEntry {
     pub time: f64,
     /// Milliseconds spent deforming the Gaussians.
     pub deform_ms: f64,
+    /// Template triangles degenerate in this frame (docs/numerics.md, "The
+    /// degenerate-triangle policy"); 0 in journals written before it was recorded.
+    #[serde(default)]
+    pub collapsed_triangles: usize,
     /// Each method's record, by method name.
     pub methods: BTreeMap<String, FrameRecord>,
     /// The incremental Delaunay statistics (with the delaunay method).
@@ -238,6 +242,7 @@ mod tests {
             frame,
             time: frame as f64 / 30.0,
             deform_ms: 0.1,
+            collapsed_triangles: 0,
             methods: BTreeMap::new(),
             delaunay: None,
         }

@@ -201,14 +201,21 @@ fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
 
 /// One report over the frames of all shards, in frame order.
 fn merged_report(reports: &[(&Path, Report)]) -> Report {
-    let mut rows: Vec<(usize, f64, f64)> = reports
+    let mut rows: Vec<(usize, f64, f64, usize)> = reports
         .iter()
         .flat_map(|(_, r)| {
+            // Reports written before the count was recorded have none: 0 per frame.
+            let collapsed = r
+                .collapsed_triangles
+                .iter()
+                .copied()
+                .chain(std::iter::repeat(0));
             r.frames
                 .iter()
                 .zip(&r.frame_times)
                 .zip(&r.deform_ms)
-                .map(|((&f, &t), &d)| (f, t, d))
+                .zip(collapsed)
+                .map(|(((&f, &t), &d), c)| (f, t, d, c))
         })
         .collect();
     rows.sort_by_key(|row| row.0);
@@ -216,6 +223,7 @@ fn merged_report(reports: &[(&Path, Report)]) -> Report {
     merged.frames = rows.iter().map(|r| r.0).collect();
     merged.frame_times = rows.iter().map(|r| r.1).collect();
     merged.deform_ms = rows.iter().map(|r| r.2).collect();
+    merged.collapsed_triangles = rows.iter().map(|r| r.3).collect();
     merged.failed_frames = reports
         .iter()
         .flat_map(|(_, r)| r.failed_frames.iter().cloned())

@@ -627,6 +627,7 @@ mod tests {
             frames: vec![0, 1, 2],
             frame_times: vec![0.0; 3],
             deform_ms: vec![0.0; 3],
+            collapsed_triangles: vec![0; 3],
             failed_frames: Vec::new(),
             ground_truth: measured.then(|| "template".to_owned()),
             samples: 10,

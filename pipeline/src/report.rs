@@ -683,6 +683,10 @@ pub struct Report {
     pub frame_times: Vec<f64>,
     /// Deformation wall time per frame, milliseconds (shared by the methods).
     pub deform_ms: Vec<f64>,
+    /// Template triangles degenerate in each frame: each kept its last valid frame (or the
+    /// fallback frame when it had none; docs/numerics.md, "The degenerate-triangle policy").
+    #[serde(default)]
+    pub collapsed_triangles: Vec<usize>,
     /// Frames that failed (not in `frames`), with the error; the run went on without them.
     pub failed_frames: Vec<crate::journal::FailedFrame>,
     /// `template`, the ground-truth file, or `None`.
@@ -813,6 +817,21 @@ impl Report {
             v.push(format!(
                 "channels of the animation that drive no morph target (ignored): {}",
                 self.unused_channels.join(", ")
+            ));
+        }
+        let collapsed: Vec<String> = self
+            .frames
+            .iter()
+            .zip(&self.collapsed_triangles)
+            .filter(|(_, n)| **n > 0)
+            .map(|(f, n)| format!("{f} ({n})"))
+            .collect();
+        if !collapsed.is_empty() {
+            v.push(format!(
+                "**collapsed triangles** (zero area; each kept its last valid frame) in {} \
+                 frame(s): {}",
+                collapsed.len(),
+                collapsed.join(", ")
             ));
         }
         let deform = mean(self.deform_ms.iter().copied()).unwrap_or(0.0);
@@ -1307,6 +1326,7 @@ mod tests {
             frames: vec![4, 5, 6],
             frame_times: vec![0.0; 3],
             deform_ms: vec![0.0; 3],
+            collapsed_triangles: vec![0; 3],
             ground_truth: None,
             samples: 10,
             tau: Some(0.01),

@@ -194,6 +194,7 @@ pub fn run(
     }
     let frame_times: Vec<f64> = entries.iter().map(|e| e.time).collect();
     let deform_ms: Vec<f64> = entries.iter().map(|e| e.deform_ms).collect();
+    let collapsed_triangles: Vec<usize> = entries.iter().map(|e| e.collapsed_triangles).collect();
     let resolved = *session.resolved();
     let mut method_reports = BTreeMap::new();
     for (m, frames_of) in records {
@@ -265,6 +266,7 @@ pub fn run(
         frames: entries.iter().map(|e| e.frame).collect(),
         frame_times,
         deform_ms,
+        collapsed_triangles,
         failed_frames: failed,
         unused_channels: session.unused_channels().to_vec(),
         ground_truth: config.gt.as_ref().map(GroundTruth::label),
@@ -348,6 +350,7 @@ fn run_frame(
         frame: f,
         time: result.time,
         deform_ms: result.deform_ms,
+        collapsed_triangles: result.collapsed.total(),
         methods: BTreeMap::new(),
         delaunay: None,
     };

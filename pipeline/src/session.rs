@@ -23,7 +23,7 @@ use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::MeshSequence;
 use trisplat_geometry::io::read_mesh;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{Deformer, WorldGeometry};
+use trisplat_splat::deform::{Collapsed, Deformer, WorldGeometry};
 use trisplat_splat::frames::Convention;
 
 use crate::avatar::{GaussianLayout, bind_lam};
@@ -81,6 +81,9 @@ pub struct FrameResult {
     pub time: f64,
     /// Milliseconds spent deforming the Gaussians.
     pub deform_ms: f64,
+    /// Triangles of the template that were degenerate in this frame (each kept its last valid
+    /// frame, or took the fallback frame when it had none).
+    pub collapsed: Collapsed,
     /// One entry per method, in report order.
     pub methods: Vec<MethodFrame>,
 }
@@ -467,17 +470,35 @@ impl Session {
             Some(p) if frame == self.frames.start => p,
             _ => self.animation.get().frame(frame)?,
         };
-        let count = stored.len();
-        self.welded
-            .positions(stored)
-            .ok_or_else(|| PipelineError::Topology {
-                animation: self.label.clone(),
-                problem: format!(
-                    "frame {frame} has {count} vertices, the template {} has {}",
-                    self.template_path.display(),
-                    self.welded.stored_vertices
-                ),
-            })
+        weld_frame(
+            &self.welded,
+            stored,
+            frame,
+            &self.label,
+            &self.template_path,
+        )
+    }
+
+    /// Readies the engine for deforming `frame` (template at `positions`) when it does not
+    /// follow the last frame deformed: the last valid frame of each triangle degenerate there
+    /// is looked up in earlier frames, so a collapsed triangle is treated alike whether the
+    /// run started before it or at it.
+    fn ready_engine(&mut self, frame: usize, positions: &[DVec3]) -> Result<(), PipelineError> {
+        let Engine::Frames(engine) = &mut self.engine else {
+            return Ok(());
+        };
+        if !engine.needs_history(frame) {
+            return Ok(());
+        }
+        let (animation, welded, label, path) = (
+            &self.animation,
+            &self.welded,
+            self.label.as_str(),
+            self.template_path.as_path(),
+        );
+        engine.fill_from_history(frame, positions, label, |f| {
+            weld_frame(welded, animation.get().frame(f)?, f, label, path)
+        })
     }
 
     /// The world-space Gaussians of animation frame `frame` (every attribute, SH included):
@@ -487,9 +508,11 @@ impl Session {
     /// As [`Session::positions`]; a failed deformation naming the frame.
     pub fn world(&mut self, frame: usize) -> Result<GaussianSet, PipelineError> {
         let positions = self.positions(frame)?;
+        self.ready_engine(frame, &positions)?;
         self.record(Stage::Deform);
         self.engine
             .deform(&self.animation, &self.set, &positions, frame, &self.label)
+            .map(|(set, _)| set)
     }
 
     /// The template's positions and the Gaussians' deformed means at animation frame
@@ -499,6 +522,7 @@ impl Session {
     /// As [`Session::positions`]; a failed deformation naming the frame.
     pub fn deform(&mut self, frame: usize) -> Result<(Vec<DVec3>, &[Vec3]), PipelineError> {
         let positions = self.positions(frame)?;
+        self.ready_engine(frame, &positions)?;
         self.record(Stage::Deform);
         self.means_into_scratch(frame, &positions)?;
         Ok((positions, &self.scratch.means))
@@ -509,7 +533,7 @@ impl Session {
         &mut self,
         frame: usize,
         positions: &[DVec3],
-    ) -> Result<(), PipelineError> {
+    ) -> Result<Collapsed, PipelineError> {
         self.engine.deform_means(
             &self.animation,
             &self.set,
@@ -522,26 +546,29 @@ impl Session {
 
     /// Deforms frame `frame` for the meshers: the means into the scratch buffers, and the
     /// world-space set (geometry and opacity only) when the plan renders. Returns the
-    /// positions, that set and the milliseconds spent deforming.
-    fn deform_frame(
-        &mut self,
-        frame: usize,
-    ) -> Result<(Vec<DVec3>, Option<GaussianSet>, f64), PipelineError> {
+    /// positions, that set, the frame's collapsed triangles and the milliseconds spent
+    /// deforming.
+    fn deform_frame(&mut self, frame: usize) -> Result<DeformedFrame, PipelineError> {
         let positions = self.positions(frame)?;
+        self.ready_engine(frame, &positions)?;
         self.record(Stage::Deform);
         let start = Instant::now();
-        let world = if let Some(render_set) = &self.render_set {
-            let world =
+        let (world, collapsed) = if let Some(render_set) = &self.render_set {
+            let (world, collapsed) =
                 self.engine
                     .deform(&self.animation, render_set, &positions, frame, &self.label)?;
             self.scratch.means.clear();
             self.scratch.means.extend_from_slice(world.means());
-            Some(world)
+            (Some(world), collapsed)
         } else {
-            self.means_into_scratch(frame, &positions)?;
-            None
+            (None, self.means_into_scratch(frame, &positions)?)
         };
-        Ok((positions, world, start.elapsed().as_secs_f64() * 1e3))
+        Ok(DeformedFrame {
+            positions,
+            world,
+            collapsed,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+        })
     }
 
     /// Deforms and meshes animation frame `frame` with every method of the plan, and measures
@@ -567,7 +594,12 @@ impl Session {
         after: impl FnOnce(&mut FrameResult, Option<&GtSamples>) -> T,
     ) -> Result<(FrameResult, T), PipelineError> {
         let time = self.frame_time(frame);
-        let (positions, world, deform_ms) = self.deform_frame(frame)?;
+        let DeformedFrame {
+            positions,
+            world,
+            collapsed,
+            ms: deform_ms,
+        } = self.deform_frame(frame)?;
         let frame_gt = match (&self.gt, self.plan.runs(Stage::Metrics)) {
             (Some(GroundTruth::Template), true) => {
                 let mesh =
@@ -668,6 +700,7 @@ impl Session {
             frame,
             time,
             deform_ms,
+            collapsed,
             methods,
         };
         let gt = if measured {
@@ -678,6 +711,35 @@ impl Session {
         let extra = after(&mut result, gt);
         Ok((result, extra))
     }
+}
+
+/// One frame deformed for the meshers (see `Session::deform_frame`).
+struct DeformedFrame {
+    positions: Vec<DVec3>,
+    world: Option<GaussianSet>,
+    collapsed: Collapsed,
+    ms: f64,
+}
+
+/// The welded positions of animation frame `frame` from its stored ones.
+fn weld_frame(
+    welded: &WeldedTemplate,
+    stored: Vec<DVec3>,
+    frame: usize,
+    label: &str,
+    template_path: &Path,
+) -> Result<Vec<DVec3>, PipelineError> {
+    let count = stored.len();
+    welded
+        .positions(stored)
+        .ok_or_else(|| PipelineError::Topology {
+            animation: label.to_owned(),
+            problem: format!(
+                "frame {frame} has {count} vertices, the template {} has {}",
+                template_path.display(),
+                welded.stored_vertices
+            ),
+        })
 }
 
 /// How the Gaussians came, for an error message.

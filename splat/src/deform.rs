@@ -28,7 +28,9 @@ use nalgebra::Matrix3;
 use rayon::prelude::*;
 use trisplat_geometry::{TriId, TriMesh};
 
-use crate::frames::{CanonicalTriangle, FrameOptions, corners_of, gaussian_avatars_frame};
+use crate::frames::{
+    CanonicalTriangle, FrameOptions, corners_of, gaussian_avatars_frame, is_degenerate,
+};
 use crate::gaussians::{
     GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
 };
@@ -109,23 +111,135 @@ pub struct WorldGeometry {
 }
 
 /// Per-triangle data of the binding mode, in `f32` for the per-Gaussian loop.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct BindingTri {
     linear: Mat3A,
     rotation: Quat,
     origin: Vec3A,
     ln_k: f32,
+    /// The posed triangle is degenerate (its frame is the fallback frame).
+    degenerate: bool,
 }
 
 /// Per-triangle data of the Jacobian mode: `M = J k_c R_c`, its kernel data and the deformed
 /// centroid.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct JacobianTri {
     m: DMat3,
     factor: TriangleFactor,
     /// `M` and the centroid in `f32` for the means (as in the binding mode).
     m32: Mat3A,
     origin: Vec3A,
+    /// The deformed triangle is degenerate (`J` is singular).
+    degenerate: bool,
+}
+
+/// Per-triangle data that a [`FrameHold`] can keep: everything but the centroid, which always
+/// follows the frame.
+trait HeldTriangle: Copy {
+    fn degenerate(&self) -> bool;
+    fn origin(&self) -> Vec3A;
+    fn set_origin(&mut self, origin: Vec3A);
+}
+
+impl HeldTriangle for BindingTri {
+    fn degenerate(&self) -> bool {
+        self.degenerate
+    }
+    fn origin(&self) -> Vec3A {
+        self.origin
+    }
+    fn set_origin(&mut self, origin: Vec3A) {
+        self.origin = origin;
+    }
+}
+
+impl HeldTriangle for JacobianTri {
+    fn degenerate(&self) -> bool {
+        self.degenerate
+    }
+    fn origin(&self) -> Vec3A {
+        self.origin
+    }
+    fn set_origin(&mut self, origin: Vec3A) {
+        self.origin = origin;
+    }
+}
+
+/// The last valid frame of every triangle, kept from frame to frame so that a triangle that
+/// collapses (docs/numerics.md, "The degenerate-triangle policy") keeps the rotation and scale
+/// (binding mode) or the linear map `M = J k_c R_c` (Jacobian mode) it had in the last frame
+/// where it was valid, while its centroid follows the collapsed triangle. A triangle degenerate
+/// in every frame seen so far takes the fallback frame. Used by [`Deformer::deform_held`] and
+/// [`Deformer::deform_geometry_held`]; frames must come in order (a caller that starts or jumps
+/// to a frame fills the hold from earlier frames with [`Deformer::fill_hold`]).
+#[derive(Clone, Debug, Default)]
+pub struct FrameHold {
+    binding: Vec<BindingTri>,
+    jacobian: Vec<JacobianTri>,
+    /// Per triangle: the kept entry is a valid frame.
+    valid: Vec<bool>,
+}
+
+impl FrameHold {
+    /// An empty hold (no triangle has a kept frame yet).
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Number of triangles with a kept valid frame.
+    #[must_use]
+    pub fn kept(&self) -> usize {
+        self.valid.iter().filter(|&&v| v).count()
+    }
+}
+
+/// How many triangles of one frame were degenerate, and what they did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Collapsed {
+    /// Degenerate triangles that kept their last valid frame.
+    pub held: usize,
+    /// Degenerate triangles with no valid frame kept, which took the fallback frame.
+    pub fallback: usize,
+}
+
+impl Collapsed {
+    /// All degenerate triangles of the frame.
+    #[must_use]
+    pub fn total(&self) -> usize {
+        self.held + self.fallback
+    }
+}
+
+/// Replaces each degenerate triangle of `tris` by its kept valid frame (centroid from `tris`)
+/// and keeps every valid one.
+fn apply_hold<T: HeldTriangle>(
+    tris: &mut [T],
+    kept: &mut Vec<T>,
+    valid: &mut Vec<bool>,
+) -> Collapsed {
+    if kept.len() != tris.len() || valid.len() != tris.len() {
+        kept.clear();
+        kept.extend_from_slice(tris);
+        valid.clear();
+        valid.resize(tris.len(), false);
+    }
+    let mut collapsed = Collapsed::default();
+    for ((t, k), v) in tris.iter_mut().zip(kept.iter_mut()).zip(valid.iter_mut()) {
+        if !t.degenerate() {
+            *k = *t;
+            *v = true;
+        } else if *v {
+            let origin = t.origin();
+            *t = *k;
+            t.set_origin(origin);
+            collapsed.held += 1;
+        } else {
+            collapsed.fallback += 1;
+        }
+    }
+    collapsed
 }
 
 /// Deforms bound Gaussians frame after frame for one template.
@@ -259,8 +373,32 @@ impl Deformer {
         set: &GaussianSet,
         positions: &[DVec3],
     ) -> Result<GaussianSet, DeformError> {
+        self.deform_with(set, positions, None).map(|(set, _)| set)
+    }
+
+    /// [`Deformer::deform`] for frames in order: a triangle that is degenerate in this frame
+    /// keeps its last valid frame from `hold` (see [`FrameHold`]); returns the set and the
+    /// frame's degenerate triangles.
+    ///
+    /// # Errors
+    /// As [`Deformer::deform`].
+    pub fn deform_held(
+        &self,
+        set: &GaussianSet,
+        positions: &[DVec3],
+        hold: &mut FrameHold,
+    ) -> Result<(GaussianSet, Collapsed), DeformError> {
+        self.deform_with(set, positions, Some(hold))
+    }
+
+    fn deform_with(
+        &self,
+        set: &GaussianSet,
+        positions: &[DVec3],
+        hold: Option<&mut FrameHold>,
+    ) -> Result<(GaussianSet, Collapsed), DeformError> {
         let mut geometry = WorldGeometry::default();
-        self.deform_geometry(set, positions, &mut geometry)?;
+        let collapsed = self.geometry_with(set, positions, hold, &mut geometry)?;
         let parts = GaussianParts {
             means: geometry.means,
             log_scales: geometry.log_scales,
@@ -274,9 +412,9 @@ impl Deformer {
             extras: set.extras().to_vec(),
             property_order: set.property_order().map(<[String]>::to_vec),
         };
-        // `deform_geometry` checked every output is finite; the other arrays are copies of a
+        // `geometry_with` checked every output is finite; the other arrays are copies of a
         // valid set, so the set is built unchecked to avoid another pass over the data.
-        Ok(GaussianSet::new_unchecked(parts))
+        Ok((GaussianSet::new_unchecked(parts), collapsed))
     }
 
     /// The world-space means of `set` with the template at `positions`; with the template's
@@ -301,6 +439,112 @@ impl Deformer {
         positions: &[DVec3],
         out: &mut WorldGeometry,
     ) -> Result<(), DeformError> {
+        self.geometry_with(set, positions, None, out).map(|_| ())
+    }
+
+    /// [`Deformer::deform_geometry`] for frames in order, keeping the last valid frame of
+    /// degenerate triangles in `hold` (see [`FrameHold`]); returns the frame's degenerate
+    /// triangles.
+    ///
+    /// # Errors
+    /// As [`Deformer::deform`].
+    pub fn deform_geometry_held(
+        &self,
+        set: &GaussianSet,
+        positions: &[DVec3],
+        hold: &mut FrameHold,
+        out: &mut WorldGeometry,
+    ) -> Result<Collapsed, DeformError> {
+        self.geometry_with(set, positions, Some(hold), out)
+    }
+
+    /// The indices of the triangles that are degenerate with the template at `positions` (in
+    /// the posed frame for the binding mode, the deformed triangle for the Jacobian mode: the
+    /// triangles a [`FrameHold`] would hold).
+    ///
+    /// # Errors
+    /// [`DeformError::VertexCount`], [`DeformError::NonFiniteVertex`].
+    pub fn degenerate_triangles(&self, positions: &[DVec3]) -> Result<Vec<usize>, DeformError> {
+        self.check_positions(positions)?;
+        let tol = self.options.degenerate_tol;
+        Ok(self
+            .triangles
+            .par_iter()
+            .enumerate()
+            .with_min_len(4096)
+            .filter(|(_, t)| is_degenerate(corners_of(positions, **t), tol))
+            .map(|(i, _)| i)
+            .collect())
+    }
+
+    /// Fills `hold` for the triangles `wanted` that have no kept frame yet, from the template
+    /// at `positions` (an earlier frame) where they are valid there, and returns those still
+    /// without one. A run that starts at (or jumps to) frame `s` calls it with frames
+    /// `s - 1, s - 2, …` for the triangles degenerate at `s` until none is left (or frame 0),
+    /// so its results equal those of a run that went through every frame before `s`.
+    ///
+    /// # Errors
+    /// [`DeformError::VertexCount`], [`DeformError::NonFiniteVertex`].
+    pub fn fill_hold(
+        &self,
+        positions: &[DVec3],
+        hold: &mut FrameHold,
+        wanted: &[usize],
+    ) -> Result<Vec<usize>, DeformError> {
+        self.check_positions(positions)?;
+        let missing: Vec<usize> = wanted
+            .iter()
+            .copied()
+            .filter(|&i| i < self.triangles.len() && !hold.valid.get(i).copied().unwrap_or(false))
+            .collect();
+        if missing.is_empty() {
+            return Ok(missing);
+        }
+        let n = self.triangles.len();
+        if hold.valid.len() != n {
+            hold.valid = vec![false; n];
+        }
+        let mut still = Vec::new();
+        match self.mode {
+            DeformMode::Binding => {
+                if hold.binding.len() != n {
+                    hold.binding = self.binding_triangles(positions);
+                }
+                for i in missing {
+                    let t = self.binding_triangle(i, positions);
+                    if t.degenerate {
+                        still.push(i);
+                    } else {
+                        hold.binding[i] = t;
+                        hold.valid[i] = true;
+                    }
+                }
+            }
+            DeformMode::Jacobian => {
+                if hold.jacobian.len() != n {
+                    hold.jacobian = self.jacobian_triangles(positions);
+                }
+                for i in missing {
+                    let t = self.jacobian_triangle(i, positions);
+                    if t.degenerate {
+                        still.push(i);
+                    } else {
+                        hold.jacobian[i] = t;
+                        hold.valid[i] = true;
+                    }
+                }
+            }
+        }
+        Ok(still)
+    }
+
+    fn geometry_with(
+        &self,
+        set: &GaussianSet,
+        positions: &[DVec3],
+        hold: Option<&mut FrameHold>,
+        out: &mut WorldGeometry,
+    ) -> Result<Collapsed, DeformError> {
         self.check(set)?;
         self.check_positions(positions)?;
         let n = set.len();
@@ -309,9 +553,13 @@ impl Deformer {
         out.log_scales.resize(n, Vec3::ZERO);
         // `check` guarantees a binding; an empty slice would only mean no Gaussians.
         let binding = set.binding().map_or(&[][..], |b| b.triangles.as_slice());
+        let mut collapsed = Collapsed::default();
         let bad = match self.mode {
             DeformMode::Binding => {
-                let tris = self.binding_triangles(positions);
+                let mut tris = self.binding_triangles(positions);
+                if let Some(h) = hold {
+                    collapsed = apply_hold(&mut tris, &mut h.binding, &mut h.valid);
+                }
                 run_chunks(out, |start, means, rots, scales| {
                     for j in 0..means.len() {
                         let i = start + j;
@@ -330,7 +578,10 @@ impl Deformer {
                 })
             }
             DeformMode::Jacobian => {
-                let tris = self.jacobian_triangles(positions);
+                let mut tris = self.jacobian_triangles(positions);
+                if let Some(h) = hold {
+                    collapsed = apply_hold(&mut tris, &mut h.jacobian, &mut h.valid);
+                }
                 let flat = set.scale_dims() == ScaleDims::Two;
                 let (local_rots, local_ls) = (set.rotations(), set.log_scales());
                 run_chunks(out, |start, means, rots, scales| {
@@ -380,61 +631,66 @@ impl Deformer {
         // handing NaN or infinity to a file or a renderer (checked per chunk, in cache).
         match bad {
             Some(index) => Err(DeformError::NonFiniteOutput { index }),
-            None => Ok(()),
+            None => Ok(collapsed),
         }
     }
 
     fn binding_triangles(&self, positions: &[DVec3]) -> Vec<BindingTri> {
-        self.triangles
-            .par_iter()
-            .enumerate()
+        (0..self.triangles.len())
+            .into_par_iter()
             .with_min_len(1024)
-            .map(|(i, t)| {
-                let v = corners_of(positions, *t);
-                let f = gaussian_avatars_frame(v, &self.options);
-                let q = quat_from_rotation(f.rotation);
-                let ln_k = match self.adaptive.get(i) {
-                    Some(&(ln_k_rest, area_rest)) if area_rest > 0.0 => {
-                        let ratio = triangle_area(v) / area_rest;
-                        ln_k_rest + 0.5 * ratio.max(f64::MIN_POSITIVE).ln()
-                    }
-                    _ => f.scale.ln(),
-                };
-                BindingTri {
-                    linear: Mat3A::from_cols(
-                        (f.rotation.x_axis * f.scale).as_vec3().into(),
-                        (f.rotation.y_axis * f.scale).as_vec3().into(),
-                        (f.rotation.z_axis * f.scale).as_vec3().into(),
-                    ),
-                    rotation: q.as_quat(),
-                    origin: f.origin.as_vec3().into(),
-                    ln_k: ln_k as f32,
-                }
-            })
+            .map(|i| self.binding_triangle(i, positions))
             .collect()
     }
 
+    fn binding_triangle(&self, i: usize, positions: &[DVec3]) -> BindingTri {
+        let v = corners_of(positions, self.triangles[i]);
+        let f = gaussian_avatars_frame(v, &self.options);
+        let q = quat_from_rotation(f.rotation);
+        let ln_k = match self.adaptive.get(i) {
+            Some(&(ln_k_rest, area_rest)) if area_rest > 0.0 => {
+                let ratio = triangle_area(v) / area_rest;
+                ln_k_rest + 0.5 * ratio.max(f64::MIN_POSITIVE).ln()
+            }
+            _ => f.scale.ln(),
+        };
+        BindingTri {
+            linear: Mat3A::from_cols(
+                (f.rotation.x_axis * f.scale).as_vec3().into(),
+                (f.rotation.y_axis * f.scale).as_vec3().into(),
+                (f.rotation.z_axis * f.scale).as_vec3().into(),
+            ),
+            rotation: q.as_quat(),
+            origin: f.origin.as_vec3().into(),
+            ln_k: ln_k as f32,
+            degenerate: f.degenerate,
+        }
+    }
+
     fn jacobian_triangles(&self, positions: &[DVec3]) -> Vec<JacobianTri> {
-        self.triangles
-            .par_iter()
-            .zip(self.canonical.par_iter())
+        (0..self.triangles.len())
+            .into_par_iter()
             .with_min_len(1024)
-            .map(|(t, c)| {
-                let v = corners_of(positions, *t);
-                let j = c.gradient(v, &self.options);
-                let m = j * c.frame.rotation * c.frame.scale;
-                JacobianTri {
-                    m,
-                    factor: TriangleFactor::new(m),
-                    m32: Mat3A::from_cols(
-                        m.x_axis.as_vec3().into(),
-                        m.y_axis.as_vec3().into(),
-                        m.z_axis.as_vec3().into(),
-                    ),
-                    origin: ((v[0] + v[1] + v[2]) / 3.0).as_vec3().into(),
-                }
-            })
+            .map(|i| self.jacobian_triangle(i, positions))
             .collect()
+    }
+
+    fn jacobian_triangle(&self, i: usize, positions: &[DVec3]) -> JacobianTri {
+        let c = &self.canonical[i];
+        let v = corners_of(positions, self.triangles[i]);
+        let j = c.gradient(v, &self.options);
+        let m = j * c.frame.rotation * c.frame.scale;
+        JacobianTri {
+            m,
+            factor: TriangleFactor::new(m),
+            m32: Mat3A::from_cols(
+                m.x_axis.as_vec3().into(),
+                m.y_axis.as_vec3().into(),
+                m.z_axis.as_vec3().into(),
+            ),
+            origin: ((v[0] + v[1] + v[2]) / 3.0).as_vec3().into(),
+            degenerate: is_degenerate(v, self.options.degenerate_tol),
+        }
     }
 }
 

@@ -161,6 +161,13 @@ fn edge_and_normal(v: [DVec3; 3], tol: f64) -> (DVec3, DVec3, bool, f64, f64) {
     (a0, orthogonal_unit(a0), true, l1, longest)
 }
 
+/// Whether the triangle `v` is degenerate by the rule of the module documentation (the same
+/// test the frames and [`CanonicalTriangle`] use).
+#[must_use]
+pub fn is_degenerate(v: [DVec3; 3], tol: f64) -> bool {
+    edge_and_normal(v, tol).2
+}
+
 fn frame_scale(
     l1: f64,
     in_plane: DVec3,

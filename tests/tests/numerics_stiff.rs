@@ -19,13 +19,15 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use glam::{DMat3, DQuat, DVec3, IVec3, Vec3};
+use glam::{DMat3, DVec3, IVec3, Vec3};
 use serde_json::Value;
 use trisplat_extract::alpha_shape::{alpha_shape_from_delaunay, circumradius};
 use trisplat_extract::delaunay3d::Delaunay3d;
 use trisplat_extract::tsdf::{DepthImage, Frame, TsdfParams, TsdfVolume};
 use trisplat_geometry::{Camera, TriId, TriMesh};
-use trisplat_splat::deform::{DeformMode, Deformer, rotation_and_scales, rotation_and_scales_svd};
+use trisplat_splat::deform::{
+    DeformMode, Deformer, FrameHold, rotation_and_scales, rotation_and_scales_svd,
+};
 use trisplat_splat::frames::{
     CanonicalTriangle, Convention, FrameOptions, deformation_gradient, edge_matrix, frame,
     gaussian_avatars_frame, transform_normal,
@@ -369,7 +371,11 @@ fn bound(op: &str, quantity: &str, case: &str) -> f64 {
         // (6e-8 / |a - b| ≈ 3e-7 voxel).
         ("tsdf", "crossing") => 0.2,
         ("tsdf", "crossing − exact rule's") => 1e-6,
-        // Collapse policy: no error, no non-finite output, flags exactly where the area is 0.
+        // Collapse policy: the held frame is the last valid one (rotations compared through
+        // f32 quaternions, means moved by the f32 centroid shift), no non-finite output, flags
+        // and held counts exactly where the area is 0.
+        ("collapse", "held rotation − last valid (rad)") => 1e-6,
+        ("collapse", "held mean − last valid moved (abs)") => 1e-6,
         ("collapse", _) => 0.0,
         _ => panic!("no bound for {op} / {quantity} / {case}"),
     }
@@ -453,8 +459,20 @@ fn deform_one(
     surfel: bool,
 ) -> GaussianSet {
     // Mesh vertices are f64: the corners go in as the fixture gives them.
+    let (template, set) = one_triangle_set(canonical, gaussians, surfel);
+    Deformer::new(&template, mode)
+        .deform(&set, &deformed)
+        .unwrap()
+}
+
+/// The fixture's Gaussians bound to one triangle whose rest shape is `canonical` (2D surfels
+/// when `surfel`).
+fn one_triangle_set(
+    canonical: [DVec3; 3],
+    gaussians: &[Value],
+    surfel: bool,
+) -> (TriMesh, GaussianSet) {
     let template = TriMesh::new(canonical.to_vec(), vec![[0, 1, 2]]);
-    let positions: Vec<DVec3> = deformed.to_vec();
     let n = gaussians.len();
     let vec3 = |v: &Value| Vec3::from_slice(&f32s(v));
     let set = GaussianSet::try_new(GaussianParts {
@@ -479,9 +497,7 @@ fn deform_one(
         ..GaussianParts::default()
     })
     .unwrap();
-    Deformer::new(&template, mode)
-        .deform(&set, &positions)
-        .unwrap()
+    (template, set)
 }
 
 /// Covariance of an output Gaussian in f64 from its stored (f32) rotation and log-scales, and
@@ -808,8 +824,12 @@ fn tsdf_at_grazing_angles() {
 
 // ------------------------------------------------------------------ collapse policy
 
+/// The policy of docs/numerics.md: a collapsed triangle is flagged, keeps its last valid frame
+/// (rotation and scale, or `M = J k_c R_c`; its centroid follows the collapse), never gives
+/// NaN, and a run that starts at the collapse (filling its hold from earlier frames) gives what
+/// a run through every frame gives.
 #[test]
-fn collapse_to_zero_area_never_gives_nan() {
+fn collapse_to_zero_area_keeps_the_last_valid_frame() {
     let json = load("collapse");
     let mut report = Report::default();
     let o = FrameOptions::default();
@@ -823,43 +843,98 @@ fn collapse_to_zero_area_never_gives_nan() {
             .iter()
             .map(|b| b.as_bool().unwrap())
             .collect();
-        let gs = inst["gaussians"].as_array().unwrap();
-        let mut rotations = Vec::new();
-        for (k, frame_v) in inst["frames"].as_array().unwrap().iter().enumerate() {
-            let v = tri32(frame_v);
-            let f = gaussian_avatars_frame(v, &o);
-            let flag_wrong = usize::from(f.degenerate != flags[k]);
-            report.add(
-                "collapse",
-                "degenerate flag − expected",
-                g,
-                flag_wrong as f64,
-            );
+        let frames: Vec<[DVec3; 3]> = inst["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(tri32)
+            .collect();
+        let t: Vec<f64> = nums(&inst["t"]);
+        let at = t.iter().position(|&x| x == 1.0).unwrap();
+        assert!(
+            flags[at] && !flags[at - 1],
+            "{name}: the fixture collapses at t = 1"
+        );
+        let (template, set) =
+            one_triangle_set(canonical, inst["gaussians"].as_array().unwrap(), false);
+        for mode in [DeformMode::Binding, DeformMode::Jacobian] {
+            let deformer = Deformer::new(&template, mode);
+            let mut hold = FrameHold::new();
+            let mut outputs = Vec::new();
             let mut bad = 0usize;
-            for mode in [DeformMode::Binding, DeformMode::Jacobian] {
-                let out = deform_one(mode, canonical, v, gs, false);
+            for (k, v) in frames.iter().enumerate() {
+                let f = gaussian_avatars_frame(*v, &o);
+                report.add(
+                    "collapse",
+                    "degenerate flag − expected",
+                    g,
+                    usize::from(f.degenerate != flags[k]) as f64,
+                );
+                let (out, collapsed) = deformer.deform_held(&set, v.as_ref(), &mut hold).unwrap();
+                report.add(
+                    "collapse",
+                    "held count − expected",
+                    g,
+                    collapsed.held.abs_diff(usize::from(flags[k])) as f64,
+                );
                 let finite = out.means().iter().all(|m| m.is_finite())
                     && out.log_scales().iter().all(|s| s.is_finite())
                     && out.rotations().iter().flatten().all(|q| q.is_finite());
                 bad += usize::from(!finite);
-                if mode == DeformMode::Binding {
-                    rotations.push(out.rotation(0));
-                }
+                outputs.push(out);
             }
             report.add("collapse", "non-finite outputs", g, bad as f64);
+            // At the collapse: the rotations and scales of t = 0.9999, the means moved with the
+            // centroid only.
+            let (before, collapsed) = (&outputs[at - 1], &outputs[at]);
+            let centroid = |v: &[DVec3; 3]| ((v[0] + v[1] + v[2]) / 3.0).as_vec3();
+            let shift = centroid(&frames[at]) - centroid(&frames[at - 1]);
+            for i in 0..set.len() {
+                let turn = before.rotation(i).angle_between(collapsed.rotation(i));
+                report.add("collapse", "held rotation − last valid (rad)", g, turn);
+                let ds = (before.log_scales()[i] - collapsed.log_scales()[i])
+                    .abs()
+                    .max_element();
+                report.add("collapse", "held log-scale − last valid", g, f64::from(ds));
+                let dm = (before.means()[i] + shift - collapsed.means()[i]).length();
+                report.add(
+                    "collapse",
+                    "held mean − last valid moved (abs)",
+                    g,
+                    f64::from(dm),
+                );
+            }
+            // Starting at the collapse with an empty hold, filled from the frame before.
+            let mut fresh = FrameHold::new();
+            let wanted = deformer.degenerate_triangles(frames[at].as_ref()).unwrap();
+            assert_eq!(wanted, vec![0], "{name} {mode:?}");
+            let left = deformer
+                .fill_hold(frames[at - 1].as_ref(), &mut fresh, &wanted)
+                .unwrap();
+            assert!(left.is_empty(), "{name} {mode:?}");
+            let (resumed, _) = deformer
+                .deform_held(&set, frames[at].as_ref(), &mut fresh)
+                .unwrap();
+            assert_eq!(
+                &resumed, collapsed,
+                "{name} {mode:?}: a run started at the collapse"
+            );
+            // Without a hold (the stateless call) the fallback frame: print how far it turns.
+            if mode == DeformMode::Binding {
+                let stateless = deformer.deform(&set, frames[at].as_ref()).unwrap();
+                println!(
+                    "collapse '{name}': the fallback frame would turn the Gaussian {:.2}° at t = 1; the held frame turns it {:.2}°",
+                    before
+                        .rotation(0)
+                        .angle_between(stateless.rotation(0))
+                        .to_degrees(),
+                    before
+                        .rotation(0)
+                        .angle_between(collapsed.rotation(0))
+                        .to_degrees(),
+                );
+            }
         }
-        // What the policy is today: the frame of the collapsed triangle is the fallback, not
-        // the last valid one; print how far the Gaussian turns at the collapse (docs/numerics.md).
-        let t: Vec<f64> = nums(&inst["t"]);
-        let at = t.iter().position(|&x| x == 1.0).unwrap();
-        let turn = |a: DQuat, b: DQuat| a.angle_between(b).to_degrees();
-        println!(
-            "collapse '{name}': binding-mode rotation turns {:.2}° from t = {} to t = 1 and {:.2}° from t = 1 to t = {}",
-            turn(rotations[at - 1], rotations[at]),
-            t[at - 1],
-            turn(rotations[at], rotations[at + 1]),
-            t[at + 1],
-        );
     }
     report.check("Triangles collapsing to zero area");
 }
