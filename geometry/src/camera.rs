@@ -172,6 +172,16 @@ impl Camera {
         self.position
     }
 
+    /// The same camera moved by `offset` (in world space, f64): the view of a scene moved by
+    /// the same offset, e.g. to a local origin ([`crate::Aabb::local_origin`]).
+    #[must_use]
+    pub fn translated(&self, offset: DVec3) -> Self {
+        Self {
+            position: self.position + offset,
+            ..self.clone()
+        }
+    }
+
     /// World-to-camera rotation (the transpose of [`Camera::rotation`]).
     #[must_use]
     pub fn world_to_camera_rotation(&self) -> DMat3 {

@@ -53,7 +53,30 @@ impl Aabb {
     pub fn center(&self) -> DVec3 {
         (self.min + self.max) * 0.5
     }
+
+    /// The origin to store coordinates inside this box relative to, in `f32`, when the box
+    /// is far from the world origin (docs/conventions.md §3, "Precision"): zero when the box's
+    /// centre is within [`LOCAL_ORIGIN_REACH`] diagonals of the world origin (no change for
+    /// objects modelled around it), else the centre rounded to a multiple of the power of two
+    /// at or above the diagonal, so `p - origin` is exact in `f64` for every point of the box
+    /// and small enough for `f32` to keep its relative precision.
+    #[must_use]
+    pub fn local_origin(&self) -> DVec3 {
+        let size = self.diagonal();
+        let centre = self.center();
+        if !(size > 0.0 && size.is_finite() && centre.is_finite())
+            || centre.abs().max_element() <= LOCAL_ORIGIN_REACH * size
+        {
+            return DVec3::ZERO;
+        }
+        let grid = 2f64.powf(size.log2().ceil());
+        (centre / grid).round() * grid
+    }
 }
+
+/// How many bounding-box diagonals from the world origin a point set's centre may lie before
+/// [`Aabb::local_origin`] moves its coordinates to a local origin.
+pub const LOCAL_ORIGIN_REACH: f64 = 4.0;
 
 /// Errors from building a [`TriMesh`] out of raw arrays.
 #[derive(Debug, thiserror::Error, PartialEq)]

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::DVec3;
+use glam::{DMat4, DVec3};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_splat::GaussianSet;
@@ -24,8 +24,9 @@ pub enum Engine {
     /// `binding` or `jacobian`: from each frame's template positions, a collapsed triangle
     /// keeping its last valid frame (docs/numerics.md, "The degenerate-triangle policy").
     Frames(FrameEngine),
-    /// `lbs`: from each frame's skinning palette (the animation is a skinned glTF).
-    Lbs(Box<LbsDeformer>),
+    /// `lbs`: from each frame's skinning palette (the animation is a skinned glTF), moved to
+    /// the template's local origin.
+    Lbs(Box<LbsDeformer>, DVec3),
 }
 
 /// The `binding`/`jacobian` engine: the deformer and the last valid frame of every triangle.
@@ -88,6 +89,8 @@ pub struct EngineInputs<'a> {
     pub stored: &'a TriMesh,
     /// The template the Gaussians are deformed on (welded at its seams in the main job).
     pub welded: &'a WeldedTemplate,
+    /// The local origin the templates are relative to (`lbs` moves its palettes there).
+    pub origin: DVec3,
     /// The template file, for messages.
     pub template_path: &'a Path,
     /// The Gaussians file, for messages (empty when bound here).
@@ -131,8 +134,14 @@ impl Engine {
             }));
         }
         let a_path = PathBuf::from(inputs.label);
-        let g = skinned_gltf(animation, inputs.stored, inputs.template_path, inputs.label)?;
-        let palette = g.palette_at(None)?;
+        let g = skinned_gltf(
+            animation,
+            inputs.stored,
+            inputs.origin,
+            inputs.template_path,
+            inputs.label,
+        )?;
+        let palette = to_local_palette(g.palette_at(None)?, inputs.origin);
         let skinning = inputs
             .welded
             .skinning(&g.skinning())
@@ -147,11 +156,14 @@ impl Engine {
                 cause: source,
             }
         })?;
-        Ok(Self::Lbs(Box::new(if inputs.adaptive_scale {
-            rig.with_adaptive_scale(template)
-        } else {
-            rig
-        })))
+        Ok(Self::Lbs(
+            Box::new(if inputs.adaptive_scale {
+                rig.with_adaptive_scale(template)
+            } else {
+                rig
+            }),
+            inputs.origin,
+        ))
     }
 
     /// The deformed means of animation frame `frame` (template positions `positions`) into
@@ -178,7 +190,7 @@ impl Engine {
                 e.last = Some(frame);
                 Ok(collapsed)
             }
-            Self::Lbs(_) => {
+            Self::Lbs(..) => {
                 let (world, collapsed) = self.deform(animation, set, positions, frame, label)?;
                 scratch.means.clear();
                 scratch.means.extend_from_slice(world.means());
@@ -212,13 +224,13 @@ impl Engine {
                 e.last = Some(frame);
                 Ok(out)
             }
-            Self::Lbs(rig) => {
+            Self::Lbs(rig, origin) => {
                 let Animation::Gltf(g) = animation else {
                     return Err(PipelineError::Internal {
                         what: "lbs engine without a glTF animation",
                     });
                 };
-                let palette = g.frame_palette(frame)?;
+                let palette = to_local_palette(g.frame_palette(frame)?, *origin);
                 let positions = rig.adaptive_scale().then_some(positions);
                 rig.deform(set, &palette, positions)
                     .map(|set| (set, Collapsed::default()))
@@ -241,15 +253,28 @@ fn deform_error(label: &str, frame: usize) -> impl FnOnce(DeformError) -> Pipeli
     }
 }
 
+/// Skinning matrices `M` (rest to posed, world coordinates) for positions relative to
+/// `origin`: `x ↦ M (x + origin) − origin`, in f64.
+fn to_local_palette(mut palette: Vec<DMat4>, origin: DVec3) -> Vec<DMat4> {
+    if origin != DVec3::ZERO {
+        for m in &mut palette {
+            let t = m.transform_point3(origin) - origin;
+            m.w_axis = t.extend(1.0);
+        }
+    }
+    palette
+}
+
 /// The skinned glTF of an `lbs` run: `animation` must be a glTF with a skin, and `template`
-/// (read from `template_path`) its rest shape within [`LBS_REST_TOLERANCE`]; `label` names the
-/// animation.
+/// (read from `template_path`, relative to `origin`) its rest shape within
+/// [`LBS_REST_TOLERANCE`]; `label` names the animation.
 ///
 /// # Errors
 /// [`PipelineError::Lbs`] naming the animation or the template.
 pub fn skinned_gltf<'a>(
     animation: &'a Animation,
     template: &TriMesh,
+    origin: DVec3,
     template_path: &Path,
     label: &str,
 ) -> Result<&'a GltfTemplate, PipelineError> {
@@ -285,7 +310,7 @@ pub fn skinned_gltf<'a>(
         .positions()
         .iter()
         .zip(rest)
-        .map(|(a, b)| (*a - *b).length())
+        .map(|(a, b)| (*a + origin - *b).length())
         .fold(0.0, f64::max);
     if worst > LBS_REST_TOLERANCE * diag.max(f64::MIN_POSITIVE) {
         return Err(lbs(

@@ -12,6 +12,14 @@
 //! ([`Plan::runs`]) and recorded ([`Session::executed`]), so the printed plan and the run
 //! cannot disagree. A frame deforms only the geometry (means, no SH) unless the plan renders
 //! (tsdf) or the caller asks for the world-space set ([`Session::world`]).
+//!
+//! A template far from the world origin is worked on relative to a local origin
+//! ([`Session::origin`], [`trisplat_geometry::Aabb::local_origin`]: zero for templates modelled
+//! around the world origin), so the `f32` Gaussian means, renders, TSDF, Delaunay and alpha
+//! shapes keep their precision at any offset: the template, its frame positions, the rest
+//! means and [`Session::deform`] are local; what leaves the session ([`Session::world`], the
+//! meshes and ground truths of [`Session::frame`]) is in world coordinates again, moved back
+//! in `f64`.
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -97,8 +105,10 @@ pub struct Session {
     welded: WeldedTemplate,
     animation: Animation,
     frames: Range<usize>,
-    /// The first frame's positions, read while checking the scale.
+    /// The first frame's positions (local), read while checking the scale.
     first_positions: Option<Vec<DVec3>>,
+    /// The local origin the session works relative to (see the module documentation).
+    origin: DVec3,
     set: GaussianSet,
     /// `set` without SH beyond degree 0 and without extras: what rendering depth needs.
     render_set: Option<GaussianSet>,
@@ -167,8 +177,10 @@ impl Session {
         let mut executed = vec![Stage::Animate];
         let label = animation_label(config);
 
-        let (stored, animation, mut input_files) =
+        let (mut stored, animation, mut input_files) =
             open_template_and_animation(config, options.targets.as_deref())?;
+        let origin = stored.bounds().map_or(DVec3::ZERO, |b| b.local_origin());
+        stored.translate(-origin);
         if stored.triangle_count() == 0 {
             return Err(PipelineError::EmptyTemplate {
                 path: config.template.clone(),
@@ -198,7 +210,7 @@ impl Session {
         };
         let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
         // The scale-derived defaults come from the template: its frames must share its scale.
-        let first_positions = anim.frame(frames.start)?;
+        let first_positions = to_local(anim.frame(frames.start)?, origin);
         check_scale(
             &stored,
             &config.template,
@@ -274,6 +286,7 @@ impl Session {
                 mode: o.mode,
                 stored: &stored,
                 welded: &welded,
+                origin,
                 template_path: &config.template,
                 gaussians_path: &gaussians_path,
                 label: &label,
@@ -337,6 +350,7 @@ impl Session {
             animation,
             frames,
             first_positions: Some(first_positions),
+            origin,
             set,
             render_set,
             source,
@@ -461,14 +475,22 @@ impl Session {
         }
     }
 
-    /// The template's positions at animation frame `frame` (welded).
+    /// The local origin: the session's template, positions, rest means and
+    /// [`Session::deform`] are relative to it (zero unless the template is far from the
+    /// world origin; see the module documentation).
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// The template's positions at animation frame `frame` (welded), relative to
+    /// [`Session::origin`].
     ///
     /// # Errors
     /// An animation error, or a frame without the template's vertices.
     pub fn positions(&mut self, frame: usize) -> Result<Vec<DVec3>, PipelineError> {
         let stored = match self.first_positions.take() {
             Some(p) if frame == self.frames.start => p,
-            _ => self.animation.get().frame(frame)?,
+            _ => to_local(self.animation.get().frame(frame)?, self.origin),
         };
         weld_frame(
             &self.welded,
@@ -490,14 +512,16 @@ impl Session {
         if !engine.needs_history(frame) {
             return Ok(());
         }
-        let (animation, welded, label, path) = (
+        let (animation, welded, label, path, origin) = (
             &self.animation,
             &self.welded,
             self.label.as_str(),
             self.template_path.as_path(),
+            self.origin,
         );
         engine.fill_from_history(frame, positions, label, |f| {
-            weld_frame(welded, animation.get().frame(f)?, f, label, path)
+            let stored = to_local(animation.get().frame(f)?, origin);
+            weld_frame(welded, stored, f, label, path)
         })
     }
 
@@ -510,9 +534,10 @@ impl Session {
         let positions = self.positions(frame)?;
         self.ready_engine(frame, &positions)?;
         self.record(Stage::Deform);
-        self.engine
-            .deform(&self.animation, &self.set, &positions, frame, &self.label)
-            .map(|(set, _)| set)
+        let (set, _) =
+            self.engine
+                .deform(&self.animation, &self.set, &positions, frame, &self.label)?;
+        Ok(moved(set, self.origin))
     }
 
     /// The template's positions and the Gaussians' deformed means at animation frame
@@ -602,8 +627,9 @@ impl Session {
         } = self.deform_frame(frame)?;
         let frame_gt = match (&self.gt, self.plan.runs(Stage::Metrics)) {
             (Some(GroundTruth::Template), true) => {
-                let mesh =
+                let mut mesh =
                     TriMesh::new_unchecked(positions.clone(), self.template().triangles().to_vec());
+                mesh.translate(self.origin);
                 Some(
                     GtSamples::new(mesh, self.samples).ok_or(PipelineError::EmptyGroundTruth {
                         gt: "template".to_owned(),
@@ -612,8 +638,13 @@ impl Session {
                 )
             }
             (Some(GroundTruth::Gaussians), true) => {
+                let origin = self.origin;
                 let mesh = TriMesh::new_unchecked(
-                    self.scratch.means.clone(),
+                    self.scratch
+                        .means
+                        .iter()
+                        .map(|m| m.as_dvec3() + origin)
+                        .collect(),
                     self.gaussian_gt_triangles.clone(),
                 );
                 Some(
@@ -644,7 +675,7 @@ impl Session {
             world: world.as_ref(),
         };
         let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
-        let (samples, tau) = (self.samples, self.tau);
+        let (samples, tau, origin) = (self.samples, self.tau, self.origin);
         let label = self.label.as_str();
         let gt_label = self
             .gt
@@ -652,7 +683,8 @@ impl Session {
             .map_or_else(String::new, GroundTruth::label);
         let mesh_and_measure =
             |(method, mesher): &mut (Method, Mesher)| -> Result<MethodFrame, PipelineError> {
-                let output = mesher.mesh(&input).map_err(|e| e.on_vertices_of(label))?;
+                let mut output = mesher.mesh(&input).map_err(|e| e.on_vertices_of(label))?;
+                output.mesh.translate(origin);
                 let metrics = match gt {
                     Some(gt) => measure_with(&output.mesh, gt, samples, tau).map_err(|source| {
                         PipelineError::Metrics {
@@ -719,6 +751,28 @@ struct DeformedFrame {
     world: Option<GaussianSet>,
     collapsed: Collapsed,
     ms: f64,
+}
+
+/// `positions` relative to `origin` (exact in f64 for positions near it; no work at zero).
+fn to_local(mut positions: Vec<DVec3>, origin: DVec3) -> Vec<DVec3> {
+    if origin != DVec3::ZERO {
+        for p in &mut positions {
+            *p -= origin;
+        }
+    }
+    positions
+}
+
+/// `set` (world-space Gaussians relative to `origin`) moved back to world coordinates.
+fn moved(set: GaussianSet, origin: DVec3) -> GaussianSet {
+    if origin == DVec3::ZERO {
+        return set;
+    }
+    let mut parts = set.into_parts();
+    for m in &mut parts.means {
+        *m = (m.as_dvec3() + origin).as_vec3();
+    }
+    GaussianSet::new_unchecked(parts)
 }
 
 /// The welded positions of animation frame `frame` from its stored ones.
