@@ -117,7 +117,11 @@ fn write_scene(dir: &std::path::Path, offset: DVec3) {
     }
 }
 
-fn extract_meshes(dir: &std::path::Path) -> (DVec3, Vec<Vec<(Method, TriMesh, FrameMetrics)>>) {
+/// Each frame's meshes and scores, by method.
+type Frames = Vec<Vec<(Method, TriMesh, FrameMetrics)>>;
+
+/// The session's local origin and the frames of the scene in `dir`.
+fn extract_meshes(dir: &std::path::Path) -> (DVec3, Frames) {
     let config = ExtractConfig {
         template: dir.join("template.obj"),
         animation: Some(dir.join("frames").display().to_string()),
