@@ -23,12 +23,12 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
-use trisplat_geometry::TriId;
+use glam::{DVec3, Vec3};
 use trisplat_geometry::io::ply::{
     ColumnView, PlyDocument, PlyProperty, PropertyData, parse_ply, write_ply_columns,
 };
 use trisplat_geometry::io::{IoError, write_atomically};
+use trisplat_geometry::{Aabb, TriId};
 
 pub use trisplat_geometry::io::PlyEncoding;
 
@@ -247,6 +247,63 @@ pub fn read_gaussians(path: &Path) -> Result<GaussianSet, PlyError> {
     let document = parse_ply(path, &bytes).map_err(PlyError::Malformed)?;
     drop(bytes);
     gaussians_from_document(document, path)
+}
+
+/// Reads a Gaussian PLY file with its means relative to a local origin, returned beside the
+/// set: the origin of the means' bounding box ([`trisplat_geometry::Aabb::local_origin`], zero
+/// unless the Gaussians are far from the world origin), subtracted from the file's values in
+/// `f64` before they are stored in `f32`, so `double` coordinates at any offset keep the
+/// precision they have near the origin. A renderer then moves its cameras by `-origin`.
+///
+/// # Errors
+/// As [`read_gaussians`].
+pub fn read_gaussians_local(path: &Path) -> Result<(GaussianSet, DVec3), PlyError> {
+    let bytes = std::fs::read(path).map_err(|source| PlyError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut document = parse_ply(path, &bytes).map_err(PlyError::Malformed)?;
+    drop(bytes);
+    let origin = move_means_to_local_origin(&mut document);
+    Ok((gaussians_from_document(document, path)?, origin))
+}
+
+/// Moves the `x`, `y`, `z` columns of the `vertex` element to their local origin (in `f64`),
+/// returning it; a document without them is left alone (the reader reports it).
+fn move_means_to_local_origin(document: &mut PlyDocument) -> DVec3 {
+    let Some(vertex) = document.elements.iter_mut().find(|e| e.name == "vertex") else {
+        return DVec3::ZERO;
+    };
+    let find = |name: &str| vertex.properties.iter().position(|p| p.name == name);
+    let (Some(ix), Some(iy), Some(iz)) = (find("x"), find("y"), find("z")) else {
+        return DVec3::ZERO;
+    };
+    let column = |i: usize| match &vertex.properties[i].data {
+        PropertyData::Scalar(c) => Some(c.to_f64()),
+        PropertyData::List { .. } => None,
+    };
+    let (Some(x), Some(y), Some(z)) = (column(ix), column(iy), column(iz)) else {
+        return DVec3::ZERO;
+    };
+    let points: Vec<DVec3> = (0..x.len().min(y.len()).min(z.len()))
+        .map(|i| DVec3::new(x[i], y[i], z[i]))
+        .collect();
+    let origin = Aabb::from_dpoints(&points).map_or(DVec3::ZERO, |b| b.local_origin());
+    if origin == DVec3::ZERO {
+        return origin;
+    }
+    for ((column, values), o) in [(ix, x), (iy, y), (iz, z)]
+        .into_iter()
+        .zip(origin.to_array())
+    {
+        #[expect(
+            clippy::cast_possible_truncation,
+            reason = "f32 storage, as every mean"
+        )]
+        let local = values.iter().map(|&v| (v - o) as f32).collect();
+        vertex.properties[column].data = PropertyData::Scalar(PropertyValues::F32(local));
+    }
+    origin
 }
 
 /// Reads a Gaussian PLY file held in memory; `path` only names it in errors.

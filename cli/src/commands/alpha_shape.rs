@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use trisplat_extract::alpha_shape::alpha_shape;
 use trisplat_geometry::cleanup::keep_largest_clusters;
-use trisplat_geometry::io::{WriteOptions, read_points, write_mesh};
+use trisplat_geometry::io::{WriteOptions, read_points_local, write_mesh};
 use trisplat_geometry::topology::TriangleClusters;
 
 use super::{Context, refuse_to_overwrite};
@@ -38,7 +38,9 @@ pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
     if args.alpha.is_nan() || args.alpha < 0.0 {
         bail!("--alpha {}: expected a non-negative radius", args.alpha);
     }
-    let cloud = read_points(&args.points)?;
+    // Points far from the world origin are tetrahedralised at their local origin (f64 before
+    // f32) and the mesh moved back in f64.
+    let (cloud, origin) = read_points_local(&args.points)?;
     let spinner = ctx.progress.spinner("tetrahedralising");
     let shape = alpha_shape(cloud.positions(), args.alpha)
         .with_context(|| format!("{}: alpha shape failed", args.points.display()))?;
@@ -65,7 +67,8 @@ pub fn run(args: AlphaShapeArgs, ctx: &Context) -> anyhow::Result<()> {
             .context("carrying the point colours")?;
     }
     let pieces = TriangleClusters::of(&mesh).count();
-    let mesh = keep_largest_clusters(&mesh, args.keep_clusters);
+    let mut mesh = keep_largest_clusters(&mesh, args.keep_clusters);
+    mesh.translate(origin);
     if !ctx.quiet && pieces > 1 {
         eprintln!(
             "{}: the alpha shape has {pieces} edge-connected pieces{}",

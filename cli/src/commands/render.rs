@@ -7,9 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::Camera;
+use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame};
-use trisplat_splat::ply::read_gaussians;
+use trisplat_splat::ply::read_gaussians_local;
 use trisplat_splat::render::image::{file_stem, image_files};
 use trisplat_splat::render::{
     Outputs, RenderImages, RenderMode, RenderOptions, options::DEFAULT_FAR, render,
@@ -214,7 +215,11 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
         if outputs.rgb || outputs.median_depth {
             bail!("--mesh renders only depth, normal and alpha (the hit mask)");
         }
-        let mesh = read_mesh(mesh_path)?;
+        // A mesh far from the world origin is ray cast at its local origin, the cameras
+        // moved with it (f64).
+        let mut mesh = read_mesh(mesh_path)?;
+        let origin = mesh.bounds().map_or(DVec3::ZERO, |b| b.local_origin());
+        mesh.translate(-origin);
         let renderer = MeshRenderer::new(
             &mesh,
             MeshRenderOptions {
@@ -224,7 +229,7 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
         )
         .with_context(|| format!("{}: cannot build the ray-casting BVH", mesh_path.display()))?;
         for camera in cameras {
-            let maps = renderer.render(camera);
+            let maps = renderer.render(&camera.translated(-origin));
             let mut images = RenderImages::new(camera.width, camera.height, outputs);
             if outputs.depth {
                 images.depth = Some(maps.depth.clone());
@@ -241,7 +246,9 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
         bar.finish_and_clear();
         return Ok(());
     }
-    let set = read_gaussians(input)?;
+    // Gaussians far from the world origin are stored relative to their local origin (f64
+    // before f32), and the cameras moved with them.
+    let (set, origin) = read_gaussians_local(input)?;
     let mut options = if args.compat_3dgs {
         RenderOptions::original_3dgs()
     } else {
@@ -263,7 +270,7 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     options.far = args.far;
     options.normal_frame = frame;
     for camera in cameras {
-        let out = render(&set, camera, &options)
+        let out = render(&set, &camera.translated(-origin), &options)
             .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
         out.images.write(&args.output, &camera.name)?;
         bar.inc(1);

@@ -20,6 +20,8 @@ pub mod ply;
 
 use std::path::Path;
 
+use glam::DVec3;
+
 pub use atomic::{abandon_writes, write_atomically};
 pub use error::IoError;
 pub use gltf_sequence::{
@@ -151,22 +153,53 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, options: WriteOptions) -> Result<
 /// # Errors
 /// [`IoError`] naming the file and the element at fault.
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
+    read_points_around(path, false).map(|(cloud, _)| cloud)
+}
+
+/// [`read_points`] with the positions relative to a local origin, returned beside them: the
+/// points' [`crate::Aabb::local_origin`] (zero unless they are far from the world origin),
+/// subtracted in `f64` before the positions are stored in `f32`. What is built from the
+/// points (an alpha shape, say) is moved back by `+origin` in `f64`.
+///
+/// # Errors
+/// As [`read_points`].
+pub fn read_points_local(path: &Path) -> Result<(PointCloud, DVec3), IoError> {
+    read_points_around(path, true)
+}
+
+fn read_points_around(path: &Path, local: bool) -> Result<(PointCloud, DVec3), IoError> {
     if Format::from_path(path)? == Format::Ply {
         let doc = ply::read_ply_document(path)?;
         let has_faces = doc.element("face").is_some_and(|f| f.count > 0)
             || doc.element("tristrips").is_some_and(|f| f.count > 0);
-        let (cloud, _) = ply::ply_to_points(path, &doc)?;
+        let (cloud, _, origin) = if local {
+            ply::ply_to_points_local(path, &doc)?
+        } else {
+            let (cloud, extras) = ply::ply_to_points(path, &doc)?;
+            (cloud, extras, DVec3::ZERO)
+        };
         if cloud.normals().is_some() || !has_faces {
-            return Ok(cloud);
+            return Ok((cloud, origin));
         }
         let (mesh, _) = ply::ply_to_mesh(path, &doc)?;
-        return mesh_points(path, mesh);
+        return mesh_points(path, mesh, local);
     }
-    mesh_points(path, read_mesh(path)?)
+    mesh_points(path, read_mesh(path)?, local)
 }
 
-/// The vertices of `mesh` as points, with its normals (area-weighted ones when it has none).
-fn mesh_points(path: &Path, mesh: TriMesh) -> Result<PointCloud, IoError> {
+/// The vertices of `mesh` as points, with its normals (area-weighted ones when it has none),
+/// relative to its local origin when `local` (returned), else to the world origin.
+fn mesh_points(
+    path: &Path,
+    mut mesh: TriMesh,
+    local: bool,
+) -> Result<(PointCloud, DVec3), IoError> {
+    let origin = if local {
+        mesh.bounds().map_or(DVec3::ZERO, |b| b.local_origin())
+    } else {
+        DVec3::ZERO
+    };
+    mesh.translate(-origin);
     let normals = match mesh.normals() {
         Some(n) => n.to_vec(),
         None => mesh.vertex_normals(),
@@ -181,7 +214,7 @@ fn mesh_points(path: &Path, mesh: TriMesh) -> Result<PointCloud, IoError> {
     if let Some(c) = colors {
         cloud = cloud.with_colors(c).map_err(bad)?;
     }
-    Ok(cloud)
+    Ok((cloud, origin))
 }
 
 /// Writes a point cloud as PLY (binary unless `options.ascii`), atomically.

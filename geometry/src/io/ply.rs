@@ -1626,10 +1626,41 @@ pub fn ply_to_mesh(path: &Path, doc: &PlyDocument) -> Result<(TriMesh, PlyExtras
 /// # Errors
 /// [`IoError::Malformed`] for a missing `vertex` element or a non-finite position.
 pub fn ply_to_points(path: &Path, doc: &PlyDocument) -> Result<(PointCloud, PlyExtras), IoError> {
+    ply_to_points_around(path, doc, DVec3::ZERO).map(|(cloud, extras, _)| (cloud, extras))
+}
+
+/// [`ply_to_points`] with the positions relative to a local origin, returned beside them:
+/// the points' [`crate::Aabb::local_origin`] (zero unless they are far from the world origin),
+/// subtracted from the file's values in `f64` before they are stored in `f32`.
+///
+/// # Errors
+/// As [`ply_to_points`].
+pub fn ply_to_points_local(
+    path: &Path,
+    doc: &PlyDocument,
+) -> Result<(PointCloud, PlyExtras, DVec3), IoError> {
+    ply_to_points_around(path, doc, DVec3::NAN)
+}
+
+/// The points of `doc` relative to `origin`, or to their local origin when `origin` is NaN.
+fn ply_to_points_around(
+    path: &Path,
+    doc: &PlyDocument,
+    origin: DVec3,
+) -> Result<(PointCloud, PlyExtras, DVec3), IoError> {
     let v = decode_vertices(path, doc)?;
     let extras = extras_of(doc, &v.used, false);
     let bad = |e: crate::MeshError| IoError::malformed(path, "element vertex", e.to_string());
-    let positions = v.positions.iter().map(|p| p.as_vec3()).collect();
+    let origin = if origin.is_nan() {
+        crate::Aabb::from_dpoints(&v.positions).map_or(DVec3::ZERO, |b| b.local_origin())
+    } else {
+        origin
+    };
+    let positions = v
+        .positions
+        .iter()
+        .map(|&p| (p - origin).as_vec3())
+        .collect();
     let mut cloud = PointCloud::try_new(positions).map_err(bad)?;
     if let Some(n) = v.normals {
         cloud = cloud.with_normals(n).map_err(bad)?;
@@ -1637,7 +1668,7 @@ pub fn ply_to_points(path: &Path, doc: &PlyDocument) -> Result<(PointCloud, PlyE
     if let Some(c) = v.colors {
         cloud = cloud.with_colors(c).map_err(bad)?;
     }
-    Ok((cloud, extras))
+    Ok((cloud, extras, origin))
 }
 
 /// Reads a PLY mesh and everything else it holds.
