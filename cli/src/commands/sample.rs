@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::io::{WriteOptions, read_mesh, write_points};
+use trisplat_geometry::glam::DVec3;
+use trisplat_geometry::io::{WriteOptions, read_mesh, write_points_at};
 use trisplat_geometry::sampling::{SampleOptions, sample};
 
 use super::{Context, refuse_to_overwrite};
@@ -57,7 +58,11 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
             args.max_points
         ),
     };
-    let mesh = read_mesh(&args.mesh)?;
+    // A mesh far from the world origin is sampled at its local origin (the f32 samples keep
+    // their precision) and the samples written back where it is, in f64.
+    let mut mesh = read_mesh(&args.mesh)?;
+    let origin = mesh.bounds().map_or(DVec3::ZERO, |b| b.local_origin());
+    mesh.translate(-origin);
     let area = mesh.area();
     if n > 0 && (area <= 0.0 || area.is_nan()) {
         bail!(
@@ -70,7 +75,12 @@ pub fn run(args: SampleArgs, ctx: &Context) -> anyhow::Result<()> {
     let samples = sample(&mesh, n, &args.options)
         .with_context(|| format!("{}: sampling failed", args.mesh.display()))?;
     spinner.finish_and_clear();
-    write_points(&args.output, &samples.points, WriteOptions::default())?;
+    write_points_at(
+        &args.output,
+        &samples.points,
+        origin,
+        WriteOptions::default(),
+    )?;
     ctx.emit(
         "sample",
         serde_json::json!({

@@ -226,11 +226,32 @@ pub fn write_points(
     points: &PointCloud,
     options: WriteOptions,
 ) -> Result<(), IoError> {
+    write_points_at(path, points, DVec3::ZERO, options)
+}
+
+/// [`write_points`] for points stored relative to `origin` (as [`read_points_local`] gives
+/// them, or sampled from a mesh moved to its local origin): written at `p + origin`, computed
+/// in f64, `double` unless every coordinate is an f32 value.
+///
+/// # Errors
+/// As [`write_points`].
+pub fn write_points_at(
+    path: &Path,
+    points: &PointCloud,
+    origin: DVec3,
+    options: WriteOptions,
+) -> Result<(), IoError> {
     if Format::from_path(path)? != Format::Ply {
         return Err(IoError::Unsupported {
             path: path.to_path_buf(),
             what: "point clouds are written as .ply only".into(),
         });
     }
-    ply::write_ply_points(path, points, &PlyExtras::default(), options.ply_encoding())
+    ply::write_ply_points_at(
+        path,
+        points,
+        origin,
+        &PlyExtras::default(),
+        options.ply_encoding(),
+    )
 }

@@ -1813,8 +1813,27 @@ pub fn mesh_to_ply(mesh: &TriMesh, extras: &PlyExtras) -> PlyDocument {
 /// The PLY document for a point cloud: one `vertex` element (see [`mesh_to_ply`]).
 #[must_use]
 pub fn points_to_ply(points: &PointCloud, extras: &PlyExtras) -> PlyDocument {
+    points_to_ply_at(points, DVec3::ZERO, extras)
+}
+
+/// [`points_to_ply`] for points stored relative to `origin` (see
+/// [`super::read_points_local`]): written at `p + origin`, computed in f64, as `double` when
+/// that is not an f32 value.
+#[must_use]
+pub fn points_to_ply_at(points: &PointCloud, origin: DVec3, extras: &PlyExtras) -> PlyDocument {
+    let positions = if origin == DVec3::ZERO {
+        position_columns_f32(points.positions())
+    } else {
+        position_columns_f64(
+            &points
+                .positions()
+                .iter()
+                .map(|p| p.as_dvec3() + origin)
+                .collect::<Vec<_>>(),
+        )
+    };
     let mut elements = vec![vertex_element(
-        position_columns_f32(points.positions()),
+        positions,
         points.normals(),
         None,
         points.colors(),
@@ -1853,7 +1872,21 @@ pub fn write_ply_points(
     extras: &PlyExtras,
     encoding: PlyEncoding,
 ) -> Result<(), IoError> {
-    let doc = points_to_ply(points, extras);
+    write_ply_points_at(path, points, DVec3::ZERO, extras, encoding)
+}
+
+/// [`write_ply_points`] for points stored relative to `origin` ([`points_to_ply_at`]).
+///
+/// # Errors
+/// [`IoError::Os`] when the file cannot be written.
+pub fn write_ply_points_at(
+    path: &Path,
+    points: &PointCloud,
+    origin: DVec3,
+    extras: &PlyExtras,
+    encoding: PlyEncoding,
+) -> Result<(), IoError> {
+    let doc = points_to_ply_at(points, origin, extras);
     super::write_atomically(path, |w| write_ply_document(path, w, &doc, encoding))
 }
 
