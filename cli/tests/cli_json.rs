@@ -102,6 +102,43 @@ fn every_command_prints_one_json_object() {
         ]),
         &["output", "vertices", "triangles"],
     );
+    let masks = json(&[
+        "render",
+        "--mesh",
+        &taubin,
+        "--cameras",
+        &p("cams.json"),
+        "-o",
+        &p("masks"),
+        "--outputs",
+        "alpha",
+    ]);
+    has(&masks, &["files"]);
+    has(
+        &json(&[
+            "init",
+            "--cameras",
+            &p("cams.json"),
+            "--masks",
+            &p("masks"),
+            "-n",
+            "500",
+            "--resolution",
+            "24",
+            "-o",
+            &p("init.ply"),
+        ]),
+        &[
+            "output",
+            "gaussians",
+            "views",
+            "voxel",
+            "dims",
+            "voxels_kept",
+            "volume",
+            "hull",
+        ],
+    );
     has(
         &json(&["bind", &spot, "-o", &p("bound.ply")]),
         &["output", "gaussians"],

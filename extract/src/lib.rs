@@ -6,6 +6,7 @@
 //! This crate takes depth images, cameras and point sets, never renderer types.
 
 pub mod alpha_shape;
+pub mod carve;
 pub mod delaunay3d;
 pub mod incremental_delaunay;
 pub mod marching_cubes;

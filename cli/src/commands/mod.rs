@@ -11,6 +11,7 @@ pub mod densify;
 pub mod eval;
 pub mod extract;
 pub mod gaussian_io;
+pub mod init;
 pub mod man;
 pub mod merge;
 pub mod prune;
