@@ -164,6 +164,8 @@ def commands(kind, path, fixtures, out):
         return [
             ["render", world, "--cameras", path, "-o", o + "/r", "--outputs", "depth"],
             ["tsdf", "--gaussians", world, "--cameras", path, "-o", o + "/t.ply"],
+            ["init", "--cameras", path, "--masks", fixtures["masks"], "-o", o + "/i.ply",
+             "-n", "500", "--resolution", "16"],
         ]
     if kind == "expression":
         return [["extract", "--avatar", fixtures["lam"], "--animation", path, "--method",
@@ -281,6 +283,12 @@ def main():
         subprocess.run([args.trisplat, "bind", fixtures["spot"], "-o", str(bound)], check=True,
                        capture_output=True)
         fixtures["bound"] = str(bound)
+        # Masks of the fixture cameras for `init`: the world Gaussians' rendered alpha.
+        masks = work / "masks"
+        subprocess.run([args.trisplat, "render", fixtures["world"], "--cameras",
+                        fixtures["cams"], "-o", str(masks), "--outputs", "alpha", "-q"],
+                       check=True, capture_output=True)
+        fixtures["masks"] = str(masks)
         counts = collections.Counter()
         failures = []
         for kind, seed in SEEDS.items():
