@@ -31,6 +31,17 @@ fn write_obj(path: &Path, v0: [f64; 3]) {
     std::fs::write(path, text).expect("write OBJ");
 }
 
+/// The template and its six frames in a temporary folder.
+fn scene() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temp dir");
+    write_obj(&dir.path().join("template.obj"), VERTEX_0[0]);
+    std::fs::create_dir(dir.path().join("frames")).expect("frames dir");
+    for (i, v0) in VERTEX_0.iter().enumerate() {
+        write_obj(&dir.path().join(format!("frames/f{i:03}.obj")), *v0);
+    }
+    dir
+}
+
 fn config(dir: &Path, frames: &str, mode: Mode) -> ExtractConfig {
     ExtractConfig {
         template: dir.join("template.obj"),
@@ -54,12 +65,7 @@ fn worlds(session: &mut Session, frames: std::ops::Range<usize>) -> Vec<Gaussian
 
 #[test]
 fn a_collapsed_triangle_keeps_its_last_valid_frame_wherever_the_run_starts() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    write_obj(&dir.path().join("template.obj"), VERTEX_0[0]);
-    std::fs::create_dir(dir.path().join("frames")).expect("frames dir");
-    for (i, v0) in VERTEX_0.iter().enumerate() {
-        write_obj(&dir.path().join(format!("frames/f{i:03}.obj")), *v0);
-    }
+    let dir = scene();
     for mode in [Mode::Binding, Mode::Jacobian] {
         let mut whole = Session::open(&config(dir.path(), "0..6", mode)).expect("open");
         let all = worlds(&mut whole, 0..6);
@@ -113,12 +119,7 @@ fn a_collapsed_triangle_keeps_its_last_valid_frame_wherever_the_run_starts() {
 
 #[test]
 fn frames_count_their_collapsed_triangles() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    write_obj(&dir.path().join("template.obj"), VERTEX_0[0]);
-    std::fs::create_dir(dir.path().join("frames")).expect("frames dir");
-    for (i, v0) in VERTEX_0.iter().enumerate() {
-        write_obj(&dir.path().join(format!("frames/f{i:03}.obj")), *v0);
-    }
+    let dir = scene();
     let mut session = Session::open(&config(dir.path(), "0..6", Mode::Binding)).expect("open");
     let counts: Vec<usize> = (0..6)
         .map(|f| session.frame(f).expect("frame").collapsed.total())

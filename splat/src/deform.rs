@@ -212,6 +212,32 @@ impl Collapsed {
     }
 }
 
+/// Keeps the frames of the triangles `missing` that are valid (`one(i)`), sizing `kept` with
+/// `all()` first when it does not hold every triangle; returns the still degenerate ones.
+fn fill_kept<T: HeldTriangle>(
+    kept: &mut Vec<T>,
+    valid: &mut [bool],
+    missing: Vec<usize>,
+    all: impl FnOnce() -> Vec<T>,
+    one: impl Fn(usize) -> T,
+) -> Vec<usize> {
+    if kept.len() != valid.len() {
+        *kept = all();
+    }
+    missing
+        .into_iter()
+        .filter(|&i| {
+            let t = one(i);
+            if t.degenerate() {
+                return true;
+            }
+            kept[i] = t;
+            valid[i] = true;
+            false
+        })
+        .collect()
+}
+
 /// Replaces each degenerate triangle of `tris` by its kept valid frame (centroid from `tris`)
 /// and keeps every valid one.
 fn apply_hold<T: HeldTriangle>(
@@ -504,38 +530,22 @@ impl Deformer {
         if hold.valid.len() != n {
             hold.valid = vec![false; n];
         }
-        let mut still = Vec::new();
-        match self.mode {
-            DeformMode::Binding => {
-                if hold.binding.len() != n {
-                    hold.binding = self.binding_triangles(positions);
-                }
-                for i in missing {
-                    let t = self.binding_triangle(i, positions);
-                    if t.degenerate {
-                        still.push(i);
-                    } else {
-                        hold.binding[i] = t;
-                        hold.valid[i] = true;
-                    }
-                }
-            }
-            DeformMode::Jacobian => {
-                if hold.jacobian.len() != n {
-                    hold.jacobian = self.jacobian_triangles(positions);
-                }
-                for i in missing {
-                    let t = self.jacobian_triangle(i, positions);
-                    if t.degenerate {
-                        still.push(i);
-                    } else {
-                        hold.jacobian[i] = t;
-                        hold.valid[i] = true;
-                    }
-                }
-            }
-        }
-        Ok(still)
+        Ok(match self.mode {
+            DeformMode::Binding => fill_kept(
+                &mut hold.binding,
+                &mut hold.valid,
+                missing,
+                || self.binding_triangles(positions),
+                |i| self.binding_triangle(i, positions),
+            ),
+            DeformMode::Jacobian => fill_kept(
+                &mut hold.jacobian,
+                &mut hold.valid,
+                missing,
+                || self.jacobian_triangles(positions),
+                |i| self.jacobian_triangle(i, positions),
+            ),
+        })
     }
 
     fn geometry_with(
