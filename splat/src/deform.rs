@@ -239,26 +239,20 @@ fn fill_kept<T: HeldTriangle>(
 }
 
 /// Replaces each degenerate triangle of `tris` by its kept valid frame (centroid from `tris`)
-/// and keeps every valid one.
-fn apply_hold<T: HeldTriangle>(
-    tris: &mut [T],
-    kept: &mut Vec<T>,
-    valid: &mut Vec<bool>,
-) -> Collapsed {
+/// and marks which entries of `tris` hold a valid frame: the caller then keeps `tris` itself
+/// (moved, not copied) as the next frame's `kept`.
+fn apply_hold<T: HeldTriangle>(tris: &mut [T], kept: &[T], valid: &mut Vec<bool>) -> Collapsed {
     if kept.len() != tris.len() || valid.len() != tris.len() {
-        kept.clear();
-        kept.extend_from_slice(tris);
         valid.clear();
         valid.resize(tris.len(), false);
     }
     let mut collapsed = Collapsed::default();
-    for ((t, k), v) in tris.iter_mut().zip(kept.iter_mut()).zip(valid.iter_mut()) {
+    for (i, (t, v)) in tris.iter_mut().zip(valid.iter_mut()).enumerate() {
         if !t.degenerate() {
-            *k = *t;
             *v = true;
         } else if *v {
             let origin = t.origin();
-            *t = *k;
+            *t = kept[i];
             t.set_origin(origin);
             collapsed.held += 1;
         } else {
@@ -552,7 +546,7 @@ impl Deformer {
         &self,
         set: &GaussianSet,
         positions: &[DVec3],
-        hold: Option<&mut FrameHold>,
+        mut hold: Option<&mut FrameHold>,
         out: &mut WorldGeometry,
     ) -> Result<Collapsed, DeformError> {
         self.check(set)?;
@@ -567,10 +561,10 @@ impl Deformer {
         let bad = match self.mode {
             DeformMode::Binding => {
                 let mut tris = self.binding_triangles(positions);
-                if let Some(h) = hold {
-                    collapsed = apply_hold(&mut tris, &mut h.binding, &mut h.valid);
+                if let Some(h) = hold.as_deref_mut() {
+                    collapsed = apply_hold(&mut tris, &h.binding, &mut h.valid);
                 }
-                run_chunks(out, |start, means, rots, scales| {
+                let bad = run_chunks(out, |start, means, rots, scales| {
                     for j in 0..means.len() {
                         let i = start + j;
                         let t = &tris[binding[i].index()];
@@ -585,16 +579,20 @@ impl Deformer {
                             ScaleDims::Two => Vec3::new(ls.x, ls.y, 0.0),
                         };
                     }
-                })
+                });
+                if let Some(h) = hold {
+                    h.binding = tris;
+                }
+                bad
             }
             DeformMode::Jacobian => {
                 let mut tris = self.jacobian_triangles(positions);
-                if let Some(h) = hold {
-                    collapsed = apply_hold(&mut tris, &mut h.jacobian, &mut h.valid);
+                if let Some(h) = hold.as_deref_mut() {
+                    collapsed = apply_hold(&mut tris, &h.jacobian, &mut h.valid);
                 }
                 let flat = set.scale_dims() == ScaleDims::Two;
                 let (local_rots, local_ls) = (set.rotations(), set.log_scales());
-                run_chunks(out, |start, means, rots, scales| {
+                let bad = run_chunks(out, |start, means, rots, scales| {
                     for (j, mean) in means.iter_mut().enumerate() {
                         let i = start + j;
                         let t = &tris[binding[i].index()];
@@ -634,7 +632,11 @@ impl Deformer {
                             scales[j] = Vec3::new(ls[0], ls[1], if flat { 0.0 } else { ls[2] });
                         }
                     }
-                })
+                });
+                if let Some(h) = hold {
+                    h.jacobian = tris;
+                }
+                bad
             }
         };
         // NaN firewall: finite inputs overflow only at extreme magnitudes; say so instead of
