@@ -59,6 +59,8 @@ pub enum Command {
     Densify(commands::densify::DensifyArgs),
     /// Remove Gaussians by opacity, outlier distance, normal consistency or a mask.
     Prune(commands::prune::PruneArgs),
+    /// Surface-guided re-initialisation of a bound avatar (VGA/GVA): alpha shape, smoothing, resampling.
+    Refine(Box<commands::refine::RefineArgs>),
     /// Render Gaussians (3DGS/2DGS/perspective-aware) or a mesh on the CPU: rgb, alpha, depth, normals.
     Render(commands::render::RenderArgs),
     /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
@@ -165,6 +167,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Deform(args) => commands::deform::run(args, &ctx),
         Command::Densify(args) => commands::densify::run(args, &ctx),
         Command::Prune(args) => commands::prune::run(args, &ctx),
+        Command::Refine(args) => commands::refine::run(*args, &ctx),
         Command::Render(args) => commands::render::run(args, &ctx),
         Command::Cameras(args) => commands::cameras::run(args, &ctx),
         Command::Extract(args) => commands::extract::run(*args, &ctx),

@@ -14,6 +14,7 @@ pub mod gaussian_io;
 pub mod man;
 pub mod merge;
 pub mod prune;
+pub mod refine;
 pub mod render;
 pub mod sample;
 pub mod smooth;
