@@ -13,7 +13,7 @@
 //! 4. **sample**: `samples` points on the smoothed surface (`geometry::sampling`, default
 //!    area-uniform, seeded). By default as many as there are Gaussians, less the old Gaussians
 //!    step 6 keeps to refill emptied triangles (counted on a first draw, then drawn again), so
-//!    the count stays about the same;
+//!    the count grows only by what the second draw empties;
 //! 5. **inherit**: each point becomes a Gaussian that copies every attribute of the old
 //!    Gaussian nearest to it (world-space rotation, scales, opacity, SH, extra properties), at
 //!    the point;
@@ -464,7 +464,8 @@ pub fn refine(
         ms.smooth = ms_since(t);
 
         // 4.-6. sample, inherit, bind. By default as many points as there are Gaussians less
-        // the old ones kept to refill emptied triangles, so the count stays about the same.
+        // the old ones kept to refill emptied triangles, so the count grows only by what the
+        // second draw empties.
         let old_triangles = &current
             .binding()
             .ok_or_else(|| stage("bind")("the set lost its binding".into()))?

@@ -92,12 +92,12 @@ fn a_round_keeps_every_triangle_and_inherits_from_the_nearest_old_gaussian() {
     let old_tris = &input.binding().unwrap().triangles;
     let new_tris = &out.set.binding().unwrap().triangles;
     let mut refilled = 0;
-    for j in 0..new.len() {
+    for (j, new_tri) in new_tris.iter().enumerate() {
         let s = source_of(&out.set, j);
         assert_eq!(out.set.sh_coeffs(j)[1], -(s as f32));
         assert_eq!(out.set.opacity_logits()[j], input.opacity_logits()[s]);
         assert_eq!(
-            new_tris[j], old_tris[s],
+            *new_tri, old_tris[s],
             "Gaussian {j}: triangle not inherited"
         );
         let (ws, os) = (new.scale(j), old.scale(s));

@@ -46,7 +46,7 @@ pub enum RebindArg {
     mean nearest-neighbour spacing; --keep-clusters K keeps the K largest pieces); that surface \
     smoothed (--smooth-method laplacian, --smooth-iterations 10, --lambda 0.5); --samples \
     points on it (default: as many as there are Gaussians less those refilled below, so the \
-    count stays about the same; --sample-method uniform, seed --seed + round); each point a new Gaussian copying every attribute of the old Gaussian \
+    count grows only by what that draw empties; --sample-method uniform, seed --seed + round); each point a new Gaussian copying every attribute of the old Gaussian \
     nearest to it (rotation, scales, opacity, SH, extra properties, in world space); the new \
     Gaussians bound to the triangle of the old Gaussian they copy (--rebind inherit) or to the \
     nearest template triangle (--rebind nearest); a triangle that had Gaussians and would be \
