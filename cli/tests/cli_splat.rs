@@ -764,6 +764,16 @@ fn seed_and_stable_gates_write_the_same_files() {
         &["--outlier-threshold", "0.015", "--normal-threshold", "0.7"],
     );
     assert!(seed == stable, "pruning: the gates differ");
+    // --w2-to without a gate is a usage error (exit 2).
+    let out = trisplat(&[
+        p("densify"),
+        &g,
+        p("-o"),
+        &dir.join("u.ply"),
+        p("--w2-to"),
+        p("children"),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
 }
 
 #[test]

@@ -19,7 +19,7 @@ use trisplat_splat::frames::{FrameOptions, corners_of, frame};
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 
 use super::bind::ConventionArg;
-use super::{Context, refuse_to_overwrite};
+use super::{Context, UsageError, refuse_to_overwrite};
 
 /// The template options shared by `densify` and `prune`.
 #[derive(Debug, clap::Args)]
@@ -234,7 +234,7 @@ pub struct DensifyArgs {
     #[arg(long, value_name = "W")]
     pub w2_threshold: Option<f64>,
     /// What the gate measures a Gaussian against (default: children for seed, nearest for
-    /// stable).
+    /// stable; needs a gate).
     #[arg(long, value_enum, value_name = "PAIRS")]
     pub w2_to: Option<W2PairsArg>,
 }
@@ -258,6 +258,12 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
         if v.is_some_and(|v| !v.is_finite() || v < 0.0) {
             bail!("{flag}: must be a non-negative number");
         }
+    }
+    if args.gate == GateArg::Stable && args.w2_threshold.is_none() && args.w2_to.is_some() {
+        return Err(UsageError(
+            "--w2-to needs a Wasserstein gate: give --w2-threshold W or --gate seed".into(),
+        )
+        .into());
     }
     let spinner = ctx.progress.spinner("densifying");
     let loaded = load(&args.gaussians, &args.template)?;
