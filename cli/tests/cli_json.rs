@@ -150,6 +150,7 @@ fn every_command_prints_one_json_object() {
             "triangles",
             "rounds",
             "seconds",
+            "surfaces",
         ],
     );
     has(

@@ -828,9 +828,27 @@ fn refine_keeps_every_triangle_and_refuses_bad_input() {
             &dir.join("x.ply"),
             p("--alpha"),
             p("1e-9"),
+            p("--surfaces"),
+            &dir.join("s"),
         ],
         &dir,
         &["g.ply", "round 1", "alpha"],
+    );
+    // A failure after the rounds (the output cannot be written) removes the surfaces they
+    // wrote, and the folder made for them.
+    fails(
+        &[
+            p("refine"),
+            &g,
+            p("--template"),
+            &mesh,
+            p("-o"),
+            &dir.join("missing").join("x.ply"),
+            p("--surfaces"),
+            &dir.join("s"),
+        ],
+        &dir,
+        &["missing"],
     );
     fails(
         &[

@@ -240,6 +240,15 @@ pub struct RoundReport {
     pub total_ms: f64,
 }
 
+/// The surfaces of one round, for callers that keep or show them.
+#[derive(Clone, Copy, Debug)]
+pub struct RoundSurfaces<'a> {
+    /// The alpha shape of the centres (the pieces kept).
+    pub alpha: &'a TriMesh,
+    /// The same smoothed: the surface the new Gaussians were sampled on.
+    pub smoothed: &'a TriMesh,
+}
+
 /// The refined set and the report of every round.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Refined {
@@ -364,7 +373,8 @@ fn centre_chamfer(
 }
 
 /// Runs `options.rounds` rounds of surface-guided re-initialisation on `set`, bound to
-/// `template` (see the module docs), calling `on_round` after each round.
+/// `template` (see the module docs), calling `on_round` after each round with its report and
+/// its surfaces.
 ///
 /// # Errors
 /// [`RefineError::BadOption`] for an option out of range; [`RefineError::Input`] for an empty
@@ -375,7 +385,7 @@ pub fn refine(
     set: &GaussianSet,
     template: &TriMesh,
     options: &RefineOptions,
-    mut on_round: impl FnMut(&RoundReport),
+    mut on_round: impl FnMut(&RoundReport, &RoundSurfaces<'_>),
 ) -> Result<Refined, RefineError> {
     check_options(options)?;
     if set.is_empty() {
@@ -616,7 +626,13 @@ pub fn refine(
             ms,
             total_ms: ms_since(start),
         };
-        on_round(&report);
+        on_round(
+            &report,
+            &RoundSurfaces {
+                alpha: &surface,
+                smoothed: &smoothed,
+            },
+        );
         reports.push(report);
         current = next;
     }

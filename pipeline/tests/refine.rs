@@ -54,13 +54,19 @@ fn a_round_keeps_every_triangle_and_inherits_from_the_nearest_old_gaussian() {
     let input = bound(&mesh);
     let before_counts = TriangleCounts::from_set(&input, mesh.triangle_count()).unwrap();
     let mut seen = Vec::new();
-    let out = refine(&input, &mesh, &RefineOptions::default(), |r| {
+    let mut areas = Vec::new();
+    let out = refine(&input, &mesh, &RefineOptions::default(), |r, surfaces| {
         seen.push(r.clone());
+        areas.push((surfaces.alpha.area(), surfaces.smoothed.area()));
+        assert_eq!(surfaces.alpha.triangle_count(), r.alpha_triangles);
+        assert_eq!(surfaces.smoothed.triangle_count(), r.alpha_triangles);
     })
     .unwrap();
     assert_eq!(seen.len(), 1);
     let r = &out.rounds[0];
     assert_eq!(&seen[0], r);
+    // Laplacian smoothing shrinks the surface.
+    assert!(areas[0].1 < areas[0].0 && areas[0].1 > 0.0, "{areas:?}");
     assert_eq!(r.before, input.len());
     assert_eq!(r.after, out.set.len());
     assert_eq!(r.after, r.samples + r.refilled - r.pruned);
@@ -150,12 +156,12 @@ fn runs_are_seeded_and_do_not_depend_on_the_thread_count() {
         rounds: 2,
         ..RefineOptions::default()
     };
-    let a = refine(&input, &mesh, &options, |_| {}).unwrap();
+    let a = refine(&input, &mesh, &options, |_, _| {}).unwrap();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .unwrap();
-    let b = pool.install(|| refine(&input, &mesh, &options, |_| {}).unwrap());
+    let b = pool.install(|| refine(&input, &mesh, &options, |_, _| {}).unwrap());
     assert_eq!(a.set, b.set);
     assert_eq!(a.rounds.len(), 2);
     assert_eq!(a.rounds[1].chamfer_before, a.rounds[0].chamfer_after);
@@ -166,7 +172,7 @@ fn runs_are_seeded_and_do_not_depend_on_the_thread_count() {
         },
         ..options
     };
-    let c = refine(&input, &mesh, &other, |_| {}).unwrap();
+    let c = refine(&input, &mesh, &other, |_, _| {}).unwrap();
     assert_ne!(a.set, c.set);
 }
 
@@ -180,7 +186,7 @@ fn nearest_rebinding_and_explicit_counts() {
         prune: PruneCriteria::none(),
         ..RefineOptions::default()
     };
-    let out = refine(&input, &mesh, &options, |_| {}).unwrap();
+    let out = refine(&input, &mesh, &options, |_, _| {}).unwrap();
     let r = &out.rounds[0];
     assert_eq!(r.samples, 5000);
     assert_eq!(out.set.len(), 5000 + r.refilled);
@@ -206,7 +212,7 @@ fn nearest_rebinding_and_explicit_counts() {
 fn bad_inputs_are_errors_naming_what_failed() {
     let mesh = spot();
     let input = bound(&mesh);
-    let err = |options: RefineOptions| refine(&input, &mesh, &options, |_| {}).unwrap_err();
+    let err = |options: RefineOptions| refine(&input, &mesh, &options, |_, _| {}).unwrap_err();
     assert!(matches!(
         err(RefineOptions {
             alpha: Some(1e-9),
@@ -252,14 +258,19 @@ fn bad_inputs_are_errors_naming_what_failed() {
     // Unbound, empty, and bound past the template.
     let world = bake(&input, &mesh);
     assert!(matches!(
-        refine(&world, &mesh, &RefineOptions::default(), |_| {}),
+        refine(&world, &mesh, &RefineOptions::default(), |_, _| {}),
         Err(RefineError::Input(_))
     ));
     assert!(matches!(
-        refine(&input.select(&[]), &mesh, &RefineOptions::default(), |_| {}),
+        refine(
+            &input.select(&[]),
+            &mesh,
+            &RefineOptions::default(),
+            |_, _| {}
+        ),
         Err(RefineError::Input(_))
     ));
     let small = TriMesh::try_new(mesh.positions_f32(), mesh.triangles()[..10].to_vec()).unwrap();
-    let e = refine(&input, &small, &RefineOptions::default(), |_| {}).unwrap_err();
+    let e = refine(&input, &small, &RefineOptions::default(), |_, _| {}).unwrap_err();
     assert!(e.to_string().contains("triangle"), "{e}");
 }

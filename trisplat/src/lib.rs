@@ -99,7 +99,7 @@
 //! let bound = init_bound(&mesh, &BindOptions { per_triangle: 2, ..BindOptions::default() })?;
 //! // Alpha shape of the centres, smoothed, resampled; new Gaussians inherit from their
 //! // nearest old ones and stay bound; the seed's pruning (ε_o 0.015, ε_n 0.3, k 5).
-//! let refined = refine(&bound, &mesh, &RefineOptions::default(), |round| {
+//! let refined = refine(&bound, &mesh, &RefineOptions::default(), |round, _surfaces| {
 //!     println!("{} Gaussians, Chamfer L1 {:.4}", round.after, round.chamfer_after.chamfer_l1);
 //! })?;
 //! let counts = TriangleCounts::from_set(&refined.set, mesh.triangle_count())?;

@@ -2,11 +2,12 @@
 //! --alpha-spacings F] [--keep-clusters K] [--smooth-method M] [--smooth-iterations N]
 //! [--lambda L] [--mu M] [--samples N] [--sample-method M] [--seed S] [--rebind inherit|nearest]
 //! [--gate seed|stable] [--outlier-threshold D] [--normal-threshold C] [--neighbours K]
-//! [--no-prune]`: the VGA/GVA surface-guided re-initialisation loop (`pipeline::refine`).
+//! [--no-prune] [--surfaces DIR]`: the VGA/GVA surface-guided re-initialisation loop (`pipeline::refine`).
 
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
+use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_geometry::sampling::{DEFAULT_CURVATURE_STRENGTH, SampleMethod, SampleOptions};
 use trisplat_geometry::smoothing::{
     DEFAULT_ITERATIONS, DEFAULT_LAMBDA, DEFAULT_MU, SmoothMethod, SmoothOptions,
@@ -55,7 +56,8 @@ pub enum RebindArg {
     mean distance to the --neighbours 5 nearest Gaussians exceeds --outlier-threshold 0.015 \
     (scene units) or the mean normal deviation 1 - |cos| exceeds --normal-threshold 0.3; \
     --gate stable prunes only by the thresholds given, the normal criterion as prune's (mean \
-    |cos| below C). --no-prune skips the stage.\n\n\
+    |cos| below C). --no-prune skips the stage. --surfaces DIR writes each round's alpha shape and \
+    smoothed surface (round_NN_alpha.ply, round_NN_smoothed.ply).\n\n\
     Prints per round the Gaussian count, the Chamfer distance of the centres to the template \
     (surface mode: centres to the exact surface, --chamfer-samples template samples to the \
     nearest centre) and the milliseconds of each stage; --json prints them as `rounds`. The \
@@ -137,6 +139,10 @@ pub struct RefineArgs {
     /// No pruning stage.
     #[arg(long, conflicts_with_all = ["outlier_threshold", "normal_threshold"])]
     pub no_prune: bool,
+    /// Write each round's alpha shape and smoothed surface into this folder
+    /// (round_NN_alpha.ply, round_NN_smoothed.ply; created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub surfaces: Option<PathBuf>,
     /// Template samples of the Chamfer distance.
     #[arg(long, value_name = "N", default_value_t = DEFAULT_CHAMFER_SAMPLES as u64,
         value_parser = clap::value_parser!(u64).range(1..))]
@@ -252,14 +258,54 @@ pub fn run(args: RefineArgs, ctx: &Context) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let spinner = ctx.progress.spinner("refining");
     let json = ctx.json;
-    let refined = refine(&set, &template, &options, |r| {
+    let created_dir = match &args.surfaces {
+        Some(dir) if !dir.is_dir() => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("{}: cannot create the folder", dir.display()))?;
+            Some(dir.clone())
+        }
+        _ => None,
+    };
+    let mut written: Vec<PathBuf> = Vec::new();
+    let mut write_error: Option<anyhow::Error> = None;
+    let result = refine(&set, &template, &options, |r, surfaces| {
         if !json {
             spinner.suspend(|| print_round(r));
         }
+        if let (Some(dir), None) = (&args.surfaces, &write_error) {
+            for (kind, mesh) in [("alpha", surfaces.alpha), ("smoothed", surfaces.smoothed)] {
+                let path = dir.join(format!("round_{:02}_{kind}.ply", r.round));
+                match write_mesh(&path, mesh, WriteOptions::default()) {
+                    Ok(()) => written.push(path),
+                    Err(e) => write_error = Some(e.into()),
+                }
+            }
+        }
     })
-    .with_context(|| format!("{name} (template {})", template_path.display()))?;
+    .with_context(|| format!("{name} (template {})", template_path.display()))
+    .and_then(|refined| match write_error.take() {
+        Some(e) => Err(e),
+        None => Ok(refined),
+    })
+    .and_then(|refined| {
+        write_gaussians(&args.output, &refined.set, &PlyWriteOptions::default())?;
+        Ok(refined)
+    });
     spinner.finish_and_clear();
-    write_gaussians(&args.output, &refined.set, &PlyWriteOptions::default())?;
+    let refined = match result {
+        Ok(r) => r,
+        Err(e) => {
+            // A failed run leaves none of the surfaces it wrote.
+            for path in &written {
+                let _ = std::fs::remove_file(path);
+            }
+            if let Some(dir) = created_dir {
+                // Only if empty: nothing but what this run created is removed.
+                let _ = std::fs::remove_dir(dir);
+            }
+            return Err(e);
+        }
+    };
     let seconds = started.elapsed().as_secs_f64();
     if !json {
         println!(
@@ -280,6 +326,7 @@ pub fn run(args: RefineArgs, ctx: &Context) -> anyhow::Result<()> {
             "triangles": template.triangle_count(),
             "rounds": refined.rounds,
             "seconds": seconds,
+            "surfaces": written,
         }),
     )
 }
