@@ -61,6 +61,8 @@ pub enum Command {
     Prune(commands::prune::PruneArgs),
     /// Initialise Gaussians inside the visual hull carved from silhouette masks.
     Init(commands::init::InitArgs),
+    /// Surface-guided re-initialisation of a bound avatar (VGA/GVA): alpha shape, smoothing, resampling.
+    Refine(Box<commands::refine::RefineArgs>),
     /// Render Gaussians (3DGS/2DGS/perspective-aware) or a mesh on the CPU: rgb, alpha, depth, normals.
     Render(commands::render::RenderArgs),
     /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
@@ -168,6 +170,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Densify(args) => commands::densify::run(args, &ctx),
         Command::Prune(args) => commands::prune::run(args, &ctx),
         Command::Init(args) => commands::init::run(args, &ctx),
+        Command::Refine(args) => commands::refine::run(*args, &ctx),
         Command::Render(args) => commands::render::run(args, &ctx),
         Command::Cameras(args) => commands::cameras::run(args, &ctx),
         Command::Extract(args) => commands::extract::run(*args, &ctx),

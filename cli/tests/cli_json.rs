@@ -167,6 +167,52 @@ fn every_command_prints_one_json_object() {
         ]),
         &["before", "after", "flagged"],
     );
+    let r = json(&[
+        "refine",
+        &p("bound.ply"),
+        "--template",
+        &spot,
+        "-o",
+        &p("refined.ply"),
+        "--chamfer-samples",
+        "2000",
+    ]);
+    has(
+        &r,
+        &[
+            "output",
+            "template",
+            "before",
+            "gaussians",
+            "triangles",
+            "rounds",
+            "seconds",
+            "surfaces",
+        ],
+    );
+    has(
+        &r["rounds"][0],
+        &[
+            "round",
+            "before",
+            "after",
+            "alpha",
+            "samples",
+            "refilled",
+            "pruned",
+            "covered_triangles",
+            "chamfer_before",
+            "chamfer_after",
+            "ms",
+            "total_ms",
+        ],
+    );
+    has(
+        &r["rounds"][0]["ms"],
+        &[
+            "bake", "alpha", "smooth", "sample", "inherit", "bind", "prune", "chamfer",
+        ],
+    );
     has(
         &json(&["convert", &spot, &p("spot.glb")]),
         &["input", "output", "bytes"],

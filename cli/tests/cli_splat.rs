@@ -703,3 +703,170 @@ fn flame_binding_matches_float64_gaussian_avatars() {
     assert!(worst_rot < FLAME_REL_TOL, "{worst_rot}");
     assert!(worst_scale < FLAME_REL_TOL, "{worst_scale}");
 }
+
+/// `--gate seed` and `--gate stable` give the same files where both are defined (an unbound
+/// set, so k = 1: W = √ε_w; the normal threshold C = 1 − ε_n), on both pairings.
+#[test]
+fn seed_and_stable_gates_write_the_same_files() {
+    let dir = fresh_dir("gates");
+    let g = fixture("render/random_deg3.ply");
+    let run = |name: &str, extra: &[&str]| -> Vec<u8> {
+        let out = dir.join(name);
+        let mut args: Vec<&Path> = vec![p("densify"), &g, p("-o"), &out];
+        args.extend(extra.iter().map(|s| p(s)));
+        ok(&args);
+        std::fs::read(&out).expect("output")
+    };
+    let eps = 0.012f64;
+    let root = eps.sqrt().to_string();
+    let seed = run("seed.ply", &["--gate", "seed"]);
+    let stable = run(
+        "stable.ply",
+        &[
+            "--gate",
+            "stable",
+            "--w2-threshold",
+            &root,
+            "--w2-to",
+            "children",
+        ],
+    );
+    assert!(seed == stable, "children: the gates differ");
+    let ungated = run("all.ply", &[]);
+    assert!(
+        seed.len() < ungated.len(),
+        "the seed gate held nothing back"
+    );
+    let seed = run(
+        "seed_nn.ply",
+        &[
+            "--gate",
+            "seed",
+            "--w2-to",
+            "nearest",
+            "--w2-threshold",
+            "0.0004",
+        ],
+    );
+    let stable = run("stable_nn.ply", &["--w2-threshold", "0.02"]);
+    assert!(seed == stable, "nearest: the gates differ");
+    // Pruning: the seed's defaults against the same criteria in the stable form.
+    let prune = |name: &str, extra: &[&str]| -> Vec<u8> {
+        let out = dir.join(name);
+        let mut args: Vec<&Path> = vec![p("prune"), &g, p("-o"), &out];
+        args.extend(extra.iter().map(|s| p(s)));
+        ok(&args);
+        std::fs::read(&out).expect("output")
+    };
+    let seed = prune("p_seed.ply", &["--gate", "seed"]);
+    let stable = prune(
+        "p_stable.ply",
+        &["--outlier-threshold", "0.015", "--normal-threshold", "0.7"],
+    );
+    assert!(seed == stable, "pruning: the gates differ");
+    // --w2-to without a gate is a usage error (exit 2).
+    let out = trisplat(&[
+        p("densify"),
+        &g,
+        p("-o"),
+        &dir.join("u.ply"),
+        p("--w2-to"),
+        p("children"),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+}
+
+#[test]
+fn refine_keeps_every_triangle_and_refuses_bad_input() {
+    let dir = fresh_dir("refine");
+    let mesh = fixture("spot_triangulated.obj");
+    let tris = read_mesh(&mesh).expect("spot").triangle_count();
+    let g = bound_spot(&dir);
+    let r = dir.join("r.ply");
+    let text = ok(&[
+        p("refine"),
+        &g,
+        p("--template"),
+        &mesh,
+        p("-o"),
+        &r,
+        p("--rounds"),
+        p("2"),
+    ]);
+    assert!(
+        text.contains("round 1:") && text.contains("round 2:"),
+        "{text}"
+    );
+    let refined = read_gaussians(&r).expect("refined");
+    let mut seen = vec![false; tris];
+    for t in &refined.binding().expect("bound").triangles {
+        seen[t.index()] = true;
+    }
+    assert!(seen.iter().all(|&s| s), "every triangle keeps a Gaussian");
+    assert!(refined.means().iter().all(|m| m.is_finite()));
+    // Unbound input, a radius that leaves no surface, a bad option: exit 1, nothing written.
+    let world = fixture("render/random_deg3.ply");
+    fails(
+        &[
+            p("refine"),
+            &world,
+            p("--template"),
+            &mesh,
+            p("-o"),
+            &dir.join("x.ply"),
+        ],
+        &dir,
+        &["random_deg3.ply", "not bound"],
+    );
+    fails(
+        &[
+            p("refine"),
+            &g,
+            p("--template"),
+            &mesh,
+            p("-o"),
+            &dir.join("x.ply"),
+            p("--alpha"),
+            p("1e-9"),
+            p("--surfaces"),
+            &dir.join("s"),
+        ],
+        &dir,
+        &["g.ply", "round 1", "alpha"],
+    );
+    // A failure after the rounds (the output cannot be written) removes the surfaces they
+    // wrote, and the folder made for them.
+    fails(
+        &[
+            p("refine"),
+            &g,
+            p("--template"),
+            &mesh,
+            p("-o"),
+            &dir.join("missing").join("x.ply"),
+            p("--surfaces"),
+            &dir.join("s"),
+        ],
+        &dir,
+        &["missing"],
+    );
+    fails(
+        &[
+            p("refine"),
+            &g,
+            p("--template"),
+            &mesh,
+            p("-o"),
+            &dir.join("x.ply"),
+            p("--lambda"),
+            p("nan"),
+        ],
+        &dir,
+        &["g.ply", "round 1", "smooth"],
+    );
+    fails(
+        &[p("refine"), &g, p("--template"), &mesh, p("-o"), &g],
+        &dir,
+        &["refusing to overwrite"],
+    );
+}

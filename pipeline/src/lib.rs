@@ -73,6 +73,7 @@ pub mod methods;
 pub mod output;
 pub mod plan;
 pub mod plot;
+pub mod refine;
 pub mod report;
 pub mod run;
 pub mod session;

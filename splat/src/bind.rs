@@ -306,6 +306,47 @@ fn attach_with_distances(
     Ok((set, distances))
 }
 
+/// Attaches world-space Gaussians to the given triangles (`triangles[i]` for Gaussian `i`),
+/// expressed in their frames as [`attach`] does: for callers that choose the triangles
+/// themselves (the re-initialisation's new Gaussians inherit the triangle of the old Gaussian
+/// they copy). Deforming the result at rest gives the Gaussians back.
+///
+/// # Errors
+/// [`BindError::NotWorld`], [`BindError::NoTriangles`]; [`BindError::VertexMap`] when
+/// `triangles` does not have one entry per Gaussian or names a triangle past the mesh.
+pub fn attach_to_triangles(
+    world: &GaussianSet,
+    mesh: &TriMesh,
+    triangles: &[TriId],
+    convention: Convention,
+) -> Result<GaussianSet, BindError> {
+    if world.space() != ParameterSpace::World {
+        return Err(BindError::NotWorld);
+    }
+    if mesh.triangles().is_empty() {
+        return Err(BindError::NoTriangles);
+    }
+    if triangles.len() != world.len() {
+        return Err(BindError::VertexMap(format!(
+            "{} triangles for {} Gaussians",
+            triangles.len(),
+            world.len()
+        )));
+    }
+    if let Some((i, t)) = triangles
+        .iter()
+        .enumerate()
+        .find(|(_, t)| t.index() >= mesh.triangle_count())
+    {
+        return Err(BindError::VertexMap(format!(
+            "Gaussian {i}: triangle {} is past the template's {} triangles",
+            t.index(),
+            mesh.triangle_count()
+        )));
+    }
+    Ok(express_locally(world, mesh, convention, triangles.to_vec()))
+}
+
 /// Attaches world-space Gaussians that belong to mesh vertices (one vertex per Gaussian,
 /// `vertex_of[i]` for Gaussian `i`, as in LAM's per-vertex avatars) to a triangle around their
 /// vertex: of the triangles using the vertex, the one whose surface is nearest the Gaussian's

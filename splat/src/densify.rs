@@ -35,6 +35,48 @@ pub const DEFAULT_SPLIT_CHILDREN: usize = 2;
 /// Default neighbour count of outlier and normal-consistency pruning (docs/conventions.md §4: k = 5).
 pub const DEFAULT_NEIGHBOURS: usize = 5;
 
+/// The seed's (GSDHuman's) split threshold ε_w: a Gaussian splits where the squared
+/// 2-Wasserstein distance to its children exceeds it (scene units², absolute).
+pub const SEED_W2_SQ: f64 = 0.012;
+
+/// The seed's (GSDHuman's) outlier threshold ε_o: pruned where the mean distance to the
+/// [`DEFAULT_NEIGHBOURS`] nearest other Gaussians exceeds it (scene units, absolute).
+pub const SEED_OUTLIER: f64 = 0.015;
+
+/// The seed's (GSDHuman's) normal-consistency threshold ε_n: pruned where the mean normal
+/// deviation `1 - |cos|` to the [`DEFAULT_NEIGHBOURS`] nearest other Gaussians exceeds it.
+pub const SEED_NORMAL: f64 = 0.3;
+
+/// The two forms of the densification and pruning criteria (docs/conventions.md §4).
+///
+/// Both compare the same measured quantities; they differ in form and defaults:
+///
+/// | criterion | [`Gate::Seed`] (GSDHuman) | [`Gate::Stable`] |
+/// |---|---|---|
+/// | split | `W² > ε_w` (absolute, default [`SEED_W2_SQ`]) | `√W² > W k_f` (relative to the triangle scale, no default) |
+/// | outliers | mean k-NN distance `> ε_o` (default [`SEED_OUTLIER`]) | the same, no default |
+/// | normals | mean `1 - abs(cos)` `> ε_n` (default [`SEED_NORMAL`]) | mean `abs(cos)` `< C`, no default |
+///
+/// With `W = √ε_w / k_f` (every `k_f` equal, or an unbound set with `k_f = 1`) and
+/// `C = 1 - ε_n` the two select the same Gaussians.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Gate {
+    /// GSDHuman's absolute thresholds and defaults.
+    Seed,
+    /// The scale-free form: thresholds relative to the triangle scale, none by default.
+    #[default]
+    Stable,
+}
+
+/// Which Gaussians the Wasserstein gate measures a Gaussian against.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum W2Pairs {
+    /// Its own split children (GSDHuman): the mean of `W²` over the children.
+    Children,
+    /// Its nearest other Gaussian by position.
+    Nearest,
+}
+
 /// Errors of densification and pruning.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -66,6 +108,16 @@ pub enum DensifyError {
     /// Neighbour queries failed (non-finite or huge means).
     #[error("neighbour search: {0}")]
     Neighbours(String),
+    /// A child names a parent past the parents.
+    #[error("child {child}: its parent {parent} is past the {parents} parents")]
+    ParentOutOfRange {
+        /// Child index.
+        child: usize,
+        /// The parent it names.
+        parent: usize,
+        /// Number of parents.
+        parents: usize,
+    },
 }
 
 /// Number of Gaussians bound to each triangle.
@@ -346,12 +398,13 @@ fn index_of(set: &GaussianSet) -> Result<Option<PointIndex>, DensifyError> {
         .map_err(|e| DensifyError::Neighbours(e.to_string()))
 }
 
-/// For each Gaussian, the Wasserstein-2 distance (not squared) to its nearest neighbour by
-/// position (`f64::INFINITY` when alone). Pass a world-space set (e.g. the template at rest).
+/// For each Gaussian, the squared Wasserstein-2 distance `W²` to its nearest neighbour by
+/// position (`f64::INFINITY` when alone; never negative). Pass a world-space set (e.g. the
+/// template at rest).
 ///
 /// # Errors
 /// [`DensifyError::Neighbours`] when the means are not finite.
-pub fn w2_to_nearest(set: &GaussianSet) -> Result<Vec<f64>, DensifyError> {
+pub fn w2_sq_to_nearest(set: &GaussianSet) -> Result<Vec<f64>, DensifyError> {
     let Some(index) = index_of(set)? else {
         return Ok(Vec::new());
     };
@@ -370,13 +423,90 @@ pub fn w2_to_nearest(set: &GaussianSet) -> Result<Vec<f64>, DensifyError> {
                 covariance_axes(set, j),
             )
             .max(0.0)
-            .sqrt()
         })
         .collect())
 }
 
-/// The Wasserstein gate (GSDHuman): Gaussian `i` may densify only if `w2[i]` exceeds
-/// `threshold × scale[i]` (thresholds relative to the triangle scale `k_f`, docs/conventions.md §4). Returns
+/// For each Gaussian, the Wasserstein-2 distance (not squared) to its nearest neighbour by
+/// position (`f64::INFINITY` when alone): the square root of [`w2_sq_to_nearest`].
+///
+/// # Errors
+/// [`DensifyError::Neighbours`] when the means are not finite.
+pub fn w2_to_nearest(set: &GaussianSet) -> Result<Vec<f64>, DensifyError> {
+    Ok(w2_sq_to_nearest(set)?.into_iter().map(f64::sqrt).collect())
+}
+
+/// For each parent, the mean over its children of the squared Wasserstein-2 distance
+/// `W²(parent, child)` (GSDHuman's split criterion): `children[j]` is a child of
+/// `parents[sources[j]]`, both sets in the same frame (world space: a bound split baked at
+/// the template's rest). A parent without children gets 0 (it never passes the gate).
+///
+/// For a split of [`split_selected`] (children at `mu + R (s ∘ z)`, scales `c s` with
+/// `c = 1 / (shrink · children)`, same rotation) the expectation is
+/// `E W² = Σ s_i² + (1 - c)² Σ s_i²` (a surfel's flat axis has no offset).
+///
+/// # Errors
+/// [`DensifyError::MaskLength`] when `sources` does not have one entry per child,
+/// [`DensifyError::ParentOutOfRange`] when one names no parent.
+pub fn w2_sq_to_children(
+    parents: &GaussianSet,
+    children: &GaussianSet,
+    sources: &[usize],
+) -> Result<Vec<f64>, DensifyError> {
+    if sources.len() != children.len() {
+        return Err(DensifyError::MaskLength {
+            len: sources.len(),
+            expected: children.len(),
+        });
+    }
+    if let Some((child, &parent)) = sources
+        .iter()
+        .enumerate()
+        .find(|(_, p)| **p >= parents.len())
+    {
+        return Err(DensifyError::ParentOutOfRange {
+            child,
+            parent,
+            parents: parents.len(),
+        });
+    }
+    let per_child: Vec<f64> = (0..children.len())
+        .into_par_iter()
+        .with_min_len(256)
+        .map(|j| {
+            let p = sources[j];
+            w2_sq(
+                parents.means()[p].as_dvec3(),
+                covariance_axes(parents, p),
+                children.means()[j].as_dvec3(),
+                covariance_axes(children, j),
+            )
+            .max(0.0)
+        })
+        .collect();
+    let mut sum = vec![0.0f64; parents.len()];
+    let mut count = vec![0u32; parents.len()];
+    for (&p, d) in sources.iter().zip(per_child) {
+        sum[p] += d;
+        count[p] += 1;
+    }
+    Ok(sum
+        .into_iter()
+        .zip(count)
+        .map(|(s, c)| if c == 0 { 0.0 } else { s / f64::from(c) })
+        .collect())
+}
+
+/// The seed's (GSDHuman's) Wasserstein gate: Gaussian `i` may split only if `w2_sq[i]`
+/// (squared, absolute, e.g. from [`w2_sq_to_children`]) exceeds `eps_w` ([`SEED_W2_SQ`]).
+#[must_use]
+pub fn seed_w2_gate(w2_sq: &[f64], eps_w: f64) -> Vec<bool> {
+    w2_sq.iter().map(|&d| d > eps_w).collect()
+}
+
+/// The stable Wasserstein gate: Gaussian `i` may densify only if `w2[i]` (the distance, not
+/// squared) exceeds `threshold × scale[i]` (thresholds relative to the triangle scale `k_f`,
+/// docs/conventions.md §4; [`seed_w2_gate`] is the seed's absolute squared form). Returns
 /// the mask of Gaussians allowed to densify; combine it with the caller's selection.
 ///
 /// # Errors
@@ -456,6 +586,33 @@ pub fn normal_inconsistency_mask(
             .map(|mean| mean.is_some_and(|m| m < threshold))
             .collect(),
     )
+}
+
+/// The seed's (GSDHuman's) normal-consistency mask: the mean normal deviation `1 - |cos|`
+/// between a Gaussian's normal (shortest axis) and those of its `k` nearest other Gaussians
+/// is above `eps_n` ([`SEED_NORMAL`]). Equals [`normal_inconsistency_mask`] with threshold
+/// `1 - eps_n` (up to rounding at the threshold). Pass a world-space set.
+///
+/// # Errors
+/// [`DensifyError::Neighbours`] when the means are not finite.
+pub fn normal_deviation_mask(
+    set: &GaussianSet,
+    k: usize,
+    eps_n: f64,
+) -> Result<Vec<bool>, DensifyError> {
+    let Some(index) = index_of(set)? else {
+        return Ok(Vec::new());
+    };
+    let normals: Vec<DVec3> = (0..set.len())
+        .into_par_iter()
+        .map(|i| shortest_axis(set, i))
+        .collect();
+    Ok(mean_over_neighbours(set, &index, k, |i, j, _| {
+        1.0 - normals[i].dot(normals[j]).abs()
+    })
+    .into_iter()
+    .map(|mean| mean.is_some_and(|m| m > eps_n))
+    .collect())
 }
 
 /// For every Gaussian, the mean of `value(i, j, distance)` over its `k` nearest other

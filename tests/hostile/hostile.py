@@ -144,6 +144,7 @@ def commands(kind, path, fixtures, out):
             ["cameras", path, "-o", o + "/cams.json", "--views", "2", "--size", "16x16"],
             ["render", "--mesh", path, "--cameras", cams, "-o", o + "/r"],
             ["alpha-shape", path, "--alpha", "0.1", "-o", o + "/a.ply"],
+            ["refine", bound, "--template", path, "-o", o + "/rf.ply"],
             ["extract", "--template", path, "--method", "alpha,delaunay", "-q", "-o", o + "/x"],
         ]
         if kind in ("gltf", "glb"):
@@ -156,6 +157,9 @@ def commands(kind, path, fixtures, out):
             ["tsdf", "--gaussians", path, "--cameras", cams, "-o", o + "/t.ply"],
             ["densify", path, "-o", o + "/d.ply"],
             ["prune", path, "-o", o + "/p.ply", "--min-opacity", "0.5"],
+            ["densify", path, "-o", o + "/ds.ply", "--gate", "seed"],
+            ["prune", path, "-o", o + "/ps.ply", "--gate", "seed"],
+            ["refine", path, "--template", spot, "-o", o + "/rf.ply"],
             ["bind", spot, "--gaussians", path, "-o", o + "/b.ply"],
             ["deform", "--template", spot, "--gaussians", path, "--animation", spot,
              "-o", o + "/f"],

@@ -1,7 +1,8 @@
 //! `trisplat densify G.ply -o OUT.ply [--template T] [--convention ...] [--mask FILE]
 //! [--op split|clone] [--split-above S] [--children N] [--shrink F] [--seed S]
-//! [--w2-threshold W]`, and the helpers `prune` shares: reading masks and baking a bound set to
-//! world space at the template's rest.
+//! [--gate seed|stable] [--w2-threshold W] [--w2-to children|nearest]`, and the helpers `prune`
+//! and `refine` share: the gate argument, reading masks and baking a bound set to world space
+//! at the template's rest.
 
 use std::path::{Path, PathBuf};
 
@@ -10,14 +11,15 @@ use trisplat_pipeline::input::read_template;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::densify::{
-    DEFAULT_SPLIT_CHILDREN, DEFAULT_SPLIT_SHRINK, SplitOptions, TriangleCounts, clone_selected,
-    split_selected, w2_gate, w2_to_nearest,
+    DEFAULT_SPLIT_CHILDREN, DEFAULT_SPLIT_SHRINK, SEED_W2_SQ, SplitOptions, TriangleCounts,
+    W2Pairs, clone_selected, seed_w2_gate, split_selected, w2_gate, w2_sq_to_children,
+    w2_sq_to_nearest,
 };
 use trisplat_splat::frames::{FrameOptions, corners_of, frame};
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
 
 use super::bind::ConventionArg;
-use super::{Context, refuse_to_overwrite};
+use super::{Context, UsageError, refuse_to_overwrite};
 
 /// The template options shared by `densify` and `prune`.
 #[derive(Debug, clap::Args)]
@@ -31,6 +33,26 @@ pub struct TemplateArgs {
     pub convention: ConventionArg,
 }
 
+/// The form of the densification and pruning criteria (`splat::densify::Gate`,
+/// docs/conventions.md §4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum GateArg {
+    /// GSDHuman's absolute thresholds and defaults: split where W² > ε_w (0.012), prune
+    /// outliers above ε_o (0.015) and normal deviations 1 - |cos| above ε_n (0.3), k = 5.
+    Seed,
+    /// Scale-free thresholds: split where W2 > W × k (triangle scale), no defaults.
+    Stable,
+}
+
+/// What the Wasserstein gate measures a Gaussian against.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum W2PairsArg {
+    /// Its own split children (the mean W² over them; GSDHuman).
+    Children,
+    /// Its nearest other Gaussian by position.
+    Nearest,
+}
+
 /// A Gaussian set with what the criteria need: the world-space set (baked at rest when bound),
 /// each Gaussian's frame scale `k` (1 when not bound), and the triangle count.
 pub struct Loaded {
@@ -42,6 +64,22 @@ pub struct Loaded {
     pub scale: Vec<f64>,
     /// Triangles of the template (bound sets).
     pub triangles: Option<usize>,
+    /// The template and deformer that bake the set (bound sets).
+    pub baker: Option<(trisplat_geometry::TriMesh, Deformer)>,
+}
+
+impl Loaded {
+    /// `set` (in the frame of the loaded set: local parameters on the same template when
+    /// bound) in world space.
+    ///
+    /// # Errors
+    /// A binding past the template, a failed deformation.
+    pub fn bake(&self, set: &GaussianSet) -> anyhow::Result<GaussianSet> {
+        match &self.baker {
+            Some((mesh, deformer)) => Ok(deformer.deform(set, mesh.positions())?),
+            None => Ok(set.clone()),
+        }
+    }
 }
 
 /// Reads `path` and, for a bound set, bakes it with the template at rest.
@@ -57,6 +95,7 @@ pub fn load(path: &Path, template: &TemplateArgs) -> anyhow::Result<Loaded> {
             scale: vec![1.0; set.len()],
             set,
             triangles: None,
+            baker: None,
         });
     };
     let Some(t_path) = &template.template else {
@@ -94,6 +133,7 @@ pub fn load(path: &Path, template: &TemplateArgs) -> anyhow::Result<Loaded> {
         world,
         scale,
         triangles: Some(mesh.triangle_count()),
+        baker: Some((mesh, deformer)),
     })
 }
 
@@ -142,10 +182,15 @@ pub enum OpArg {
     rules). On a bound set, clones and children keep the parent's triangle (binding \
     inheritance) and its local frame; the output stays bound (local parameters, binding_0).\n\n\
     Selection: --mask FILE (one 0/1 per Gaussian; default every Gaussian), narrowed by the \
-    Wasserstein gate --w2-threshold W (GSDHuman: a Gaussian may densify only if the \
-    2-Wasserstein distance to its nearest neighbour exceeds W times its triangle's frame scale \
-    k; for an unbound set W is in scene units). Distances are measured in world space, a bound \
-    set baked at the template's rest (--template, --convention).\n\n\
+    Wasserstein gate in one of two forms (docs/conventions.md §4). --gate stable (default): \
+    only with --w2-threshold W, a Gaussian may densify only if the 2-Wasserstein distance W2 \
+    (not squared) to its nearest neighbour (--w2-to nearest, the default here) exceeds W times \
+    its triangle's frame scale k (scene units for an unbound set). --gate seed (GSDHuman): a \
+    Gaussian may densify only if the squared distance W² to its split children (--w2-to \
+    children, the default here: the mean over the --children children the split draws, the \
+    same ones it then makes) exceeds the absolute --w2-threshold ε_w (default 0.012, scene \
+    units squared). The forms agree for W = √ε_w / k. Distances are measured in world space, a \
+    bound set baked at the template's rest (--template, --convention).\n\n\
     Operation: --op split (default) or clone; or --split-above S: selected Gaussians whose \
     largest world-space scale exceeds S are split, the others cloned (the 3DGS rule without \
     gradients). A split makes --children N children (default 2) at positions drawn from the \
@@ -181,9 +226,17 @@ pub struct DensifyArgs {
     /// Seed of the split sampling.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Wasserstein gate threshold, relative to the triangle scale k (see the help).
+    /// Form of the Wasserstein gate: seed (W² > ε_w, absolute) or stable (W2 > W × k).
+    #[arg(long, value_enum, default_value_t = GateArg::Stable)]
+    pub gate: GateArg,
+    /// Wasserstein gate threshold: stable W (relative to the triangle scale k; no gate when
+    /// absent), seed ε_w (scene units squared; default 0.012).
     #[arg(long, value_name = "W")]
     pub w2_threshold: Option<f64>,
+    /// What the gate measures a Gaussian against (default: children for seed, nearest for
+    /// stable; needs a gate).
+    #[arg(long, value_enum, value_name = "PAIRS")]
+    pub w2_to: Option<W2PairsArg>,
 }
 
 /// Runs `trisplat densify`.
@@ -206,6 +259,12 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
             bail!("{flag}: must be a non-negative number");
         }
     }
+    if args.gate == GateArg::Stable && args.w2_threshold.is_none() && args.w2_to.is_some() {
+        return Err(UsageError(
+            "--w2-to needs a Wasserstein gate: give --w2-threshold W or --gate seed".into(),
+        )
+        .into());
+    }
     let spinner = ctx.progress.spinner("densifying");
     let loaded = load(&args.gaussians, &args.template)?;
     let name = args.gaussians.display().to_string();
@@ -214,9 +273,40 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
         Some(p) => read_mask(p, n)?,
         None => vec![true; n],
     };
-    if let Some(w) = args.w2_threshold {
-        let w2 = w2_to_nearest(&loaded.world).with_context(|| name.clone())?;
-        let gate = w2_gate(&w2, &loaded.scale, w).with_context(|| name.clone())?;
+    let n_selected_before_gate = selected.iter().filter(|&&s| s).count();
+    let options = SplitOptions {
+        children: args.children as usize,
+        shrink: args.shrink,
+        seed: args.seed,
+    };
+    let threshold = match args.gate {
+        GateArg::Seed => Some(args.w2_threshold.unwrap_or(SEED_W2_SQ)),
+        GateArg::Stable => args.w2_threshold,
+    };
+    let pairs = match (args.w2_to, args.gate) {
+        (Some(W2PairsArg::Children), _) | (None, GateArg::Seed) => W2Pairs::Children,
+        (Some(W2PairsArg::Nearest), _) | (None, GateArg::Stable) => W2Pairs::Nearest,
+    };
+    if let Some(w) = threshold {
+        let w2_sq = match pairs {
+            W2Pairs::Nearest => w2_sq_to_nearest(&loaded.world).with_context(|| name.clone())?,
+            W2Pairs::Children => {
+                // The children the split below makes for these parents (same seed, same
+                // stream per parent index), baked like the parents.
+                let trial = split_selected(&loaded.set, &vec![true; n], &options, None)
+                    .with_context(|| name.clone())?;
+                let children = loaded.bake(&trial.set).with_context(|| name.clone())?;
+                w2_sq_to_children(&loaded.world, &children, &trial.sources)
+                    .with_context(|| name.clone())?
+            }
+        };
+        let gate = match args.gate {
+            GateArg::Seed => seed_w2_gate(&w2_sq, w),
+            GateArg::Stable => {
+                let w2: Vec<f64> = w2_sq.iter().map(|d| d.sqrt()).collect();
+                w2_gate(&w2, &loaded.scale, w).with_context(|| name.clone())?
+            }
+        };
         selected.iter_mut().zip(gate).for_each(|(s, g)| *s &= g);
     }
     let (split, clone): (Vec<bool>, Vec<bool>) = match (args.split_above, args.op) {
@@ -242,20 +332,20 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
         clone_selected(&loaded.set, &clone, counts.as_mut()).with_context(|| name.clone())?;
     let mut split_mask = split;
     split_mask.resize(cloned.set.len(), false);
-    let options = SplitOptions {
-        children: args.children as usize,
-        shrink: args.shrink,
-        seed: args.seed,
-    };
     let result = split_selected(&cloned.set, &split_mask, &options, counts.as_mut())
         .with_context(|| name.clone())?;
     spinner.finish_and_clear();
     write_gaussians(&args.output, &result.set, &PlyWriteOptions::default())?;
     let n_split = split_mask.iter().filter(|&&s| s).count();
+    let n_gated = n_selected_before_gate - selected.iter().filter(|&&s| s).count();
     let n_clone = clone.iter().filter(|&&s| s).count();
     if !ctx.json {
+        let gated = match threshold {
+            Some(w) => format!("; {n_gated} held back by the W2 gate at {w}"),
+            None => String::new(),
+        };
         println!(
-            "densify: {n} -> {} Gaussians ({n_clone} cloned, {n_split} split into {} each)",
+            "densify: {n} -> {} Gaussians ({n_clone} cloned, {n_split} split into {} each{gated})",
             result.set.len(),
             args.children
         );
@@ -269,6 +359,12 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
             "cloned": n_clone,
             "split": n_split,
             "children": args.children,
+            "gate": match args.gate {
+                GateArg::Seed => "seed",
+                GateArg::Stable => "stable",
+            },
+            "w2_threshold": threshold,
+            "gated": n_gated,
         }),
     )
 }

@@ -15,6 +15,7 @@ pub mod init;
 pub mod man;
 pub mod merge;
 pub mod prune;
+pub mod refine;
 pub mod render;
 pub mod sample;
 pub mod smooth;

@@ -1,15 +1,17 @@
 //! `trisplat prune G.ply -o OUT.ply [--template T] [--convention ...] [--min-opacity O]
-//! [--outlier-threshold D] [--outlier-k K] [--normal-threshold C] [--normal-k K] [--mask FILE]`.
+//! [--outlier-threshold D] [--outlier-k K] [--normal-threshold C] [--normal-k K] [--mask FILE]
+//! [--gate seed|stable]`.
 
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use trisplat_splat::densify::{
-    DEFAULT_NEIGHBOURS, TriangleCounts, normal_inconsistency_mask, outlier_mask, prune,
+    DEFAULT_NEIGHBOURS, SEED_NORMAL, SEED_OUTLIER, TriangleCounts, normal_deviation_mask,
+    normal_inconsistency_mask, outlier_mask, prune,
 };
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
-use super::densify::{TemplateArgs, load, read_mask};
+use super::densify::{GateArg, TemplateArgs, load, read_mask};
 use super::{Context, refuse_to_overwrite};
 
 /// Arguments of `trisplat prune`.
@@ -23,6 +25,10 @@ use super::{Context, refuse_to_overwrite};
     --normal-threshold C: mean |cos| between the Gaussian's normal (its shortest axis) and \
     those of its --normal-k nearest Gaussians (default 5) below C (0..1);\n  \
     --mask FILE: one 0/1 per Gaussian, 1 = remove.\n\n\
+    --gate seed (GSDHuman) turns on its defaults, each overridable: --outlier-threshold 0.015 \
+    (scene units), and --normal-threshold 0.3 read as the seed's ε_n on the mean normal \
+    deviation 1 - |cos| (removed above it; the same as --gate stable with C = 1 - ε_n), both \
+    with k = 5 neighbours. --gate stable (default) uses only the criteria given.\n\n\
     Distances and normals are measured in world space; a bound set is baked at the template's \
     rest (--template, --convention) and written back bound (local parameters, binding_0). A \
     bound set never loses the last Gaussians of a triangle (GaussianAvatars): when every \
@@ -58,6 +64,10 @@ pub struct PruneArgs {
     /// Mask file: one 0/1 per Gaussian, 1 = remove.
     #[arg(long, value_name = "FILE")]
     pub mask: Option<PathBuf>,
+    /// Form and defaults of the criteria: seed (GSDHuman's ε_o 0.015 and ε_n 0.3 on) or stable
+    /// (only the criteria given).
+    #[arg(long, value_enum, default_value_t = GateArg::Stable)]
+    pub gate: GateArg,
 }
 
 /// Runs `trisplat prune`.
@@ -65,8 +75,12 @@ pub struct PruneArgs {
 /// # Errors
 /// No criterion, unreadable inputs, bad masks or thresholds, an output equal to an input, a
 /// failed write.
-pub fn run(args: PruneArgs, ctx: &Context) -> anyhow::Result<()> {
+pub fn run(mut args: PruneArgs, ctx: &Context) -> anyhow::Result<()> {
     refuse_to_overwrite(&args.gaussians, &args.output)?;
+    if args.gate == GateArg::Seed {
+        args.outlier_threshold.get_or_insert(SEED_OUTLIER);
+        args.normal_threshold.get_or_insert(SEED_NORMAL);
+    }
     if let Some(t) = &args.template.template {
         refuse_to_overwrite(t, &args.output)?;
     }
@@ -108,8 +122,11 @@ pub fn run(args: PruneArgs, ctx: &Context) -> anyhow::Result<()> {
         flagged.iter_mut().zip(m).for_each(|(f, m)| *f |= m);
     }
     if let Some(c) = args.normal_threshold {
-        let m = normal_inconsistency_mask(&loaded.world, args.normal_k as usize, c)
-            .with_context(|| name.clone())?;
+        let m = match args.gate {
+            GateArg::Seed => normal_deviation_mask(&loaded.world, args.normal_k as usize, c),
+            GateArg::Stable => normal_inconsistency_mask(&loaded.world, args.normal_k as usize, c),
+        }
+        .with_context(|| name.clone())?;
         flagged.iter_mut().zip(m).for_each(|(f, m)| *f |= m);
     }
     let mut counts = match loaded.triangles {
@@ -139,6 +156,10 @@ pub fn run(args: PruneArgs, ctx: &Context) -> anyhow::Result<()> {
             "after": pruned.result.set.len(),
             "flagged": n_flagged,
             "spared": pruned.spared,
+            "gate": match args.gate {
+                GateArg::Seed => "seed",
+                GateArg::Stable => "stable",
+            },
         }),
     )
 }
