@@ -531,13 +531,25 @@ impl Session {
     /// # Errors
     /// As [`Session::positions`]; a failed deformation naming the frame.
     pub fn world(&mut self, frame: usize) -> Result<GaussianSet, PipelineError> {
+        self.world_counted(frame).map(|(set, _)| set)
+    }
+
+    /// [`Session::world`] and the frame's collapsed template triangles (docs/numerics.md,
+    /// "The degenerate-triangle policy").
+    ///
+    /// # Errors
+    /// As [`Session::world`].
+    pub fn world_counted(
+        &mut self,
+        frame: usize,
+    ) -> Result<(GaussianSet, Collapsed), PipelineError> {
         let positions = self.positions(frame)?;
         self.ready_engine(frame, &positions)?;
         self.record(Stage::Deform);
-        let (set, _) =
+        let (set, collapsed) =
             self.engine
                 .deform(&self.animation, &self.set, &positions, frame, &self.label)?;
-        Ok(moved(set, self.origin))
+        Ok((moved(set, self.origin), collapsed))
     }
 
     /// The template's positions and the Gaussians' deformed means at animation frame

@@ -165,11 +165,16 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
     }
     let bar = ctx.progress.bar(frames.len() as u64, "deforming");
     let mut created = Created::default();
+    // Frames with collapsed template triangles (each kept its last valid frame), and how many.
+    let mut collapsed: Vec<(usize, usize)> = Vec::new();
     let result = (|| -> anyhow::Result<()> {
         for f in frames.clone() {
             let out = frame_path(f);
             let existed = out.exists();
-            let world = session.world(f)?;
+            let (world, c) = session.world_counted(f)?;
+            if c.total() > 0 {
+                collapsed.push((f, c.total()));
+            }
             write_gaussian_file(&out, &world, &args.gaussian, false, false)?;
             created.note(&out, existed);
             bar.inc(1);
@@ -181,6 +186,20 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
         created.remove();
     }
     result?;
+    if !collapsed.is_empty() && !ctx.quiet && !ctx.json {
+        let listed: Vec<String> = collapsed
+            .iter()
+            .take(10)
+            .map(|(f, n)| format!("{f} ({n})"))
+            .collect();
+        eprintln!(
+            "warning: {} frame(s) have template triangles of zero area, whose Gaussians kept \
+             their last valid frame: {}{}",
+            collapsed.len(),
+            listed.join(", "),
+            if collapsed.len() > 10 { ", ..." } else { "" }
+        );
+    }
     ctx.emit(
         "deform",
         serde_json::json!({
@@ -188,6 +207,10 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
             "frames": frames.len(),
             "gaussians": session.gaussians().len(),
             "format": args.format.extension(),
+            "collapsed_frames": collapsed
+                .iter()
+                .map(|(f, n)| serde_json::json!({"frame": f, "triangles": n}))
+                .collect::<Vec<_>>(),
         }),
     )
 }
