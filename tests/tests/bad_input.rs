@@ -639,3 +639,20 @@ fn gltf_that_is_not_plain_json_is_refused() {
         assert_eq!(element, "document");
     }
 }
+
+/// Found by AFL (`fuzz/regressions/gltf/attribute_semantic_renamed_accessor_missing.gltf`): a
+/// document without accessors whose primitive's `POSITION` names accessor 2 beside an unknown
+/// semantic (`NOR:AL`) got past the accessor check and panicked in the `gltf` crate's
+/// validation. Both readers now refuse it, naming the attribute.
+#[test]
+fn gltf_attribute_naming_a_missing_accessor_beside_an_odd_semantic_is_refused() {
+    use trisplat_geometry::animation::{Clip, GltfTemplate};
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions/gltf/attribute_semantic_renamed_accessor_missing.gltf");
+    let e = io::read_mesh(&p).expect_err("missing accessor").to_string();
+    assert!(e.contains("which does not exist"), "{e}");
+    let e = GltfTemplate::open(&p, &Clip::FirstIfAny)
+        .expect_err("missing accessor")
+        .to_string();
+    assert!(e.contains("which does not exist"), "{e}");
+}

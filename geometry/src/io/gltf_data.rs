@@ -400,27 +400,49 @@ fn renamed_extension_semantics(json_bytes: &[u8]) -> Option<Vec<u8>> {
     renamed.then(|| json.to_string().into_bytes())
 }
 
-/// Refuses a primitive attribute that names an accessor the file does not have (the `gltf`
-/// crate's validation would index the accessor array with it unchecked).
+/// Refuses a primitive attribute (or morph-target attribute) that names an accessor the file
+/// does not have (the `gltf` crate's validation indexes the accessor array with `POSITION`
+/// unchecked). Read from the plain JSON, so it holds whatever the `gltf` crate makes of the
+/// rest of the document (an unknown semantic such as `NOR:AL` included).
 fn check_attribute_indices(json_bytes: &[u8]) -> Result<(), GltfDataErrorKind> {
-    // Unvalidated parse: only the indices are looked at here.
-    let Ok(unchecked) = gltf::Gltf::from_slice_without_validation(json_bytes) else {
+    let Ok(json) = serde_json::from_slice::<serde_json::Value>(json_bytes) else {
         // The validated parse reports what is wrong.
         return Ok(());
     };
-    let json = unchecked.document.as_json();
-    for (mesh, m) in json.meshes.iter().enumerate() {
-        for (primitive, p) in m.primitives.iter().enumerate() {
-            for (semantic, accessor) in &p.attributes {
-                if accessor.value() >= json.accessors.len() {
-                    return Err(GltfDataErrorKind::Attribute {
-                        mesh,
-                        primitive,
-                        message: format!(
-                            "attribute {semantic:?} refers to accessor {}, which does not exist",
-                            accessor.value()
-                        ),
-                    });
+    let accessors = json
+        .get("accessors")
+        .and_then(|a| a.as_array())
+        .map_or(0, Vec::len);
+    let Some(meshes) = json.get("meshes").and_then(|m| m.as_array()) else {
+        return Ok(());
+    };
+    for (mesh, m) in meshes.iter().enumerate() {
+        let Some(primitives) = m.get("primitives").and_then(|p| p.as_array()) else {
+            continue;
+        };
+        for (primitive, p) in primitives.iter().enumerate() {
+            let targets = p
+                .get("targets")
+                .and_then(|t| t.as_array())
+                .into_iter()
+                .flatten();
+            let maps = p.get("attributes").into_iter().chain(targets);
+            for map in maps.filter_map(|m| m.as_object()) {
+                for (semantic, accessor) in map {
+                    // Non-integers are refused by the validated parse.
+                    let Some(index) = accessor.as_u64() else {
+                        continue;
+                    };
+                    if usize::try_from(index).map_or(true, |i| i >= accessors) {
+                        return Err(GltfDataErrorKind::Attribute {
+                            mesh,
+                            primitive,
+                            message: format!(
+                                "attribute {semantic:?} refers to accessor {index}, which does \
+                                 not exist"
+                            ),
+                        });
+                    }
                 }
             }
         }
