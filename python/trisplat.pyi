@@ -53,7 +53,7 @@ class Mesh:
     def volume(self) -> float:
         """Signed volume (positive for a closed mesh with outward faces)."""
     def stats(self) -> Dict[str, Any]:
-        """The mesh's structure, as ``eval``'s ``pred_structure``: triangles, area, components,
+        """The mesh's structure, as ``eval``'s ``pred_structure``: vertices, triangles, area, components,
         largest_component_area_fraction, boundary_edges, non_manifold_edges, watertight,
         winding_consistent."""
 
@@ -292,7 +292,8 @@ def alpha_shape(points: ArrayLike, alpha: float, keep_clusters: int = 0) -> Mesh
     """The alpha shape of float32 ``(N, 3)`` points (Open3D's definition), faces outward."""
 
 def delaunay(points: ArrayLike) -> U32:
-    """The 3D Delaunay tetrahedra of float32 ``(N, 3)`` points: uint32 ``(T, 4)`` indices."""
+    """The 3D Delaunay tetrahedra of float32 ``(N, 3)`` points: uint32 ``(T, 4)`` indices,
+    positive in Shewchuk's orient3d convention."""
 
 def eval(
     pred: Union[PathLike, Mesh, PointCloud],

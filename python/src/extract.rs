@@ -143,7 +143,7 @@ fn alpha_shape<'py>(
 
 /// The 3D Delaunay tetrahedralisation of ``points`` (float32 ``(N, 3)``; exact predicates with
 /// symbolic perturbation): uint32 ``(T, 4)`` indices into ``points``, each tetrahedron
-/// positively oriented. Exact duplicates are skipped (the first copy is used); coplanar or
+/// positive in Shewchuk's ``orient3d`` convention (``(p1 - p0) × (p2 - p0) · (p3 - p0) < 0``). Exact duplicates are skipped (the first copy is used); coplanar or
 /// fewer than four distinct points give no tetrahedra.
 #[pyfunction]
 fn delaunay<'py>(

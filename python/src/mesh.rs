@@ -123,8 +123,8 @@ impl Mesh {
         Ok(py.detach(|| mesh.signed_volume()))
     }
 
-    /// The structure of the mesh (``eval``'s ``pred_structure``): ``triangles``, ``area``,
-    /// ``components``, ``largest_component_area_fraction``, ``boundary_edges``,
+    /// The structure of the mesh (``eval``'s ``pred_structure``): ``vertices``, ``triangles``,
+    /// ``area``, ``components``, ``largest_component_area_fraction``, ``boundary_edges``,
     /// ``non_manifold_edges``, ``watertight``, ``winding_consistent`` (docs/conventions.md §8).
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let mesh = self.to_rust(py)?;

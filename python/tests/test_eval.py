@@ -18,7 +18,7 @@ EVAL_KEYS = {
 }
 THRESHOLD_KEYS = {"tau", "tau_fraction", "precision", "recall", "fscore"}
 STRUCTURE_KEYS = {
-    "triangles", "area", "components", "largest_component_area_fraction", "boundary_edges",
+    "vertices", "triangles", "area", "components", "largest_component_area_fraction", "boundary_edges",
     "non_manifold_edges", "watertight", "winding_consistent",
 }
 
@@ -59,7 +59,7 @@ def test_keys_are_those_of_the_command():
     assert all(set(t) == THRESHOLD_KEYS for t in m["thresholds"])
     assert set(m["pred_structure"]) == STRUCTURE_KEYS == set(m["gt_structure"])
     assert [t["tau_fraction"] for t in m["thresholds"]] == [0.001, 0.0025, 0.005, 0.01]
-    assert m["chamfer_l1"] < 0.01 and m["relation"] == "accuracy"
+    assert 0 < m["chamfer_l1"] < 0.05 and m["relation"] == "accuracy"
     # The same mesh scored against itself is labelled self-consistency.
     assert trisplat.eval(spot, spot, samples=1000)["relation"] == "self-consistency"
 

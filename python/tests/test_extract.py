@@ -62,10 +62,10 @@ def test_delaunay_matches_scipy():
     assert tets.dtype == np.uint32 and tets.shape[1] == 4
     ours = {tuple(t) for t in np.sort(tets, axis=1).tolist()}
     assert ours == {tuple(t) for t in ref["tetrahedra_sorted"]}
-    # Positively oriented.
+    # Positive in Shewchuk's orient3d convention: (p1 - p0) x (p2 - p0) . (p3 - p0) < 0.
     p = points.astype(np.float64)[tets]
     volumes = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
-    assert (volumes > 0).all()
+    assert (volumes < 0).all()
 
 
 def test_degenerate_points_give_empty_results():

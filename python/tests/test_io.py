@@ -30,7 +30,7 @@ def test_mesh_round_trip(tmp_path):
         trisplat.write_mesh(tmp_path / name, spot)
         back = trisplat.read_mesh(tmp_path / name)
         np.testing.assert_array_equal(back.triangles, spot.triangles)
-        # PLY stores float32 (as Open3D and trimesh write); OBJ keeps the decimal text.
+        # PLY writes float32 when every coordinate is one, else double; glTF stores float32.
         np.testing.assert_allclose(back.vertices, spot.vertices, rtol=0, atol=1e-6)
 
 
