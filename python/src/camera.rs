@@ -38,7 +38,10 @@ fn vec3(array: &PyArrayLike1<'_, f64, AllowTypeChange>, what: &str) -> PyResult<
 impl Camera {
     #[new]
     #[pyo3(signature = (width, height, fx, fy, cx, cy, rotation, position, name = String::new(), id = 0))]
-    #[expect(clippy::too_many_arguments, reason = "the camera's fields, as in Python")]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the camera's fields, as in Python"
+    )]
     fn new(
         width: u32,
         height: u32,
@@ -196,8 +199,14 @@ fn sphere_rig(
     height: u32,
     fov_y: f64,
 ) -> PyResult<Vec<Camera>> {
-    let cameras = rig(vec3(&center, "center")?, radius, count, (width, height), fov_y)
-        .map_err(|e| error::about("sphere_rig", &e))?;
+    let cameras = rig(
+        vec3(&center, "center")?,
+        radius,
+        count,
+        (width, height),
+        fov_y,
+    )
+    .map_err(|e| error::about("sphere_rig", &e))?;
     Ok(cameras.into_iter().map(|inner| Camera { inner }).collect())
 }
 

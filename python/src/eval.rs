@@ -15,8 +15,7 @@ use pyo3::types::PyAny;
 use trisplat::geometry::io::{self, Format, ply};
 use trisplat::geometry::mesh_stats::MeshStats;
 use trisplat::geometry::metrics::{
-    self, DEFAULT_TAU_FRACTIONS, Metrics, MetricsError, MetricsOptions, Relation, Shape, Side,
-    Tau,
+    self, DEFAULT_TAU_FRACTIONS, Metrics, MetricsError, MetricsOptions, Relation, Shape, Side, Tau,
 };
 use trisplat::geometry::rng::splitmix64;
 use trisplat::geometry::sampling::sample_uniform;
@@ -176,7 +175,10 @@ struct Report {
 /// distances to mesh sides.
 #[pyfunction]
 #[pyo3(signature = (pred, gt, samples = DEFAULT_SAMPLES, seed = 0, taus = None, tau_fractions = None, surface = false, max_samples = DEFAULT_MAX_SAMPLES))]
-#[expect(clippy::too_many_arguments, reason = "the command's options as keywords")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the command's options as keywords"
+)]
 fn eval<'py>(
     py: Python<'py>,
     pred: &Bound<'py, PyAny>,
@@ -194,7 +196,11 @@ fn eval<'py>(
         )));
     }
     let (taus, fractions) = (taus.unwrap_or_default(), tau_fractions.unwrap_or_default());
-    if let Some(t) = taus.iter().chain(&fractions).find(|t| !(t.is_finite() && **t > 0.0)) {
+    if let Some(t) = taus
+        .iter()
+        .chain(&fractions)
+        .find(|t| !(t.is_finite() && **t > 0.0))
+    {
         return Err(error::value(format!(
             "threshold {t}: expected a finite positive number"
         )));
@@ -203,7 +209,9 @@ fn eval<'py>(
         DEFAULT_TAU_FRACTIONS.map(Tau::Fraction).to_vec()
     } else {
         let absolute = taus.iter().map(|&t| Tau::Absolute(t));
-        absolute.chain(fractions.iter().map(|&f| Tau::Fraction(f))).collect()
+        absolute
+            .chain(fractions.iter().map(|&f| Tau::Fraction(f)))
+            .collect()
     };
     let (mut pred, pred_name) = input(py, pred, "prediction")?;
     let (mut gt, gt_name) = input(py, gt, "ground truth")?;
@@ -244,10 +252,8 @@ fn eval<'py>(
             };
             error::about(name, &e)
         })?;
-        let (pred_structure, gt_structure) = (
-            pred.mesh().map(MeshStats::of),
-            gt.mesh().map(MeshStats::of),
-        );
+        let (pred_structure, gt_structure) =
+            (pred.mesh().map(MeshStats::of), gt.mesh().map(MeshStats::of));
         let area_ratio = match (&pred_structure, &gt_structure) {
             (Some(p), Some(g)) if g.area > 0.0 => Some(p.area / g.area),
             _ => None,

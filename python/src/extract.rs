@@ -21,7 +21,12 @@ fn points_in(points: &PyArrayLike2<'_, f32, AllowTypeChange>) -> PyResult<Vec<Ve
 }
 
 /// Image `i` of a list, checked against its camera's size.
-fn image_size(image: &PyReadonlyArray2<'_, f32>, camera: &Camera, what: &str, i: usize) -> PyResult<()> {
+fn image_size(
+    image: &PyReadonlyArray2<'_, f32>,
+    camera: &Camera,
+    what: &str,
+    i: usize,
+) -> PyResult<()> {
     let shape = image.shape();
     let (w, h) = (camera.inner.width as usize, camera.inner.height as usize);
     if shape[0] != h || shape[1] != w {
@@ -43,7 +48,10 @@ fn image_size(image: &PyReadonlyArray2<'_, f32>, camera: &Camera, what: &str, i:
 /// ``voxel`` = depth_trunc / 1024, ``trunc`` = 5 voxels.
 #[pyfunction]
 #[pyo3(signature = (cameras, depths, colors = None, voxel = None, trunc = None, depth_trunc = None, keep_clusters = 1))]
-#[expect(clippy::too_many_arguments, reason = "the fusion's options as keywords")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the fusion's options as keywords"
+)]
 fn tsdf<'py>(
     py: Python<'py>,
     cameras: Vec<PyRef<'py, Camera>>,
@@ -139,7 +147,6 @@ fn alpha_shape<'py>(
         .map_err(|e| error::about("alpha_shape", &e))?;
     Ok(Mesh::from_rust(py, mesh))
 }
-
 
 /// The 3D Delaunay tetrahedralisation of ``points`` (float32 ``(N, 3)``; exact predicates with
 /// symbolic perturbation): uint32 ``(T, 4)`` indices into ``points``, each tetrahedron

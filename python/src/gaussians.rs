@@ -4,19 +4,26 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{
+    AllowTypeChange, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2, PyArrayMethods,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use trisplat::geometry::TriId;
 use trisplat::splat::axes::Axes;
-use trisplat::splat::bind::{AttachLimits, BindOptions, attach as attach_set, attach_checked, init_bound};
+use trisplat::splat::bind::{
+    AttachLimits, BindOptions, attach as attach_set, attach_checked, init_bound,
+};
 use trisplat::splat::deform::{DeformMode, Deformer as RsDeformer};
 use trisplat::splat::frames::Convention;
 use trisplat::splat::gaussians::{
-    Binding, BindingEncoding, ExtraProperty, GaussianParts, GaussianSet, ParameterSpace,
-    ScaleDims, sh_coeffs_per_channel,
+    Binding, BindingEncoding, ExtraProperty, GaussianParts, GaussianSet, ParameterSpace, ScaleDims,
+    sh_coeffs_per_channel,
 };
 use trisplat::splat::gltf_splat::{read_gltf_gaussians, write_gltf_gaussians};
-use trisplat::splat::ply::{PlyEncoding, PlyWriteOptions, read_gaussians as read_ply, write_gaussians as write_ply};
+use trisplat::splat::ply::{
+    PlyEncoding, PlyWriteOptions, read_gaussians as read_ply, write_gaussians as write_ply,
+};
 use trisplat::splat::spz::{SpzReadOptions, SpzWriteOptions, read_spz, write_spz};
 
 use crate::arrays::{CloneBound, rows_in, rows_out, vec_in, vec_out};
@@ -78,7 +85,10 @@ pub struct Gaussians {
 impl Gaussians {
     #[new]
     #[pyo3(signature = (means, log_scales, rotations, opacity_logits, sh = None, binding = None, local = false, surfels = false))]
-    #[expect(clippy::too_many_arguments, reason = "one argument per array, as in Python")]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one argument per array, as in Python"
+    )]
     fn new<'py>(
         py: Python<'py>,
         means: PyArrayLike2<'py, f32, AllowTypeChange>,
@@ -135,7 +145,11 @@ impl Gaussians {
             self.__len__(py),
             self.sh_degree,
             if self.surfels { ", surfels" } else { "" },
-            if self.binding.is_some() { ", bound" } else { "" },
+            if self.binding.is_some() {
+                ", bound"
+            } else {
+                ""
+            },
             if self.local { ", local frames" } else { "" },
         )
     }
@@ -157,7 +171,10 @@ impl Gaussians {
             Err(_) => sh.as_array().iter().copied().collect(),
         };
         let binding = self.binding.as_ref().map(|b| Binding {
-            triangles: vec_in(&b.bind(py).readonly()).into_iter().map(TriId).collect(),
+            triangles: vec_in(&b.bind(py).readonly())
+                .into_iter()
+                .map(TriId)
+                .collect(),
             encoding: self.kept.encoding,
         });
         let parts = GaussianParts {
@@ -192,16 +209,20 @@ impl Gaussians {
         let sh = vec_out(py, parts.sh)
             .reshape([n, per])
             .expect("3 (degree + 1)² coefficients per Gaussian");
-        let encoding = parts.binding.as_ref().map(|b| b.encoding).unwrap_or_default();
+        let encoding = parts
+            .binding
+            .as_ref()
+            .map(|b| b.encoding)
+            .unwrap_or_default();
         Self {
             means: rows_out::<Vec3, f32>(py, parts.means, 3).unbind(),
             log_scales: rows_out::<Vec3, f32>(py, parts.log_scales, 3).unbind(),
             rotations: rows_out::<[f32; 4], f32>(py, parts.rotations, 4).unbind(),
             opacity_logits: vec_out(py, parts.opacity_logits).unbind(),
             sh: sh.unbind(),
-            binding: parts.binding.map(|b| {
-                vec_out(py, b.triangles.into_iter().map(|t| t.0).collect()).unbind()
-            }),
+            binding: parts
+                .binding
+                .map(|b| vec_out(py, b.triangles.into_iter().map(|t| t.0).collect()).unbind()),
             sh_degree: parts.sh_degree,
             surfels: parts.scale_dims == ScaleDims::Two,
             local: parts.space == ParameterSpace::Local,

@@ -46,4 +46,3 @@ pub fn json_to_py<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<B
         }
     })
 }
-

@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
+use glam::{DVec3, Vec2, Vec3};
 use numpy::{AllowTypeChange, PyArray2, PyArrayLike2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use glam::{DVec3, Vec2, Vec3};
 use trisplat::geometry::io::{self, WriteOptions};
 use trisplat::geometry::mesh_stats::MeshStats;
 use trisplat::geometry::{PointCloud as RsPointCloud, TriMesh};
@@ -148,9 +148,9 @@ impl Mesh {
     /// `TrisplatError` naming the first invalid index or value.
     pub fn to_rust(&self, py: Python<'_>) -> PyResult<TriMesh> {
         let positions: Vec<[f64; 3]> = rows_in(&self.vertices.bind(py).readonly(), "vertices")?;
-        let triangles: Vec<[u32; 3]> =
-            rows_in(&self.triangles.bind(py).readonly(), "triangles")?;
-        let mut mesh = TriMesh::try_new(positions, triangles).map_err(|e| error::about("mesh", &e))?;
+        let triangles: Vec<[u32; 3]> = rows_in(&self.triangles.bind(py).readonly(), "triangles")?;
+        let mut mesh =
+            TriMesh::try_new(positions, triangles).map_err(|e| error::about("mesh", &e))?;
         if let Some(normals) = &self.normals {
             let normals: Vec<[f32; 3]> = rows_in(&normals.bind(py).readonly(), "normals")?;
             mesh = mesh

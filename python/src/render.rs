@@ -50,7 +50,10 @@ fn outputs(names: &[String]) -> PyResult<Outputs> {
 /// than ``near`` or beyond ``far`` are culled. The images do not depend on the thread count.
 #[pyfunction]
 #[pyo3(signature = (gaussians, camera, outputs = vec!["rgb".to_owned(), "alpha".to_owned(), "depth".to_owned(), "normal".to_owned()], mode = "3dgs", rules = "gsplat", background = (0.0, 0.0, 0.0), near = DEFAULT_NEAR, far = DEFAULT_FAR, antialiased = false, normal_frame = "world"))]
-#[expect(clippy::too_many_arguments, reason = "the renderer's options as keywords")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the renderer's options as keywords"
+)]
 pub fn render<'py>(
     py: Python<'py>,
     gaussians: &Gaussians,

@@ -96,7 +96,10 @@ fn frame_dict<'py>(py: Python<'py>, result: FrameResult) -> PyResult<Bound<'py, 
 impl Session {
     #[new]
     #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None))]
-    #[expect(clippy::too_many_arguments, reason = "the command's options as keywords")]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the command's options as keywords"
+    )]
     fn new(
         py: Python<'_>,
         template: PathBuf,
@@ -132,10 +135,7 @@ impl Session {
             template,
             animation,
             gaussians,
-            methods: methods
-                .iter()
-                .map(|m| method(m))
-                .collect::<PyResult<_>>()?,
+            methods: methods.iter().map(|m| method(m)).collect::<PyResult<_>>()?,
             // A session writes nothing; `trisplat extract` gives it its output folder.
             output: PathBuf::new(),
             frames,
@@ -191,11 +191,7 @@ impl Session {
     fn world(&self, py: Python<'_>, frame: usize) -> PyResult<Gaussians> {
         // Locked without the GIL and released before taking it back: a thread waiting for
         // the session with the GIL held cannot block this one.
-        let set = py.detach(|| {
-            self.lock()?
-                .world(frame)
-                .map_err(|e| error::library(&e))
-        })?;
+        let set = py.detach(|| self.lock()?.world(frame).map_err(|e| error::library(&e)))?;
         Ok(Gaussians::from_rust(py, set))
     }
 
@@ -207,11 +203,7 @@ impl Session {
     fn frame<'py>(&self, py: Python<'py>, frame: usize) -> PyResult<Bound<'py, PyDict>> {
         // Locked without the GIL and released before taking it back: a thread waiting for
         // the session with the GIL held cannot block this one.
-        let result = py.detach(|| {
-            self.lock()?
-                .frame(frame)
-                .map_err(|e| error::library(&e))
-        })?;
+        let result = py.detach(|| self.lock()?.frame(frame).map_err(|e| error::library(&e)))?;
         frame_dict(py, result)
     }
 
