@@ -251,16 +251,13 @@ impl PointCloud {
         Ok(cloud)
     }
 
-    /// The library's point cloud as arrays (copied: the library's type lends its buffers).
-    pub fn from_rust(py: Python<'_>, cloud: &RsPointCloud) -> Self {
+    /// The library's point cloud as arrays, moved (no copy).
+    pub fn from_rust(py: Python<'_>, cloud: RsPointCloud) -> Self {
+        let (points, normals, colors) = cloud.into_parts();
         Self {
-            points: rows_out::<Vec3, f32>(py, cloud.positions().to_vec(), 3).unbind(),
-            normals: cloud
-                .normals()
-                .map(|n| rows_out::<Vec3, f32>(py, n.to_vec(), 3).unbind()),
-            colors: cloud
-                .colors()
-                .map(|c| rows_out::<[f32; 4], f32>(py, c.to_vec(), 4).unbind()),
+            points: rows_out::<Vec3, f32>(py, points, 3).unbind(),
+            normals: normals.map(|n| rows_out::<Vec3, f32>(py, n, 3).unbind()),
+            colors: colors.map(|c| rows_out::<[f32; 4], f32>(py, c, 4).unbind()),
         }
     }
 }
@@ -294,7 +291,7 @@ fn read_points(py: Python<'_>, path: PathBuf) -> PyResult<PointCloud> {
     let cloud = py
         .detach(|| io::read_points(&path))
         .map_err(|e| error::library(&e))?;
-    Ok(PointCloud::from_rust(py, &cloud))
+    Ok(PointCloud::from_rust(py, cloud))
 }
 
 /// Writes a point cloud as PLY (binary unless ``ascii``), atomically.

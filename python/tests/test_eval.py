@@ -67,7 +67,7 @@ def test_keys_are_those_of_the_command():
 def test_eval_errors():
     spot = trisplat.read_mesh(DATA / "spot_triangulated.obj")
     pts = trisplat.read_points(METRICS / "pred.ply")
-    with pytest.raises(ValueError, match="needs a mesh input"):
+    with pytest.raises(trisplat.TrisplatError, match="need a mesh input"):
         trisplat.eval(pts, pts, surface=True)
     with pytest.raises(TypeError, match="prediction: expected a path"):
         trisplat.eval(3, spot)
