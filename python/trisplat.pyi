@@ -305,4 +305,7 @@ def eval(
     surface: bool = False,
     max_samples: int = 100_000_000,
 ) -> Dict[str, Any]:
-    """The JSON object of ``trisplat eval --json`` as a dict."""
+    """The JSON object of ``trisplat eval --json`` (without ``"command"``) as a dict: the
+    metrics (accuracy, completeness, chamfer_l1, chamfer_l2, normal_consistency,
+    normal_angle_deg, n_pred, n_gt, thresholds, seconds), gt_bbox_diagonal, pred_structure,
+    gt_structure, area_ratio, shared_vertex_fraction, relation."""
