@@ -56,7 +56,8 @@ fn mode(name: &str) -> PyResult<Mode> {
 }
 
 impl Session {
-    /// The session; never held across a return to Python.
+    /// The session. Long calls lock it inside `py.detach` and drop the guard there, before
+    /// taking the GIL back: a thread that waits for it with the GIL held is never waited for.
     fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, RsSession>> {
         self.inner
             .lock()
@@ -176,8 +177,6 @@ impl Session {
         py: Python<'py>,
         frame: usize,
     ) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
-        // Locked without the GIL and released before taking it back: a thread waiting for
-        // the session with the GIL held cannot block this one.
         let positions = py.detach(|| {
             self.lock()?
                 .positions(frame)
@@ -189,8 +188,6 @@ impl Session {
     /// The world-space Gaussians of animation frame ``frame`` (what ``trisplat deform``
     /// writes).
     fn world(&self, py: Python<'_>, frame: usize) -> PyResult<Gaussians> {
-        // Locked without the GIL and released before taking it back: a thread waiting for
-        // the session with the GIL held cannot block this one.
         let set = py.detach(|| self.lock()?.world(frame).map_err(|e| error::library(&e)))?;
         Ok(Gaussians::from_rust(py, set))
     }
@@ -201,8 +198,6 @@ impl Session {
     /// incremental update did, as in report.json) and ``metrics`` (against ``gt``, as in
     /// report.json; None without ``gt``).
     fn frame<'py>(&self, py: Python<'py>, frame: usize) -> PyResult<Bound<'py, PyDict>> {
-        // Locked without the GIL and released before taking it back: a thread waiting for
-        // the session with the GIL held cannot block this one.
         let result = py.detach(|| self.lock()?.frame(frame).map_err(|e| error::library(&e)))?;
         frame_dict(py, result)
     }
