@@ -4,9 +4,9 @@
 //! flat `Vec` of its scalars (same allocation, `bytemuck::allocation::try_cast_vec`) and moved
 //! into a numpy array: no copy. In: any array-like is converted to the dtype if needed (numpy's
 //! rules, as `np.asarray(x, dtype)`), checked for its shape, then copied once into the rows
-//! the library's types own (a contiguous array in one `memcpy`).
+//! the library's types own (one pass over a contiguous array).
 
-use bytemuck::{AnyBitPattern, NoUninit, Pod};
+use bytemuck::{AnyBitPattern, NoUninit};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{
     Element, IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2,
@@ -71,7 +71,7 @@ fn flat<R: NoUninit, T: AnyBitPattern>(rows: Vec<R>) -> Vec<T> {
 ///
 /// # Errors
 /// `ValueError` for another shape.
-pub fn rows_in<T: Element + Pod, const C: usize>(
+pub fn rows_in<T: Element + Copy, const C: usize>(
     array: &PyReadonlyArray2<'_, T>,
     what: &str,
 ) -> PyResult<Vec<[T; C]>> {
@@ -83,7 +83,10 @@ pub fn rows_in<T: Element + Pod, const C: usize>(
         )));
     }
     if let Ok(slice) = array.as_slice() {
-        return Ok(bytemuck::cast_slice(slice).to_vec());
+        return Ok(slice
+            .chunks_exact(C)
+            .map(|row| std::array::from_fn(|k| row[k]))
+            .collect());
     }
     Ok(view
         .rows()
