@@ -6,44 +6,45 @@ library. Library errors raise ``TrisplatError`` with the library's message.
 """
 
 import os
-from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
 
-PathLike = Union[str, "os.PathLike[str]"]
-ArrayLike = npt.ArrayLike
-F32 = npt.NDArray[np.float32]
-F64 = npt.NDArray[np.float64]
-U32 = npt.NDArray[np.uint32]
+_PathLike = Union[str, "os.PathLike[str]"]
+_ArrayLike = npt.ArrayLike
+_F32 = npt.NDArray[np.float32]
+_F64 = npt.NDArray[np.float64]
+_U32 = npt.NDArray[np.uint32]
 
 class TrisplatError(Exception):
     """An error of the trisplat library; the message names the file, element or option at fault."""
 
+@final
 class Mesh:
     """A triangle mesh: float64 ``(N, 3)`` vertices, uint32 ``(M, 3)`` triangles, optional
     float32 per-vertex ``normals`` ``(N, 3)``, ``uvs`` ``(N, 2)``, ``colors`` RGBA ``(N, 4)``."""
 
-    def __init__(
-        self,
-        vertices: ArrayLike,
-        triangles: ArrayLike,
-        normals: Optional[ArrayLike] = None,
-        uvs: Optional[ArrayLike] = None,
-        colors: Optional[ArrayLike] = None,
-    ) -> None: ...
+    def __new__(
+        cls,
+        vertices: _ArrayLike,
+        triangles: _ArrayLike,
+        normals: Optional[_ArrayLike] = None,
+        uvs: Optional[_ArrayLike] = None,
+        colors: Optional[_ArrayLike] = None,
+    ) -> "Mesh": ...
     @property
-    def vertices(self) -> F64: ...
+    def vertices(self) -> _F64: ...
     @property
-    def triangles(self) -> U32: ...
+    def triangles(self) -> _U32: ...
     @property
-    def normals(self) -> Optional[F32]: ...
+    def normals(self) -> Optional[_F32]: ...
     @property
-    def uvs(self) -> Optional[F32]: ...
+    def uvs(self) -> Optional[_F32]: ...
     @property
-    def colors(self) -> Optional[F32]: ...
+    def colors(self) -> Optional[_F32]: ...
     @property
     def vertex_count(self) -> int: ...
     @property
@@ -57,50 +58,52 @@ class Mesh:
         largest_component_area_fraction, boundary_edges, non_manifold_edges, watertight,
         winding_consistent."""
 
+@final
 class PointCloud:
     """Points: float32 ``(N, 3)``, optional float32 ``normals`` ``(N, 3)`` and RGBA ``colors``
     ``(N, 4)``."""
 
-    def __init__(
-        self, points: ArrayLike, normals: Optional[ArrayLike] = None, colors: Optional[ArrayLike] = None
-    ) -> None: ...
+    def __new__(
+        cls, points: _ArrayLike, normals: Optional[_ArrayLike] = None, colors: Optional[_ArrayLike] = None
+    ) -> "PointCloud": ...
     @property
-    def points(self) -> F32: ...
+    def points(self) -> _F32: ...
     @property
-    def normals(self) -> Optional[F32]: ...
+    def normals(self) -> Optional[_F32]: ...
     @property
-    def colors(self) -> Optional[F32]: ...
+    def colors(self) -> Optional[_F32]: ...
     def __len__(self) -> int: ...
 
+@final
 class Gaussians:
     """Gaussians (3DGS conventions): means ``(N, 3)``, natural-log scales ``(N, 3)``, ``w, x, y,
     z`` rotations ``(N, 4)``, opacity logits ``(N,)``, SH ``(N, 3 (degree + 1)²)`` in INRIA PLY
     order, all float32; ``binding`` uint32 ``(N,)`` or None; ``local``: parameters in the bound
     triangles' frames."""
 
-    def __init__(
-        self,
-        means: ArrayLike,
-        log_scales: ArrayLike,
-        rotations: ArrayLike,
-        opacity_logits: ArrayLike,
-        sh: Optional[ArrayLike] = None,
-        binding: Optional[ArrayLike] = None,
+    def __new__(
+        cls,
+        means: _ArrayLike,
+        log_scales: _ArrayLike,
+        rotations: _ArrayLike,
+        opacity_logits: _ArrayLike,
+        sh: Optional[_ArrayLike] = None,
+        binding: Optional[_ArrayLike] = None,
         local: bool = False,
         surfels: bool = False,
-    ) -> None: ...
+    ) -> "Gaussians": ...
     @property
-    def means(self) -> F32: ...
+    def means(self) -> _F32: ...
     @property
-    def log_scales(self) -> F32: ...
+    def log_scales(self) -> _F32: ...
     @property
-    def rotations(self) -> F32: ...
+    def rotations(self) -> _F32: ...
     @property
-    def opacity_logits(self) -> F32: ...
+    def opacity_logits(self) -> _F32: ...
     @property
-    def sh(self) -> F32: ...
+    def sh(self) -> _F32: ...
     @property
-    def binding(self) -> Optional[U32]: ...
+    def binding(self) -> Optional[_U32]: ...
     @property
     def sh_degree(self) -> int: ...
     @property
@@ -112,31 +115,32 @@ class Gaussians:
         """The file's per-Gaussian properties beyond the standard ones (kept for writing)."""
     def __len__(self) -> int: ...
 
+@final
 class Camera:
     """A pinhole camera (OpenCV axes); ``rotation`` is camera-to-world, its columns the
     camera's axes in world space."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         width: int,
         height: int,
         fx: float,
         fy: float,
         cx: float,
         cy: float,
-        rotation: ArrayLike,
-        position: ArrayLike,
+        rotation: _ArrayLike,
+        position: _ArrayLike,
         name: str = "",
         id: int = 0,
-    ) -> None: ...
+    ) -> "Camera": ...
     @staticmethod
     def look_at(
-        eye: ArrayLike,
-        target: ArrayLike,
+        eye: _ArrayLike,
+        target: _ArrayLike,
         width: int,
         height: int,
         fov_y: float = 40.0,
-        up: Optional[ArrayLike] = None,
+        up: Optional[_ArrayLike] = None,
         name: str = "camera",
     ) -> "Camera": ...
     @property
@@ -154,26 +158,28 @@ class Camera:
     @property
     def cy(self) -> float: ...
     @property
-    def rotation(self) -> F64: ...
+    def rotation(self) -> _F64: ...
     @property
-    def position(self) -> F64: ...
+    def position(self) -> _F64: ...
 
+@final
 class Deformer:
     """Deforms bound Gaussians with a template frame after frame (``"binding"`` or
     ``"jacobian"``)."""
 
-    def __init__(self, template: Mesh, mode: Literal["binding", "jacobian"] = "binding") -> None: ...
-    def deform(self, gaussians: Gaussians, vertices: ArrayLike) -> Gaussians:
+    def __new__(cls, template: Mesh, mode: Literal["binding", "jacobian"] = "binding") -> "Deformer": ...
+    def deform(self, gaussians: Gaussians, vertices: _ArrayLike) -> Gaussians:
         """World-space Gaussians with the template's vertices at ``vertices`` (float64 ``(V, 3)``)."""
 
+@final
 class Session:
     """The main job of ``trisplat extract`` frame by frame, meshes in memory."""
 
-    def __init__(
-        self,
-        template: PathLike,
+    def __new__(
+        cls,
+        template: _PathLike,
         animation: Optional[str] = None,
-        gaussians: Optional[PathLike] = None,
+        gaussians: Optional[_PathLike] = None,
         methods: Sequence[Literal["tsdf", "delaunay", "alpha"]] = ("delaunay",),
         frames: Optional[str] = None,
         gt: Optional[str] = None,
@@ -186,14 +192,14 @@ class Session:
         hop_threshold: Optional[float] = None,
         samples: Optional[int] = None,
         tau_fraction: Optional[float] = None,
-    ) -> None: ...
+    ) -> "Session": ...
     @property
     def frames(self) -> List[int]: ...
     @property
     def template(self) -> Mesh: ...
     @property
     def gaussians(self) -> Gaussians: ...
-    def positions(self, frame: int) -> F64:
+    def positions(self, frame: int) -> _F64:
         """The template's vertices at animation frame ``frame``."""
     def world(self, frame: int) -> Gaussians:
         """The world-space Gaussians of animation frame ``frame``."""
@@ -201,23 +207,23 @@ class Session:
         """``frame``, ``time``, ``deform_ms`` and ``methods``: per method ``mesh`` (Mesh),
         ``ms``, ``render_ms``, ``delaunay`` and ``metrics`` (dicts as in report.json, or None)."""
 
-def read_mesh(path: PathLike) -> Mesh:
+def read_mesh(path: _PathLike) -> Mesh:
     """Reads a PLY, OBJ or glTF/GLB mesh (by extension)."""
 
-def write_mesh(path: PathLike, mesh: Mesh, ascii: bool = False) -> None:
+def write_mesh(path: _PathLike, mesh: Mesh, ascii: bool = False) -> None:
     """Writes a mesh atomically (.ply, .obj, .gltf, .glb)."""
 
-def read_points(path: PathLike) -> PointCloud:
+def read_points(path: _PathLike) -> PointCloud:
     """Reads a PLY point cloud (or the vertices of a mesh file)."""
 
-def write_points(path: PathLike, cloud: PointCloud, ascii: bool = False) -> None:
+def write_points(path: _PathLike, cloud: PointCloud, ascii: bool = False) -> None:
     """Writes a point cloud as PLY, atomically."""
 
-def read_gaussians(path: PathLike, axes: Optional[str] = "rdf") -> Gaussians:
+def read_gaussians(path: _PathLike, axes: Optional[str] = "rdf") -> Gaussians:
     """Reads INRIA PLY, SPZ (returned in ``axes``) or glTF ``KHR_gaussian_splatting`` Gaussians."""
 
 def write_gaussians(
-    path: PathLike,
+    path: _PathLike,
     gaussians: Gaussians,
     ascii: bool = False,
     axes: Optional[str] = "rdf",
@@ -244,16 +250,16 @@ def attach(
 def deform(
     template: Mesh,
     gaussians: Gaussians,
-    vertices: ArrayLike,
+    vertices: _ArrayLike,
     mode: Literal["binding", "jacobian"] = "binding",
 ) -> Gaussians:
     """One frame: ``Deformer(template, mode).deform(gaussians, vertices)``."""
 
-def read_cameras(path: PathLike, size: Optional[Tuple[int, int]] = None) -> List[Camera]:
+def read_cameras(path: _PathLike, size: Optional[Tuple[int, int]] = None) -> List[Camera]:
     """The cameras of a 3DGS cameras.json or a NeRF transforms.json."""
 
 def sphere_rig(
-    center: ArrayLike, radius: float, count: int, width: int, height: int, fov_y: float = 40.0
+    center: _ArrayLike, radius: float, count: int, width: int, height: int, fov_y: float = 40.0
 ) -> List[Camera]:
     """``count`` cameras on a Fibonacci sphere around ``center``, framing a ball of ``radius``."""
 
@@ -273,14 +279,14 @@ def render(
     far: float = 1e10,
     antialiased: bool = False,
     normal_frame: Literal["world", "camera"] = "world",
-) -> Dict[str, F32]:
+) -> Dict[str, _F32]:
     """Float32 images by name: rgb ``(H, W, 3)``, alpha, depth, median_depth ``(H, W)``,
     normal ``(H, W, 3)``."""
 
 def tsdf(
     cameras: Sequence[Camera],
-    depths: Sequence[ArrayLike],
-    colors: Optional[Sequence[ArrayLike]] = None,
+    depths: Sequence[_ArrayLike],
+    colors: Optional[Sequence[_ArrayLike]] = None,
     voxel: Optional[float] = None,
     trunc: Optional[float] = None,
     depth_trunc: Optional[float] = None,
@@ -288,16 +294,16 @@ def tsdf(
 ) -> Mesh:
     """Fuses one ``(H, W)`` depth map per camera (TSDF, Open3D's rules) into a cleaned mesh."""
 
-def alpha_shape(points: ArrayLike, alpha: float, keep_clusters: int = 0) -> Mesh:
+def alpha_shape(points: _ArrayLike, alpha: float, keep_clusters: int = 0) -> Mesh:
     """The alpha shape of float32 ``(N, 3)`` points (Open3D's definition), faces outward."""
 
-def delaunay(points: ArrayLike) -> U32:
+def delaunay(points: _ArrayLike) -> _U32:
     """The 3D Delaunay tetrahedra of float32 ``(N, 3)`` points: uint32 ``(T, 4)`` indices,
     positive in Shewchuk's orient3d convention."""
 
 def eval(
-    pred: Union[PathLike, Mesh, PointCloud],
-    gt: Union[PathLike, Mesh, PointCloud],
+    pred: Union[_PathLike, Mesh, PointCloud],
+    gt: Union[_PathLike, Mesh, PointCloud],
     samples: int = 100_000,
     seed: int = 0,
     taus: Optional[Sequence[float]] = None,
