@@ -113,4 +113,10 @@ impl PointCloud {
     pub fn bounds(&self) -> Option<Aabb> {
         Aabb::from_points(&self.positions)
     }
+
+    /// Splits the cloud into its raw arrays: positions, normals, colours.
+    #[must_use]
+    pub fn into_parts(self) -> (Vec<Vec3>, Option<Vec<Vec3>>, Option<Vec<Rgba>>) {
+        (self.positions, self.normals, self.colors)
+    }
 }

@@ -63,6 +63,7 @@ pub mod avatar;
 pub mod config;
 pub mod deform;
 pub mod error;
+pub mod eval;
 pub mod html;
 pub mod input;
 pub mod journal;

@@ -1,24 +1,17 @@
 //! `trisplat eval`: geometry metrics of a prediction against a ground truth (docs/conventions.md §8, §10).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context as _, bail};
-use trisplat_geometry::glam::DVec3;
-use trisplat_geometry::io::{self, Format, ply};
+use anyhow::bail;
 use trisplat_geometry::mesh_stats::MeshStats;
-use trisplat_geometry::metrics::{
-    self, DEFAULT_TAU_FRACTIONS, Metrics, MetricsOptions, Relation, SELF_CONSISTENCY_MIN_SHARED,
-    Shape, Tau,
-};
-use trisplat_geometry::rng::splitmix64;
-use trisplat_geometry::sampling::sample_uniform;
-use trisplat_geometry::{PointCloud, TriMesh};
+use trisplat_geometry::metrics::{Relation, SELF_CONSISTENCY_MIN_SHARED};
+use trisplat_pipeline::eval::{self, EvalError, EvalInput, EvalOptions, EvalReport};
 
 use super::Context;
 use trisplat_pipeline::config::DEFAULT_MAX_SAMPLES;
 
 /// Samples drawn on each mesh input unless `--samples` says otherwise.
-pub const DEFAULT_SAMPLES: usize = 100_000;
+pub const DEFAULT_SAMPLES: usize = eval::DEFAULT_SAMPLES;
 
 /// Arguments of `trisplat eval`.
 #[derive(Debug, clap::Args)]
@@ -112,145 +105,6 @@ fn parse_tau(s: &str) -> Result<f64, String> {
     }
 }
 
-/// An input file: a mesh (with its samples) or a point cloud.
-enum Input {
-    Mesh(TriMesh, PointCloud),
-    Points(PointCloud),
-}
-
-impl Input {
-    fn shape(&self) -> Shape<'_> {
-        match self {
-            Self::Mesh(mesh, samples) => Shape::mesh(mesh, samples),
-            Self::Points(points) => Shape::points(points),
-        }
-    }
-
-    fn is_mesh(&self) -> bool {
-        matches!(self, Self::Mesh(..))
-    }
-
-    fn mesh(&self) -> Option<&TriMesh> {
-        match self {
-            Self::Mesh(mesh, _) => Some(mesh),
-            Self::Points(_) => None,
-        }
-    }
-
-    /// The diagonal of the bounding box of the mesh's vertices or of the points.
-    fn extent(&self) -> f64 {
-        match self {
-            Self::Mesh(mesh, _) => mesh.bounds().map_or(0.0, |b| b.diagonal()),
-            Self::Points(points) => metrics::bbox_diagonal(points.positions()),
-        }
-    }
-
-    /// Fraction of `gt`'s vertices that are vertices (or points) of `self`; `None` unless
-    /// `gt` is a mesh.
-    fn shared_with(&self, gt: &Self) -> Option<f64> {
-        let gt = gt.mesh()?.positions();
-        match self {
-            Self::Mesh(mesh, _) => metrics::shared_vertex_fraction(gt, mesh.positions()),
-            Self::Points(points) => {
-                let widened: Vec<_> = points.positions().iter().map(|p| p.as_dvec3()).collect();
-                metrics::shared_vertex_fraction(gt, &widened)
-            }
-        }
-    }
-}
-
-/// The thresholds asked for: absolute ones (`--tau`) then fractions (`--tau-fraction`), or the
-/// default fractions.
-fn thresholds(args: &EvalArgs) -> Vec<Tau> {
-    if args.taus.is_empty() && args.tau_fractions.is_empty() {
-        return DEFAULT_TAU_FRACTIONS.map(Tau::Fraction).to_vec();
-    }
-    let absolute = args.taus.iter().map(|&t| Tau::Absolute(t));
-    absolute
-        .chain(args.tau_fractions.iter().map(|&f| Tau::Fraction(f)))
-        .collect()
-}
-
-/// What `eval` reports beyond [`Metrics`] (docs/conventions.md §8).
-#[derive(Debug, serde::Serialize)]
-struct Report {
-    #[serde(flatten)]
-    metrics: Metrics,
-    /// Diagonal of the ground truth's bounding box (scales relative thresholds).
-    gt_bbox_diagonal: f64,
-    /// Structure of the prediction when it is a mesh.
-    pred_structure: Option<MeshStats>,
-    /// Structure of the ground truth when it is a mesh.
-    gt_structure: Option<MeshStats>,
-    /// area(P) / area(G) when both are meshes and G has area.
-    area_ratio: Option<f64>,
-    /// Fraction of the ground truth's mesh vertices found bit for bit among P's vertices.
-    shared_vertex_fraction: Option<f64>,
-    /// `accuracy`, or `self-consistency` when P contains G.
-    relation: Relation,
-}
-
-/// Reads `path` as a mesh when it has faces, else as a point cloud; samples meshes.
-/// Reads `path` as a mesh (its samples left empty, see [`sample`]) or a point cloud.
-fn read_input(path: &Path) -> anyhow::Result<Input> {
-    let mesh = if Format::from_path(path)? == Format::Ply {
-        let doc = ply::read_ply_document(path)?;
-        let has_faces = doc.element("face").is_some_and(|f| f.count > 0)
-            || doc.element("tristrips").is_some_and(|f| f.count > 0);
-        if !has_faces {
-            let (points, _) = ply::ply_to_points(path, &doc)?;
-            return Ok(Input::Points(points));
-        }
-        ply::ply_to_mesh(path, &doc)?.0
-    } else {
-        io::read_mesh(path)?
-    };
-    if mesh.triangle_count() == 0 {
-        let normals = mesh.normals().map(<[_]>::to_vec);
-        let positions = mesh.positions_f32();
-        let mut points = PointCloud::try_new(positions)
-            .with_context(|| format!("{}: vertices", path.display()))?;
-        if let Some(n) = normals {
-            points = points
-                .with_normals(n)
-                .with_context(|| format!("{}: normals", path.display()))?;
-        }
-        return Ok(Input::Points(points));
-    }
-    Ok(Input::Mesh(mesh, PointCloud::default()))
-}
-
-/// Samples a mesh input (`samples` points, seeded); point clouds pass through.
-fn sample(input: Input, path: &Path, samples: usize, seed: u64) -> anyhow::Result<Input> {
-    let Input::Mesh(mesh, _) = input else {
-        return Ok(input);
-    };
-    let sampled = sample_uniform(&mesh, samples, seed);
-    if sampled.is_empty() {
-        bail!(
-            "{}: the mesh has zero surface area, nothing to sample",
-            path.display()
-        );
-    }
-    Ok(Input::Mesh(mesh, sampled))
-}
-
-/// Centre of the bounding box of a mesh's vertices (f64) or of the points.
-fn centre(input: &Input) -> Option<DVec3> {
-    match input {
-        Input::Mesh(mesh, _) => mesh.bounds().map(|b| b.center()),
-        Input::Points(points) => points.bounds().map(|b| b.center()),
-    }
-}
-
-/// Moves an input by `offset` (meshes in f64, points computed in f64 and stored as f32).
-fn translate(input: &mut Input, offset: DVec3) {
-    match input {
-        Input::Mesh(mesh, _) => mesh.translate(offset),
-        Input::Points(points) => points.translate(offset),
-    }
-}
-
 /// Runs `trisplat eval`.
 ///
 /// # Errors
@@ -265,95 +119,51 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
         );
     }
     let spinner = ctx.progress.spinner("eval: loading");
-    let gt_seed = splitmix64(args.seed);
-    let (pred, gt) = rayon::join(|| read_input(&args.pred), || read_input(&args.gt));
-    let (mut pred, mut gt) = (pred?, gt?);
-    // Shared vertices are compared where they are, before moving anything.
-    let shared_vertex_fraction = pred.shared_with(&gt);
-    // Both sides move to the ground truth's centre in f64 before any sample is stored in
-    // f32: the scores do not depend on how far from the origin the files are
-    // (docs/conventions.md §8).
-    if let Some(c) = centre(&gt) {
-        translate(&mut pred, -c);
-        translate(&mut gt, -c);
-    }
-    let (pred, gt) = rayon::join(
-        || sample(pred, &args.pred, args.samples, args.seed),
-        || sample(gt, &args.gt, args.samples, gt_seed),
-    );
+    let (pred, gt) = rayon::join(|| EvalInput::read(&args.pred), || EvalInput::read(&args.gt));
     let (pred, gt) = (pred?, gt?);
-    if args.surface && !pred.is_mesh() && !gt.is_mesh() {
-        bail!(
-            "{}: --surface needs a mesh input (a file with faces), but both inputs are point \
-             clouds",
-            args.gt.display()
-        );
-    }
-    let taus = thresholds(&args);
-    let diagonal = gt.extent();
-    let options = MetricsOptions {
-        taus: metrics::resolve_taus(&taus, diagonal).map_err(|_| {
-            anyhow::anyhow!(
-                "{}: the ground truth's bounding-box diagonal is {diagonal}, so thresholds \
-                 relative to it (--tau-fraction, the default) are not positive; give \
-                 absolute ones with --tau",
-                args.gt.display()
-            )
-        })?,
+    spinner.set_message("eval: computing");
+    let options = EvalOptions {
+        samples: args.samples,
+        seed: args.seed,
+        // `--tau` then `--tau-fraction`, or the default fractions.
+        taus: eval::thresholds(&args.taus, &args.tau_fractions),
         surface: args.surface,
     };
-    spinner.set_message("eval: computing");
-    let (result, (pred_structure, gt_structure)) = rayon::join(
-        || metrics::evaluate(pred.shape(), gt.shape(), &options),
-        || {
-            rayon::join(
-                || pred.mesh().map(MeshStats::of),
-                || gt.mesh().map(MeshStats::of),
-            )
-        },
+    let names = (
+        args.pred.display().to_string(),
+        args.gt.display().to_string(),
     );
-    let result = result.map_err(|e| {
-        let file = match &e {
-            metrics::MetricsError::Empty(metrics::Side::Prediction)
-            | metrics::MetricsError::Spatial {
-                side: metrics::Side::Prediction,
-                ..
-            } => &args.pred,
-            _ => &args.gt,
-        };
-        anyhow::anyhow!("{}: {e}", file.display())
+    let done = eval::evaluate(pred, gt, (&names.0, &names.1), &options).map_err(|e| match e {
+        // The command's own option names.
+        EvalError::SurfaceWithoutMesh { gt } => anyhow::anyhow!(
+            "{gt}: --surface needs a mesh input (a file with faces), but both inputs are point \
+             clouds"
+        ),
+        EvalError::NoScale { gt, diagonal } => anyhow::anyhow!(
+            "{gt}: the ground truth's bounding-box diagonal is {diagonal}, so thresholds \
+             relative to it (--tau-fraction, the default) are not positive; give absolute ones \
+             with --tau"
+        ),
+        e => e.into(),
     })?;
-    let area_ratio = match (&pred_structure, &gt_structure) {
-        (Some(p), Some(g)) if g.area > 0.0 => Some(p.area / g.area),
-        _ => None,
-    };
-    let report = Report {
-        metrics: result.with_tau_fractions(&taus),
-        gt_bbox_diagonal: diagonal,
-        pred_structure,
-        gt_structure,
-        area_ratio,
-        shared_vertex_fraction,
-        relation: Relation::from_shared_fraction(shared_vertex_fraction),
-    };
     spinner.finish_and_clear();
     if ctx.json {
-        ctx.emit("eval", serde_json::to_value(&report)?)?;
+        ctx.emit("eval", serde_json::to_value(&done.report)?)?;
     } else {
-        print_table(&args, &pred, &gt, &report);
+        print_table(&args, &done.pred, &done.gt, &done.report);
     }
     Ok(())
 }
 
-fn describe(input: &Input) -> &'static str {
+fn describe(input: &EvalInput) -> &'static str {
     match input {
-        Input::Mesh(..) => "mesh, sampled",
-        Input::Points(p) if p.normals().is_some() => "points with normals",
-        Input::Points(_) => "points",
+        EvalInput::Mesh(..) => "mesh, sampled",
+        EvalInput::Points(p) if p.normals().is_some() => "points with normals",
+        EvalInput::Points(_) => "points",
     }
 }
 
-fn print_table(args: &EvalArgs, pred: &Input, gt: &Input, r: &Report) {
+fn print_table(args: &EvalArgs, pred: &EvalInput, gt: &EvalInput, r: &EvalReport) {
     let m = &r.metrics;
     let mode = if args.surface {
         "surface (exact distance to mesh triangles)"
@@ -431,7 +241,7 @@ fn print_table(args: &EvalArgs, pred: &Input, gt: &Input, r: &Report) {
 }
 
 /// The structure of both sides, side by side (`-` for a point cloud).
-fn print_structure(r: &Report) {
+fn print_structure(r: &EvalReport) {
     let (p, g) = (r.pred_structure.as_ref(), r.gt_structure.as_ref());
     let row = |name: &str, f: &dyn Fn(&MeshStats) -> String| {
         let cell = |s: Option<&MeshStats>| s.map_or_else(|| "-".to_owned(), f);

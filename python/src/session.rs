@@ -1,0 +1,221 @@
+//! `Session`: the main job (`trisplat extract`) frame by frame, its meshes in memory
+//! (`pipeline::Session`; nothing is written).
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use trisplat::pipeline::config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode};
+use trisplat::pipeline::report::DelaunayFrame;
+use trisplat::pipeline::{FrameResult, Session as RsSession};
+
+use crate::arrays::rows_out;
+use crate::error;
+use crate::gaussians::Gaussians;
+use crate::json::{json_to_py, to_json};
+use crate::mesh::Mesh;
+
+/// The main job of ``trisplat extract``, frame by frame, in memory: the inputs are read once
+/// when the session opens, then ``frame(i)`` deforms the Gaussians to animation frame ``i``
+/// and meshes them with each method (docs/conventions.md §1, §6).
+///
+/// ``template``: the template mesh (a glTF plays its own first clip unless ``animation`` is
+/// given); ``animation``: a glTF, a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
+/// JSON; ``gaussians``: a bound Gaussian PLY (None: Gaussians are bound here,
+/// ``per_triangle`` per triangle); ``methods``: any of ``"tsdf"``, ``"delaunay"``, ``"alpha"``;
+/// ``frames``: ``"A..B"``, ``"A..=B"``, ``"A.."``, ``"..B"`` or ``"A"``; ``gt``: None (no
+/// metrics), ``"template"`` (each frame's deformed template), ``"gaussians"`` or a mesh file;
+/// ``mode``: ``"binding"``, ``"jacobian"`` or ``"lbs"``. The other keywords are
+/// ``trisplat extract``'s options of the same names; None keeps their scale-derived defaults.
+#[pyclass(module = "trisplat", frozen)]
+pub struct Session {
+    inner: Mutex<RsSession>,
+}
+
+fn method(name: &str) -> PyResult<Method> {
+    Method::ALL
+        .into_iter()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            error::value(format!(
+                "method {name:?}: expected \"tsdf\", \"delaunay\" or \"alpha\""
+            ))
+        })
+}
+
+fn mode(name: &str) -> PyResult<Mode> {
+    [Mode::Binding, Mode::Jacobian, Mode::Lbs]
+        .into_iter()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            error::value(format!(
+                "mode {name:?}: expected \"binding\", \"jacobian\" or \"lbs\""
+            ))
+        })
+}
+
+impl Session {
+    /// The session. Long calls lock it inside `py.detach` and drop the guard there, before
+    /// taking the GIL back: a thread that waits for it with the GIL held is never waited for.
+    fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, RsSession>> {
+        self.inner
+            .lock()
+            .map_err(|_| error::value("the session failed in another thread"))
+    }
+}
+
+/// A frame's result as a dict (see ``Session.frame``).
+fn frame_dict<'py>(py: Python<'py>, result: FrameResult) -> PyResult<Bound<'py, PyDict>> {
+    let dict = PyDict::new(py);
+    dict.set_item("frame", result.frame)?;
+    dict.set_item("time", result.time)?;
+    dict.set_item("deform_ms", result.deform_ms)?;
+    let methods = PyDict::new(py);
+    for m in result.methods {
+        let entry = PyDict::new(py);
+        entry.set_item("ms", m.output.ms)?;
+        entry.set_item("render_ms", m.output.render_ms)?;
+        let delaunay = match &m.output.delaunay {
+            Some(stats) => json_to_py(py, &to_json(&DelaunayFrame::new(result.frame, stats))?)?,
+            None => py.None().into_bound(py),
+        };
+        entry.set_item("delaunay", delaunay)?;
+        let metrics = match &m.metrics {
+            Some(metrics) => json_to_py(py, &to_json(metrics)?)?,
+            None => py.None().into_bound(py),
+        };
+        entry.set_item("metrics", metrics)?;
+        entry.set_item("mesh", Mesh::from_rust(py, m.output.mesh))?;
+        methods.set_item(m.method.name(), entry)?;
+    }
+    dict.set_item("methods", methods)?;
+    Ok(dict)
+}
+
+#[pymethods]
+impl Session {
+    #[new]
+    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None))]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the command's options as keywords"
+    )]
+    fn new(
+        py: Python<'_>,
+        template: PathBuf,
+        animation: Option<String>,
+        gaussians: Option<PathBuf>,
+        methods: Vec<String>,
+        frames: Option<String>,
+        gt: Option<String>,
+        mode: &str,
+        per_triangle: Option<u32>,
+        voxel: Option<f64>,
+        views: Option<usize>,
+        resolution: Option<u32>,
+        alpha: Option<f64>,
+        hop_threshold: Option<f64>,
+        samples: Option<usize>,
+        tau_fraction: Option<f64>,
+    ) -> PyResult<Self> {
+        let defaults = ExtractOptions::default();
+        let options = ExtractOptions {
+            mode: self::mode(mode)?,
+            per_triangle: per_triangle.unwrap_or(defaults.per_triangle),
+            voxel,
+            views: views.unwrap_or(defaults.views),
+            resolution: resolution.unwrap_or(defaults.resolution),
+            alpha,
+            hop_threshold: hop_threshold.unwrap_or(defaults.hop_threshold),
+            samples: samples.unwrap_or(defaults.samples),
+            tau_fraction: tau_fraction.or(defaults.tau_fraction),
+            ..defaults
+        };
+        let config = ExtractConfig {
+            template,
+            animation,
+            gaussians,
+            methods: methods.iter().map(|m| method(m)).collect::<PyResult<_>>()?,
+            // A session writes nothing; `trisplat extract` gives it its output folder.
+            output: PathBuf::new(),
+            frames,
+            gt: gt.as_deref().map(GroundTruth::parse),
+            options,
+        };
+        let session = py
+            .detach(|| RsSession::open(&config))
+            .map_err(|e| error::library(&e))?;
+        Ok(Self {
+            inner: Mutex::new(session),
+        })
+    }
+
+    /// The animation frame indices the session runs, in order.
+    #[getter]
+    fn frames(&self) -> PyResult<Vec<usize>> {
+        Ok(self.lock()?.frames().collect())
+    }
+
+    /// The template as the session uses it (world space, as its animation poses it).
+    #[getter]
+    fn template(&self, py: Python<'_>) -> PyResult<Mesh> {
+        let mesh = self.lock()?.template().clone();
+        Ok(Mesh::from_rust(py, mesh))
+    }
+
+    /// The bound Gaussians (read or bound when the session opened).
+    #[getter]
+    fn gaussians(&self, py: Python<'_>) -> PyResult<Gaussians> {
+        let set = self.lock()?.gaussians().clone();
+        Ok(Gaussians::from_rust(py, set))
+    }
+
+    /// The template's vertices at animation frame ``frame``, float64 ``(V, 3)``.
+    fn positions<'py>(
+        &self,
+        py: Python<'py>,
+        frame: usize,
+    ) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+        let positions = py.detach(|| {
+            self.lock()?
+                .positions(frame)
+                .map_err(|e| error::library(&e))
+        })?;
+        Ok(rows_out::<glam::DVec3, f64>(py, positions, 3))
+    }
+
+    /// The world-space Gaussians of animation frame ``frame`` (what ``trisplat deform``
+    /// writes).
+    fn world(&self, py: Python<'_>, frame: usize) -> PyResult<Gaussians> {
+        let set = py.detach(|| self.lock()?.world(frame).map_err(|e| error::library(&e)))?;
+        Ok(Gaussians::from_rust(py, set))
+    }
+
+    /// Deforms and meshes animation frame ``frame`` and returns a dict: ``frame``, ``time``
+    /// (seconds), ``deform_ms``, and ``methods``: per method name a dict with ``mesh`` (a
+    /// ``Mesh``), ``ms`` (the method's own time), ``render_ms`` (tsdf), ``delaunay`` (what the
+    /// incremental update did, as in report.json) and ``metrics`` (against ``gt``, as in
+    /// report.json; None without ``gt``).
+    fn frame<'py>(&self, py: Python<'py>, frame: usize) -> PyResult<Bound<'py, PyDict>> {
+        let result = py.detach(|| self.lock()?.frame(frame).map_err(|e| error::library(&e)))?;
+        frame_dict(py, result)
+    }
+
+    fn __repr__(&self) -> PyResult<String> {
+        let session = self.lock()?;
+        let frames = session.frames();
+        Ok(format!(
+            "Session({}, frames {}..{})",
+            session.template_path().display(),
+            frames.start,
+            frames.end
+        ))
+    }
+}
+
+/// Adds the class of this module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Session>()?;
+    Ok(())
+}

@@ -1,0 +1,101 @@
+"""Binding, deformation, rendering (against gsplat, tests/reference/ref_render_gsplat.py) and
+the extraction session frame by frame."""
+
+import json
+
+import numpy as np
+import pytest
+import trisplat
+from conftest import DATA, REFERENCE
+
+
+def spot():
+    return trisplat.read_mesh(DATA / "spot_triangulated.obj")
+
+
+def test_bound_centres_are_trimesh_triangle_centres():
+    ref = json.loads((REFERENCE / "python" / "python.json").read_text())["spot"]
+    mesh = spot()
+    bound = trisplat.bind(mesh)
+    assert bound.local and bound.binding.dtype == np.uint32
+    np.testing.assert_array_equal(bound.binding, np.arange(mesh.triangle_count))
+    world = trisplat.deform(mesh, bound, mesh.vertices)
+    # float32 means of float64 centroids.
+    np.testing.assert_allclose(world.means[:64], ref["triangles_center_first_64"], atol=1e-6)
+    np.testing.assert_allclose(world.means.mean(0), ref["triangles_center_mean"], atol=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["binding", "jacobian"])
+def test_gaussians_follow_the_mesh(mode):
+    mesh = spot()
+    bound = trisplat.bind(mesh, per_triangle=3, opacity=0.5)
+    deformer = trisplat.Deformer(mesh, mode=mode)
+    rest = deformer.deform(bound, mesh.vertices)
+    moved = deformer.deform(bound, mesh.vertices + [0.25, -1.0, 2.0])
+    np.testing.assert_allclose(moved.means, rest.means + [0.25, -1.0, 2.0], atol=1e-5)
+    np.testing.assert_allclose(moved.rotations, rest.rotations, atol=1e-6)
+    np.testing.assert_array_equal(moved.opacity_logits, bound.opacity_logits)
+    with pytest.raises(trisplat.TrisplatError, match="vert"):
+        deformer.deform(bound, mesh.vertices[:10])
+
+
+def test_attach_binds_world_gaussians_to_their_triangles():
+    mesh = spot()
+    world = trisplat.deform(mesh, trisplat.bind(mesh), mesh.vertices)
+    bound = trisplat.attach(world, mesh)
+    np.testing.assert_array_equal(bound.binding, np.arange(mesh.triangle_count))
+    again = trisplat.deform(mesh, bound, mesh.vertices)
+    np.testing.assert_allclose(again.means, world.means, atol=1e-6)
+
+
+@pytest.mark.parametrize("camera", range(3))
+def test_render_matches_gsplat(camera):
+    """Within the Rust parity test's limits (tests/tests/render_gsplat_parity.rs)."""
+    scene = trisplat.read_gaussians(DATA / "render" / "random_deg3.ply")
+    cam = trisplat.read_cameras(DATA / "render" / "random_cameras.json")[camera]
+    out = trisplat.render(scene, cam, outputs=["rgb", "alpha", "depth", "normal"])
+    ref = {k: np.load(REFERENCE / "render" / f"random_{cam.name}_{k}.npy") for k in ["rgb", "alpha", "depth"]}
+    assert out["rgb"].shape == (cam.height, cam.width, 3) == ref["rgb"].shape
+    assert out["alpha"].shape == (cam.height, cam.width) and out["normal"].shape == out["rgb"].shape
+    mse = np.mean((out["rgb"].astype(np.float64) - ref["rgb"]) ** 2)
+    assert mse == 0 or 10 * np.log10(1 / mse) >= 50
+    assert np.abs(out["alpha"] - ref["alpha"]).max() <= 1e-3
+    covered = ref["alpha"] > 0.5
+    rel = np.abs(out["depth"][covered] - ref["depth"][covered]) / ref["depth"][covered]
+    assert rel.max() <= 1e-4
+
+
+def test_render_refuses_local_gaussians():
+    mesh = spot()
+    cam = trisplat.Camera.look_at([0, 0, 3], [0, 0, 0], 32, 32)
+    with pytest.raises(trisplat.TrisplatError, match="local triangle frames"):
+        trisplat.render(trisplat.bind(mesh), cam)
+    with pytest.raises(ValueError, match="output 'colour'|output \"colour\""):
+        trisplat.render(trisplat.deform(mesh, trisplat.bind(mesh), mesh.vertices), cam, outputs=["colour"])
+
+
+def test_camera_round_trip():
+    cam = trisplat.Camera.look_at([0, 0, 3], [0, 0, 0], 64, 48, fov_y=50)
+    again = trisplat.Camera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, cam.rotation, cam.position)
+    np.testing.assert_allclose(again.rotation, cam.rotation, atol=1e-12)
+    np.testing.assert_allclose(cam.position, [0, 0, 3])
+    # The camera looks down -z: its z axis (third column) is world -z.
+    np.testing.assert_allclose(cam.rotation[:, 2], [0, 0, -1], atol=1e-12)
+
+
+def test_session_frame_by_frame():
+    session = trisplat.Session(
+        DATA / "anim" / "RiggedFigure.glb", methods=["delaunay", "alpha"], frames="0..2", gt="template"
+    )
+    assert session.frames == [0, 1]
+    assert len(session.gaussians) > 0 and session.gaussians.local
+    for f in session.frames:
+        result = session.frame(f)
+        assert result["frame"] == f and set(result["methods"]) == {"delaunay", "alpha"}
+        for name, m in result["methods"].items():
+            assert m["mesh"].triangle_count > 0, name
+            assert 0 < m["metrics"]["fscore"] <= 1
+        assert result["methods"]["delaunay"]["delaunay"]["frame"] == f
+        np.testing.assert_array_equal(session.positions(f).shape, (session.template.vertex_count, 3))
+    with pytest.raises(trisplat.TrisplatError):
+        trisplat.Session(DATA / "missing.glb")
