@@ -28,7 +28,7 @@ use trisplat_geometry::Camera;
 
 pub use composite::{CompositeRules, MedianRule, RenderStats, rasterize};
 pub use grad::{
-    DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads, backward,
+    BackwardStats, DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads, backward,
     backward_into, render_with_grad,
 };
 pub use image::RenderImages;

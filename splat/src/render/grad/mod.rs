@@ -23,6 +23,11 @@
 mod params;
 mod project;
 
+use std::any::{Any, TypeId};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use glam::Vec4;
+
 use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
@@ -31,6 +36,7 @@ pub use params::{DiffParams, GaussianGrads, GaussianParams, Real};
 use self::project::{ScreenGrad, View};
 use super::RenderError;
 use super::composite::{CompositeRules, RenderStats};
+use super::project::{SPAN_MARGIN, exp_neg4};
 use super::options::{Outputs, RenderMode, RenderOptions, Rules};
 use super::screen::{ScreenEntry, gather_visible};
 use super::tiles::{TILE_SIZE, TileBins, depth_order};
@@ -74,6 +80,8 @@ struct Splat<F> {
     /// Screen box (for the pixel range), as binned.
     center: [f32; 2],
     radius: [f32; 2],
+    /// Row-span coefficients (pixels outside them have alpha below the skip threshold).
+    span: [f32; 3],
 }
 
 /// The images of a differentiable render and what its backward pass needs (module
@@ -209,6 +217,7 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
             color: s.color.map(F::of),
             center,
             radius,
+            span: s.span,
         };
         Some((entry, splat))
     });
@@ -303,7 +312,18 @@ pub fn backward<F: Real, P: DiffParams + ?Sized>(
     Ok(out)
 }
 
-/// [`backward`] adding into `out` (for losses over several views).
+/// Wall-clock seconds of the stages of one backward pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BackwardStats {
+    /// The per-tile back-to-front loops.
+    pub composite_s: f64,
+    /// The per-splat reduction of the (tile, splat) sums.
+    pub reduce_s: f64,
+    /// The projection's vector-Jacobian products, per Gaussian.
+    pub project_s: f64,
+}
+
+/// [`backward`] adding into `out` (for losses over several views); returns the stage timings.
 ///
 /// # Errors
 /// As [`backward`]; also [`GradError::Size`] when `out` does not fit `params`.
@@ -314,8 +334,10 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
     forward: &GradRender<F>,
     grads: &ImageGrads<'_, F>,
     out: &mut GaussianGrads,
-) -> Result<(), GradError> {
+) -> Result<BackwardStats, GradError> {
     check(params, camera, options)?;
+    let mut stats = BackwardStats::default();
+    let start = std::time::Instant::now();
     let pixels = forward.width as usize * forward.height as usize;
     let size = |what, got, expected| {
         if got == expected {
@@ -347,18 +369,39 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         }
     }
 
-    // Per (tile, splat) sums, back to front per tile.
-    let mut slots = vec![[0.0f64; SLOT]; forward.bins.intersections()];
+    // Per (tile, splat) sums, back to front per tile, written splat-major: splat j's slots
+    // are its tile rectangle's tiles in row-major order (the binning's rectangles), from
+    // `rects[j].offset`. Each slot is written once, by the tile that owns it.
     let bins = &forward.bins;
-    let tiles_x = bins.tiles_x as usize;
-    let mut bands: Vec<&mut [[f64; SLOT]]> = Vec::with_capacity(bins.tiles_y as usize);
-    let mut rest = slots.as_mut_slice();
-    for ty in 0..bins.tiles_y as usize {
-        let len = bins.offsets[(ty + 1) * tiles_x] - bins.offsets[ty * tiles_x];
-        let (head, tail) = rest.split_at_mut(len);
-        bands.push(head);
-        rest = tail;
+    let rects: Vec<SlotRect> = forward
+        .splats
+        .par_iter()
+        .map(|s| {
+            let (x0, x1, y0, y1) = super::tiles::tile_range(
+                forward.rules.tile_rect,
+                s.center,
+                s.radius,
+                bins.tiles_x,
+                bins.tiles_y,
+            );
+            SlotRect {
+                offset: (x1 - x0) as usize * (y1 - y0) as usize,
+                x0,
+                y0,
+                width: x1 - x0,
+            }
+        })
+        .collect();
+    let mut rects = rects;
+    let mut total = 0;
+    for r in &mut rects {
+        let area = r.offset;
+        r.offset = total;
+        total += area;
     }
+    let slots: Vec<[AtomicU64; SLOT]> = (0..total)
+        .map(|_| std::array::from_fn(|_| AtomicU64::new(0)))
+        .collect();
     let ctx = Ctx {
         splats: &forward.splats,
         bins,
@@ -367,42 +410,25 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         width: forward.width,
         height: forward.height,
     };
-    bands.into_par_iter().enumerate().for_each(|(ty, band)| {
+    (0..bins.tiles_y).into_par_iter().for_each(|ty| {
         let mut s = BackwardTile::<F>::default();
-        let base = bins.offsets[ty * tiles_x];
         for tx in 0..bins.tiles_x {
-            let t = ty * tiles_x + tx as usize;
-            let slots = &mut band[bins.offsets[t] - base..bins.offsets[t + 1] - base];
-            ctx.backward_tile(forward, grads, tx, ty as u32, slots, &mut s);
+            ctx.backward_tile(forward, grads, tx, ty, &rects, &slots, &mut s);
         }
     });
-
-    // Reduce per splat, in tile order: a splat's slots are found by binary search in the
-    // (sorted) lists of the tiles of its rectangle.
+    stats.composite_s = start.elapsed().as_secs_f64();
+    let start = std::time::Instant::now();
+    // Reduce per splat, in tile order.
     let view = View::new(camera, options.rules);
-    let screen_grads: Vec<ScreenGrad> = (0..forward.splats.len())
-        .into_par_iter()
-        .map(|j| {
-            let s = &forward.splats[j];
-            let (x0, x1, y0, y1) = super::tiles::tile_range(
-                forward.rules.tile_rect,
-                s.center,
-                s.radius,
-                bins.tiles_x,
-                bins.tiles_y,
-            );
+    let screen_grads: Vec<ScreenGrad> = rects
+        .par_iter()
+        .enumerate()
+        .map(|(j, r)| {
+            let end = rects.get(j + 1).map_or(total, |n| n.offset);
             let mut sum = [0.0; SLOT];
-            for ty in y0..y1 {
-                for tx in x0..x1 {
-                    let list = bins.tile(tx, ty);
-                    let pos = list.partition_point(|&e| (e as usize) < j);
-                    if list.get(pos) == Some(&(j as u32)) {
-                        let t = ty as usize * tiles_x + tx as usize;
-                        let slot = &slots[bins.offsets[t] + pos];
-                        for (a, b) in sum.iter_mut().zip(slot) {
-                            *a += b;
-                        }
-                    }
+            for slot in &slots[r.offset..end] {
+                for (a, b) in sum.iter_mut().zip(slot) {
+                    *a += f64::from_bits(b.load(Ordering::Relaxed));
                 }
             }
             ScreenGrad {
@@ -415,6 +441,8 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         })
         .collect();
     drop(slots);
+    stats.reduce_s = start.elapsed().as_secs_f64();
+    let start = std::time::Instant::now();
 
     // Through the projection, per Gaussian.
     let mut visible_of = vec![u32::MAX; params.len()];
@@ -460,11 +488,23 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
                 }
             },
         );
-    Ok(())
+    stats.project_s = start.elapsed().as_secs_f64();
+    Ok(stats)
 }
+
+/// Pixels evaluated together in the backward row loop.
+const LANES: usize = 4;
 
 /// Values per (tile, splat) slot: d/d mean (2), conic (3), opacity, depth, colour (3).
 const SLOT: usize = 10;
+
+/// Where a splat's (tile, splat) slots start and the tile rectangle they follow.
+struct SlotRect {
+    offset: usize,
+    x0: u32,
+    y0: u32,
+    width: u32,
+}
 
 /// What both tile loops read.
 struct Ctx<'a, F> {
@@ -570,6 +610,154 @@ fn hi(v: f32, start: u32, n: usize) -> usize {
     if x > 0.0 { (x as usize + 1).min(n) } else { 0 }
 }
 
+/// The local pixel columns of row `ly` inside splat `s`'s row span, within `lx0..lx1` (the
+/// plain compositor's [`super::screen::SplatKernel::row_span`] for the EWA kernel).
+#[inline(always)]
+fn row_span<F: Real>(
+    s: &Splat<F>,
+    g: &TileGeom,
+    ly: usize,
+    off: f32,
+    (lx0, lx1): (usize, usize),
+) -> (usize, usize) {
+    let py = (g.y0 as usize + ly) as f32 + off;
+    let [p, q, r] = s.span;
+    let dy = s.center[1] - py;
+    let root_sq = q * dy * dy + r;
+    let center = s.center[0] + p * dy;
+    let root = if root_sq < 0.0 { 0.0 } else { root_sq.sqrt() };
+    let (a, b) = (center - root - SPAN_MARGIN, center + root + SPAN_MARGIN);
+    (lo(a - off, g.x0, g.tw).max(lx0), hi(b - off, g.x0, g.tw).min(lx1))
+}
+
+/// One row of one splat in the backward pass, pixel by pixel: returns the row sums
+/// `[Σ g_r w, Σ g_g w, Σ g_b w, Σ g_D w, Σ g_α G, Σ g_σ, Σ g_σ dx, Σ g_σ dx²]` (module
+/// documentation) and updates the pixels' transmittance and `behind` sums.
+#[inline(always)]
+fn backward_row<F: Real>(
+    sp: &Splat<F>,
+    s: &mut BackwardTile<F>,
+    g: &TileGeom,
+    ly: usize,
+    (sx0, sx1): (usize, usize),
+    k: u32,
+    r: &PixelRules<F>,
+) -> [f64; 8] {
+    let ts = TILE_SIZE as usize;
+    let py = F::of(f64::from((g.y0 as usize + ly) as f32 + r.offset));
+    let dy = sp.mean[1] - py;
+    let mut row = [F::ZERO; 8];
+    for lx in sx0..sx1 {
+        let p = ly * ts + lx;
+        if k >= s.last[p] {
+            continue;
+        }
+        let px = F::of(f64::from((g.x0 as usize + lx) as f32 + r.offset));
+        let dx = sp.mean[0] - px;
+        let sigma = sigma_of(sp, dx, dy);
+        if sigma < F::ZERO {
+            continue;
+        }
+        let falloff = sigma.exp_neg();
+        let raw = sp.opacity * falloff;
+        let alpha = raw.min(r.max_alpha);
+        if alpha < r.min_alpha {
+            continue;
+        }
+        let ra = F::ONE / (F::ONE - alpha);
+        let t = s.t[p] * ra;
+        let wgt = alpha * t;
+        let (gr, gg, gb) = (s.g_rgb[0][p], s.g_rgb[1][p], s.g_rgb[2][p]);
+        let gd = s.g_depth[p];
+        let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
+        let g_alpha = t * qk - ra * s.behind[p];
+        s.behind[p] += wgt * qk;
+        s.t[p] = t;
+        row[0] += gr * wgt;
+        row[1] += gg * wgt;
+        row[2] += gb * wgt;
+        row[3] += gd * wgt;
+        if raw <= r.max_alpha {
+            row[4] += g_alpha * falloff;
+            let g_sigma = -(g_alpha * raw);
+            row[5] += g_sigma;
+            row[6] += g_sigma * dx;
+            row[7] += g_sigma * dx * dx;
+        }
+    }
+    row.map(Real::wide)
+}
+
+/// [`backward_row`] in `f32`, four pixels at a time in `glam::Vec4` lanes, branch-free; the
+/// alphas are those of the plain compositor's [`super::project::EwaKernel::sample4`] bit for
+/// bit (same operations, same `exp`).
+#[inline(always)]
+fn backward_row_f32(
+    sp: &Splat<f32>,
+    s: &mut BackwardTile<f32>,
+    g: &TileGeom,
+    ly: usize,
+    (sx0, sx1): (usize, usize),
+    k: u32,
+    r: &PixelRules<f32>,
+) -> [f64; 8] {
+    let ts = TILE_SIZE as usize;
+    let py = (g.y0 as usize + ly) as f32 + r.offset;
+    let dy = sp.mean[1] - py;
+    let [a, b, c] = sp.conic;
+    let cdy2 = c * dy * dy;
+    let mut acc = [Vec4::ZERO; 8];
+    let groups = (sx1.saturating_sub(sx0)).div_ceil(LANES);
+    let gx0 = sx0.min(ts.saturating_sub(groups * LANES));
+    let kf = Vec4::splat(k as f32);
+    let (max_alpha, min_alpha) = (Vec4::splat(r.max_alpha), Vec4::splat(r.min_alpha));
+    for gi in 0..groups {
+        let lx = gx0 + gi * LANES;
+        let p0 = ly * ts + lx;
+        let range = p0..p0 + LANES;
+        if range.end > TILE_PIXELS {
+            break;
+        }
+        let px0 = (g.x0 as usize + lx) as f32 + r.offset;
+        let px = Vec4::splat(px0) + Vec4::new(0.0, 1.0, 2.0, 3.0);
+        let dx = Vec4::splat(sp.mean[0]) - px;
+        let sigma = 0.5 * (a * dx * dx + Vec4::splat(cdy2)) + b * dx * dy;
+        let falloff = exp_neg4(sigma);
+        let raw = sp.opacity * falloff;
+        let alpha = raw.min(max_alpha);
+        let last = Vec4::from_array(
+            <[u32; LANES]>::try_from(&s.last[range.clone()])
+                .unwrap_or([0; LANES])
+                .map(|v| v as f32),
+        );
+        let on = kf.cmplt(last) & sigma.cmpge(Vec4::ZERO) & alpha.cmpge(min_alpha);
+        let ra = Vec4::ONE / (Vec4::ONE - alpha);
+        let t_old = Vec4::from_slice(&s.t[range.clone()]);
+        let behind = Vec4::from_slice(&s.behind[range.clone()]);
+        let t = t_old * ra;
+        let wgt = Vec4::select(on, alpha * t, Vec4::ZERO);
+        let gr = Vec4::from_slice(&s.g_rgb[0][range.clone()]);
+        let gg = Vec4::from_slice(&s.g_rgb[1][range.clone()]);
+        let gb = Vec4::from_slice(&s.g_rgb[2][range.clone()]);
+        let gd = Vec4::from_slice(&s.g_depth[range.clone()]);
+        let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
+        let g_alpha = t * qk - ra * behind;
+        (behind + wgt * qk).write_to_slice(&mut s.behind[range.clone()]);
+        Vec4::select(on, t, t_old).write_to_slice(&mut s.t[range.clone()]);
+        acc[0] += gr * wgt;
+        acc[1] += gg * wgt;
+        acc[2] += gb * wgt;
+        acc[3] += gd * wgt;
+        let free = on & raw.cmple(max_alpha);
+        let g_sigma = Vec4::select(free, -(g_alpha * raw), Vec4::ZERO);
+        acc[4] += Vec4::select(free, g_alpha * falloff, Vec4::ZERO);
+        acc[5] += g_sigma;
+        acc[6] += g_sigma * dx;
+        acc[7] += g_sigma * dx * dx;
+    }
+    acc.map(|v| v.to_array().iter().map(|&x| f64::from(x)).sum())
+}
+
 /// The tile's geometry: origin, size in pixels.
 struct TileGeom {
     x0: u32,
@@ -641,9 +829,10 @@ impl<F: Real> Ctx<'_, F> {
             let sp = &self.splats[entry as usize];
             let (lx0, lx1, ly0, ly1) = self.pixel_range(sp, &g);
             for ly in ly0..ly1 {
+                let (sx0, sx1) = row_span(sp, &g, ly, r.offset, (lx0, lx1));
                 let py = F::of(f64::from((g.y0 as usize + ly) as f32 + r.offset));
                 let dy = sp.mean[1] - py;
-                for lx in lx0..lx1 {
+                for lx in sx0..sx1 {
                     let p = ly * ts + lx;
                     if !s.alive[p] {
                         continue;
@@ -707,7 +896,8 @@ impl<F: Real> Ctx<'_, F> {
         grads: &ImageGrads<'_, F>,
         tx: u32,
         ty: u32,
-        slots: &mut [[f64; SLOT]],
+        rects: &[SlotRect],
+        slots: &[[AtomicU64; SLOT]],
         s: &mut BackwardTile<F>,
     ) {
         let ts = TILE_SIZE as usize;
@@ -748,57 +938,51 @@ impl<F: Real> Ctx<'_, F> {
             }
         }
         let entries = self.bins.tile(tx, ty);
-        let half = F::of(0.5);
         for k in (0..max_last as usize).rev() {
-            let sp = &self.splats[entries[k] as usize];
+            let j = entries[k] as usize;
+            let sp = &self.splats[j];
             let (lx0, lx1, ly0, ly1) = self.pixel_range(sp, &g);
             let [a, b, c] = sp.conic;
             let mut sum = [0.0f64; SLOT];
+            let (a64, b64, c64) = (a.wide(), b.wide(), c.wide());
             for ly in ly0..ly1 {
+                let (sx0, sx1) = row_span(sp, &g, ly, r.offset, (lx0, lx1));
+                // Row sums (at most 16 terms) in F, then widened to f64. With dy fixed on the
+                // row, the conic and mean gradients need only Σ g_σ, Σ g_σ dx and Σ g_σ dx².
+                // f32: four pixels at a time in SSE lanes (the type test is resolved at
+                // compile time).
+                let row = if TypeId::of::<F>() == TypeId::of::<f32>() {
+                    let sp32 = (sp as &dyn Any).downcast_ref::<Splat<f32>>();
+                    let s32 = (&mut *s as &mut dyn Any).downcast_mut::<BackwardTile<f32>>();
+                    let r32 = PixelRules::<f32>::new(self.rules);
+                    match (sp32, s32) {
+                        (Some(sp32), Some(s32)) => {
+                            backward_row_f32(sp32, s32, &g, ly, (sx0, sx1), k as u32, &r32)
+                        }
+                        _ => unreachable!("F is f32"),
+                    }
+                } else {
+                    backward_row(sp, s, &g, ly, (sx0, sx1), k as u32, &r)
+                };
                 let py = F::of(f64::from((g.y0 as usize + ly) as f32 + r.offset));
-                let dy = sp.mean[1] - py;
-                for lx in lx0..lx1 {
-                    let p = ly * ts + lx;
-                    if k as u32 >= s.last[p] {
-                        continue;
-                    }
-                    let px = F::of(f64::from((g.x0 as usize + lx) as f32 + r.offset));
-                    let dx = sp.mean[0] - px;
-                    let sigma = sigma_of(sp, dx, dy);
-                    if sigma < F::ZERO {
-                        continue;
-                    }
-                    let falloff = sigma.exp_neg();
-                    let raw = sp.opacity * falloff;
-                    let alpha = raw.min(r.max_alpha);
-                    if alpha < r.min_alpha {
-                        continue;
-                    }
-                    let ra = F::ONE / (F::ONE - alpha);
-                    let t = s.t[p] * ra;
-                    let wgt = alpha * t;
-                    let (gr, gg, gb) = (s.g_rgb[0][p], s.g_rgb[1][p], s.g_rgb[2][p]);
-                    let gd = s.g_depth[p];
-                    let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
-                    let g_alpha = t * qk - ra * s.behind[p];
-                    s.behind[p] += wgt * qk;
-                    s.t[p] = t;
-                    sum[7] += (gr * wgt).wide();
-                    sum[8] += (gg * wgt).wide();
-                    sum[9] += (gb * wgt).wide();
-                    sum[6] += (gd * wgt).wide();
-                    if raw <= r.max_alpha {
-                        sum[5] += (g_alpha * falloff).wide();
-                        let g_sigma = -(g_alpha * raw);
-                        sum[0] += (g_sigma * (a * dx + b * dy)).wide();
-                        sum[1] += (g_sigma * (b * dx + c * dy)).wide();
-                        sum[2] += (g_sigma * half * dx * dx).wide();
-                        sum[3] += (g_sigma * dx * dy).wide();
-                        sum[4] += (g_sigma * half * dy * dy).wide();
-                    }
-                }
+                let dy = (sp.mean[1] - py).wide();
+                let [r_r, r_g, r_b, r_d, r_op, s0, s1, s2] = row;
+                sum[7] += r_r;
+                sum[8] += r_g;
+                sum[9] += r_b;
+                sum[6] += r_d;
+                sum[5] += r_op;
+                sum[0] += a64 * s1 + b64 * dy * s0;
+                sum[1] += b64 * s1 + c64 * dy * s0;
+                sum[2] += 0.5 * s2;
+                sum[3] += dy * s1;
+                sum[4] += 0.5 * dy * dy * s0;
             }
-            slots[k] = sum;
+            let rect = &rects[j];
+            let at = rect.offset + ((ty - rect.y0) * rect.width + tx - rect.x0) as usize;
+            for (slot, v) in slots[at].iter().zip(sum) {
+                slot.store(v.to_bits(), Ordering::Relaxed);
+            }
         }
     }
 }

@@ -13,7 +13,9 @@ use super::params::DiffParams;
 use crate::gaussians::sh_coeffs_per_channel;
 use crate::render::composite::ALPHA_THRESHOLD;
 use crate::render::options::{RenderOptions, Rules};
-use crate::render::project::{EPS_2D, FRUSTUM_MARGIN, GSPLAT_EXTENT, ORIGINAL_EXTENT};
+use crate::render::project::{
+    EPS_2D, FRUSTUM_MARGIN, GSPLAT_EXTENT, ORIGINAL_EXTENT, row_span_coefficients,
+};
 use crate::sh::{SH_C1, SH_C2, SH_C3, sh_basis};
 
 /// The original 3DGS floor of `mid² − det` (as in [`crate::render::project`]).
@@ -88,6 +90,8 @@ pub(crate) struct Screen {
     pub color: [f64; 3],
     /// Screen box half sizes.
     pub radius: [f64; 2],
+    /// Row-span coefficients (as [`crate::render::project::EwaSplat::span`]).
+    pub span: [f32; 3],
 }
 
 /// Gradients of a loss with respect to one Gaussian's screen quantities.
@@ -301,6 +305,7 @@ fn trace<P: DiffParams + ?Sized>(
         depth: z,
         color,
         radius,
+        span: row_span_coefficients([d11 * inv, -c01 * inv, d00 * inv], log_ratio.max(0.0)),
     };
     let trace = Trace {
         t,
