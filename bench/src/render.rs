@@ -249,6 +249,17 @@ pub fn run(args: &RenderBenchArgs) -> anyhow::Result<()> {
                 t.stages.reduce_s * 1e3,
                 t.stages.project_s * 1e3
             );
+            if threads == 1 && t.cpu[0] > 0.0 {
+                let f = args.frames.max(1) as f64;
+                println!(
+                    "1 thread, backward pass, CPU time per frame: plain render {:.2} ms, \
+                     render_with_grad {:.2} ms, backward {:.2} ms; backward / plain render {:.2}",
+                    t.cpu[0] / f * 1e3,
+                    t.cpu[1] / f * 1e3,
+                    t.cpu[2] / f * 1e3,
+                    t.cpu[2] / t.cpu[0]
+                );
+            }
         }
     }
     Ok(())
@@ -261,6 +272,10 @@ struct BackwardTimes {
     backward: f64,
     /// The stages of the best backward pass.
     stages: BackwardStats,
+    /// CPU time of the calling thread summed over the timed frames (plain render,
+    /// differentiable forward, backward): with one thread all the work runs on it, so this sees
+    /// through a loaded machine.
+    cpu: [f64; 3],
 }
 
 /// Times the plain render (rgb + alpha + depth), the differentiable forward and the backward
@@ -285,19 +300,31 @@ fn time_backward(
         forward: f64::INFINITY,
         backward: f64::INFINITY,
         stages: BackwardStats::default(),
+        cpu: [0.0; 3],
     };
     for frame in 0..WARM_UP + frames {
+        let cpu0 = thread_cpu_s();
         let start = std::time::Instant::now();
         render(set, camera, &options)?;
         let plain = start.elapsed().as_secs_f64();
+        let cpu1 = thread_cpu_s();
         let start = std::time::Instant::now();
         let fwd = render_with_grad::<f32, _>(set, camera, &options)?;
         let forward = start.elapsed().as_secs_f64();
+        let cpu2 = thread_cpu_s();
         let start = std::time::Instant::now();
         let mut g = GaussianGrads::zeros(set.len(), set.sh_degree());
         let stages = backward_into(set, camera, &options, &fwd, &grads, &mut g)?;
         let back = start.elapsed().as_secs_f64();
+        let cpu3 = thread_cpu_s();
         std::hint::black_box(g);
+        if let (Some(c0), Some(c1), Some(c2), Some(c3)) = (cpu0, cpu1, cpu2, cpu3)
+            && frame >= WARM_UP
+        {
+            t.cpu[0] += c1 - c0;
+            t.cpu[1] += c2 - c1;
+            t.cpu[2] += c3 - c2;
+        }
         if frame >= WARM_UP && back < t.backward {
             t.backward = back;
             t.stages = stages;

@@ -445,10 +445,12 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
     let start = std::time::Instant::now();
 
     // Through the projection, per Gaussian.
-    let mut visible_of = vec![u32::MAX; params.len()];
-    for (j, &id) in forward.ids.iter().enumerate() {
-        visible_of[id as usize] = j as u32;
+    // Screen gradients moved to Gaussian order (the loop below reads them in memory order).
+    let mut by_id: Vec<Option<ScreenGrad>> = vec![None; params.len()];
+    for (&id, g) in forward.ids.iter().zip(&screen_grads) {
+        by_id[id as usize] = Some(*g);
     }
+    drop(screen_grads);
     let GaussianGrads {
         means,
         log_scales,
@@ -467,7 +469,7 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         .enumerate()
         .for_each(
             |(i, (((((mean, log_scale), rotation), opacity), mean2d), sh))| {
-                let Some(g) = screen_grads.get(visible_of[i] as usize) else {
+                let Some(g) = &by_id[i] else {
                     return;
                 };
                 let Some(p) = project::project_vjp(params, i, &view, options, g) else {
@@ -630,132 +632,159 @@ fn row_span<F: Real>(
     (lo(a - off, g.x0, g.tw).max(lx0), hi(b - off, g.x0, g.tw).min(lx1))
 }
 
-/// One row of one splat in the backward pass, pixel by pixel: returns the row sums
-/// `[Σ g_r w, Σ g_g w, Σ g_b w, Σ g_D w, Σ g_α G, Σ g_σ, Σ g_σ dx, Σ g_σ dx²]` (module
-/// documentation) and updates the pixels' transmittance and `behind` sums.
+/// One splat over its pixels of one tile in the backward pass, pixel by pixel: returns its
+/// slot `[d/d mean (2), conic (3), opacity, depth, colour (3)]` and updates the pixels'
+/// transmittance and `behind` sums (module documentation). Row sums (at most 16 terms) in `F`,
+/// then `f64`: with dy fixed on a row, the conic and mean gradients need only `Σ g_σ`,
+/// `Σ g_σ dx` and `Σ g_σ dx²`.
 #[inline(always)]
-fn backward_row<F: Real>(
+fn backward_splat<F: Real>(
     sp: &Splat<F>,
     s: &mut BackwardTile<F>,
     g: &TileGeom,
-    ly: usize,
-    (sx0, sx1): (usize, usize),
+    (lx0, lx1, ly0, ly1): (usize, usize, usize, usize),
     k: u32,
     r: &PixelRules<F>,
-) -> [f64; 8] {
+) -> [f64; SLOT] {
     let ts = TILE_SIZE as usize;
-    let py = F::of(f64::from((g.y0 as usize + ly) as f32 + r.offset));
-    let dy = sp.mean[1] - py;
-    let mut row = [F::ZERO; 8];
-    for lx in sx0..sx1 {
-        let p = ly * ts + lx;
-        if k >= s.last[p] {
-            continue;
+    let [a, b, c] = sp.conic.map(Real::wide);
+    let mut sum = [0.0f64; SLOT];
+    for ly in ly0..ly1 {
+        let (sx0, sx1) = row_span(sp, g, ly, r.offset, (lx0, lx1));
+        let py = F::of(f64::from((g.y0 as usize + ly) as f32 + r.offset));
+        let dy = sp.mean[1] - py;
+        let mut row = [F::ZERO; 8];
+        for lx in sx0..sx1 {
+            let p = ly * ts + lx;
+            if k >= s.last[p] {
+                continue;
+            }
+            let px = F::of(f64::from((g.x0 as usize + lx) as f32 + r.offset));
+            let dx = sp.mean[0] - px;
+            let sigma = sigma_of(sp, dx, dy);
+            if sigma < F::ZERO {
+                continue;
+            }
+            let falloff = sigma.exp_neg();
+            let raw = sp.opacity * falloff;
+            let alpha = raw.min(r.max_alpha);
+            if alpha < r.min_alpha {
+                continue;
+            }
+            let ra = F::ONE / (F::ONE - alpha);
+            let t = s.t[p] * ra;
+            let wgt = alpha * t;
+            let (gr, gg, gb) = (s.g_rgb[0][p], s.g_rgb[1][p], s.g_rgb[2][p]);
+            let gd = s.g_depth[p];
+            let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
+            let g_alpha = t * qk - ra * s.behind[p];
+            s.behind[p] += wgt * qk;
+            s.t[p] = t;
+            row[0] += gr * wgt;
+            row[1] += gg * wgt;
+            row[2] += gb * wgt;
+            row[3] += gd * wgt;
+            if raw <= r.max_alpha {
+                row[4] += g_alpha * falloff;
+                let g_sigma = -(g_alpha * raw);
+                row[5] += g_sigma;
+                row[6] += g_sigma * dx;
+                row[7] += g_sigma * dx * dx;
+            }
         }
-        let px = F::of(f64::from((g.x0 as usize + lx) as f32 + r.offset));
-        let dx = sp.mean[0] - px;
-        let sigma = sigma_of(sp, dx, dy);
-        if sigma < F::ZERO {
-            continue;
-        }
-        let falloff = sigma.exp_neg();
-        let raw = sp.opacity * falloff;
-        let alpha = raw.min(r.max_alpha);
-        if alpha < r.min_alpha {
-            continue;
-        }
-        let ra = F::ONE / (F::ONE - alpha);
-        let t = s.t[p] * ra;
-        let wgt = alpha * t;
-        let (gr, gg, gb) = (s.g_rgb[0][p], s.g_rgb[1][p], s.g_rgb[2][p]);
-        let gd = s.g_depth[p];
-        let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
-        let g_alpha = t * qk - ra * s.behind[p];
-        s.behind[p] += wgt * qk;
-        s.t[p] = t;
-        row[0] += gr * wgt;
-        row[1] += gg * wgt;
-        row[2] += gb * wgt;
-        row[3] += gd * wgt;
-        if raw <= r.max_alpha {
-            row[4] += g_alpha * falloff;
-            let g_sigma = -(g_alpha * raw);
-            row[5] += g_sigma;
-            row[6] += g_sigma * dx;
-            row[7] += g_sigma * dx * dx;
-        }
+        let dy = dy.wide();
+        let [r_r, r_g, r_b, r_d, r_op, s0, s1, s2] = row.map(Real::wide);
+        sum[7] += r_r;
+        sum[8] += r_g;
+        sum[9] += r_b;
+        sum[6] += r_d;
+        sum[5] += r_op;
+        sum[0] += a * s1 + b * dy * s0;
+        sum[1] += b * s1 + c * dy * s0;
+        sum[2] += 0.5 * s2;
+        sum[3] += dy * s1;
+        sum[4] += 0.5 * dy * dy * s0;
     }
-    row.map(Real::wide)
+    sum
 }
 
-/// [`backward_row`] in `f32`, four pixels at a time in `glam::Vec4` lanes, branch-free; the
+/// [`backward_splat`] in `f32`, four pixels at a time in `glam::Vec4` lanes, branch-free; the
 /// alphas are those of the plain compositor's [`super::project::EwaKernel::sample4`] bit for
-/// bit (same operations, same `exp`).
+/// bit (same operations, same `exp`). Each lane sums at most 64 terms of one (tile, splat) pair
+/// in `f32`; the lanes are added in `f64`.
 #[inline(always)]
-fn backward_row_f32(
+fn backward_splat_f32(
     sp: &Splat<f32>,
     s: &mut BackwardTile<f32>,
     g: &TileGeom,
-    ly: usize,
-    (sx0, sx1): (usize, usize),
+    (lx0, lx1, ly0, ly1): (usize, usize, usize, usize),
     k: u32,
     r: &PixelRules<f32>,
-) -> [f64; 8] {
+) -> [f64; SLOT] {
     let ts = TILE_SIZE as usize;
-    let py = (g.y0 as usize + ly) as f32 + r.offset;
-    let dy = sp.mean[1] - py;
     let [a, b, c] = sp.conic;
-    let cdy2 = c * dy * dy;
-    let mut acc = [Vec4::ZERO; 8];
-    let groups = (sx1.saturating_sub(sx0)).div_ceil(LANES);
-    let gx0 = sx0.min(ts.saturating_sub(groups * LANES));
+    let mut acc = [Vec4::ZERO; SLOT];
     let kf = Vec4::splat(k as f32);
     let (max_alpha, min_alpha) = (Vec4::splat(r.max_alpha), Vec4::splat(r.min_alpha));
-    for gi in 0..groups {
-        let lx = gx0 + gi * LANES;
-        let p0 = ly * ts + lx;
-        let range = p0..p0 + LANES;
-        if range.end > TILE_PIXELS {
-            break;
+    let lanes = Vec4::new(0.0, 1.0, 2.0, 3.0);
+    for ly in ly0..ly1 {
+        let (sx0, sx1) = row_span(sp, g, ly, r.offset, (lx0, lx1));
+        let py = (g.y0 as usize + ly) as f32 + r.offset;
+        let dy = sp.mean[1] - py;
+        let cdy2 = c * dy * dy;
+        let groups = sx1.saturating_sub(sx0).div_ceil(LANES);
+        let gx0 = sx0.min(ts.saturating_sub(groups * LANES));
+        for gi in 0..groups {
+            let lx = gx0 + gi * LANES;
+            let p0 = ly * ts + lx;
+            let range = p0..p0 + LANES;
+            if range.end > TILE_PIXELS {
+                break;
+            }
+            let px = Vec4::splat((g.x0 as usize + lx) as f32 + r.offset) + lanes;
+            let dx = Vec4::splat(sp.mean[0]) - px;
+            let sigma = 0.5 * (a * dx * dx + Vec4::splat(cdy2)) + b * dx * dy;
+            let falloff = exp_neg4(sigma);
+            let raw = sp.opacity * falloff;
+            let alpha = raw.min(max_alpha);
+            let last = Vec4::from_array(
+                <[u32; LANES]>::try_from(&s.last[range.clone()])
+                    .unwrap_or([0; LANES])
+                    .map(|v| v as f32),
+            );
+            let on = kf.cmplt(last) & sigma.cmpge(Vec4::ZERO) & alpha.cmpge(min_alpha);
+            let ra = Vec4::ONE / (Vec4::ONE - alpha);
+            let t_old = Vec4::from_slice(&s.t[range.clone()]);
+            let behind = Vec4::from_slice(&s.behind[range.clone()]);
+            let t = t_old * ra;
+            let wgt = Vec4::select(on, alpha * t, Vec4::ZERO);
+            let gr = Vec4::from_slice(&s.g_rgb[0][range.clone()]);
+            let gg = Vec4::from_slice(&s.g_rgb[1][range.clone()]);
+            let gb = Vec4::from_slice(&s.g_rgb[2][range.clone()]);
+            let gd = Vec4::from_slice(&s.g_depth[range.clone()]);
+            let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
+            let g_alpha = t * qk - ra * behind;
+            (behind + wgt * qk).write_to_slice(&mut s.behind[range.clone()]);
+            Vec4::select(on, t, t_old).write_to_slice(&mut s.t[range.clone()]);
+            acc[7] += gr * wgt;
+            acc[8] += gg * wgt;
+            acc[9] += gb * wgt;
+            acc[6] += gd * wgt;
+            let free = on & raw.cmple(max_alpha);
+            let g_sigma = Vec4::select(free, -(g_alpha * raw), Vec4::ZERO);
+            acc[5] += Vec4::select(free, g_alpha * falloff, Vec4::ZERO);
+            let gdx = g_sigma * dx;
+            acc[0] += gdx * a + g_sigma * (b * dy);
+            acc[1] += gdx * b + g_sigma * (c * dy);
+            acc[2] += gdx * dx;
+            acc[3] += gdx * dy;
+            acc[4] += g_sigma * (dy * dy);
         }
-        let px0 = (g.x0 as usize + lx) as f32 + r.offset;
-        let px = Vec4::splat(px0) + Vec4::new(0.0, 1.0, 2.0, 3.0);
-        let dx = Vec4::splat(sp.mean[0]) - px;
-        let sigma = 0.5 * (a * dx * dx + Vec4::splat(cdy2)) + b * dx * dy;
-        let falloff = exp_neg4(sigma);
-        let raw = sp.opacity * falloff;
-        let alpha = raw.min(max_alpha);
-        let last = Vec4::from_array(
-            <[u32; LANES]>::try_from(&s.last[range.clone()])
-                .unwrap_or([0; LANES])
-                .map(|v| v as f32),
-        );
-        let on = kf.cmplt(last) & sigma.cmpge(Vec4::ZERO) & alpha.cmpge(min_alpha);
-        let ra = Vec4::ONE / (Vec4::ONE - alpha);
-        let t_old = Vec4::from_slice(&s.t[range.clone()]);
-        let behind = Vec4::from_slice(&s.behind[range.clone()]);
-        let t = t_old * ra;
-        let wgt = Vec4::select(on, alpha * t, Vec4::ZERO);
-        let gr = Vec4::from_slice(&s.g_rgb[0][range.clone()]);
-        let gg = Vec4::from_slice(&s.g_rgb[1][range.clone()]);
-        let gb = Vec4::from_slice(&s.g_rgb[2][range.clone()]);
-        let gd = Vec4::from_slice(&s.g_depth[range.clone()]);
-        let qk = gr * sp.color[0] + gg * sp.color[1] + gb * sp.color[2] + gd * sp.depth;
-        let g_alpha = t * qk - ra * behind;
-        (behind + wgt * qk).write_to_slice(&mut s.behind[range.clone()]);
-        Vec4::select(on, t, t_old).write_to_slice(&mut s.t[range.clone()]);
-        acc[0] += gr * wgt;
-        acc[1] += gg * wgt;
-        acc[2] += gb * wgt;
-        acc[3] += gd * wgt;
-        let free = on & raw.cmple(max_alpha);
-        let g_sigma = Vec4::select(free, -(g_alpha * raw), Vec4::ZERO);
-        acc[4] += Vec4::select(free, g_alpha * falloff, Vec4::ZERO);
-        acc[5] += g_sigma;
-        acc[6] += g_sigma * dx;
-        acc[7] += g_sigma * dx * dx;
     }
-    acc.map(|v| v.to_array().iter().map(|&x| f64::from(x)).sum())
+    let mut sum = acc.map(|v| v.to_array().iter().map(|&x| f64::from(x)).sum::<f64>());
+    sum[2] *= 0.5;
+    sum[4] *= 0.5;
+    sum
 }
 
 /// The tile's geometry: origin, size in pixels.
@@ -938,46 +967,25 @@ impl<F: Real> Ctx<'_, F> {
             }
         }
         let entries = self.bins.tile(tx, ty);
+        let r32 = PixelRules::<f32>::new(self.rules);
         for k in (0..max_last as usize).rev() {
             let j = entries[k] as usize;
             let sp = &self.splats[j];
             let (lx0, lx1, ly0, ly1) = self.pixel_range(sp, &g);
-            let [a, b, c] = sp.conic;
-            let mut sum = [0.0f64; SLOT];
-            let (a64, b64, c64) = (a.wide(), b.wide(), c.wide());
-            for ly in ly0..ly1 {
-                let (sx0, sx1) = row_span(sp, &g, ly, r.offset, (lx0, lx1));
-                // Row sums (at most 16 terms) in F, then widened to f64. With dy fixed on the
-                // row, the conic and mean gradients need only Σ g_σ, Σ g_σ dx and Σ g_σ dx².
-                // f32: four pixels at a time in SSE lanes (the type test is resolved at
-                // compile time).
-                let row = if TypeId::of::<F>() == TypeId::of::<f32>() {
-                    let sp32 = (sp as &dyn Any).downcast_ref::<Splat<f32>>();
-                    let s32 = (&mut *s as &mut dyn Any).downcast_mut::<BackwardTile<f32>>();
-                    let r32 = PixelRules::<f32>::new(self.rules);
-                    match (sp32, s32) {
-                        (Some(sp32), Some(s32)) => {
-                            backward_row_f32(sp32, s32, &g, ly, (sx0, sx1), k as u32, &r32)
-                        }
-                        _ => unreachable!("F is f32"),
+            // f32: four pixels at a time in SSE lanes (the type test is resolved at compile
+            // time); f64 pixel by pixel.
+            let sum = if TypeId::of::<F>() == TypeId::of::<f32>() {
+                let sp32 = (sp as &dyn Any).downcast_ref::<Splat<f32>>();
+                let s32 = (&mut *s as &mut dyn Any).downcast_mut::<BackwardTile<f32>>();
+                match (sp32, s32) {
+                    (Some(sp32), Some(s32)) => {
+                        backward_splat_f32(sp32, s32, &g, (lx0, lx1, ly0, ly1), k as u32, &r32)
                     }
-                } else {
-                    backward_row(sp, s, &g, ly, (sx0, sx1), k as u32, &r)
-                };
-                let py = F::of(f64::from((g.y0 as usize + ly) as f32 + r.offset));
-                let dy = (sp.mean[1] - py).wide();
-                let [r_r, r_g, r_b, r_d, r_op, s0, s1, s2] = row;
-                sum[7] += r_r;
-                sum[8] += r_g;
-                sum[9] += r_b;
-                sum[6] += r_d;
-                sum[5] += r_op;
-                sum[0] += a64 * s1 + b64 * dy * s0;
-                sum[1] += b64 * s1 + c64 * dy * s0;
-                sum[2] += 0.5 * s2;
-                sum[3] += dy * s1;
-                sum[4] += 0.5 * dy * dy * s0;
-            }
+                    _ => unreachable!("F is f32"),
+                }
+            } else {
+                backward_splat(sp, s, &g, (lx0, lx1, ly0, ly1), k as u32, &r)
+            };
             let rect = &rects[j];
             let at = rect.offset + ((ty - rect.y0) * rect.width + tx - rect.x0) as usize;
             for (slot, v) in slots[at].iter().zip(sum) {
