@@ -15,8 +15,8 @@ use trisplat_geometry::rng::Rng;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_splat::gaussians::{logit, to_wxyz};
 use trisplat_splat::render::{
-    BackwardStats, GaussianGrads, ImageGrads, Outputs, RenderOptions, RenderStats,
-    backward_into, render, render_with_grad,
+    BackwardStats, GaussianGrads, ImageGrads, Outputs, RenderOptions, RenderStats, backward_into,
+    render, render_with_grad,
 };
 use trisplat_splat::{GaussianParts, GaussianSet};
 
@@ -288,7 +288,11 @@ fn time_backward(
     let options = RenderOptions::default();
     let pixels = camera.width as usize * camera.height as usize;
     let mut rng = Rng::new(5);
-    let mut draw = |n: usize| (0..n).map(|_| rng.uniform_f32() - 0.5).collect::<Vec<f32>>();
+    let mut draw = |n: usize| {
+        (0..n)
+            .map(|_| rng.uniform_f32() - 0.5)
+            .collect::<Vec<f32>>()
+    };
     let (g_rgb, g_alpha, g_depth) = (draw(3 * pixels), draw(pixels), draw(pixels));
     let grads = ImageGrads {
         rgb: Some(&g_rgb),

@@ -28,8 +28,8 @@ use trisplat_geometry::Camera;
 
 pub use composite::{CompositeRules, MedianRule, RenderStats, rasterize};
 pub use grad::{
-    BackwardStats, DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads, backward,
-    backward_into, render_with_grad,
+    BackwardStats, DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads,
+    Real, backward, backward_into, render_with_grad,
 };
 pub use image::RenderImages;
 pub use options::{Outputs, RenderMode, RenderOptions, Rules};

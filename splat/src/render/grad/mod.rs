@@ -36,8 +36,8 @@ pub use params::{DiffParams, GaussianGrads, GaussianParams, Real};
 use self::project::{ScreenGrad, View};
 use super::RenderError;
 use super::composite::{CompositeRules, RenderStats};
-use super::project::{SPAN_MARGIN, exp_neg4};
 use super::options::{Outputs, RenderMode, RenderOptions, Rules};
+use super::project::{SPAN_MARGIN, exp_neg4};
 use super::screen::{ScreenEntry, gather_visible};
 use super::tiles::{TILE_SIZE, TileBins, depth_order};
 use crate::gaussians::sh_coeffs_per_channel;
@@ -629,7 +629,10 @@ fn row_span<F: Real>(
     let center = s.center[0] + p * dy;
     let root = if root_sq < 0.0 { 0.0 } else { root_sq.sqrt() };
     let (a, b) = (center - root - SPAN_MARGIN, center + root + SPAN_MARGIN);
-    (lo(a - off, g.x0, g.tw).max(lx0), hi(b - off, g.x0, g.tw).min(lx1))
+    (
+        lo(a - off, g.x0, g.tw).max(lx0),
+        hi(b - off, g.x0, g.tw).min(lx1),
+    )
 }
 
 /// One splat over its pixels of one tile in the backward pass, pixel by pixel: returns its
