@@ -81,7 +81,7 @@ const GROUPS: [Group; 5] = [
 ];
 
 /// Components `(index, value slot)` of Gaussian `i` in `group`.
-fn slot<'a>(p: &'a mut GaussianParams, group: Group, i: usize, c: usize) -> &'a mut f64 {
+fn slot(p: &mut GaussianParams, group: Group, i: usize, c: usize) -> &mut f64 {
     let k = p.sh_per_gaussian();
     match group {
         Group::Means => &mut p.means[i][c],

@@ -413,7 +413,7 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
     (0..bins.tiles_y).into_par_iter().for_each(|ty| {
         let mut s = BackwardTile::<F>::default();
         for tx in 0..bins.tiles_x {
-            ctx.backward_tile(forward, grads, tx, ty, &rects, &slots, &mut s);
+            ctx.backward_tile(forward, grads, (tx, ty), (&rects, &slots), &mut s);
         }
     });
     stats.composite_s = start.elapsed().as_secs_f64();
@@ -479,8 +479,8 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
                     mean[m] += p.mean[m];
                     log_scale[m] += p.log_scale[m];
                 }
-                for m in 0..4 {
-                    rotation[m] += p.rotation[m];
+                for (a, b) in rotation.iter_mut().zip(p.rotation) {
+                    *a += b;
                 }
                 *opacity += p.opacity_logit;
                 mean2d[0] += g.mean[0];
@@ -926,10 +926,8 @@ impl<F: Real> Ctx<'_, F> {
         &self,
         fwd: &GradRender<F>,
         grads: &ImageGrads<'_, F>,
-        tx: u32,
-        ty: u32,
-        rects: &[SlotRect],
-        slots: &[[AtomicU64; SLOT]],
+        (tx, ty): (u32, u32),
+        (rects, slots): (&[SlotRect], &[[AtomicU64; SLOT]]),
         s: &mut BackwardTile<F>,
     ) {
         let ts = TILE_SIZE as usize;

@@ -196,6 +196,16 @@ impl GaussianGrads {
     pub fn is_empty(&self) -> bool {
         self.means.is_empty()
     }
+
+    /// Sets every gradient to zero, keeping the buffers (for the next step of a fitter).
+    pub fn clear(&mut self) {
+        self.means.fill([0.0; 3]);
+        self.log_scales.fill([0.0; 3]);
+        self.rotations.fill([0.0; 4]);
+        self.opacity_logits.fill(0.0);
+        self.sh.fill(0.0);
+        self.means2d.fill([0.0; 2]);
+    }
 }
 
 /// The float type of the per-pixel forward and backward arithmetic: `f32` (as gsplat; the

@@ -186,6 +186,8 @@ struct Trace {
     basis: [f64; 16],
     /// Colour channels with `raw + 0.5 > 0` (not clamped).
     color_free: [bool; 3],
+    /// The SH coefficients (file order).
+    coeffs: [f64; 48],
 }
 
 /// Projects Gaussian `i` (module documentation); `None` when culled. The values equal those of
@@ -330,6 +332,7 @@ fn trace<P: DiffParams + ?Sized>(
         dir,
         basis,
         color_free,
+        coeffs,
     };
     Some((screen, trace))
 }
@@ -406,8 +409,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     // Colour → SH coefficients and the view direction.
     let degree = p.sh_degree().min(3);
     let k = sh_coeffs_per_channel(degree);
-    let mut coeffs = [0.0; 48];
-    p.sh_coeffs(i, &mut coeffs);
+    let coeffs = &tr.coeffs;
     let mut g_basis = [0.0; 16];
     for c in 0..3 {
         if !tr.color_free[c] {
@@ -415,10 +417,16 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
         }
         let gc = g.color[c];
         out.sh[c] = gc * tr.basis[0];
-        for j in 1..k {
+        for (j, (gb, y)) in g_basis
+            .iter_mut()
+            .zip(&tr.basis)
+            .enumerate()
+            .take(k)
+            .skip(1)
+        {
             let idx = 3 + c * (k - 1) + (j - 1);
-            out.sh[idx] = gc * tr.basis[j];
-            g_basis[j] += gc * coeffs[idx];
+            out.sh[idx] = gc * y;
+            *gb += gc * coeffs[idx];
         }
     }
     if degree > 0 {
@@ -508,8 +516,8 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     ];
     if tr.qnorm > 0.0 {
         let dot: f64 = (0..4).map(|m| tr.qn[m] * g_qn[m]).sum();
-        for m in 0..4 {
-            out.rotation[m] = (g_qn[m] - tr.qn[m] * dot) / tr.qnorm;
+        for ((o, g), q) in out.rotation.iter_mut().zip(g_qn).zip(tr.qn) {
+            *o = (g - q * dot) / tr.qnorm;
         }
     }
 
