@@ -62,7 +62,7 @@ impl Loss {
     }
 }
 
-/// The parameter groups, as (name, accessor of the analytic gradient, accessor of the value).
+/// The parameter groups.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Group {
     Means,
@@ -80,7 +80,7 @@ const GROUPS: [Group; 5] = [
     Group::Sh,
 ];
 
-/// Components `(index, value slot)` of Gaussian `i` in `group`.
+/// Component `c` of Gaussian `i`'s parameters in `group`.
 fn slot(p: &mut GaussianParams, group: Group, i: usize, c: usize) -> &mut f64 {
     let k = p.sh_per_gaussian();
     match group {

@@ -400,6 +400,7 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         total += area;
     }
     let slots: Vec<[AtomicU64; SLOT]> = (0..total)
+        .into_par_iter()
         .map(|_| std::array::from_fn(|_| AtomicU64::new(0)))
         .collect();
     let ctx = Ctx {
@@ -776,15 +777,22 @@ fn backward_splat_f32(
             let free = on & raw.cmple(max_alpha);
             let g_sigma = Vec4::select(free, -(g_alpha * raw), Vec4::ZERO);
             acc[5] += Vec4::select(free, g_alpha * falloff, Vec4::ZERO);
+            // Σ g_σ dx, Σ g_σ dy, Σ g_σ dx², Σ g_σ dx dy, Σ g_σ dy²: the mean and conic
+            // gradients follow per (tile, splat) pair, below.
             let gdx = g_sigma * dx;
-            acc[0] += gdx * a + g_sigma * (b * dy);
-            acc[1] += gdx * b + g_sigma * (c * dy);
+            let gdy = g_sigma * dy;
+            acc[0] += gdx;
+            acc[1] += gdy;
             acc[2] += gdx * dx;
             acc[3] += gdx * dy;
-            acc[4] += g_sigma * (dy * dy);
+            acc[4] += gdy * dy;
         }
     }
     let mut sum = acc.map(|v| v.to_array().iter().map(|&x| f64::from(x)).sum::<f64>());
+    let [a, b, c] = sp.conic.map(f64::from);
+    let (sdx, sdy) = (sum[0], sum[1]);
+    sum[0] = a * sdx + b * sdy;
+    sum[1] = b * sdx + c * sdy;
     sum[2] *= 0.5;
     sum[4] *= 0.5;
     sum

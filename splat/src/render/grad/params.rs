@@ -199,12 +199,13 @@ impl GaussianGrads {
 
     /// Sets every gradient to zero, keeping the buffers (for the next step of a fitter).
     pub fn clear(&mut self) {
-        self.means.fill([0.0; 3]);
-        self.log_scales.fill([0.0; 3]);
-        self.rotations.fill([0.0; 4]);
-        self.opacity_logits.fill(0.0);
-        self.sh.fill(0.0);
-        self.means2d.fill([0.0; 2]);
+        use rayon::prelude::*;
+        self.means.par_iter_mut().for_each(|v| *v = [0.0; 3]);
+        self.log_scales.par_iter_mut().for_each(|v| *v = [0.0; 3]);
+        self.rotations.par_iter_mut().for_each(|v| *v = [0.0; 4]);
+        self.opacity_logits.par_iter_mut().for_each(|v| *v = 0.0);
+        self.sh.par_iter_mut().for_each(|v| *v = 0.0);
+        self.means2d.par_iter_mut().for_each(|v| *v = [0.0; 2]);
     }
 }
 
