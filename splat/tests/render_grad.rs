@@ -320,3 +320,46 @@ fn f32_forward_matches_the_renderer_and_f64_backward() {
         assert!(errs.iter().all(|&e| e < 1e-3));
     }
 }
+
+#[test]
+fn gradients_do_not_depend_on_the_thread_count() {
+    let (p, camera) = random_scene(40, 3, 77);
+    let options = RenderOptions::default();
+    let loss = Loss::new(camera.width as usize * camera.height as usize, 3);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| loss.grads(&p, &camera, &options))
+    };
+    assert_eq!(run(1), run(3));
+}
+
+#[test]
+fn refuses_what_it_cannot_differentiate() {
+    use trisplat_splat::render::{GradError, RenderMode};
+    let (p, camera) = random_scene(3, 0, 1);
+    let surfels = RenderOptions {
+        mode: RenderMode::Surfel2d,
+        ..RenderOptions::default()
+    };
+    assert!(matches!(
+        render_with_grad::<f64, _>(&p, &camera, &surfels),
+        Err(GradError::UnsupportedMode(RenderMode::Surfel2d))
+    ));
+    let options = RenderOptions::default();
+    let fwd = render_with_grad::<f64, _>(&p, &camera, &options).unwrap();
+    let short = vec![0.0; 5];
+    let grads = ImageGrads {
+        alpha: Some(&short),
+        ..ImageGrads::default()
+    };
+    assert!(matches!(
+        backward(&p, &camera, &options, &fwd, &grads),
+        Err(GradError::Size { .. })
+    ));
+    // No image gradient at all: zero gradients.
+    let g = backward(&p, &camera, &options, &fwd, &ImageGrads::default()).unwrap();
+    assert!(g.means.iter().flatten().all(|&v| v == 0.0));
+}
