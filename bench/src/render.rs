@@ -14,7 +14,10 @@ use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_splat::gaussians::{logit, to_wxyz};
-use trisplat_splat::render::{Outputs, RenderOptions, RenderStats, render};
+use trisplat_splat::render::{
+    BackwardStats, GaussianGrads, ImageGrads, Outputs, RenderOptions, RenderStats, backward_into,
+    render, render_with_grad,
+};
 use trisplat_splat::{GaussianParts, GaussianSet};
 
 /// The FLAME registered scan (not redistributable: read from the shared data folder).
@@ -43,6 +46,10 @@ pub struct RenderBenchArgs {
     /// Also render normals and median depth (the geometry outputs).
     #[arg(long)]
     pub all_outputs: bool,
+    /// Skip the backward-pass rows (differentiable forward and backward of an rgb + alpha +
+    /// depth loss, timed against the plain render).
+    #[arg(long)]
+    pub no_backward: bool,
 }
 
 /// The benchmark scene: Gaussians on the scan and a camera framing it from the front.
@@ -225,6 +232,113 @@ pub fn run(args: &RenderBenchArgs) -> anyhow::Result<()> {
             coverage * 100.0,
             opaque * 100.0
         );
+        if !args.no_backward {
+            let t = pool.install(|| time_backward(&set, &camera, args.frames.max(1)))?;
+            println!(
+                "{threads} thread(s), backward pass: plain render {:.2} ms, render_with_grad \
+                 (f32) {:.2} ms, backward {:.2} ms (best of {}); backward / plain render \
+                 {:.2}, backward / render_with_grad {:.2}; backward stages: tiles {:.2} ms, \
+                 reduce {:.2} ms, projection {:.2} ms",
+                t.plain * 1e3,
+                t.forward * 1e3,
+                t.backward * 1e3,
+                args.frames.max(1),
+                t.backward / t.plain,
+                t.backward / t.forward,
+                t.stages.composite_s * 1e3,
+                t.stages.reduce_s * 1e3,
+                t.stages.project_s * 1e3
+            );
+            if threads == 1 && t.cpu[0] > 0.0 {
+                let f = args.frames.max(1) as f64;
+                println!(
+                    "1 thread, backward pass, CPU time per frame: plain render {:.2} ms, \
+                     render_with_grad {:.2} ms, backward {:.2} ms; backward / plain render {:.2}",
+                    t.cpu[0] / f * 1e3,
+                    t.cpu[1] / f * 1e3,
+                    t.cpu[2] / f * 1e3,
+                    t.cpu[2] / t.cpu[0]
+                );
+            }
+        }
     }
     Ok(())
+}
+
+/// Best times of one frame, in seconds.
+struct BackwardTimes {
+    plain: f64,
+    forward: f64,
+    backward: f64,
+    /// The stages of the best backward pass.
+    stages: BackwardStats,
+    /// CPU time of the calling thread summed over the timed frames (plain render,
+    /// differentiable forward, backward): with one thread all the work runs on it, so this sees
+    /// through a loaded machine.
+    cpu: [f64; 3],
+}
+
+/// Times the plain render (rgb + alpha + depth), the differentiable forward and the backward
+/// pass of a loss on all three images (seeded random image gradients), best of `frames`.
+fn time_backward(
+    set: &GaussianSet,
+    camera: &Camera,
+    frames: usize,
+) -> anyhow::Result<BackwardTimes> {
+    let options = RenderOptions::default();
+    let pixels = camera.width as usize * camera.height as usize;
+    let mut rng = Rng::new(5);
+    let mut draw = |n: usize| {
+        (0..n)
+            .map(|_| rng.uniform_f32() - 0.5)
+            .collect::<Vec<f32>>()
+    };
+    let (g_rgb, g_alpha, g_depth) = (draw(3 * pixels), draw(pixels), draw(pixels));
+    let grads = ImageGrads {
+        rgb: Some(&g_rgb),
+        alpha: Some(&g_alpha),
+        depth: Some(&g_depth),
+    };
+    let mut t = BackwardTimes {
+        plain: f64::INFINITY,
+        forward: f64::INFINITY,
+        backward: f64::INFINITY,
+        stages: BackwardStats::default(),
+        cpu: [0.0; 3],
+    };
+    let mut g = GaussianGrads::zeros(set.len(), set.sh_degree());
+    for frame in 0..WARM_UP + frames {
+        let cpu0 = thread_cpu_s();
+        let start = std::time::Instant::now();
+        render(set, camera, &options)?;
+        let plain = start.elapsed().as_secs_f64();
+        let cpu1 = thread_cpu_s();
+        let start = std::time::Instant::now();
+        let fwd = render_with_grad::<f32, _>(set, camera, &options)?;
+        let forward = start.elapsed().as_secs_f64();
+        let cpu2 = thread_cpu_s();
+        let start = std::time::Instant::now();
+        // A fitter's step: the gradient buffers cleared and filled again.
+        g.clear();
+        let stages = backward_into(set, camera, &options, &fwd, &grads, &mut g)?;
+        let back = start.elapsed().as_secs_f64();
+        let cpu3 = thread_cpu_s();
+        std::hint::black_box(&g);
+        if let (Some(c0), Some(c1), Some(c2), Some(c3)) = (cpu0, cpu1, cpu2, cpu3)
+            && frame >= WARM_UP
+        {
+            t.cpu[0] += c1 - c0;
+            t.cpu[1] += c2 - c1;
+            t.cpu[2] += c3 - c2;
+        }
+        if frame >= WARM_UP && back < t.backward {
+            t.backward = back;
+            t.stages = stages;
+        }
+        if frame >= WARM_UP {
+            t.plain = t.plain.min(plain);
+            t.forward = t.forward.min(forward);
+        }
+    }
+    Ok(t)
 }

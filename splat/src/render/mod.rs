@@ -13,6 +13,7 @@
 //! run in parallel with rayon; the images do not depend on the thread count.
 
 pub mod composite;
+pub mod grad;
 pub mod image;
 pub mod options;
 pub mod perspective;
@@ -26,6 +27,10 @@ use std::time::Instant;
 use trisplat_geometry::Camera;
 
 pub use composite::{CompositeRules, MedianRule, RenderStats, rasterize};
+pub use grad::{
+    BackwardStats, DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads,
+    Real, backward, backward_into, render_with_grad,
+};
 pub use image::RenderImages;
 pub use options::{Outputs, RenderMode, RenderOptions, Rules};
 pub use screen::{Sample, ScreenSplats, SplatKernel};

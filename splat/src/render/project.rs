@@ -144,7 +144,7 @@ impl SplatKernel for EwaKernel {
 }
 
 /// The row-span coefficients of [`EwaSplat::span`] for conic `(a, b, c)` and `sigma_max`.
-fn row_span_coefficients([a, b, c]: [f64; 3], sigma_max: f64) -> [f32; 3] {
+pub(crate) fn row_span_coefficients([a, b, c]: [f64; 3], sigma_max: f64) -> [f32; 3] {
     if a > 0.0 && a.is_finite() {
         [
             (b / a) as f32,
@@ -220,7 +220,7 @@ fn pow2_neg4(n: Vec4) -> Vec4 {
 }
 
 /// Pixels of rounding margin on each side of an analytic row span.
-const SPAN_MARGIN: f32 = 0.5;
+pub(crate) const SPAN_MARGIN: f32 = 0.5;
 
 /// What a 3DGS projection needs to know of the camera, precomputed once.
 struct View {
