@@ -478,6 +478,7 @@ impl Session {
     /// The local origin: the session's template, positions, rest means and
     /// [`Session::deform`] are relative to it (zero unless the template is far from the
     /// world origin; see the module documentation).
+    #[must_use]
     pub fn origin(&self) -> DVec3 {
         self.origin
     }

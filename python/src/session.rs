@@ -171,16 +171,18 @@ impl Session {
         Ok(Gaussians::from_rust(py, set))
     }
 
-    /// The template's vertices at animation frame ``frame``, float64 ``(V, 3)``.
+    /// The template's vertices at animation frame ``frame``, float64 ``(V, 3)``, in world
+    /// coordinates (the session works relative to a local origin far from the world's).
     fn positions<'py>(
         &self,
         py: Python<'py>,
         frame: usize,
     ) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
         let positions = py.detach(|| {
-            self.lock()?
-                .positions(frame)
-                .map_err(|e| error::library(&e))
+            let mut session = self.lock()?;
+            let origin = session.origin();
+            let local = session.positions(frame).map_err(|e| error::library(&e))?;
+            PyResult::Ok(local.into_iter().map(|p| p + origin).collect::<Vec<_>>())
         })?;
         Ok(rows_out::<glam::DVec3, f64>(py, positions, 3))
     }
