@@ -656,3 +656,26 @@ fn gltf_attribute_naming_a_missing_accessor_beside_an_odd_semantic_is_refused() 
         .to_string();
     assert!(e.contains("which does not exist"), "{e}");
 }
+
+/// Found by AFL (`fuzz/regressions/gltf*/invalid_utf8_hides_missing_position_accessor.gltf`):
+/// the same missing `POSITION` accessor, hidden from the accessor check by invalid UTF-8 in a
+/// string the `gltf` crate skips (plain JSON failed, so the check passed it on to the crate's
+/// validation, which panicked). The plain JSON is now read before the crate validates, so both
+/// readers refuse it as a document error naming the line.
+#[test]
+fn gltf_not_plain_json_is_refused_before_the_crate_validates_it() {
+    use trisplat_geometry::animation::{AnimationError, Clip, GltfTemplate};
+    for target in ["gltf", "gltf_animated"] {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../fuzz/regressions")
+            .join(target)
+            .join("invalid_utf8_hides_missing_position_accessor.gltf");
+        let (element, message) = malformed(io::read_mesh(&p), &p);
+        assert_eq!(element, "document", "{message}");
+        assert!(message.contains("line"), "{message}");
+        match GltfTemplate::open(&p, &Clip::FirstIfAny) {
+            Err(AnimationError::Gltf { path, .. }) => assert_eq!(path, p),
+            other => panic!("expected a document error for {target}, got {other:?}"),
+        }
+    }
+}

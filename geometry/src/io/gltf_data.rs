@@ -104,7 +104,13 @@ impl GltfData {
         } else {
             (bytes, None)
         };
-        check_attribute_indices(&json_bytes).map_err(err)?;
+        // The reference checks read this plain JSON, so a document the `gltf` crate accepts
+        // but plain JSON does not (invalid UTF-8 in a string the crate skips) is refused rather
+        // than checked as empty; and it is read first, so that no document reaches the
+        // crate's validation unchecked.
+        let json = serde_json::from_slice(&json_bytes)
+            .map_err(|e| err(GltfDataErrorKind::Document(gltf::Error::Deserialize(e))))?;
+        check_attribute_indices(&json).map_err(err)?;
         let document = match gltf::Gltf::from_slice(&json_bytes) {
             Ok(g) => g.document,
             // Extension-defined attribute semantics (`KHR_gaussian_splatting:SCALE`) are valid
@@ -120,11 +126,6 @@ impl GltfData {
                 None => return Err(err(GltfDataErrorKind::Document(e))),
             },
         };
-        // The reference checks read this plain JSON, so a document the `gltf` crate accepts
-        // but plain JSON does not (invalid UTF-8 in a string the crate skips) is refused rather
-        // than checked as empty.
-        let json = serde_json::from_slice(&json_bytes)
-            .map_err(|e| err(GltfDataErrorKind::Document(gltf::Error::Deserialize(e))))?;
         let buffers = load_buffers(path, &document, blob).map_err(err)?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -404,11 +405,7 @@ fn renamed_extension_semantics(json_bytes: &[u8]) -> Option<Vec<u8>> {
 /// does not have (the `gltf` crate's validation indexes the accessor array with `POSITION`
 /// unchecked). Read from the plain JSON, so it holds whatever the `gltf` crate makes of the
 /// rest of the document (an unknown semantic such as `NOR:AL` included).
-fn check_attribute_indices(json_bytes: &[u8]) -> Result<(), GltfDataErrorKind> {
-    let Ok(json) = serde_json::from_slice::<serde_json::Value>(json_bytes) else {
-        // The validated parse reports what is wrong.
-        return Ok(());
-    };
+fn check_attribute_indices(json: &serde_json::Value) -> Result<(), GltfDataErrorKind> {
     let accessors = json
         .get("accessors")
         .and_then(|a| a.as_array())
