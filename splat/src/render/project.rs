@@ -310,6 +310,54 @@ pub fn project_ewa(
     (screen, EwaKernel { splats })
 }
 
+/// The pixel-space centre and radii of a projected Gaussian with 2D covariance diagonal
+/// `c00, c11` and determinant `det` (blur included) and projected centre `[u, w]`, by `rules`
+/// (gsplat: extent `min(3, √(2 ln(255 opacity)))` σ per axis, culled below alpha 1/255; the
+/// original rules: 3 √λ_max, centre moved by half a pixel), or `None` when it is culled or
+/// entirely off the `size` image. Shared by the renderer and its gradient, so both keep the
+/// same splats.
+pub(crate) fn screen_footprint(
+    rules: Rules,
+    opacity: f64,
+    log_ratio: f64,
+    [c00, c11, det]: [f64; 3],
+    [mut u, mut w]: [f64; 2],
+    [width, height]: [f64; 2],
+) -> Option<([f64; 2], [f64; 2])> {
+    let radius = match rules {
+        Rules::Gsplat => {
+            if opacity < f64::from(ALPHA_THRESHOLD) {
+                return None;
+            }
+            let extent = GSPLAT_EXTENT.min((2.0 * log_ratio).sqrt());
+            let rx = (extent * c00.sqrt()).ceil();
+            let ry = (extent * c11.sqrt()).ceil();
+            if rx <= 0.0 && ry <= 0.0 {
+                return None;
+            }
+            [rx, ry]
+        }
+        Rules::Original3dgs => {
+            let mid = 0.5 * (c00 + c11);
+            let root = (mid * mid - det).max(ORIGINAL_EIGEN_FLOOR).sqrt();
+            let lambda = (mid + root).max(mid - root);
+            let r = (ORIGINAL_EXTENT * lambda.sqrt()).ceil();
+            u -= 0.5;
+            w -= 0.5;
+            [r, r]
+        }
+    };
+    if u + radius[0] <= 0.0
+        || u - radius[0] >= width
+        || w + radius[1] <= 0.0
+        || w - radius[1] >= height
+        || !(u.is_finite() && w.is_finite())
+    {
+        return None;
+    }
+    Some(([u, w], radius))
+}
+
 fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Option<Projected> {
     let mean = set.means()[i].as_dvec3();
     let t = v.w2c * (mean - v.position);
@@ -348,42 +396,19 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
     } else {
         opacity
     };
-    let mut u = v.fx * t.x / z + v.cx;
-    let mut w = v.fy * t.y / z + v.cy;
+    let u = v.fx * t.x / z + v.cx;
+    let w = v.fy * t.y / z + v.cy;
     // `ln(255 opacity)`: the largest sigma with alpha >= 1/255 (negative, NaN or -inf for
     // opacities below 1/255, which gsplat culls and the original rules clamp to 0 below).
     let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
-    let radius = match o.rules {
-        Rules::Gsplat => {
-            if opacity < f64::from(ALPHA_THRESHOLD) {
-                return None;
-            }
-            let extent = GSPLAT_EXTENT.min((2.0 * log_ratio).sqrt());
-            let rx = (extent * c00.sqrt()).ceil();
-            let ry = (extent * c11.sqrt()).ceil();
-            if rx <= 0.0 && ry <= 0.0 {
-                return None;
-            }
-            [rx, ry]
-        }
-        Rules::Original3dgs => {
-            let mid = 0.5 * (c00 + c11);
-            let root = (mid * mid - det).max(ORIGINAL_EIGEN_FLOOR).sqrt();
-            let lambda = (mid + root).max(mid - root);
-            let r = (ORIGINAL_EXTENT * lambda.sqrt()).ceil();
-            u -= 0.5;
-            w -= 0.5;
-            [r, r]
-        }
-    };
-    if u + radius[0] <= 0.0
-        || u - radius[0] >= v.width
-        || w + radius[1] <= 0.0
-        || w - radius[1] >= v.height
-        || !(u.is_finite() && w.is_finite())
-    {
-        return None;
-    }
+    let ([u, w], radius) = screen_footprint(
+        o.rules,
+        opacity,
+        log_ratio,
+        [c00, c11, det],
+        [u, w],
+        [v.width, v.height],
+    )?;
     let inv = 1.0 / det;
     let color = if o.outputs.rgb {
         crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - v.position)

@@ -13,13 +13,8 @@ use super::params::DiffParams;
 use crate::gaussians::sh_coeffs_per_channel;
 use crate::render::composite::ALPHA_THRESHOLD;
 use crate::render::options::{RenderOptions, Rules};
-use crate::render::project::{
-    EPS_2D, FRUSTUM_MARGIN, GSPLAT_EXTENT, ORIGINAL_EXTENT, row_span_coefficients,
-};
+use crate::render::project::{EPS_2D, FRUSTUM_MARGIN, row_span_coefficients, screen_footprint};
 use crate::sh::{SH_C1, SH_C2, SH_C3, sh_basis};
-
-/// The original 3DGS floor of `mid² − det` (as in [`crate::render::project`]).
-const ORIGINAL_EIGEN_FLOOR: f64 = 0.1;
 
 /// What the projection needs of the camera.
 pub(crate) struct View {
@@ -248,40 +243,17 @@ fn trace<P: DiffParams + ?Sized>(
         1.0
     };
     let opacity = sig * comp;
-    let mut u = v.fx * t.x / z + v.cx;
-    let mut w = v.fy * t.y / z + v.cy;
+    let u = v.fx * t.x / z + v.cx;
+    let w = v.fy * t.y / z + v.cy;
     let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
-    let radius = match o.rules {
-        Rules::Gsplat => {
-            if opacity < f64::from(ALPHA_THRESHOLD) {
-                return None;
-            }
-            let extent = GSPLAT_EXTENT.min((2.0 * log_ratio).sqrt());
-            let rx = (extent * d00.sqrt()).ceil();
-            let ry = (extent * d11.sqrt()).ceil();
-            if rx <= 0.0 && ry <= 0.0 {
-                return None;
-            }
-            [rx, ry]
-        }
-        Rules::Original3dgs => {
-            let mid = 0.5 * (d00 + d11);
-            let root = (mid * mid - det).max(ORIGINAL_EIGEN_FLOOR).sqrt();
-            let lambda = (mid + root).max(mid - root);
-            let r = (ORIGINAL_EXTENT * lambda.sqrt()).ceil();
-            u -= 0.5;
-            w -= 0.5;
-            [r, r]
-        }
-    };
-    if u + radius[0] <= 0.0
-        || u - radius[0] >= v.width
-        || w + radius[1] <= 0.0
-        || w - radius[1] >= v.height
-        || !(u.is_finite() && w.is_finite())
-    {
-        return None;
-    }
+    let ([u, w], radius) = screen_footprint(
+        o.rules,
+        opacity,
+        log_ratio,
+        [d00, d11, det],
+        [u, w],
+        [v.width, v.height],
+    )?;
     let inv = 1.0 / det;
     // Colour: max(Σ sh_k Y_k(dir) + 0.5, 0).
     let degree = p.sh_degree().min(3);
