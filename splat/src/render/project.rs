@@ -223,21 +223,23 @@ fn pow2_neg4(n: Vec4) -> Vec4 {
 pub(crate) const SPAN_MARGIN: f32 = 0.5;
 
 /// What a 3DGS projection needs to know of the camera, precomputed once.
-struct View {
-    w2c: DMat3,
-    position: DVec3,
-    fx: f64,
-    fy: f64,
-    cx: f64,
-    cy: f64,
-    width: f64,
-    height: f64,
-    lim_x: (f64, f64),
-    lim_y: (f64, f64),
+pub(crate) struct View {
+    pub(crate) w2c: DMat3,
+    pub(crate) position: DVec3,
+    pub(crate) fx: f64,
+    pub(crate) fy: f64,
+    pub(crate) cx: f64,
+    pub(crate) cy: f64,
+    pub(crate) width: f64,
+    pub(crate) height: f64,
+    /// `(−lower, upper)` limits of x/z in the Jacobian clamp.
+    pub(crate) lim_x: (f64, f64),
+    pub(crate) lim_y: (f64, f64),
 }
 
 impl View {
-    fn new(camera: &Camera, rules: Rules) -> Self {
+    /// The view of `camera` under `rules`.
+    pub(crate) fn new(camera: &Camera, rules: Rules) -> Self {
         let (width, height) = (f64::from(camera.width), f64::from(camera.height));
         let tan_x = 0.5 * width / camera.fx;
         let tan_y = 0.5 * height / camera.fy;

@@ -7,68 +7,14 @@
 //! z-dependence stays); the colour's `max(·, 0)` passes none where it clamps.
 
 use glam::{DMat3, DVec3};
-use trisplat_geometry::Camera;
 
 use super::params::DiffParams;
 use crate::gaussians::sh_coeffs_per_channel;
 use crate::render::composite::ALPHA_THRESHOLD;
 use crate::render::options::{RenderOptions, Rules};
-use crate::render::project::{EPS_2D, FRUSTUM_MARGIN, row_span_coefficients, screen_footprint};
+pub(crate) use crate::render::project::View;
+use crate::render::project::{EPS_2D, row_span_coefficients, screen_footprint};
 use crate::sh::{SH_C1, SH_C2, SH_C3, sh_basis};
-
-/// What the projection needs of the camera.
-pub(crate) struct View {
-    pub w2c: DMat3,
-    pub position: DVec3,
-    pub fx: f64,
-    pub fy: f64,
-    pub cx: f64,
-    pub cy: f64,
-    pub width: f64,
-    pub height: f64,
-    /// `(−lower, upper)` limits of x/z in the Jacobian clamp.
-    pub lim_x: (f64, f64),
-    pub lim_y: (f64, f64),
-}
-
-impl View {
-    pub(crate) fn new(camera: &Camera, rules: Rules) -> Self {
-        let (width, height) = (f64::from(camera.width), f64::from(camera.height));
-        let tan_x = 0.5 * width / camera.fx;
-        let tan_y = 0.5 * height / camera.fy;
-        let (lim_x, lim_y) = match rules {
-            Rules::Gsplat => (
-                (
-                    camera.cx / camera.fx + FRUSTUM_MARGIN * tan_x,
-                    (width - camera.cx) / camera.fx + FRUSTUM_MARGIN * tan_x,
-                ),
-                (
-                    camera.cy / camera.fy + FRUSTUM_MARGIN * tan_y,
-                    (height - camera.cy) / camera.fy + FRUSTUM_MARGIN * tan_y,
-                ),
-            ),
-            Rules::Original3dgs => {
-                let (lx, ly) = (
-                    (1.0 + FRUSTUM_MARGIN) * tan_x,
-                    (1.0 + FRUSTUM_MARGIN) * tan_y,
-                );
-                ((lx, lx), (ly, ly))
-            }
-        };
-        Self {
-            w2c: camera.world_to_camera_rotation(),
-            position: camera.position(),
-            fx: camera.fx,
-            fy: camera.fy,
-            cx: camera.cx,
-            cy: camera.cy,
-            width,
-            height,
-            lim_x,
-            lim_y,
-        }
-    }
-}
 
 /// One projected Gaussian's screen quantities, in `f64`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
