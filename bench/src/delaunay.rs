@@ -59,6 +59,11 @@ pub struct DelaunayBenchArgs {
     /// Skip the error/run-time table.
     #[arg(long)]
     pub no_table: bool,
+    /// Write the scene instead of timing it: `DIR/template.ply`, the bound Gaussians
+    /// `DIR/gaussians.ply` and the animation `DIR/frames/frame_NNNN.ply` (binary, vertices as
+    /// doubles), so `trisplat extract` can be timed on it as a whole process.
+    #[arg(long, value_name = "DIR")]
+    pub write: Option<std::path::PathBuf>,
 }
 
 fn load_template() -> anyhow::Result<(String, TriMesh)> {
@@ -302,6 +307,44 @@ fn fingerprint(t: &[[u32; 3]]) -> u64 {
     })
 }
 
+/// Writes the template, the bound Gaussians and the animation's frames to `dir` and prints the
+/// `trisplat extract` commands that time the incremental mesher and the rebuild on them.
+fn write_scene(
+    dir: &Path,
+    template: &TriMesh,
+    set: &GaussianSet,
+    anim: &Animation,
+    frames: usize,
+) -> anyhow::Result<()> {
+    use trisplat_geometry::io::{WriteOptions, write_mesh};
+    let frames_dir = dir.join("frames");
+    std::fs::create_dir_all(&frames_dir)
+        .with_context(|| format!("creating {}", frames_dir.display()))?;
+    write_mesh(&dir.join("template.ply"), template, WriteOptions::default())?;
+    trisplat_splat::ply::write_gaussians(
+        &dir.join("gaussians.ply"),
+        set,
+        &trisplat_splat::ply::PlyWriteOptions::default(),
+    )?;
+    for f in 0..frames {
+        let mesh = TriMesh::try_new(anim.frame(f), template.triangles().to_vec())?;
+        write_mesh(
+            &frames_dir.join(format!("frame_{f:04}.ply")),
+            &mesh,
+            WriteOptions::default(),
+        )?;
+    }
+    let d = dir.display();
+    println!(
+        "wrote {d}/template.ply, {d}/gaussians.ply ({} Gaussians) and {frames} frames in \
+         {d}/frames; time the whole process with\n  trisplat extract --template {d}/template.ply \
+         --gaussians {d}/gaussians.ply --animation {d}/frames --method delaunay --targets report \
+         -q -o OUT [--rebuild-every 1]",
+        set.len()
+    );
+    Ok(())
+}
+
 /// Runs the benchmark.
 ///
 /// # Errors
@@ -310,6 +353,9 @@ pub fn run(args: &DelaunayBenchArgs) -> anyhow::Result<()> {
     let (name, template) = load_template()?;
     let set = make_gaussians(&template, args)?;
     let anim = Animation::new(&template, args.amplitude, args.frames);
+    if let Some(dir) = &args.write {
+        return write_scene(dir, &template, &set, &anim, args.frames);
+    }
     println!(
         "delaunay: {name} ({} vertices, {} triangles), {} Gaussians, {} frames, {} threads",
         template.vertex_count(),
