@@ -335,6 +335,13 @@ pub struct ExtractOptions {
     /// (yellow, and beyond). Needs --gt or --gt-sequence; not with --tsdf-colors.
     #[cfg_attr(feature = "cli", arg(long, conflicts_with = "tsdf_colors"))]
     pub error_colors: bool,
+    /// The template's axes, for the camera of report.html's pictures (which look at the model
+    /// from its front, a little to one side and above): three letters for the directions of x,
+    /// y and z as the model sees them, Right/Left, Up/Down, Back/Front (docs/conventions.md
+    /// §3 "Axes"). glTF's frame (+Y up, facing +Z) is luf; a Z-up mesh facing -Y (Blender's
+    /// front) is lbu. Only the pictures use it.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "AXES", default_value = "luf"))]
+    pub view_axes: trisplat_splat::axes::Axes,
     /// Refuse a weights track with channels that drive nothing (without it they are listed
     /// once on stderr and in the report, and ignored).
     #[cfg_attr(feature = "cli", arg(long))]
@@ -419,6 +426,7 @@ impl Default for ExtractOptions {
             tau_fraction: Some(DEFAULT_TAU_FRACTION),
             strict: false,
             error_colors: false,
+            view_axes: trisplat_splat::axes::Axes::Luf,
             targets: OutputTarget::ALL.to_vec(),
             limits: Limits::default(),
         }

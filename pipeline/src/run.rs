@@ -122,6 +122,7 @@ pub fn run(
         error_colors: o.error_colors,
         thumbnails: o.writes(OutputTarget::Report) && f == thumbnail_frame,
         threshold: o.threshold(),
+        view_axes: o.view_axes,
     };
     let mut done_frames = previous.done;
     let mut failed: Vec<FailedFrame> = Vec::new();
@@ -301,6 +302,8 @@ struct FrameExtras {
     thumbnails: bool,
     /// The F-score threshold: the colour scale is twice it.
     threshold: Tau,
+    /// The template's axes, for the thumbnails' camera.
+    view_axes: trisplat_splat::axes::Axes,
 }
 
 /// One frame: meshed by every method, each mesh written (atomically) to its frame file, with
@@ -330,7 +333,7 @@ fn run_frame(
             }
         }
         Ok::<_, PipelineError>(if extras.thumbnails {
-            frame_pictures(r, gt, scale)
+            frame_pictures(r, gt, scale, extras.view_axes)
         } else {
             Vec::new()
         })
@@ -400,6 +403,7 @@ fn frame_pictures(
     r: &FrameResult,
     gt: Option<&GtSamples>,
     scale: Option<f64>,
+    view_axes: trisplat_splat::axes::Axes,
 ) -> Vec<(String, Picture)> {
     let points: Vec<glam::DVec3> = match gt {
         Some(g) => g.mesh.positions().to_vec(),
@@ -409,7 +413,7 @@ fn frame_pictures(
             .flat_map(|m| m.output.mesh.positions().iter().copied())
             .collect(),
     };
-    let Some((camera, origin)) = thumbnail::frame_camera(&points) else {
+    let Some((camera, origin)) = thumbnail::frame_camera(&points, view_axes) else {
         return Vec::new();
     };
     let colouring = match (gt, scale) {

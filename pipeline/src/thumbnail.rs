@@ -9,9 +9,10 @@
 //! camera), so that the shape reads as well as the error. The background is white.
 //!
 //! Every picture of a frame uses the same camera ([`frame_camera`]): it looks at the points it
-//! is given (the ground truth's vertices, else the meshes') from the front-right and a little
-//! above, in glTF's axes (+Y up, the model facing +Z), and is fitted to them with a margin,
-//! 360 pixels high and as wide as their outline needs (144 to 576 pixels).
+//! is given (the ground truth's vertices, else the meshes') from the front, 30° to the model's
+//! left and 12° above, in the template's axes (`extract --view-axes`; glTF's by default: +Y up,
+//! the model facing +Z), and is fitted to them with a margin, 360 pixels high and as wide as
+//! their outline needs (144 to 576 pixels).
 //!
 //! Error colours on meshes: each vertex's distance to the ground truth through the same colour
 //! map and scale ([`error_colors`]).
@@ -24,6 +25,7 @@ use rayon::prelude::*;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::spatial::{SpatialError, TriangleBvh};
 use trisplat_geometry::{Camera, Rgba, TriMesh};
+use trisplat_splat::axes::Axes;
 
 use crate::report::GtSamples;
 
@@ -31,7 +33,8 @@ use crate::report::GtSamples;
 pub const THUMBNAIL_DIR: &str = "thumbnails";
 /// Height of a thumbnail in pixels.
 pub const THUMBNAIL_HEIGHT: u32 = 360;
-/// The camera's direction from the model, degrees about +Y from +Z (towards +X).
+/// The camera's direction from the model, degrees about the model's up axis from its front
+/// (towards its left: +X in glTF's axes).
 pub const AZIMUTH_DEG: f64 = 30.0;
 /// The camera's height above the model's centre, degrees.
 pub const ELEVATION_DEG: f64 = 12.0;
@@ -73,11 +76,11 @@ pub fn error_colors(distances: &[f64], scale: f64) -> Vec<Rgba> {
         .collect()
 }
 
-/// The camera of one frame's thumbnails (see the module docs), fitted to `points`, in
-/// coordinates relative to the centre of their bounding box (returned beside it); `None` for
-/// no points or points that all coincide.
+/// The camera of one frame's thumbnails (see the module docs), fitted to `points` given in
+/// `axes`, in coordinates relative to the centre of their bounding box (returned beside it);
+/// `None` for no points or points that all coincide.
 #[must_use]
-pub fn frame_camera(points: &[DVec3]) -> Option<(Camera, DVec3)> {
+pub fn frame_camera(points: &[DVec3], axes: Axes) -> Option<(Camera, DVec3)> {
     let bounds = trisplat_geometry::Aabb::from_dpoints(points)?;
     let centre = bounds.center();
     let radius = 0.5 * bounds.diagonal();
@@ -85,9 +88,12 @@ pub fn frame_camera(points: &[DVec3]) -> Option<(Camera, DVec3)> {
         return None;
     }
     let (az, el) = (AZIMUTH_DEG.to_radians(), ELEVATION_DEG.to_radians());
-    let towards_eye = DVec3::new(az.sin() * el.cos(), el.sin(), az.cos() * el.cos());
+    // In glTF's axes (luf), then in the points' own.
+    let to_points = Axes::Luf.to(axes);
+    let towards_eye = to_points * DVec3::new(az.sin() * el.cos(), el.sin(), az.cos() * el.cos());
     let eye = towards_eye * (4.0 * radius);
-    let aim = Camera::look_at("thumbnail", eye, DVec3::ZERO, DVec3::Y, (64, 64), 30.0).ok()?;
+    let up = to_points * DVec3::Y;
+    let aim = Camera::look_at("thumbnail", eye, DVec3::ZERO, up, (64, 64), 30.0).ok()?;
     // The outline of the points in normalised image coordinates (at most ~20,000 of them).
     let step = (points.len() / 20_000).max(1);
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -286,11 +292,39 @@ mod tests {
     }
 
     #[test]
+    fn the_camera_follows_the_template_axes() {
+        // A lopsided shape in glTF's axes, and the same shape stored Z-up facing -Y (lbu):
+        // told the axes, the camera sees both alike (every vertex at the same pixel).
+        let luf: Vec<DVec3> = tetra(1.0, DVec3::ZERO)
+            .positions()
+            .iter()
+            .map(|p| *p * DVec3::new(1.0, 2.0, 0.5))
+            .collect();
+        let m = Axes::Luf.to(Axes::Lbu);
+        let lbu: Vec<DVec3> = luf.iter().map(|p| m * *p).collect();
+        let (a, oa) = frame_camera(&luf, Axes::Luf).expect("camera");
+        let (b, ob) = frame_camera(&lbu, Axes::Lbu).expect("camera");
+        assert_eq!((a.width, a.height), (b.width, b.height));
+        for (p, q) in luf.iter().zip(&lbu) {
+            let pa = a.project(a.world_to_camera(*p - oa));
+            let pb = b.project(b.world_to_camera(*q - ob));
+            assert!((pa - pb).length() < 1e-9, "{pa} {pb}");
+        }
+        // Told the wrong axes, it does not.
+        let (c, oc) = frame_camera(&lbu, Axes::Luf).expect("camera");
+        let moved = luf.iter().zip(&lbu).any(|(p, q)| {
+            let pa = a.project(a.world_to_camera(*p - oa));
+            (pa - c.project(c.world_to_camera(*q - oc))).length() > 1.0
+        });
+        assert!(moved);
+    }
+
+    #[test]
     fn the_camera_frames_the_points_and_the_picture_shows_the_error() {
         // A unit tetrahedron far from the origin; the ground truth is the same shape.
         let shift = DVec3::new(1.0e4, -2.0e4, 5.0e3);
         let gt_mesh = tetra(1.0, shift);
-        let (camera, origin) = frame_camera(gt_mesh.positions()).expect("camera");
+        let (camera, origin) = frame_camera(gt_mesh.positions(), Axes::Luf).expect("camera");
         assert_eq!(camera.height, THUMBNAIL_HEIGHT);
         assert!((144..=576).contains(&camera.width), "{}", camera.width);
         // Every vertex projects inside the picture.
@@ -349,7 +383,7 @@ mod tests {
             "far faces in the top colour"
         );
         // No points, or one point: no camera.
-        assert!(frame_camera(&[]).is_none());
-        assert!(frame_camera(&[DVec3::ONE; 3]).is_none());
+        assert!(frame_camera(&[], Axes::Luf).is_none());
+        assert!(frame_camera(&[DVec3::ONE; 3], Axes::Luf).is_none());
     }
 }
