@@ -311,7 +311,15 @@ def eval(
     surface: bool = False,
     max_samples: int = 100_000_000,
 ) -> Dict[str, Any]:
-    """The JSON object of ``trisplat eval --json`` (without ``"command"``) as a dict: the
+    """The JSON object of ``trisplat eval --json`` as a dict: command ("eval"), the
     metrics (accuracy, completeness, chamfer_l1, chamfer_l2, normal_consistency,
     normal_angle_deg, n_pred, n_gt, thresholds, seconds), gt_bbox_diagonal, pred_structure,
     gt_structure, area_ratio, shared_vertex_fraction, relation."""
+
+def set_num_threads(n: Optional[int] = None) -> None:
+    """Sets the number of worker threads of every later call (the CLI's ``--threads``).
+    ``None`` or ``0``: back to the default, all cores (or ``RAYON_NUM_THREADS``). Results do
+    not depend on it."""
+
+def get_num_threads() -> int:
+    """The number of worker threads calls use now."""

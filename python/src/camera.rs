@@ -11,6 +11,7 @@ use trisplat::geometry::camera::{read_cameras_json, read_transforms_json, sphere
 
 use crate::arrays::rows_in;
 use crate::error;
+use crate::threads;
 
 /// A pinhole camera: image ``width`` × ``height`` pixels, focal lengths ``fx``, ``fy`` and
 /// principal point ``cx``, ``cy`` in pixels, ``rotation`` (camera-to-world, float64 ``(3, 3)``:
@@ -172,17 +173,16 @@ impl Camera {
 #[pyfunction]
 #[pyo3(signature = (path, size = None))]
 fn read_cameras(py: Python<'_>, path: PathBuf, size: Option<(u32, u32)>) -> PyResult<Vec<Camera>> {
-    let cameras = py
-        .detach(|| {
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| trisplat::geometry::io::IoError::os(&path, e))?;
-            if text.trim_start().starts_with('{') {
-                read_transforms_json(&path, size)
-            } else {
-                read_cameras_json(&path)
-            }
-        })
-        .map_err(|e| error::library(&e))?;
+    let cameras = threads::detach(py, || {
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| trisplat::geometry::io::IoError::os(&path, e))?;
+        if text.trim_start().starts_with('{') {
+            read_transforms_json(&path, size)
+        } else {
+            read_cameras_json(&path)
+        }
+    })
+    .map_err(|e| error::library(&e))?;
     Ok(cameras.into_iter().map(|inner| Camera { inner }).collect())
 }
 

@@ -11,6 +11,7 @@ use trisplat::pipeline::eval::{self as measure, DEFAULT_SAMPLES, EvalInput, Eval
 use crate::error;
 use crate::json::{json_to_py, to_json};
 use crate::mesh::{Mesh, PointCloud};
+use crate::threads;
 
 /// An argument: a path, a `Mesh` or a `PointCloud`; with the name errors give it (the path,
 /// else `side`).
@@ -28,14 +29,12 @@ fn input(py: Python<'_>, value: &Bound<'_, PyAny>, side: &str) -> PyResult<(Eval
             "{side}: expected a path, a Mesh or a PointCloud"
         ))
     })?;
-    let read = py
-        .detach(|| EvalInput::read(&path))
-        .map_err(|e| error::library(&e))?;
+    let read = threads::detach(py, || EvalInput::read(&path)).map_err(|e| error::library(&e))?;
     Ok((read, path.display().to_string()))
 }
 
 /// Measures ``pred`` against ``gt`` as ``trisplat eval --json`` does and returns its JSON
-/// object as a dict (docs/conventions.md §8, §10; without ``"command"``): ``accuracy``,
+/// object as a dict (docs/conventions.md §8, §10): ``command`` (``"eval"``), ``accuracy``,
 /// ``completeness``, ``chamfer_l1``, ``chamfer_l2``, ``normal_consistency``,
 /// ``normal_angle_deg``, ``n_pred``, ``n_gt``, ``thresholds`` (a list of ``tau``,
 /// ``tau_fraction``, ``precision``, ``recall``, ``fscore``), ``seconds``,
@@ -89,10 +88,15 @@ fn eval<'py>(
     };
     let (pred, pred_name) = input(py, pred, "prediction")?;
     let (gt, gt_name) = input(py, gt, "ground truth")?;
-    let done = py
-        .detach(|| measure::evaluate(pred, gt, (&pred_name, &gt_name), &options))
-        .map_err(|e| error::library(&e))?;
-    json_to_py(py, &to_json(&done.report)?)
+    let done = threads::detach(py, || {
+        measure::evaluate(pred, gt, (&pred_name, &gt_name), &options)
+    })
+    .map_err(|e| error::library(&e))?;
+    let mut object = to_json(&done.report)?;
+    if let serde_json::Value::Object(fields) = &mut object {
+        fields.insert("command".into(), "eval".into());
+    }
+    json_to_py(py, &object)
 }
 
 /// Adds the functions of this module.

@@ -13,6 +13,7 @@ use crate::arrays::{rows_in, rows_out};
 use crate::camera::Camera;
 use crate::error;
 use crate::mesh::Mesh;
+use crate::threads;
 
 /// Points as the library's `Vec3`s.
 fn points_in(points: &PyArrayLike2<'_, f32, AllowTypeChange>) -> PyResult<Vec<Vec3>> {
@@ -117,9 +118,10 @@ fn tsdf<'py>(
         keep_clusters,
         ..TsdfOptions::default()
     };
-    let fused = py
-        .detach(|| fuse(&cameras, &depth_images, color_images.as_deref(), &options))
-        .map_err(|e| error::about("tsdf", &e))?;
+    let fused = threads::detach(py, || {
+        fuse(&cameras, &depth_images, color_images.as_deref(), &options)
+    })
+    .map_err(|e| error::about("tsdf", &e))?;
     Ok(Mesh::from_rust(py, fused.mesh))
 }
 
@@ -137,14 +139,13 @@ fn alpha_shape<'py>(
     keep_clusters: usize,
 ) -> PyResult<Mesh> {
     let points = points_in(&points)?;
-    let mesh = py
-        .detach(|| {
-            shape_of(&points, alpha).map(|shape| match keep_clusters {
-                0 => shape.mesh,
-                k => keep_largest_clusters(&shape.mesh, k),
-            })
+    let mesh = threads::detach(py, || {
+        shape_of(&points, alpha).map(|shape| match keep_clusters {
+            0 => shape.mesh,
+            k => keep_largest_clusters(&shape.mesh, k),
         })
-        .map_err(|e| error::about("alpha_shape", &e))?;
+    })
+    .map_err(|e| error::about("alpha_shape", &e))?;
     Ok(Mesh::from_rust(py, mesh))
 }
 
@@ -158,9 +159,10 @@ fn delaunay<'py>(
     points: PyArrayLike2<'py, f32, AllowTypeChange>,
 ) -> PyResult<Bound<'py, PyArray2<u32>>> {
     let points = points_in(&points)?;
-    let tetrahedra = py
-        .detach(|| Delaunay3d::new(&points).map(|d| d.tetrahedra().to_vec()))
-        .map_err(|e| error::about("delaunay", &e))?;
+    let tetrahedra = threads::detach(py, || {
+        Delaunay3d::new(&points).map(|d| d.tetrahedra().to_vec())
+    })
+    .map_err(|e| error::about("delaunay", &e))?;
     Ok(rows_out::<[u32; 4], u32>(py, tetrahedra, 4))
 }
 

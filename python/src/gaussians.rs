@@ -29,6 +29,7 @@ use trisplat::splat::spz::{SpzReadOptions, SpzWriteOptions, read_spz, write_spz}
 use crate::arrays::{CloneBound, rows_in, rows_out, vec_in, vec_out};
 use crate::error;
 use crate::mesh::Mesh;
+use crate::threads;
 
 /// What a set carries beyond its arrays, kept so a file read and written back is unchanged.
 #[derive(Clone, Debug, Default)]
@@ -274,7 +275,7 @@ fn parse_axes(axes: Option<&str>) -> PyResult<Option<Axes>> {
 fn read_gaussians(py: Python<'_>, path: PathBuf, axes: Option<&str>) -> PyResult<Gaussians> {
     let axes = parse_axes(axes)?;
     let format = format_of(&path)?;
-    let set = py.detach(|| match format {
+    let set = threads::detach(py, || match format {
         Format::Ply => read_ply(&path).map_err(|e| error::library(&e)),
         Format::Spz => read_spz(&path, &SpzReadOptions { axes })
             .map(|f| f.gaussians)
@@ -302,7 +303,7 @@ fn write_gaussians(
     let axes = parse_axes(axes)?;
     let format = format_of(&path)?;
     let set = gaussians.to_rust(py)?;
-    py.detach(|| match format {
+    threads::detach(py, || match format {
         Format::Ply => {
             let encoding = if ascii {
                 PlyEncoding::Ascii
@@ -364,9 +365,8 @@ fn bind(
         opacity,
     };
     let mesh = mesh.to_rust(py)?;
-    let set = py
-        .detach(|| init_bound(&mesh, &options))
-        .map_err(|e| error::library(&e))?;
+    let set =
+        threads::detach(py, || init_bound(&mesh, &options)).map_err(|e| error::library(&e))?;
     Ok(Gaussians::from_rust(py, set))
 }
 
@@ -385,15 +385,14 @@ fn attach(
 ) -> PyResult<Gaussians> {
     let convention = self::convention(convention)?;
     let (set, mesh) = (gaussians.to_rust(py)?, mesh.to_rust(py)?);
-    let bound = py
-        .detach(|| {
-            if checked {
-                attach_checked(&set, &mesh, convention, &AttachLimits::default()).map(|r| r.0)
-            } else {
-                attach_set(&set, &mesh, convention)
-            }
-        })
-        .map_err(|e| error::library(&e))?;
+    let bound = threads::detach(py, || {
+        if checked {
+            attach_checked(&set, &mesh, convention, &AttachLimits::default()).map(|r| r.0)
+        } else {
+            attach_set(&set, &mesh, convention)
+        }
+    })
+    .map_err(|e| error::library(&e))?;
     Ok(Gaussians::from_rust(py, bound))
 }
 
@@ -413,7 +412,7 @@ impl Deformer {
     fn new(py: Python<'_>, template: &Mesh, mode: &str) -> PyResult<Self> {
         let mode = deform_mode(mode)?;
         let template = template.to_rust(py)?;
-        let inner = py.detach(|| RsDeformer::new(&template, mode));
+        let inner = threads::detach(py, || RsDeformer::new(&template, mode));
         Ok(Self { inner })
     }
 
@@ -428,8 +427,7 @@ impl Deformer {
         let positions: Vec<[f64; 3]> = rows_in(&vertices, "vertices")?;
         let positions: Vec<glam::DVec3> = positions.into_iter().map(glam::DVec3::from).collect();
         let set = gaussians.to_rust(py)?;
-        let world = py
-            .detach(|| self.inner.deform(&set, &positions))
+        let world = threads::detach(py, || self.inner.deform(&set, &positions))
             .map_err(|e| error::library(&e))?;
         Ok(Gaussians::from_rust(py, world))
     }

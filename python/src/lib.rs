@@ -4,7 +4,8 @@
 //! Arrays leave Rust without a copy: the library's buffers (`Vec<DVec3>`, `Vec<[u32; 3]>`, image
 //! `Vec<f32>`) are handed to numpy as they are ([`arrays`]). Arrays coming in are converted to
 //! the library's dtype if needed and copied once into the library's owned types, which own
-//! their buffers. Heavy work runs with the GIL released. Library errors become
+//! their buffers. Heavy work runs with the GIL released, in the pool `set_num_threads` chose
+//! ([`threads`]). Library errors become
 //! `trisplat.TrisplatError` with the library's message ([`error`]).
 //!
 //! | module | Python |
@@ -16,6 +17,7 @@
 //! | [`extract`] | `tsdf`, `alpha_shape`, `delaunay` |
 //! | [`eval`] | `eval` |
 //! | [`session`] | `Session` |
+//! | [`threads`] | `set_num_threads`, `get_num_threads` |
 //!
 //! The signatures, with types, are in `python/trisplat.pyi`; usage in `python/README.md`.
 
@@ -31,6 +33,7 @@ pub mod json;
 pub mod mesh;
 pub mod render;
 pub mod session;
+pub mod threads;
 
 /// The `trisplat` extension module.
 #[pymodule(name = "trisplat")]
@@ -44,5 +47,6 @@ fn init(m: &Bound<'_, PyModule>) -> PyResult<()> {
     extract::register(m)?;
     eval::register(m)?;
     session::register(m)?;
+    threads::register(m)?;
     Ok(())
 }

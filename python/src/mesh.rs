@@ -12,6 +12,7 @@ use trisplat::geometry::{PointCloud as RsPointCloud, TriMesh};
 use crate::arrays::{CloneBound, rows_in, rows_out};
 use crate::error;
 use crate::json::{json_to_py, to_json};
+use crate::threads;
 
 /// A triangle mesh: ``vertices`` float64 ``(N, 3)``, ``triangles`` uint32 ``(M, 3)``, and
 /// optional per-vertex ``normals`` float32 ``(N, 3)``, ``uvs`` float32 ``(N, 2)``, ``colors``
@@ -114,13 +115,13 @@ impl Mesh {
     /// Surface area (sum of the triangle areas, in float64).
     fn area(&self, py: Python<'_>) -> PyResult<f64> {
         let mesh = self.to_rust(py)?;
-        Ok(py.detach(|| mesh.area()))
+        Ok(threads::detach(py, || mesh.area()))
     }
 
     /// Signed volume (positive for a closed mesh with outward faces), in float64.
     fn volume(&self, py: Python<'_>) -> PyResult<f64> {
         let mesh = self.to_rust(py)?;
-        Ok(py.detach(|| mesh.signed_volume()))
+        Ok(threads::detach(py, || mesh.signed_volume()))
     }
 
     /// The structure of the mesh (``eval``'s ``pred_structure``): ``vertices``, ``triangles``,
@@ -128,7 +129,7 @@ impl Mesh {
     /// ``non_manifold_edges``, ``watertight``, ``winding_consistent`` (docs/conventions.md §8).
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let mesh = self.to_rust(py)?;
-        let stats = py.detach(|| MeshStats::of(&mesh));
+        let stats = threads::detach(py, || MeshStats::of(&mesh));
         json_to_py(py, &to_json(&stats)?)
     }
 
@@ -268,9 +269,7 @@ impl PointCloud {
 /// Raises ``TrisplatError`` naming the file and the element at fault.
 #[pyfunction]
 fn read_mesh(py: Python<'_>, path: PathBuf) -> PyResult<Mesh> {
-    let mesh = py
-        .detach(|| io::read_mesh(&path))
-        .map_err(|e| error::library(&e))?;
+    let mesh = threads::detach(py, || io::read_mesh(&path)).map_err(|e| error::library(&e))?;
     Ok(Mesh::from_rust(py, mesh))
 }
 
@@ -280,7 +279,7 @@ fn read_mesh(py: Python<'_>, path: PathBuf) -> PyResult<Mesh> {
 #[pyo3(signature = (path, mesh, ascii = false))]
 fn write_mesh(py: Python<'_>, path: PathBuf, mesh: &Mesh, ascii: bool) -> PyResult<()> {
     let mesh = mesh.to_rust(py)?;
-    py.detach(|| io::write_mesh(&path, &mesh, WriteOptions { ascii }))
+    threads::detach(py, || io::write_mesh(&path, &mesh, WriteOptions { ascii }))
         .map_err(|e| error::library(&e))
 }
 
@@ -288,9 +287,7 @@ fn write_mesh(py: Python<'_>, path: PathBuf, mesh: &Mesh, ascii: bool) -> PyResu
 /// vertices of any mesh file.
 #[pyfunction]
 fn read_points(py: Python<'_>, path: PathBuf) -> PyResult<PointCloud> {
-    let cloud = py
-        .detach(|| io::read_points(&path))
-        .map_err(|e| error::library(&e))?;
+    let cloud = threads::detach(py, || io::read_points(&path)).map_err(|e| error::library(&e))?;
     Ok(PointCloud::from_rust(py, cloud))
 }
 
@@ -299,8 +296,10 @@ fn read_points(py: Python<'_>, path: PathBuf) -> PyResult<PointCloud> {
 #[pyo3(signature = (path, cloud, ascii = false))]
 fn write_points(py: Python<'_>, path: PathBuf, cloud: &PointCloud, ascii: bool) -> PyResult<()> {
     let cloud = cloud.to_rust(py)?;
-    py.detach(|| io::write_points(&path, &cloud, WriteOptions { ascii }))
-        .map_err(|e| error::library(&e))
+    threads::detach(py, || {
+        io::write_points(&path, &cloud, WriteOptions { ascii })
+    })
+    .map_err(|e| error::library(&e))
 }
 
 /// Adds the classes and functions of this module.

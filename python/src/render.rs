@@ -10,6 +10,7 @@ use crate::arrays::image_out;
 use crate::camera::Camera;
 use crate::error;
 use crate::gaussians::Gaussians;
+use crate::threads;
 
 /// The images asked for by name.
 fn outputs(names: &[String]) -> PyResult<Outputs> {
@@ -104,8 +105,7 @@ pub fn render<'py>(
     };
     let set = gaussians.to_rust(py)?;
     let camera = &camera.inner;
-    let out = py
-        .detach(|| render_set(&set, camera, &options))
+    let out = threads::detach(py, || render_set(&set, camera, &options))
         .map_err(|e| error::library(&e))?;
     let images = out.images;
     let (h, w) = (images.height as usize, images.width as usize);

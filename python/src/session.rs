@@ -15,6 +15,7 @@ use crate::error;
 use crate::gaussians::Gaussians;
 use crate::json::{json_to_py, to_json};
 use crate::mesh::Mesh;
+use crate::threads;
 
 /// The main job of ``trisplat extract``, frame by frame, in memory: the inputs are read once
 /// when the session opens, then ``frame(i)`` deforms the Gaussians to animation frame ``i``
@@ -56,7 +57,7 @@ fn mode(name: &str) -> PyResult<Mode> {
 }
 
 impl Session {
-    /// The session. Long calls lock it inside `py.detach` and drop the guard there, before
+    /// The session. Long calls lock it inside `threads::detach` and drop the guard there, before
     /// taking the GIL back: a thread that waits for it with the GIL held is never waited for.
     fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, RsSession>> {
         self.inner
@@ -143,9 +144,8 @@ impl Session {
             gt: gt.as_deref().map(GroundTruth::parse),
             options,
         };
-        let session = py
-            .detach(|| RsSession::open(&config))
-            .map_err(|e| error::library(&e))?;
+        let session =
+            threads::detach(py, || RsSession::open(&config)).map_err(|e| error::library(&e))?;
         Ok(Self {
             inner: Mutex::new(session),
         })
@@ -178,7 +178,7 @@ impl Session {
         py: Python<'py>,
         frame: usize,
     ) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
-        let positions = py.detach(|| {
+        let positions = threads::detach(py, || {
             let mut session = self.lock()?;
             let origin = session.origin();
             let local = session.positions(frame).map_err(|e| error::library(&e))?;
@@ -190,7 +190,9 @@ impl Session {
     /// The world-space Gaussians of animation frame ``frame`` (what ``trisplat deform``
     /// writes).
     fn world(&self, py: Python<'_>, frame: usize) -> PyResult<Gaussians> {
-        let set = py.detach(|| self.lock()?.world(frame).map_err(|e| error::library(&e)))?;
+        let set = threads::detach(py, || {
+            self.lock()?.world(frame).map_err(|e| error::library(&e))
+        })?;
         Ok(Gaussians::from_rust(py, set))
     }
 
@@ -200,7 +202,9 @@ impl Session {
     /// incremental update did, as in report.json) and ``metrics`` (against ``gt``, as in
     /// report.json; None without ``gt``).
     fn frame<'py>(&self, py: Python<'py>, frame: usize) -> PyResult<Bound<'py, PyDict>> {
-        let result = py.detach(|| self.lock()?.frame(frame).map_err(|e| error::library(&e)))?;
+        let result = threads::detach(py, || {
+            self.lock()?.frame(frame).map_err(|e| error::library(&e))
+        })?;
         frame_dict(py, result)
     }
 

@@ -12,7 +12,7 @@ METRICS = REFERENCE / "metrics"
 
 # The keys of `trisplat eval --json` (cli/src/commands/eval.rs, docs/conventions.md §10).
 EVAL_KEYS = {
-    "accuracy", "completeness", "chamfer_l1", "chamfer_l2", "normal_consistency",
+    "command", "accuracy", "completeness", "chamfer_l1", "chamfer_l2", "normal_consistency",
     "normal_angle_deg", "n_pred", "n_gt", "thresholds", "seconds", "gt_bbox_diagonal",
     "pred_structure", "gt_structure", "area_ratio", "shared_vertex_fraction", "relation",
 }
@@ -55,7 +55,7 @@ def test_keys_are_those_of_the_command():
     spot = trisplat.read_mesh(DATA / "spot_triangulated.obj")
     smooth = trisplat.read_mesh(DATA / "spot_taubin.ply")
     m = trisplat.eval(smooth, spot, samples=5000)
-    assert set(m) == EVAL_KEYS
+    assert set(m) == EVAL_KEYS and m["command"] == "eval"
     assert all(set(t) == THRESHOLD_KEYS for t in m["thresholds"])
     assert set(m["pred_structure"]) == STRUCTURE_KEYS == set(m["gt_structure"])
     assert [t["tau_fraction"] for t in m["thresholds"]] == [0.001, 0.0025, 0.005, 0.01]
