@@ -173,7 +173,8 @@ class Deformer:
 
 @final
 class Session:
-    """The main job of ``trisplat extract`` frame by frame, meshes in memory."""
+    """The main job of ``trisplat extract`` frame by frame, meshes in memory. ``template`` may
+    be a LAM avatar folder (as ``extract --avatar``)."""
 
     def __new__(
         cls,
@@ -192,7 +193,20 @@ class Session:
         hop_threshold: Optional[float] = None,
         samples: Optional[int] = None,
         tau_fraction: Optional[float] = None,
+        gt_sequence: Optional[str] = None,
+        clip: Optional[str] = None,
+        clip_from: Optional[_PathLike] = None,
+        fps: Optional[float] = None,
+        layout: Literal["bound", "lam"] = "bound",
+        tsdf_depth: Literal["median", "expected"] = "median",
+        tsdf_colors: bool = False,
+        alpha_keep_clusters: int = 0,
+        rebuild_every: int = 0,
+        tau: Optional[float] = None,
+        strict: bool = False,
     ) -> "Session": ...
+    @property
+    def unused_channels(self) -> List[str]: ...
     @property
     def frames(self) -> List[int]: ...
     @property

@@ -6,7 +6,10 @@ use std::sync::Mutex;
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use trisplat::pipeline::config::{ExtractConfig, ExtractOptions, GroundTruth, Method, Mode};
+use trisplat::pipeline::avatar::{AvatarFolder, GaussianLayout};
+use trisplat::pipeline::config::{
+    DepthKind, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
+};
 use trisplat::pipeline::report::DelaunayFrame;
 use trisplat::pipeline::{FrameResult, Session as RsSession};
 
@@ -27,8 +30,13 @@ use crate::threads;
 /// ``per_triangle`` per triangle); ``methods``: any of ``"tsdf"``, ``"delaunay"``, ``"alpha"``;
 /// ``frames``: ``"A..B"``, ``"A..=B"``, ``"A.."``, ``"..B"`` or ``"A"``; ``gt``: None (no
 /// metrics), ``"template"`` (each frame's deformed template), ``"gaussians"`` or a mesh file;
-/// ``mode``: ``"binding"``, ``"jacobian"`` or ``"lbs"``. The other keywords are
-/// ``trisplat extract``'s options of the same names; None keeps their scale-derived defaults.
+/// ``mode``: ``"binding"``, ``"jacobian"`` or ``"lbs"``. ``template`` may be a LAM avatar
+/// folder (``skin.glb``, ``offset.ply``, ``vertex_order.json``: as ``extract --avatar``).
+/// ``gt_sequence``: a folder or pattern of one ground-truth mesh per frame (instead of ``gt``).
+/// The other keywords are ``trisplat extract``'s options of the same names (``layout``:
+/// ``"bound"`` or ``"lam"``; ``tsdf_depth``: ``"median"`` or ``"expected"``; ``tau`` absolute,
+/// instead of ``tau_fraction``); None keeps their scale-derived defaults. ``strict`` refuses a
+/// weights track with channels that drive nothing.
 #[pyclass(module = "trisplat", frozen)]
 pub struct Session {
     inner: Mutex<RsSession>,
@@ -94,10 +102,28 @@ fn frame_dict<'py>(py: Python<'py>, result: FrameResult) -> PyResult<Bound<'py, 
     Ok(dict)
 }
 
+fn layout(name: &str) -> PyResult<GaussianLayout> {
+    [GaussianLayout::Bound, GaussianLayout::Lam]
+        .into_iter()
+        .find(|l| l.name() == name)
+        .ok_or_else(|| error::value(format!("layout {name:?}: expected \"bound\" or \"lam\"")))
+}
+
+fn tsdf_depth(name: &str) -> PyResult<DepthKind> {
+    [DepthKind::Median, DepthKind::Expected]
+        .into_iter()
+        .find(|d| d.name() == name)
+        .ok_or_else(|| {
+            error::value(format!(
+                "tsdf_depth {name:?}: expected \"median\" or \"expected\""
+            ))
+        })
+}
+
 #[pymethods]
 impl Session {
     #[new]
-    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None))]
+    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false))]
     #[expect(
         clippy::too_many_arguments,
         reason = "the command's options as keywords"
@@ -119,9 +145,63 @@ impl Session {
         hop_threshold: Option<f64>,
         samples: Option<usize>,
         tau_fraction: Option<f64>,
+        gt_sequence: Option<String>,
+        clip: Option<String>,
+        clip_from: Option<PathBuf>,
+        fps: Option<f64>,
+        layout: &str,
+        tsdf_depth: &str,
+        tsdf_colors: bool,
+        alpha_keep_clusters: usize,
+        rebuild_every: usize,
+        tau: Option<f64>,
+        strict: bool,
     ) -> PyResult<Self> {
+        if gt.is_some() && gt_sequence.is_some() {
+            return Err(error::value("give gt or gt_sequence, not both"));
+        }
+        if tau.is_some() && tau_fraction.is_some() {
+            return Err(error::value("give tau or tau_fraction, not both"));
+        }
+        if let Some(t) = tau.filter(|t| !(t.is_finite() && *t > 0.0)) {
+            return Err(error::value(format!(
+                "tau {t}: expected a finite positive number"
+            )));
+        }
+        if let Some(f) = fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
+            return Err(error::value(format!(
+                "fps {f}: expected a finite positive number"
+            )));
+        }
         let defaults = ExtractOptions::default();
+        let mut layout = self::layout(layout)?;
+        // A LAM avatar folder stands for its template and per-vertex Gaussians, as in
+        // `trisplat extract --avatar DIR`.
+        let (template, gaussians) = if template.is_dir() {
+            if let Some(g) = &gaussians {
+                return Err(error::value(format!(
+                    "gaussians {}: the avatar folder {} brings its own",
+                    g.display(),
+                    template.display()
+                )));
+            }
+            let avatar = AvatarFolder::open(&template).map_err(|e| error::library(&e))?;
+            layout = GaussianLayout::Lam;
+            (avatar.template, Some(avatar.gaussians))
+        } else {
+            (template, gaussians)
+        };
         let options = ExtractOptions {
+            clip,
+            clip_from,
+            fps: fps.unwrap_or(defaults.fps),
+            layout,
+            tsdf_depth: self::tsdf_depth(tsdf_depth)?,
+            tsdf_colors,
+            alpha_keep_clusters,
+            rebuild_every,
+            strict,
+            tau: tau.unwrap_or(defaults.tau),
             mode: self::mode(mode)?,
             per_triangle: per_triangle.unwrap_or(defaults.per_triangle),
             voxel,
@@ -130,7 +210,11 @@ impl Session {
             alpha,
             hop_threshold: hop_threshold.unwrap_or(defaults.hop_threshold),
             samples: samples.unwrap_or(defaults.samples),
-            tau_fraction: tau_fraction.or(defaults.tau_fraction),
+            tau_fraction: if tau.is_some() {
+                None
+            } else {
+                tau_fraction.or(defaults.tau_fraction)
+            },
             ..defaults
         };
         let config = ExtractConfig {
@@ -141,7 +225,10 @@ impl Session {
             // A session writes nothing; `trisplat extract` gives it its output folder.
             output: PathBuf::new(),
             frames,
-            gt: gt.as_deref().map(GroundTruth::parse),
+            gt: gt
+                .as_deref()
+                .map(GroundTruth::parse)
+                .or(gt_sequence.map(GroundTruth::Sequence)),
             options,
         };
         let session =
@@ -149,6 +236,13 @@ impl Session {
         Ok(Self {
             inner: Mutex::new(session),
         })
+    }
+
+    /// The names of the weights track's channels that drive no morph target (ignored; a
+    /// session opened with ``strict=True`` refuses them instead).
+    #[getter]
+    fn unused_channels(&self) -> PyResult<Vec<String>> {
+        Ok(self.lock()?.unused_channels().to_vec())
     }
 
     /// The animation frame indices the session runs, in order.

@@ -99,3 +99,30 @@ def test_session_frame_by_frame():
         np.testing.assert_array_equal(session.positions(f).shape, (session.template.vertex_count, 3))
     with pytest.raises(trisplat.TrisplatError):
         trisplat.Session(DATA / "missing.glb")
+
+
+def test_session_of_a_lam_avatar_folder():
+    """The folder stands for its template and per-vertex Gaussians (extract --avatar), with
+    extract's other options by name."""
+    lam = DATA / "lam_mini"
+    session = trisplat.Session(
+        lam, animation=str(lam / "expression.json"), methods=["tsdf", "alpha"], frames="0..2",
+        gt="gaussians", tsdf_depth="expected", views=6, resolution=64, alpha_keep_clusters=1,
+        tau=0.002,
+    )
+    assert session.frames == [0, 1]
+    assert len(session.gaussians) == session.template.vertex_count  # one per vertex (LAM)
+    result = session.frame(1)
+    for name, m in result["methods"].items():
+        assert m["mesh"].triangle_count > 0, name
+        assert m["metrics"]["tau"] == 0.002 and m["metrics"]["tau_fraction"] is None, name
+    assert result["methods"]["alpha"]["metrics"]["structure"]["components"] == 1
+    assert isinstance(session.unused_channels, list)
+    with pytest.raises(ValueError, match="brings its own"):
+        trisplat.Session(lam, gaussians=lam / "offset.ply")
+    with pytest.raises(ValueError, match="layout"):
+        trisplat.Session(DATA / "anim" / "RiggedFigure.glb", layout="flat")
+    with pytest.raises(ValueError, match="tsdf_depth"):
+        trisplat.Session(DATA / "anim" / "RiggedFigure.glb", tsdf_depth="mean")
+    with pytest.raises(ValueError, match="not both"):
+        trisplat.Session(DATA / "anim" / "RiggedFigure.glb", gt="template", gt_sequence="x/*.ply")
