@@ -167,20 +167,20 @@ pub struct ProjectedSurfel {
 
 /// What the surfel projection needs of the camera.
 #[derive(Clone, Copy, Debug)]
-struct View {
-    w2c: DMat3,
-    position: DVec3,
-    fx: f64,
-    fy: f64,
+pub(crate) struct View {
+    pub(crate) w2c: DMat3,
+    pub(crate) position: DVec3,
+    pub(crate) fx: f64,
+    pub(crate) fy: f64,
     /// Principal point shifted by −0.5 (integer pixel centres).
-    cx: f64,
-    cy: f64,
-    near: f64,
-    far: f64,
+    pub(crate) cx: f64,
+    pub(crate) cy: f64,
+    pub(crate) near: f64,
+    pub(crate) far: f64,
 }
 
 impl View {
-    fn new(camera: &Camera, near: f64, far: f64) -> Self {
+    pub(crate) fn new(camera: &Camera, near: f64, far: f64) -> Self {
         Self {
             w2c: camera.world_to_camera_rotation(),
             position: camera.position(),
@@ -212,7 +212,7 @@ pub fn project_surfel(
     )
 }
 
-fn project_with(
+pub(crate) fn project_with(
     v: &View,
     mean: DVec3,
     rotation: DMat3,

@@ -22,9 +22,9 @@
 
 mod params;
 mod project;
+mod slots;
 
 use std::any::{Any, TypeId};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec4;
 
@@ -34,6 +34,7 @@ use trisplat_geometry::Camera;
 pub use params::{DiffParams, GaussianGrads, GaussianParams, Real};
 
 use self::project::{ScreenGrad, View};
+use self::slots::SlotBuffer;
 use super::RenderError;
 use super::composite::{CompositeRules, RenderStats};
 use super::options::{Outputs, RenderMode, RenderOptions, Rules};
@@ -369,40 +370,13 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         }
     }
 
-    // Per (tile, splat) sums, back to front per tile, written splat-major: splat j's slots
-    // are its tile rectangle's tiles in row-major order (the binning's rectangles), from
-    // `rects[j].offset`. Each slot is written once, by the tile that owns it.
+    // Per (tile, splat) sums, back to front per tile (module documentation).
     let bins = &forward.bins;
-    let rects: Vec<SlotRect> = forward
-        .splats
-        .par_iter()
-        .map(|s| {
-            let (x0, x1, y0, y1) = super::tiles::tile_range(
-                forward.rules.tile_rect,
-                s.center,
-                s.radius,
-                bins.tiles_x,
-                bins.tiles_y,
-            );
-            SlotRect {
-                offset: (x1 - x0) as usize * (y1 - y0) as usize,
-                x0,
-                y0,
-                width: x1 - x0,
-            }
-        })
-        .collect();
-    let mut rects = rects;
-    let mut total = 0;
-    for r in &mut rects {
-        let area = r.offset;
-        r.offset = total;
-        total += area;
-    }
-    let slots: Vec<[AtomicU64; SLOT]> = (0..total)
-        .into_par_iter()
-        .map(|_| std::array::from_fn(|_| AtomicU64::new(0)))
-        .collect();
+    let slots = SlotBuffer::<SLOT>::new(
+        forward.splats.par_iter().map(|s| (s.center, s.radius)),
+        forward.rules.tile_rect,
+        bins,
+    );
     let ctx = Ctx {
         splats: &forward.splats,
         bins,
@@ -414,34 +388,24 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
     (0..bins.tiles_y).into_par_iter().for_each(|ty| {
         let mut s = BackwardTile::<F>::default();
         for tx in 0..bins.tiles_x {
-            ctx.backward_tile(forward, grads, (tx, ty), (&rects, &slots), &mut s);
+            ctx.backward_tile(forward, grads, (tx, ty), &slots, &mut s);
         }
     });
     stats.composite_s = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
     // Reduce per splat, in tile order.
     let view = View::new(camera, options.rules);
-    let screen_grads: Vec<ScreenGrad> = rects
-        .par_iter()
-        .enumerate()
-        .map(|(j, r)| {
-            let end = rects.get(j + 1).map_or(total, |n| n.offset);
-            let mut sum = [0.0; SLOT];
-            for slot in &slots[r.offset..end] {
-                for (a, b) in sum.iter_mut().zip(slot) {
-                    *a += f64::from_bits(b.load(Ordering::Relaxed));
-                }
-            }
-            ScreenGrad {
-                mean: [sum[0], sum[1]],
-                conic: [sum[2], sum[3], sum[4]],
-                opacity: sum[5],
-                depth: sum[6],
-                color: [sum[7], sum[8], sum[9]],
-            }
+    let screen_grads: Vec<ScreenGrad> = slots
+        .reduce()
+        .into_par_iter()
+        .map(|sum| ScreenGrad {
+            mean: [sum[0], sum[1]],
+            conic: [sum[2], sum[3], sum[4]],
+            opacity: sum[5],
+            depth: sum[6],
+            color: [sum[7], sum[8], sum[9]],
         })
         .collect();
-    drop(slots);
     stats.reduce_s = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
 
@@ -500,14 +464,6 @@ const LANES: usize = 4;
 
 /// Values per (tile, splat) slot: d/d mean (2), conic (3), opacity, depth, colour (3).
 const SLOT: usize = 10;
-
-/// Where a splat's (tile, splat) slots start and the tile rectangle they follow.
-struct SlotRect {
-    offset: usize,
-    x0: u32,
-    y0: u32,
-    width: u32,
-}
 
 /// What both tile loops read.
 struct Ctx<'a, F> {
@@ -935,7 +891,7 @@ impl<F: Real> Ctx<'_, F> {
         fwd: &GradRender<F>,
         grads: &ImageGrads<'_, F>,
         (tx, ty): (u32, u32),
-        (rects, slots): (&[SlotRect], &[[AtomicU64; SLOT]]),
+        slots: &SlotBuffer<SLOT>,
         s: &mut BackwardTile<F>,
     ) {
         let ts = TILE_SIZE as usize;
@@ -995,11 +951,7 @@ impl<F: Real> Ctx<'_, F> {
             } else {
                 backward_splat(sp, s, &g, (lx0, lx1, ly0, ly1), k as u32, &r)
             };
-            let rect = &rects[j];
-            let at = rect.offset + ((ty - rect.y0) * rect.width + tx - rect.x0) as usize;
-            for (slot, v) in slots[at].iter().zip(sum) {
-                slot.store(v.to_bits(), Ordering::Relaxed);
-            }
+            slots.store(j, (tx, ty), sum);
         }
     }
 }
