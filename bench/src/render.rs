@@ -298,6 +298,7 @@ fn time_backward(
         rgb: Some(&g_rgb),
         alpha: Some(&g_alpha),
         depth: Some(&g_depth),
+        ..ImageGrads::default()
     };
     let mut t = BackwardTimes {
         plain: f64::INFINITY,

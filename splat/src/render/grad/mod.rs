@@ -23,6 +23,8 @@
 mod params;
 mod project;
 mod slots;
+mod surfel;
+mod surfel_project;
 
 use std::any::{Any, TypeId};
 
@@ -32,6 +34,7 @@ use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
 pub use params::{DiffParams, GaussianGrads, GaussianParams, Real};
+pub use surfel::{DIST_FAR, DIST_NEAR};
 
 use self::project::{ScreenGrad, View};
 use self::slots::SlotBuffer;
@@ -55,9 +58,31 @@ pub enum GradError {
     /// The inputs the renderer itself refuses.
     #[error(transparent)]
     Render(#[from] RenderError),
-    /// Only 3DGS mode has a backward pass so far.
-    #[error("the backward pass supports 3DGS mode only, not {0:?}")]
+    /// The mode has no backward pass (perspective mode).
+    #[error("the backward pass supports 3DGS and 2DGS modes only, not {0:?}")]
     UnsupportedMode(RenderMode),
+    /// An image gradient the mode does not render (the normal image and the depth distortion
+    /// are 2DGS-only).
+    #[error("{what} is rendered in 2DGS mode only, not {mode:?}")]
+    NotInMode {
+        /// Which image gradient.
+        what: &'static str,
+        /// The forward's mode.
+        mode: RenderMode,
+    },
+    /// The backward pass is asked for another mode than its forward pass was made in.
+    #[error(
+        "the forward pass was made in {forward:?} mode, the backward pass asks for {backward:?}"
+    )]
+    ModeMismatch {
+        /// The forward's mode.
+        forward: RenderMode,
+        /// The options' mode.
+        backward: RenderMode,
+    },
+    /// The distortion weight is not finite.
+    #[error("the distortion weight {0} is not finite")]
+    BadDistortionWeight(f64),
     /// An image gradient or the parameters do not match the forward pass.
     #[error("{what} has {got} values, expected {expected}")]
     Size {
@@ -97,17 +122,32 @@ pub struct GradRender<F: Real> {
     pub rgb: Vec<F>,
     /// `1 − T`, `[H, W]`.
     pub alpha: Vec<F>,
-    /// Expected z-depth `Σ w z / max(alpha, 1e-10)`, 0 where alpha = 0, `[H, W]`.
+    /// Expected z-depth `Σ w z / max(alpha, 1e-10)`, 0 where alpha = 0, `[H, W]` (2DGS: `z`
+    /// the ray-surfel intersection's).
     pub depth: Vec<F>,
+    /// 2DGS mode: the normal image `Σ w n`, `[H, W, 3]`, as [`super::render`]'s normal output
+    /// (unit normals facing the camera, not renormalised, in `options.normal_frame`). Empty in
+    /// 3DGS mode.
+    pub normal: Vec<F>,
+    /// 2DGS mode: the depth distortion per pixel, `Σ_{i<j} w_i w_j (m_i − m_j)²` with `m` the
+    /// intersection depth mapped by [`DIST_NEAR`] and [`DIST_FAR`] (docs/conventions.md §5),
+    /// `[H, W]`. Empty in 3DGS mode.
+    pub distortion: Vec<F>,
     /// Stage timings and counts of the forward pass.
     pub stats: RenderStats,
+    mode: RenderMode,
     n_gaussians: usize,
     /// Gaussian index of each visible splat, in depth order.
     ids: Vec<u32>,
+    /// 3DGS mode: the splats in depth order (empty in 2DGS mode).
     splats: Vec<Splat<F>>,
+    /// 2DGS mode: the surfels in depth order (empty in 3DGS mode).
+    surfels: Vec<surfel::GradSurfel<F>>,
     bins: TileBins,
     final_t: Vec<F>,
     depth_sum: Vec<F>,
+    /// 2DGS mode: per pixel the distortion's moments `Σ w m`, `Σ w m²` (empty in 3DGS mode).
+    moments: Vec<[F; 2]>,
     /// Per pixel: 1 + the tile-list position of the last contributing splat, 0 for none.
     last: Vec<u32>,
     rules: CompositeRules,
@@ -126,10 +166,24 @@ impl<F: Real> GradRender<F> {
     pub fn final_transmittance(&self) -> &[F] {
         &self.final_t
     }
+
+    /// The mode of the forward pass.
+    #[must_use]
+    pub fn mode(&self) -> RenderMode {
+        self.mode
+    }
+
+    /// The depth distortion summed over the pixels, in `f64` (0 in 3DGS mode): the loss that
+    /// [`ImageGrads::distortion`] weights.
+    #[must_use]
+    pub fn distortion_total(&self) -> f64 {
+        self.distortion.iter().map(|v| v.wide()).sum()
+    }
 }
 
 /// Gradients of a loss with respect to the images of a [`GradRender`] (each `None` counts as
-/// zero), laid out like the images.
+/// zero), laid out like the images, and the weight of the 2DGS depth-distortion loss. Write
+/// `ImageGrads { rgb: Some(..), ..ImageGrads::default() }`: more fields may come.
 #[derive(Clone, Copy, Debug)]
 pub struct ImageGrads<'a, F> {
     /// d loss / d rgb, `[H, W, 3]`.
@@ -138,14 +192,22 @@ pub struct ImageGrads<'a, F> {
     pub alpha: Option<&'a [F]>,
     /// d loss / d expected depth, `[H, W]`.
     pub depth: Option<&'a [F]>,
+    /// 2DGS mode only: d loss / d normal image ([`GradRender::normal`]: same frame and sign),
+    /// `[H, W, 3]`.
+    pub normal: Option<&'a [F]>,
+    /// 2DGS mode only: weight `λ` of the depth-distortion loss `λ Σ_pixels distortion`
+    /// ([`GradRender::distortion`]); 0 = off.
+    pub distortion: F,
 }
 
-impl<F> Default for ImageGrads<'_, F> {
+impl<F: Default> Default for ImageGrads<'_, F> {
     fn default() -> Self {
         Self {
             rgb: None,
             alpha: None,
             depth: None,
+            normal: None,
+            distortion: F::default(),
         }
     }
 }
@@ -155,7 +217,7 @@ fn check<P: DiffParams + ?Sized>(
     camera: &Camera,
     options: &RenderOptions,
 ) -> Result<CompositeRules, GradError> {
-    if options.mode != RenderMode::Gaussian3d {
+    if options.mode == RenderMode::Perspective {
         return Err(GradError::UnsupportedMode(options.mode));
     }
     if !params.is_world() {
@@ -175,9 +237,10 @@ fn check<P: DiffParams + ?Sized>(
         }
         .into());
     }
-    Ok(match options.rules {
-        Rules::Gsplat => CompositeRules::GSPLAT,
-        Rules::Original3dgs => CompositeRules::ORIGINAL_3DGS,
+    Ok(match (options.mode, options.rules) {
+        (RenderMode::Surfel2d, _) => super::surfel::SURFEL_RULES,
+        (_, Rules::Gsplat) => CompositeRules::GSPLAT,
+        (_, Rules::Original3dgs) => CompositeRules::ORIGINAL_3DGS,
     })
 }
 
@@ -195,6 +258,9 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
     options: &RenderOptions,
 ) -> Result<GradRender<F>, GradError> {
     let rules = check(params, camera, options)?;
+    if options.mode == RenderMode::Surfel2d {
+        return Ok(surfel::render_with_grad(params, camera, options));
+    }
     let start = std::time::Instant::now();
     let view = View::new(camera, options.rules);
     let outputs = Outputs::NONE;
@@ -246,13 +312,18 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
         rgb: vec![F::ZERO; 3 * pixels],
         alpha: vec![F::ZERO; pixels],
         depth: vec![F::ZERO; pixels],
+        normal: Vec::new(),
+        distortion: Vec::new(),
         stats,
+        mode: options.mode,
         n_gaussians: params.len(),
         ids,
         splats,
+        surfels: Vec::new(),
         bins,
         final_t: vec![F::ONE; pixels],
         depth_sum: vec![F::ZERO; pixels],
+        moments: Vec::new(),
         last: vec![0; pixels],
         rules,
         background: options.background.map(|v| F::of(f64::from(v))),
@@ -364,9 +435,36 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         ("d loss / d rgb", grads.rgb, 3),
         ("d loss / d alpha", grads.alpha, 1),
         ("d loss / d depth", grads.depth, 1),
+        ("d loss / d normal", grads.normal, 3),
     ] {
         if let Some(buf) = buf {
             size(what, buf.len(), per * pixels)?;
+        }
+    }
+    if forward.mode != options.mode {
+        return Err(GradError::ModeMismatch {
+            forward: forward.mode,
+            backward: options.mode,
+        });
+    }
+    let lambda = grads.distortion.wide();
+    if !lambda.is_finite() {
+        return Err(GradError::BadDistortionWeight(lambda));
+    }
+    if options.mode == RenderMode::Surfel2d {
+        return Ok(surfel::backward_into(
+            params, camera, options, forward, grads, out,
+        ));
+    }
+    for (what, given) in [
+        ("d loss / d normal", grads.normal.is_some()),
+        ("the distortion weight", lambda != 0.0),
+    ] {
+        if given {
+            return Err(GradError::NotInMode {
+                what,
+                mode: options.mode,
+            });
         }
     }
 
