@@ -146,8 +146,9 @@ pub struct GradRender<F: Real> {
     bins: TileBins,
     final_t: Vec<F>,
     depth_sum: Vec<F>,
-    /// 2DGS mode: per pixel the distortion's moments `Σ w m`, `Σ w m²` (empty in 3DGS mode).
-    moments: Vec<[F; 2]>,
+    /// 2DGS mode: per pixel the distortion's moments `Σ w`, `Σ w m`, `Σ w m²` (empty in 3DGS
+    /// mode).
+    moments: Vec<[f64; 3]>,
     /// Per pixel: 1 + the tile-list position of the last contributing splat, 0 for none.
     last: Vec<u32>,
     rules: CompositeRules,

@@ -12,9 +12,10 @@
 //! **Depth distortion** (2DGS's `render_dist`): per pixel `Σ_{i<j} w_i w_j (m_i − m_j)²` over
 //! the contributing surfels, with `m = f/(f − n) (1 − n/z)` the intersection depth `z` mapped to
 //! `[0, 1)` by hbb1's constants `n = 0.2`, `f = 100` ([`DIST_NEAR`], [`DIST_FAR`]). With
-//! `A = 1 − T_final = Σ w`, `M1 = Σ w m`, `M2 = Σ w m²` it equals `A M2 − M1²`, which is how it
-//! is computed and differentiated (`d/dw_k = A m_k² − 2 M1 m_k` plus `d/dT_final = −M2`,
-//! `d/dm_k = 2 w_k (A m_k − M1)`).
+//! `A = Σ w`, `M1 = Σ w m`, `M2 = Σ w m²` (summed in `f64` whatever `F`: the value is a small
+//! difference of terms near 1) it equals `A M2 − M1²`; with `μ = M1 / A` and
+//! `S = M2 − M1² / A` its derivatives are `d/dw_k = A (m_k − μ)² + S` and
+//! `d/dm_k = 2 A w_k (m_k − μ)`, written so that nothing cancels.
 
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -216,7 +217,7 @@ pub(crate) fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
         bins,
         final_t: vec![F::ONE; pixels],
         depth_sum: vec![F::ZERO; pixels],
-        moments: vec![[F::ZERO; 2]; pixels],
+        moments: vec![[0.0; 3]; pixels],
         last: vec![0; pixels],
         rules,
         background: options.background.map(|v| F::of(f64::from(v))),
@@ -380,7 +381,7 @@ struct ForwardBand<'a, F> {
     distortion: &'a mut [F],
     final_t: &'a mut [F],
     depth_sum: &'a mut [F],
-    moments: &'a mut [[F; 2]],
+    moments: &'a mut [[f64; 3]],
     last: &'a mut [u32],
 }
 
@@ -390,8 +391,8 @@ struct ForwardTile<F> {
     rgb: [[F; TILE_PIXELS]; 3],
     normal: [[F; TILE_PIXELS]; 3],
     depth: [F; TILE_PIXELS],
-    /// `Σ w m`, `Σ w m²` (the distortion's moments).
-    moments: [[F; 2]; TILE_PIXELS],
+    /// `Σ w`, `Σ w m`, `Σ w m²` (the distortion's moments).
+    moments: [[f64; 3]; TILE_PIXELS],
     last: [u32; TILE_PIXELS],
     alive: [bool; TILE_PIXELS],
 }
@@ -403,7 +404,7 @@ impl<F: Real> Default for ForwardTile<F> {
             rgb: [[F::ZERO; TILE_PIXELS]; 3],
             normal: [[F::ZERO; TILE_PIXELS]; 3],
             depth: [F::ZERO; TILE_PIXELS],
-            moments: [[F::ZERO; 2]; TILE_PIXELS],
+            moments: [[0.0; 3]; TILE_PIXELS],
             last: [0; TILE_PIXELS],
             alive: [true; TILE_PIXELS],
         }
@@ -420,8 +421,8 @@ struct BackwardTile<F> {
     g_normal: [[F; TILE_PIXELS]; 3],
     /// d loss / d (Σ w z).
     g_depth: [F; TILE_PIXELS],
-    /// Distortion weight × `A` and × `M1` (module documentation).
-    dist: [[F; 2]; TILE_PIXELS],
+    /// `λ A`, `μ`, `λ S` of the distortion (module documentation), `λ` its weight.
+    dist: [[f64; 3]; TILE_PIXELS],
     last: [u32; TILE_PIXELS],
 }
 
@@ -433,7 +434,7 @@ impl<F: Real> Default for BackwardTile<F> {
             g_rgb: [[F::ZERO; TILE_PIXELS]; 3],
             g_normal: [[F::ZERO; TILE_PIXELS]; 3],
             g_depth: [F::ZERO; TILE_PIXELS],
-            dist: [[F::ZERO; 2]; TILE_PIXELS],
+            dist: [[0.0; 3]; TILE_PIXELS],
             last: [0; TILE_PIXELS],
         }
     }
@@ -478,7 +479,7 @@ impl<F: Real> Ctx<'_, F> {
             s.normal[c].fill(F::ZERO);
         }
         s.depth.fill(F::ZERO);
-        s.moments.fill([F::ZERO; 2]);
+        s.moments.fill([0.0; 3]);
         s.last.fill(0);
         for (p, alive) in s.alive.iter_mut().enumerate() {
             *alive = p % ts < g.tw && p / ts < g.th;
@@ -517,10 +518,12 @@ impl<F: Real> Ctx<'_, F> {
                         s.normal[c][p] += w * sp.normal[c];
                     }
                     s.depth[p] += w * F::of(h.depth);
-                    let m = F::of(mapped_depth(h.depth).0);
-                    let wm = w * m;
-                    s.moments[p][0] += wm;
-                    s.moments[p][1] += wm * m;
+                    let m = mapped_depth(h.depth).0;
+                    let w64 = w.wide();
+                    let [a, m1, m2] = &mut s.moments[p];
+                    *a += w64;
+                    *m1 += w64 * m;
+                    *m2 += w64 * m * m;
                     s.t[p] = next;
                     s.last[p] = k as u32 + 1;
                 }
@@ -543,8 +546,8 @@ impl<F: Real> Ctx<'_, F> {
                 } else {
                     F::ZERO
                 };
-                let [m1, m2] = s.moments[p];
-                band.distortion[q] = acc * m2 - m1 * m1;
+                let [a, m1, m2] = s.moments[p];
+                band.distortion[q] = F::of(a * m2 - m1 * m1);
                 band.final_t[q] = t;
                 band.depth_sum[q] = s.depth[p];
                 band.moments[q] = s.moments[p];
@@ -569,7 +572,7 @@ impl<F: Real> Ctx<'_, F> {
         let offset = f64::from(r.offset);
         let w = self.width as usize;
         let floor = F::of(DEPTH_ALPHA_FLOOR);
-        let lambda = grads.distortion;
+        let lambda = grads.distortion.wide();
         let mut max_last = 0;
         s.last.fill(0);
         for ly in 0..g.th {
@@ -597,10 +600,12 @@ impl<F: Real> Ctx<'_, F> {
                 if acc > floor {
                     g_t += gd * fwd.depth_sum[q] / (acc * acc);
                 }
-                // Distortion A M2 − M1² with A = 1 − T_final.
-                let [m1, m2] = fwd.moments[q];
-                g_t += -(lambda * m2);
-                s.dist[p] = [lambda * acc, lambda * m1];
+                let [a, m1, m2] = fwd.moments[q];
+                s.dist[p] = if a > 0.0 {
+                    [lambda * a, m1 / a, lambda * (m2 - m1 * m1 / a)]
+                } else {
+                    [0.0; 3]
+                };
                 s.t[p] = t_final;
                 s.behind[p] = g_t * t_final;
                 s.last[p] = fwd.last[q];
@@ -633,9 +638,9 @@ impl<F: Real> Ctx<'_, F> {
                     let wgt = alpha * t;
                     let z = F::of(h.depth);
                     let (m, dm_dz) = mapped_depth(h.depth);
-                    let m = F::of(m);
-                    let [dist_a, dist_m1] = s.dist[p];
-                    let mut qk = s.g_depth[p] * z + dist_a * m * m - F::of(2.0) * dist_m1 * m;
+                    let [dist_a, mean_m, dist_s] = s.dist[p];
+                    let dm = m - mean_m;
+                    let mut qk = s.g_depth[p] * z + F::of(dist_a * dm * dm + dist_s);
                     for c in 0..3 {
                         qk += s.g_rgb[c][p] * sp.color[c] + s.g_normal[c][p] * sp.normal[c];
                     }
@@ -647,8 +652,7 @@ impl<F: Real> Ctx<'_, F> {
                         sum[15 + c] += (s.g_normal[c][p] * wgt).wide();
                     }
                     let w64 = wgt.wide();
-                    let g_z = (s.g_depth[p] * wgt).wide()
-                        + 2.0 * w64 * (dist_a * m - dist_m1).wide() * dm_dz;
+                    let g_z = (s.g_depth[p] * wgt).wide() + 2.0 * w64 * dist_a * dm * dm_dz;
                     let mut g_rho = 0.0;
                     if raw <= r.max_alpha {
                         let ga = g_alpha.wide();
