@@ -1,10 +1,12 @@
-//! The backward pass of the 3DGS renderer: gradients of a loss on the rgb, alpha and
-//! expected-depth images with respect to every Gaussian's mean, log-scales, raw quaternion,
-//! opacity logit and SH coefficients (docs/conventions.md §5 "Gradients").
+//! The backward pass of the 3DGS and 2DGS renderers: gradients of a loss on the rgb, alpha and
+//! expected-depth images (2DGS: also the normal image and the depth distortion) with respect to
+//! every Gaussian's mean, log-scales, raw quaternion, opacity logit and SH coefficients
+//! (docs/conventions.md §5 "Gradients"). The 3DGS tile loops are below; the 2DGS ones are in
+//! [`surfel`] (which shares [`slots`], the per-pixel rules and the colour and quaternion VJPs).
 //!
 //! Two calls, as in gsplat and the 3DGS reference code:
 //! 1. [`render_with_grad`] renders rgb, alpha and expected depth by the rules of
-//!    [`super::render`] (3DGS mode, gsplat's or the original rules) and keeps what the backward
+//!    [`super::render`] (3DGS mode, gsplat's or the original rules; 2DGS mode) and keeps what the backward
 //!    pass needs: the projected splats in depth order, the tile lists, and per pixel the final
 //!    transmittance, the depth sum and the number of tile-list entries up to the last one that
 //!    contributed. The plain [`super::render`] is untouched and stores none of it.
@@ -245,14 +247,15 @@ fn check<P: DiffParams + ?Sized>(
     })
 }
 
-/// Renders rgb, alpha and expected depth of `params` (world space) seen by `camera` in 3DGS mode
-/// (`options.outputs` is ignored: these three are always made) and keeps what [`backward`]
-/// needs. With `F = f32` and the same Gaussians the images equal those of [`super::render`] up
-/// to the rounding of the activations (which `render` does partly in `f32`).
+/// Renders rgb, alpha and expected depth of `params` (world space) seen by `camera` in 3DGS or
+/// 2DGS mode (`options.mode`; 2DGS also makes [`GradRender::normal`] in
+/// `options.normal_frame` and [`GradRender::distortion`]; `options.outputs` is ignored: these
+/// are always made) and keeps what [`backward`] needs. With `F = f32` and the same Gaussians the
+/// images equal those of [`super::render`] up to the rounding of the activations (which
+/// `render` does partly in `f32`).
 ///
 /// # Errors
-/// [`GradError::UnsupportedMode`] for 2DGS and perspective modes; the renderer's own
-/// [`RenderError`]s.
+/// [`GradError::UnsupportedMode`] for perspective mode; the renderer's own [`RenderError`]s.
 pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
     params: &P,
     camera: &Camera,
@@ -371,8 +374,10 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
 /// `camera` and `options`). Gaussians culled by the projection get zero gradients.
 ///
 /// # Errors
-/// As [`render_with_grad`], and [`GradError::Size`] when an image gradient or `params` does not
-/// match `forward`.
+/// As [`render_with_grad`]; [`GradError::Size`] when an image gradient or `params` does not
+/// match `forward`; [`GradError::ModeMismatch`] when `options.mode` is not `forward`'s;
+/// [`GradError::NotInMode`] for a normal gradient or a non-zero distortion weight in 3DGS mode;
+/// [`GradError::BadDistortionWeight`] for a non-finite one.
 pub fn backward<F: Real, P: DiffParams + ?Sized>(
     params: &P,
     camera: &Camera,

@@ -101,7 +101,7 @@ fn trace<P: DiffParams + ?Sized>(
     frame: NormalFrame,
 ) -> Option<(SurfelScreen, Activated, ColorTrace)> {
     let a = activate(p, i);
-    if !(a.sig >= f64::from(ALPHA_THRESHOLD)) {
+    if a.sig.is_nan() || a.sig < f64::from(ALPHA_THRESHOLD) {
         return None;
     }
     let s = project_with(v, a.mean, a.rot, a.scale, a.sig)?;
