@@ -520,6 +520,21 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         by_id[id as usize] = Some(*g);
     }
     drop(screen_grads);
+    accumulate(out, k, |i| {
+        let g = by_id[i].as_ref()?;
+        project::project_vjp(params, i, &view, options, g).map(|p| (p, g.mean))
+    });
+    stats.project_s = start.elapsed().as_secs_f64();
+    Ok(stats)
+}
+
+/// Adds every Gaussian's parameter gradients and screen-space gradient (`grad(i)`; `None` for
+/// culled ones) into `out` (`k` SH coefficients per Gaussian), in parallel over Gaussians.
+fn accumulate(
+    out: &mut GaussianGrads,
+    k: usize,
+    grad: impl Fn(usize) -> Option<(project::ParamGrad, [f64; 2])> + Sync,
+) {
     let GaussianGrads {
         means,
         log_scales,
@@ -538,10 +553,7 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         .enumerate()
         .for_each(
             |(i, (((((mean, log_scale), rotation), opacity), mean2d), sh))| {
-                let Some(g) = &by_id[i] else {
-                    return;
-                };
-                let Some(p) = project::project_vjp(params, i, &view, options, g) else {
+                let Some((p, screen)) = grad(i) else {
                     return;
                 };
                 for m in 0..3 {
@@ -552,15 +564,13 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
                     *a += b;
                 }
                 *opacity += p.opacity_logit;
-                mean2d[0] += g.mean[0];
-                mean2d[1] += g.mean[1];
+                mean2d[0] += screen[0];
+                mean2d[1] += screen[1];
                 for (a, b) in sh.iter_mut().zip(&p.sh) {
                     *a += b;
                 }
             },
         );
-    stats.project_s = start.elapsed().as_secs_f64();
-    Ok(stats)
 }
 
 /// Pixels evaluated together in the backward row loop.
@@ -866,6 +876,20 @@ struct TileGeom {
     th: usize,
 }
 
+impl TileGeom {
+    /// Tile `(tx, ty)` of a `width` × `height` image.
+    fn new(tx: u32, ty: u32, width: u32, height: u32) -> Self {
+        let x0 = tx * TILE_SIZE;
+        let y0 = ty * TILE_SIZE;
+        Self {
+            x0,
+            y0,
+            tw: (width - x0).min(TILE_SIZE) as usize,
+            th: (height - y0).min(TILE_SIZE) as usize,
+        }
+    }
+}
+
 /// `sigma = ½(a dx² + c dy²) + b dx dy` with `d = mean − pixel`, in the operation order of
 /// [`super::project::EwaKernel`], so `f32` gives the plain forward's values.
 #[inline(always)]
@@ -876,14 +900,7 @@ fn sigma_of<F: Real>(s: &Splat<F>, dx: F, dy: F) -> F {
 
 impl<F: Real> Ctx<'_, F> {
     fn geom(&self, tx: u32, ty: u32) -> TileGeom {
-        let x0 = tx * TILE_SIZE;
-        let y0 = ty * TILE_SIZE;
-        TileGeom {
-            x0,
-            y0,
-            tw: (self.width - x0).min(TILE_SIZE) as usize,
-            th: (self.height - y0).min(TILE_SIZE) as usize,
-        }
+        TileGeom::new(tx, ty, self.width, self.height)
     }
 
     /// The local pixel rectangle of splat `s` in the tile (the plain compositor's).

@@ -26,6 +26,7 @@ use super::slots::SlotBuffer;
 use super::surfel_project::{self, SURFEL_SLOT, SurfelScreenGrad};
 use super::{
     BackwardStats, DEPTH_ALPHA_FLOOR, GradRender, ImageGrads, PixelRules, Splat, TILE_PIXELS,
+    TileGeom, accumulate,
 };
 use crate::gaussians::sh_coeffs_per_channel;
 use crate::render::composite::{CompositeRules, RenderStats};
@@ -317,47 +318,10 @@ pub(crate) fn backward_into<F: Real, P: DiffParams + ?Sized>(
     let start = std::time::Instant::now();
     let view = View::new(camera, f64::from(options.near), f64::from(options.far));
     let k = 3 * sh_coeffs_per_channel(params.sh_degree());
-    let GaussianGrads {
-        means,
-        log_scales,
-        rotations,
-        opacity_logits,
-        sh,
-        means2d,
-    } = out;
-    means
-        .par_iter_mut()
-        .zip(log_scales.par_iter_mut())
-        .zip(rotations.par_iter_mut())
-        .zip(opacity_logits.par_iter_mut())
-        .zip(means2d.par_iter_mut())
-        .zip(sh.par_chunks_mut(k.max(1)))
-        .enumerate()
-        .for_each(
-            |(i, (((((mean, log_scale), rotation), opacity), mean2d), sh))| {
-                let Some(g) = &by_id[i] else {
-                    return;
-                };
-                let Some((p, screen)) =
-                    surfel_project::project_vjp(params, i, &view, options.normal_frame, g)
-                else {
-                    return;
-                };
-                for m in 0..3 {
-                    mean[m] += p.mean[m];
-                    log_scale[m] += p.log_scale[m];
-                }
-                for (a, b) in rotation.iter_mut().zip(p.rotation) {
-                    *a += b;
-                }
-                *opacity += p.opacity_logit;
-                mean2d[0] += screen[0];
-                mean2d[1] += screen[1];
-                for (a, b) in sh.iter_mut().zip(&p.sh) {
-                    *a += b;
-                }
-            },
-        );
+    accumulate(out, k, |i| {
+        let g = by_id[i].as_ref()?;
+        surfel_project::project_vjp(params, i, &view, options.normal_frame, g)
+    });
     stats.project_s = start.elapsed().as_secs_f64();
     stats
 }
@@ -440,24 +404,9 @@ impl<F: Real> Default for BackwardTile<F> {
     }
 }
 
-/// A tile's origin and size in pixels.
-struct TileGeom {
-    x0: u32,
-    y0: u32,
-    tw: usize,
-    th: usize,
-}
-
 impl<F: Real> Ctx<'_, F> {
     fn geom(&self, tx: u32, ty: u32) -> TileGeom {
-        let x0 = tx * TILE_SIZE;
-        let y0 = ty * TILE_SIZE;
-        TileGeom {
-            x0,
-            y0,
-            tw: (self.width - x0).min(TILE_SIZE) as usize,
-            th: (self.height - y0).min(TILE_SIZE) as usize,
-        }
+        TileGeom::new(tx, ty, self.width, self.height)
     }
 
     /// Front to back over the tile's list, every pixel of the tile (hbb1's rule; no box clip).
