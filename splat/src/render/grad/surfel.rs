@@ -29,7 +29,7 @@ use super::{
     TileGeom, accumulate,
 };
 use crate::gaussians::sh_coeffs_per_channel;
-use crate::render::composite::{CompositeRules, RenderStats};
+use crate::render::composite::{ALPHA_THRESHOLD, CompositeRules, RenderStats};
 use crate::render::options::{Outputs, RenderOptions};
 use crate::render::screen::{ScreenEntry, gather_visible};
 use crate::render::surfel::{FILTER_INV_SQUARE, SURFEL_RULES, SurfelSplat, View};
@@ -56,6 +56,74 @@ pub(crate) struct GradSurfel<F> {
     normal: [F; 3],
     center: [f32; 2],
     radius: [f32; 2],
+    /// Pixel coordinates `[x0, x1, y0, y1]` outside of which the surfel's alpha is below the
+    /// skip threshold ([`contributing_box`]).
+    bounds: [f64; 4],
+}
+
+/// A box of pixel coordinates (integer values are pixel centres) outside of which surfel `sp`
+/// certainly has alpha below the skip threshold, so the loops need not evaluate it there:
+/// `alpha ≥ t` needs `rho ≤ R = 2 ln(opacity / t)`, so either the filter term (pixels within
+/// `sqrt(R / 2)` of the filter centre) or the ray-splat term (the image of the disc of radius
+/// `sqrt(R)`, whose box is hbb1's computeAABB of the rows with `u`, `v` scaled by `sqrt(R)`:
+/// exact while the disc lies wholly in front of the camera, else the whole image). Widened by
+/// a pixel and a slack in `R` for rounding, so the images are those of every-pixel evaluation.
+fn contributing_box(sp: &SurfelSplat) -> [f64; 4] {
+    const EVERYWHERE: [f64; 4] = [
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+    ];
+    const MARGIN: f64 = 1.0;
+    let rho_max = 2.0 * (sp.opacity / f64::from(ALPHA_THRESHOLD)).ln();
+    if !rho_max.is_finite() {
+        return EVERYWHERE;
+    }
+    let r = (rho_max.max(0.0) * 1.001 + 1e-3).sqrt();
+    let [tu, tv, tw] = sp.rows;
+    // Nearest camera z of the disc of radius r: Tw.z − r |Tw.xy| (Tw is M's depth row).
+    if !(tw.z - r * tw.x.hypot(tw.y) > 0.0) {
+        return EVERYWHERE;
+    }
+    let scale = DVec3::new(r, r, 1.0);
+    let (ru, rv, rw) = (tu * scale, tv * scale, tw * scale);
+    let sign = DVec3::new(1.0, 1.0, -1.0);
+    let f = sign / sign.dot(rw * rw);
+    let center = DVec2::new(f.dot(ru * rw), f.dot(rv * rw));
+    let h = center * center - DVec2::new(f.dot(ru * ru), f.dot(rv * rv));
+    let extent = DVec2::new(h.x.max(0.0).sqrt(), h.y.max(0.0).sqrt());
+    let filter = r / FILTER_INV_SQUARE.sqrt();
+    let b = [
+        (center.x - extent.x).min(sp.center.x - filter) - MARGIN,
+        (center.x + extent.x).max(sp.center.x + filter) + MARGIN,
+        (center.y - extent.y).min(sp.center.y - filter) - MARGIN,
+        (center.y + extent.y).max(sp.center.y + filter) + MARGIN,
+    ];
+    if b.iter().all(|v| !v.is_nan()) {
+        b
+    } else {
+        EVERYWHERE
+    }
+}
+
+/// The local pixel rectangle `(lx0, lx1, ly0, ly1)` of tile `g` inside `bounds` (pixel
+/// coordinates `g.x0 + lx + offset`).
+fn local_range(bounds: &[f64; 4], g: &TileGeom, offset: f64) -> (usize, usize, usize, usize) {
+    let first = |lo: f64, start: u32, n: usize| {
+        let v = (lo - offset - f64::from(start)).ceil();
+        if v <= 0.0 { 0 } else { (v as usize).min(n) }
+    };
+    let end = |hi: f64, start: u32, n: usize| {
+        let v = (hi - offset - f64::from(start)).floor() + 1.0;
+        if v <= 0.0 { 0 } else { (v as usize).min(n) }
+    };
+    (
+        first(bounds[0], g.x0, g.tw),
+        end(bounds[1], g.x0, g.tw),
+        first(bounds[2], g.y0, g.th),
+        end(bounds[3], g.y0, g.th),
+    )
 }
 
 /// A surfel met by a pixel's ray: [`SurfelSplat::evaluate`]'s values and the intermediates its
@@ -180,6 +248,7 @@ pub(crate) fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
             normal: s.normal.to_array().map(F::of),
             center,
             radius,
+            bounds: contributing_box(&s.splat),
         };
         Some((entry, surfel))
     });
@@ -439,9 +508,10 @@ impl<F: Real> Ctx<'_, F> {
                 break;
             }
             let sp = &self.surfels[entry as usize];
-            for ly in 0..g.th {
+            let (lx0, lx1, ly0, ly1) = local_range(&sp.bounds, &g, offset);
+            for ly in ly0..ly1 {
                 let y = f64::from(g.y0 + ly as u32) + offset;
-                for lx in 0..g.tw {
+                for lx in lx0..lx1 {
                     let p = ly * ts + lx;
                     if !s.alive[p] {
                         continue;
@@ -566,9 +636,10 @@ impl<F: Real> Ctx<'_, F> {
             let j = entries[k] as usize;
             let sp = &self.surfels[j];
             let mut sum = [0.0f64; SURFEL_SLOT];
-            for ly in 0..g.th {
+            let (lx0, lx1, ly0, ly1) = local_range(&sp.bounds, &g, offset);
+            for ly in ly0..ly1 {
                 let y = f64::from(g.y0 + ly as u32) + offset;
-                for lx in 0..g.tw {
+                for lx in lx0..lx1 {
                     let p = ly * ts + lx;
                     if k as u32 >= s.last[p] {
                         continue;
@@ -621,6 +692,60 @@ impl<F: Real> Ctx<'_, F> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every pixel whose alpha passes the skip threshold lies in [`contributing_box`]: random
+    /// surfels (tilted up to edge-on, large and tiny, near and far) seen by one camera.
+    #[test]
+    fn the_contributing_box_holds_every_contributing_pixel() {
+        use trisplat_geometry::rng::Rng;
+        let camera = Camera::look_at(
+            "box",
+            DVec3::new(0.2, -0.1, -2.5),
+            DVec3::ZERO,
+            DVec3::NEG_Y,
+            (64, 48),
+            60.0,
+        )
+        .unwrap();
+        let mut rng = Rng::new(4);
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform_f64();
+        let (mut checked, mut bounded) = (0, 0);
+        for _ in 0..300 {
+            let q = glam::DQuat::from_xyzw(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0))
+                .normalize();
+            let mean = DVec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-2.2, 1.5));
+            let scale = glam::DVec2::new(u(-6.0, 0.0).exp(), u(-6.0, 0.0).exp());
+            let Some(p) = crate::render::surfel::project_surfel(
+                &camera,
+                (mean, glam::DMat3::from_quat(q), scale, u(0.004, 1.0)),
+                (0.2, 1e10),
+            ) else {
+                continue;
+            };
+            let b = contributing_box(&p.splat);
+            bounded += usize::from(b[0].is_finite());
+            let threshold = f64::from(ALPHA_THRESHOLD);
+            for y in -40..90 {
+                for x in -40..110 {
+                    let (x, y) = (f64::from(x), f64::from(y));
+                    if let Some(h) = hit(&p.splat, x, y)
+                        && h.alpha.min(0.99) >= threshold * (1.0 - 1e-6)
+                    {
+                        checked += 1;
+                        assert!(
+                            x >= b[0] && x <= b[1] && y >= b[2] && y <= b[3],
+                            "pixel ({x}, {y}) alpha {} outside {b:?}",
+                            h.alpha
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            checked > 1000 && bounded > 100,
+            "{checked} pixels, {bounded} boxes"
+        );
+    }
 
     #[test]
     fn hit_repeats_the_renderers_evaluation() {
