@@ -83,7 +83,8 @@ fn contributing_box(sp: &SurfelSplat) -> [f64; 4] {
     let r = (rho_max.max(0.0) * 1.001 + 1e-3).sqrt();
     let [tu, tv, tw] = sp.rows;
     // Nearest camera z of the disc of radius r: Tw.z − r |Tw.xy| (Tw is M's depth row).
-    if !(tw.z - r * tw.x.hypot(tw.y) > 0.0) {
+    let nearest = tw.z - r * tw.x.hypot(tw.y);
+    if nearest.is_nan() || nearest <= 0.0 {
         return EVERYWHERE;
     }
     let scale = DVec3::new(r, r, 1.0);
