@@ -29,7 +29,7 @@ use super::{
     TileGeom, accumulate,
 };
 use crate::gaussians::sh_coeffs_per_channel;
-use crate::render::composite::{ALPHA_THRESHOLD, CompositeRules, RenderStats};
+use crate::render::composite::{CompositeRules, RenderStats};
 use crate::render::options::{Outputs, RenderOptions};
 use crate::render::screen::{ScreenEntry, gather_visible};
 use crate::render::surfel::{FILTER_INV_SQUARE, SURFEL_RULES, SurfelSplat, View};
@@ -57,55 +57,8 @@ pub(crate) struct GradSurfel<F> {
     center: [f32; 2],
     radius: [f32; 2],
     /// Pixel coordinates `[x0, x1, y0, y1]` outside of which the surfel's alpha is below the
-    /// skip threshold ([`contributing_box`]).
+    /// skip threshold ([`SurfelSplat::contributing_box`]).
     bounds: [f64; 4],
-}
-
-/// A box of pixel coordinates (integer values are pixel centres) outside of which surfel `sp`
-/// certainly has alpha below the skip threshold, so the loops need not evaluate it there:
-/// `alpha ≥ t` needs `rho ≤ R = 2 ln(opacity / t)`, so either the filter term (pixels within
-/// `sqrt(R / 2)` of the filter centre) or the ray-splat term (the image of the disc of radius
-/// `sqrt(R)`, whose box is hbb1's computeAABB of the rows with `u`, `v` scaled by `sqrt(R)`:
-/// exact while the disc lies wholly in front of the camera, else the whole image). Widened by
-/// a pixel and a slack in `R` for rounding, so the images are those of every-pixel evaluation.
-fn contributing_box(sp: &SurfelSplat) -> [f64; 4] {
-    const EVERYWHERE: [f64; 4] = [
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-    ];
-    const MARGIN: f64 = 1.0;
-    let rho_max = 2.0 * (sp.opacity / f64::from(ALPHA_THRESHOLD)).ln();
-    if !rho_max.is_finite() {
-        return EVERYWHERE;
-    }
-    let r = (rho_max.max(0.0) * 1.001 + 1e-3).sqrt();
-    let [tu, tv, tw] = sp.rows;
-    // Nearest camera z of the disc of radius r: Tw.z − r |Tw.xy| (Tw is M's depth row).
-    let nearest = tw.z - r * tw.x.hypot(tw.y);
-    if nearest.is_nan() || nearest <= 0.0 {
-        return EVERYWHERE;
-    }
-    let scale = DVec3::new(r, r, 1.0);
-    let (ru, rv, rw) = (tu * scale, tv * scale, tw * scale);
-    let sign = DVec3::new(1.0, 1.0, -1.0);
-    let f = sign / sign.dot(rw * rw);
-    let center = DVec2::new(f.dot(ru * rw), f.dot(rv * rw));
-    let h = center * center - DVec2::new(f.dot(ru * ru), f.dot(rv * rv));
-    let extent = DVec2::new(h.x.max(0.0).sqrt(), h.y.max(0.0).sqrt());
-    let filter = r / FILTER_INV_SQUARE.sqrt();
-    let b = [
-        (center.x - extent.x).min(sp.center.x - filter) - MARGIN,
-        (center.x + extent.x).max(sp.center.x + filter) + MARGIN,
-        (center.y - extent.y).min(sp.center.y - filter) - MARGIN,
-        (center.y + extent.y).max(sp.center.y + filter) + MARGIN,
-    ];
-    if b.iter().all(|v| !v.is_nan()) {
-        b
-    } else {
-        EVERYWHERE
-    }
 }
 
 /// The local pixel rectangle `(lx0, lx1, ly0, ly1)` of tile `g` inside `bounds` (pixel
@@ -249,7 +202,7 @@ pub(crate) fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
             normal: s.normal.to_array().map(F::of),
             center,
             radius,
-            bounds: contributing_box(&s.splat),
+            bounds: s.splat.contributing_box(),
         };
         Some((entry, surfel))
     });
@@ -694,7 +647,8 @@ impl<F: Real> Ctx<'_, F> {
 mod tests {
     use super::*;
 
-    /// Every pixel whose alpha passes the skip threshold lies in [`contributing_box`]: random
+    /// Every pixel whose alpha passes the skip threshold lies in
+    /// [`SurfelSplat::contributing_box`]: random
     /// surfels (tilted up to edge-on, large and tiny, near and far) seen by one camera.
     #[test]
     fn the_contributing_box_holds_every_contributing_pixel() {
@@ -723,9 +677,9 @@ mod tests {
             ) else {
                 continue;
             };
-            let b = contributing_box(&p.splat);
+            let b = p.splat.contributing_box();
             bounded += usize::from(b[0].is_finite());
-            let threshold = f64::from(ALPHA_THRESHOLD);
+            let threshold = f64::from(crate::render::composite::ALPHA_THRESHOLD);
             for y in -40..90 {
                 for x in -40..110 {
                     let (x, y) = (f64::from(x), f64::from(y));
