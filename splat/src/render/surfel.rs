@@ -20,7 +20,9 @@
 //! Screen box (hbb1 `computeAABB`): with `d = Tw.x² + Tw.y² − Tw.z²` and `f = (1, 1, −1)/d`, the
 //! centre is `(f·(Tu∘Tw), f·(Tv∘Tw))` and the half extents `sqrt(max(0, centre² − f·(Tu∘Tu)))`
 //! (the box of the projected unit circle); radius `ceil(3 max(extent_x, extent_y, FILTER_SIZE))`.
-//! Like hbb1, every pixel of every 16×16 tile that box touches (3DGS `getRect`) is evaluated.
+//! Like hbb1, every pixel of every 16×16 tile that box touches (3DGS `getRect`) counts, but only
+//! those inside [`SurfelSplat::contributing_box`] are evaluated (outside it alpha is below the
+//! 1/255 skip threshold, so the images are the same).
 //!
 //! hbb1 samples integer pixel centres with the principal point at `(W − 1)/2`; this module uses
 //! the same geometry in trisplat's convention by shifting the principal point by −0.5 and
