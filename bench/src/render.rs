@@ -5,6 +5,10 @@
 //!
 //! The issue's target on the 2-core machine: ≥ 20 frames per second on 2 threads. There is no
 //! CPU tool to compare with (gsplat's rasterizer needs CUDA), so only trisplat's timings print.
+//!
+//! Unless `--no-backward`, the backward-pass rows follow per thread count: 3DGS (rgb + alpha +
+//! depth loss) and 2DGS surfels (rgb + alpha + depth + normal + depth distortion), each beside
+//! the plain render of the same mode (the issue's goal: backward ≤ 2× the plain render).
 
 use std::path::Path;
 
@@ -14,9 +18,10 @@ use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_splat::gaussians::{logit, to_wxyz};
+use trisplat_splat::render::surfel::SURFEL_NEAR;
 use trisplat_splat::render::{
-    BackwardStats, GaussianGrads, ImageGrads, Outputs, RenderOptions, RenderStats, backward_into,
-    render, render_with_grad,
+    BackwardStats, GaussianGrads, ImageGrads, Outputs, RenderMode, RenderOptions, RenderStats,
+    backward_into, render, render_with_grad,
 };
 use trisplat_splat::{GaussianParts, GaussianSet};
 
@@ -46,8 +51,9 @@ pub struct RenderBenchArgs {
     /// Also render normals and median depth (the geometry outputs).
     #[arg(long)]
     pub all_outputs: bool,
-    /// Skip the backward-pass rows (differentiable forward and backward of an rgb + alpha +
-    /// depth loss, timed against the plain render).
+    /// Skip the backward-pass rows (3DGS: differentiable forward and backward of an rgb +
+    /// alpha + depth loss; 2DGS surfels: rgb + alpha + depth + normal + depth distortion; each
+    /// timed against the plain render of the same images in the same mode).
     #[arg(long)]
     pub no_backward: bool,
 }
@@ -232,13 +238,20 @@ pub fn run(args: &RenderBenchArgs) -> anyhow::Result<()> {
             coverage * 100.0,
             opaque * 100.0
         );
-        if !args.no_backward {
-            let t = pool.install(|| time_backward(&set, &camera, args.frames.max(1)))?;
+        if args.no_backward {
+            continue;
+        }
+        for mode in [RenderMode::Gaussian3d, RenderMode::Surfel2d] {
+            let t = pool.install(|| time_backward(&set, &camera, args.frames.max(1), mode))?;
+            let label = match mode {
+                RenderMode::Surfel2d => "2DGS surfels",
+                _ => "3DGS",
+            };
             println!(
-                "{threads} thread(s), backward pass: plain render {:.2} ms, render_with_grad \
-                 (f32) {:.2} ms, backward {:.2} ms (best of {}); backward / plain render \
-                 {:.2}, backward / render_with_grad {:.2}; backward stages: tiles {:.2} ms, \
-                 reduce {:.2} ms, projection {:.2} ms",
+                "{threads} thread(s), {label} backward pass: plain render {:.2} ms, \
+                 render_with_grad (f32) {:.2} ms, backward {:.2} ms (best of {}); backward / \
+                 plain render {:.2}, backward / render_with_grad {:.2}; backward stages: tiles \
+                 {:.2} ms, reduce {:.2} ms, projection {:.2} ms",
                 t.plain * 1e3,
                 t.forward * 1e3,
                 t.backward * 1e3,
@@ -252,7 +265,7 @@ pub fn run(args: &RenderBenchArgs) -> anyhow::Result<()> {
             if threads == 1 && t.cpu[0] > 0.0 {
                 let f = args.frames.max(1) as f64;
                 println!(
-                    "1 thread, backward pass, CPU time per frame: plain render {:.2} ms, \
+                    "1 thread, {label} backward pass, CPU time per frame: plain render {:.2} ms, \
                      render_with_grad {:.2} ms, backward {:.2} ms; backward / plain render {:.2}",
                     t.cpu[0] / f * 1e3,
                     t.cpu[1] / f * 1e3,
@@ -278,14 +291,31 @@ struct BackwardTimes {
     cpu: [f64; 3],
 }
 
-/// Times the plain render (rgb + alpha + depth), the differentiable forward and the backward
-/// pass of a loss on all three images (seeded random image gradients), best of `frames`.
+/// Times the plain render, the differentiable forward and the backward pass of a loss on all
+/// the images the differentiable forward makes (seeded random image gradients), best of
+/// `frames`: in 3DGS mode rgb + alpha + depth; in 2DGS mode also the normal image (the plain
+/// render makes it too) and the depth distortion (weight 1; the plain render has none), with
+/// hbb1's near plane.
 fn time_backward(
     set: &GaussianSet,
     camera: &Camera,
     frames: usize,
+    mode: RenderMode,
 ) -> anyhow::Result<BackwardTimes> {
-    let options = RenderOptions::default();
+    let surfels = mode == RenderMode::Surfel2d;
+    let options = if surfels {
+        RenderOptions {
+            mode,
+            near: SURFEL_NEAR,
+            outputs: Outputs {
+                normal: true,
+                ..Outputs::RGB_ALPHA_DEPTH
+            },
+            ..RenderOptions::default()
+        }
+    } else {
+        RenderOptions::default()
+    };
     let pixels = camera.width as usize * camera.height as usize;
     let mut rng = Rng::new(5);
     let mut draw = |n: usize| {
@@ -294,10 +324,13 @@ fn time_backward(
             .collect::<Vec<f32>>()
     };
     let (g_rgb, g_alpha, g_depth) = (draw(3 * pixels), draw(pixels), draw(pixels));
+    let g_normal = draw(3 * pixels);
     let grads = ImageGrads {
         rgb: Some(&g_rgb),
         alpha: Some(&g_alpha),
         depth: Some(&g_depth),
+        normal: surfels.then_some(g_normal.as_slice()),
+        distortion: if surfels { 1.0 } else { 0.0 },
     };
     let mut t = BackwardTimes {
         plain: f64::INFINITY,

@@ -57,6 +57,7 @@ impl Loss {
             rgb: Some(&self.rgb),
             alpha: Some(&self.alpha),
             depth: Some(&self.depth),
+            ..ImageGrads::default()
         };
         backward(params, camera, options, &fwd, &g).unwrap()
     }
@@ -296,6 +297,7 @@ fn f32_forward_matches_the_renderer_and_f64_backward() {
                 rgb: Some(&r),
                 alpha: Some(&a),
                 depth: Some(&d),
+                ..ImageGrads::default()
             },
         )
         .unwrap();
@@ -340,13 +342,13 @@ fn gradients_do_not_depend_on_the_thread_count() {
 fn refuses_what_it_cannot_differentiate() {
     use trisplat_splat::render::{GradError, RenderMode};
     let (p, camera) = random_scene(3, 0, 1);
-    let surfels = RenderOptions {
-        mode: RenderMode::Surfel2d,
+    let perspective = RenderOptions {
+        mode: RenderMode::Perspective,
         ..RenderOptions::default()
     };
     assert!(matches!(
-        render_with_grad::<f64, _>(&p, &camera, &surfels),
-        Err(GradError::UnsupportedMode(RenderMode::Surfel2d))
+        render_with_grad::<f64, _>(&p, &camera, &perspective),
+        Err(GradError::UnsupportedMode(RenderMode::Perspective))
     ));
     let options = RenderOptions::default();
     let fwd = render_with_grad::<f64, _>(&p, &camera, &options).unwrap();

@@ -78,6 +78,7 @@ fn run<F: Real>(
             rgb: Some(&wr),
             alpha: Some(&wa),
             depth: Some(&wd),
+            ..ImageGrads::default()
         },
     )
     .unwrap();

@@ -20,7 +20,9 @@
 //! Screen box (hbb1 `computeAABB`): with `d = Tw.x² + Tw.y² − Tw.z²` and `f = (1, 1, −1)/d`, the
 //! centre is `(f·(Tu∘Tw), f·(Tv∘Tw))` and the half extents `sqrt(max(0, centre² − f·(Tu∘Tu)))`
 //! (the box of the projected unit circle); radius `ceil(3 max(extent_x, extent_y, FILTER_SIZE))`.
-//! Like hbb1, every pixel of every 16×16 tile that box touches (3DGS `getRect`) is evaluated.
+//! Like hbb1, every pixel of every 16×16 tile that box touches (3DGS `getRect`) counts, but only
+//! those inside [`SurfelSplat::contributing_box`] are evaluated (outside it alpha is below the
+//! 1/255 skip threshold, so the images are the same).
 //!
 //! hbb1 samples integer pixel centres with the principal point at `(W − 1)/2`; this module uses
 //! the same geometry in trisplat's convention by shifting the principal point by −0.5 and
@@ -130,6 +132,54 @@ impl SurfelSplat {
             rho2d,
         })
     }
+
+    /// A box of pixel coordinates (integer values are pixel centres) outside of which this surfel
+    /// certainly has alpha below the skip threshold, so the loops need not evaluate it there:
+    /// `alpha ≥ t` needs `rho ≤ R = 2 ln(opacity / t)`, so either the filter term (pixels within
+    /// `sqrt(R / 2)` of the filter centre) or the ray-splat term (the image of the disc of radius
+    /// `sqrt(R)`, whose box is hbb1's computeAABB of the rows with `u`, `v` scaled by `sqrt(R)`:
+    /// exact while the disc lies wholly in front of the camera, else the whole image). Widened by
+    /// a pixel and a slack in `R` for rounding, so the images are those of every-pixel evaluation.
+    #[must_use]
+    pub fn contributing_box(&self) -> [f64; 4] {
+        const EVERYWHERE: [f64; 4] = [
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+        ];
+        const MARGIN: f64 = 1.0;
+        let rho_max = 2.0 * (self.opacity / f64::from(ALPHA_THRESHOLD)).ln();
+        if !rho_max.is_finite() {
+            return EVERYWHERE;
+        }
+        let r = (rho_max.max(0.0) * 1.001 + 1e-3).sqrt();
+        let [tu, tv, tw] = self.rows;
+        // Nearest camera z of the disc of radius r: Tw.z − r |Tw.xy| (Tw is M's depth row).
+        let nearest = tw.z - r * tw.x.hypot(tw.y);
+        if nearest.is_nan() || nearest <= 0.0 {
+            return EVERYWHERE;
+        }
+        let scale = DVec3::new(r, r, 1.0);
+        let (ru, rv, rw) = (tu * scale, tv * scale, tw * scale);
+        let sign = DVec3::new(1.0, 1.0, -1.0);
+        let f = sign / sign.dot(rw * rw);
+        let center = DVec2::new(f.dot(ru * rw), f.dot(rv * rw));
+        let h = center * center - DVec2::new(f.dot(ru * ru), f.dot(rv * rv));
+        let extent = DVec2::new(h.x.max(0.0).sqrt(), h.y.max(0.0).sqrt());
+        let filter = r / FILTER_INV_SQUARE.sqrt();
+        let b = [
+            (center.x - extent.x).min(self.center.x - filter) - MARGIN,
+            (center.x + extent.x).max(self.center.x + filter) + MARGIN,
+            (center.y - extent.y).min(self.center.y - filter) - MARGIN,
+            (center.y + extent.y).max(self.center.y + filter) + MARGIN,
+        ];
+        if b.iter().all(|v| !v.is_nan()) {
+            b
+        } else {
+            EVERYWHERE
+        }
+    }
 }
 
 /// The 2DGS surfel kernel ([`SurfelSplat::evaluate`] for each visible surfel).
@@ -137,6 +187,31 @@ impl SurfelSplat {
 pub struct SurfelKernel {
     /// One entry per visible surfel, indexed like the [`ScreenSplats`].
     pub splats: Vec<SurfelSplat>,
+    /// Each surfel's [`SurfelSplat::contributing_box`] in `f32`, clamped to ±[`BOX_LIMIT`]
+    /// (`None`: no bound), for [`SplatKernel::row_span`].
+    bounds: Vec<Option<[f32; 4]>>,
+}
+
+/// Bound on [`SurfelKernel`]'s row-span coordinates (far outside any image, well inside the
+/// range where the compositor's `as usize` conversions are exact).
+const BOX_LIMIT: f64 = 1e7;
+
+impl SurfelKernel {
+    /// The kernel of `splats`, with their contributing boxes.
+    #[must_use]
+    pub fn new(splats: Vec<SurfelSplat>) -> Self {
+        use rayon::prelude::*;
+        let bounds = splats
+            .par_iter()
+            .map(|s| {
+                let b = s.contributing_box();
+                b.iter()
+                    .all(|v| v.is_finite())
+                    .then(|| b.map(|v| v.clamp(-BOX_LIMIT, BOX_LIMIT) as f32))
+            })
+            .collect();
+        Self { splats, bounds }
+    }
 }
 
 impl SplatKernel for SurfelKernel {
@@ -147,6 +222,18 @@ impl SplatKernel for SurfelKernel {
             alpha: s.alpha as f32,
             depth: s.depth as f32,
         })
+    }
+
+    /// The contributing box's columns on rows inside it, an empty span elsewhere
+    /// ([`SurfelSplat::contributing_box`]; `f32` rounding is inside its one-pixel margin).
+    #[inline]
+    fn row_span(&self, i: usize, py: f32) -> Option<(f32, f32)> {
+        let [x0, x1, y0, y1] = (*self.bounds.get(i)?)?;
+        if py >= y0 && py <= y1 {
+            Some((x0, x1))
+        } else {
+            Some((BOX_LIMIT as f32, -BOX_LIMIT as f32))
+        }
     }
 }
 
@@ -167,20 +254,20 @@ pub struct ProjectedSurfel {
 
 /// What the surfel projection needs of the camera.
 #[derive(Clone, Copy, Debug)]
-struct View {
-    w2c: DMat3,
-    position: DVec3,
-    fx: f64,
-    fy: f64,
+pub(crate) struct View {
+    pub(crate) w2c: DMat3,
+    pub(crate) position: DVec3,
+    pub(crate) fx: f64,
+    pub(crate) fy: f64,
     /// Principal point shifted by −0.5 (integer pixel centres).
-    cx: f64,
-    cy: f64,
-    near: f64,
-    far: f64,
+    pub(crate) cx: f64,
+    pub(crate) cy: f64,
+    pub(crate) near: f64,
+    pub(crate) far: f64,
 }
 
 impl View {
-    fn new(camera: &Camera, near: f64, far: f64) -> Self {
+    pub(crate) fn new(camera: &Camera, near: f64, far: f64) -> Self {
         Self {
             w2c: camera.world_to_camera_rotation(),
             position: camera.position(),
@@ -212,7 +299,7 @@ pub fn project_surfel(
     )
 }
 
-fn project_with(
+pub(crate) fn project_with(
     v: &View,
     mean: DVec3,
     rotation: DMat3,
@@ -331,7 +418,7 @@ pub fn project_surfels(
         };
         Some((entry, p.splat))
     });
-    (screen, SurfelKernel { splats })
+    (screen, SurfelKernel::new(splats))
 }
 
 #[cfg(test)]

@@ -1,10 +1,12 @@
-//! The backward pass of the 3DGS renderer: gradients of a loss on the rgb, alpha and
-//! expected-depth images with respect to every Gaussian's mean, log-scales, raw quaternion,
-//! opacity logit and SH coefficients (docs/conventions.md §5 "Gradients").
+//! The backward pass of the 3DGS and 2DGS renderers: gradients of a loss on the rgb, alpha and
+//! expected-depth images (2DGS: also the normal image and the depth distortion) with respect to
+//! every Gaussian's mean, log-scales, raw quaternion, opacity logit and SH coefficients
+//! (docs/conventions.md §5 "Gradients"). The 3DGS tile loops are below; the 2DGS ones are in
+//! [`surfel`] (which shares [`slots`], the per-pixel rules and the colour and quaternion VJPs).
 //!
 //! Two calls, as in gsplat and the 3DGS reference code:
 //! 1. [`render_with_grad`] renders rgb, alpha and expected depth by the rules of
-//!    [`super::render`] (3DGS mode, gsplat's or the original rules) and keeps what the backward
+//!    [`super::render`] (3DGS mode, gsplat's or the original rules; 2DGS mode) and keeps what the backward
 //!    pass needs: the projected splats in depth order, the tile lists, and per pixel the final
 //!    transmittance, the depth sum and the number of tile-list entries up to the last one that
 //!    contributed. The plain [`super::render`] is untouched and stores none of it.
@@ -22,9 +24,11 @@
 
 mod params;
 mod project;
+mod slots;
+mod surfel;
+mod surfel_project;
 
 use std::any::{Any, TypeId};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec4;
 
@@ -32,8 +36,10 @@ use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
 pub use params::{DiffParams, GaussianGrads, GaussianParams, Real};
+pub use surfel::{DIST_FAR, DIST_NEAR};
 
 use self::project::{ScreenGrad, View};
+use self::slots::SlotBuffer;
 use super::RenderError;
 use super::composite::{CompositeRules, RenderStats};
 use super::options::{Outputs, RenderMode, RenderOptions, Rules};
@@ -54,9 +60,31 @@ pub enum GradError {
     /// The inputs the renderer itself refuses.
     #[error(transparent)]
     Render(#[from] RenderError),
-    /// Only 3DGS mode has a backward pass so far.
-    #[error("the backward pass supports 3DGS mode only, not {0:?}")]
+    /// The mode has no backward pass (perspective mode).
+    #[error("the backward pass supports 3DGS and 2DGS modes only, not {0:?}")]
     UnsupportedMode(RenderMode),
+    /// An image gradient the mode does not render (the normal image and the depth distortion
+    /// are 2DGS-only).
+    #[error("{what} is rendered in 2DGS mode only, not {mode:?}")]
+    NotInMode {
+        /// Which image gradient.
+        what: &'static str,
+        /// The forward's mode.
+        mode: RenderMode,
+    },
+    /// The backward pass is asked for another mode than its forward pass was made in.
+    #[error(
+        "the forward pass was made in {forward:?} mode, the backward pass asks for {backward:?}"
+    )]
+    ModeMismatch {
+        /// The forward's mode.
+        forward: RenderMode,
+        /// The options' mode.
+        backward: RenderMode,
+    },
+    /// The distortion weight is not finite.
+    #[error("the distortion weight {0} is not finite")]
+    BadDistortionWeight(f64),
     /// An image gradient or the parameters do not match the forward pass.
     #[error("{what} has {got} values, expected {expected}")]
     Size {
@@ -96,17 +124,33 @@ pub struct GradRender<F: Real> {
     pub rgb: Vec<F>,
     /// `1 − T`, `[H, W]`.
     pub alpha: Vec<F>,
-    /// Expected z-depth `Σ w z / max(alpha, 1e-10)`, 0 where alpha = 0, `[H, W]`.
+    /// Expected z-depth `Σ w z / max(alpha, 1e-10)`, 0 where alpha = 0, `[H, W]` (2DGS: `z`
+    /// the ray-surfel intersection's).
     pub depth: Vec<F>,
+    /// 2DGS mode: the normal image `Σ w n`, `[H, W, 3]`, as [`super::render`]'s normal output
+    /// (unit normals facing the camera, not renormalised, in `options.normal_frame`). Empty in
+    /// 3DGS mode.
+    pub normal: Vec<F>,
+    /// 2DGS mode: the depth distortion per pixel, `Σ_{i<j} w_i w_j (m_i − m_j)²` with `m` the
+    /// intersection depth mapped by [`DIST_NEAR`] and [`DIST_FAR`] (docs/conventions.md §5),
+    /// `[H, W]`. Empty in 3DGS mode.
+    pub distortion: Vec<F>,
     /// Stage timings and counts of the forward pass.
     pub stats: RenderStats,
+    mode: RenderMode,
     n_gaussians: usize,
     /// Gaussian index of each visible splat, in depth order.
     ids: Vec<u32>,
+    /// 3DGS mode: the splats in depth order (empty in 2DGS mode).
     splats: Vec<Splat<F>>,
+    /// 2DGS mode: the surfels in depth order (empty in 3DGS mode).
+    surfels: Vec<surfel::GradSurfel<F>>,
     bins: TileBins,
     final_t: Vec<F>,
     depth_sum: Vec<F>,
+    /// 2DGS mode: per pixel the distortion's moments `Σ w`, `Σ w m`, `Σ w m²` (empty in 3DGS
+    /// mode).
+    moments: Vec<[f64; 3]>,
     /// Per pixel: 1 + the tile-list position of the last contributing splat, 0 for none.
     last: Vec<u32>,
     rules: CompositeRules,
@@ -125,10 +169,24 @@ impl<F: Real> GradRender<F> {
     pub fn final_transmittance(&self) -> &[F] {
         &self.final_t
     }
+
+    /// The mode of the forward pass.
+    #[must_use]
+    pub fn mode(&self) -> RenderMode {
+        self.mode
+    }
+
+    /// The depth distortion summed over the pixels, in `f64` (0 in 3DGS mode): the loss that
+    /// [`ImageGrads::distortion`] weights.
+    #[must_use]
+    pub fn distortion_total(&self) -> f64 {
+        self.distortion.iter().map(|v| v.wide()).sum()
+    }
 }
 
 /// Gradients of a loss with respect to the images of a [`GradRender`] (each `None` counts as
-/// zero), laid out like the images.
+/// zero), laid out like the images, and the weight of the 2DGS depth-distortion loss. Write
+/// `ImageGrads { rgb: Some(..), ..ImageGrads::default() }`: more fields may come.
 #[derive(Clone, Copy, Debug)]
 pub struct ImageGrads<'a, F> {
     /// d loss / d rgb, `[H, W, 3]`.
@@ -137,14 +195,22 @@ pub struct ImageGrads<'a, F> {
     pub alpha: Option<&'a [F]>,
     /// d loss / d expected depth, `[H, W]`.
     pub depth: Option<&'a [F]>,
+    /// 2DGS mode only: d loss / d normal image ([`GradRender::normal`]: same frame and sign),
+    /// `[H, W, 3]`.
+    pub normal: Option<&'a [F]>,
+    /// 2DGS mode only: weight `λ` of the depth-distortion loss `λ Σ_pixels distortion`
+    /// ([`GradRender::distortion`]); 0 = off.
+    pub distortion: F,
 }
 
-impl<F> Default for ImageGrads<'_, F> {
+impl<F: Default> Default for ImageGrads<'_, F> {
     fn default() -> Self {
         Self {
             rgb: None,
             alpha: None,
             depth: None,
+            normal: None,
+            distortion: F::default(),
         }
     }
 }
@@ -154,7 +220,7 @@ fn check<P: DiffParams + ?Sized>(
     camera: &Camera,
     options: &RenderOptions,
 ) -> Result<CompositeRules, GradError> {
-    if options.mode != RenderMode::Gaussian3d {
+    if options.mode == RenderMode::Perspective {
         return Err(GradError::UnsupportedMode(options.mode));
     }
     if !params.is_world() {
@@ -174,26 +240,31 @@ fn check<P: DiffParams + ?Sized>(
         }
         .into());
     }
-    Ok(match options.rules {
-        Rules::Gsplat => CompositeRules::GSPLAT,
-        Rules::Original3dgs => CompositeRules::ORIGINAL_3DGS,
+    Ok(match (options.mode, options.rules) {
+        (RenderMode::Surfel2d, _) => super::surfel::SURFEL_RULES,
+        (_, Rules::Gsplat) => CompositeRules::GSPLAT,
+        (_, Rules::Original3dgs) => CompositeRules::ORIGINAL_3DGS,
     })
 }
 
-/// Renders rgb, alpha and expected depth of `params` (world space) seen by `camera` in 3DGS mode
-/// (`options.outputs` is ignored: these three are always made) and keeps what [`backward`]
-/// needs. With `F = f32` and the same Gaussians the images equal those of [`super::render`] up
-/// to the rounding of the activations (which `render` does partly in `f32`).
+/// Renders rgb, alpha and expected depth of `params` (world space) seen by `camera` in 3DGS or
+/// 2DGS mode (`options.mode`; 2DGS also makes [`GradRender::normal`] in
+/// `options.normal_frame` and [`GradRender::distortion`]; `options.outputs` is ignored: these
+/// are always made) and keeps what [`backward`] needs. With `F = f32` and the same Gaussians the
+/// images equal those of [`super::render`] up to the rounding of the activations (which
+/// `render` does partly in `f32`).
 ///
 /// # Errors
-/// [`GradError::UnsupportedMode`] for 2DGS and perspective modes; the renderer's own
-/// [`RenderError`]s.
+/// [`GradError::UnsupportedMode`] for perspective mode; the renderer's own [`RenderError`]s.
 pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
     params: &P,
     camera: &Camera,
     options: &RenderOptions,
 ) -> Result<GradRender<F>, GradError> {
     let rules = check(params, camera, options)?;
+    if options.mode == RenderMode::Surfel2d {
+        return Ok(surfel::render_with_grad(params, camera, options));
+    }
     let start = std::time::Instant::now();
     let view = View::new(camera, options.rules);
     let outputs = Outputs::NONE;
@@ -245,13 +316,18 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
         rgb: vec![F::ZERO; 3 * pixels],
         alpha: vec![F::ZERO; pixels],
         depth: vec![F::ZERO; pixels],
+        normal: Vec::new(),
+        distortion: Vec::new(),
         stats,
+        mode: options.mode,
         n_gaussians: params.len(),
         ids,
         splats,
+        surfels: Vec::new(),
         bins,
         final_t: vec![F::ONE; pixels],
         depth_sum: vec![F::ZERO; pixels],
+        moments: Vec::new(),
         last: vec![0; pixels],
         rules,
         background: options.background.map(|v| F::of(f64::from(v))),
@@ -298,8 +374,10 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
 /// `camera` and `options`). Gaussians culled by the projection get zero gradients.
 ///
 /// # Errors
-/// As [`render_with_grad`], and [`GradError::Size`] when an image gradient or `params` does not
-/// match `forward`.
+/// As [`render_with_grad`]; [`GradError::Size`] when an image gradient or `params` does not
+/// match `forward`; [`GradError::ModeMismatch`] when `options.mode` is not `forward`'s;
+/// [`GradError::NotInMode`] for a normal gradient or a non-zero distortion weight in 3DGS mode;
+/// [`GradError::BadDistortionWeight`] for a non-finite one.
 pub fn backward<F: Real, P: DiffParams + ?Sized>(
     params: &P,
     camera: &Camera,
@@ -363,46 +441,46 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         ("d loss / d rgb", grads.rgb, 3),
         ("d loss / d alpha", grads.alpha, 1),
         ("d loss / d depth", grads.depth, 1),
+        ("d loss / d normal", grads.normal, 3),
     ] {
         if let Some(buf) = buf {
             size(what, buf.len(), per * pixels)?;
         }
     }
-
-    // Per (tile, splat) sums, back to front per tile, written splat-major: splat j's slots
-    // are its tile rectangle's tiles in row-major order (the binning's rectangles), from
-    // `rects[j].offset`. Each slot is written once, by the tile that owns it.
-    let bins = &forward.bins;
-    let rects: Vec<SlotRect> = forward
-        .splats
-        .par_iter()
-        .map(|s| {
-            let (x0, x1, y0, y1) = super::tiles::tile_range(
-                forward.rules.tile_rect,
-                s.center,
-                s.radius,
-                bins.tiles_x,
-                bins.tiles_y,
-            );
-            SlotRect {
-                offset: (x1 - x0) as usize * (y1 - y0) as usize,
-                x0,
-                y0,
-                width: x1 - x0,
-            }
-        })
-        .collect();
-    let mut rects = rects;
-    let mut total = 0;
-    for r in &mut rects {
-        let area = r.offset;
-        r.offset = total;
-        total += area;
+    if forward.mode != options.mode {
+        return Err(GradError::ModeMismatch {
+            forward: forward.mode,
+            backward: options.mode,
+        });
     }
-    let slots: Vec<[AtomicU64; SLOT]> = (0..total)
-        .into_par_iter()
-        .map(|_| std::array::from_fn(|_| AtomicU64::new(0)))
-        .collect();
+    let lambda = grads.distortion.wide();
+    if !lambda.is_finite() {
+        return Err(GradError::BadDistortionWeight(lambda));
+    }
+    if options.mode == RenderMode::Surfel2d {
+        return Ok(surfel::backward_into(
+            params, camera, options, forward, grads, out,
+        ));
+    }
+    for (what, given) in [
+        ("d loss / d normal", grads.normal.is_some()),
+        ("the distortion weight", lambda != 0.0),
+    ] {
+        if given {
+            return Err(GradError::NotInMode {
+                what,
+                mode: options.mode,
+            });
+        }
+    }
+
+    // Per (tile, splat) sums, back to front per tile (module documentation).
+    let bins = &forward.bins;
+    let slots = SlotBuffer::<SLOT>::new(
+        forward.splats.par_iter().map(|s| (s.center, s.radius)),
+        forward.rules.tile_rect,
+        bins,
+    );
     let ctx = Ctx {
         splats: &forward.splats,
         bins,
@@ -414,34 +492,24 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
     (0..bins.tiles_y).into_par_iter().for_each(|ty| {
         let mut s = BackwardTile::<F>::default();
         for tx in 0..bins.tiles_x {
-            ctx.backward_tile(forward, grads, (tx, ty), (&rects, &slots), &mut s);
+            ctx.backward_tile(forward, grads, (tx, ty), &slots, &mut s);
         }
     });
     stats.composite_s = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
     // Reduce per splat, in tile order.
     let view = View::new(camera, options.rules);
-    let screen_grads: Vec<ScreenGrad> = rects
-        .par_iter()
-        .enumerate()
-        .map(|(j, r)| {
-            let end = rects.get(j + 1).map_or(total, |n| n.offset);
-            let mut sum = [0.0; SLOT];
-            for slot in &slots[r.offset..end] {
-                for (a, b) in sum.iter_mut().zip(slot) {
-                    *a += f64::from_bits(b.load(Ordering::Relaxed));
-                }
-            }
-            ScreenGrad {
-                mean: [sum[0], sum[1]],
-                conic: [sum[2], sum[3], sum[4]],
-                opacity: sum[5],
-                depth: sum[6],
-                color: [sum[7], sum[8], sum[9]],
-            }
+    let screen_grads: Vec<ScreenGrad> = slots
+        .reduce()
+        .into_par_iter()
+        .map(|sum| ScreenGrad {
+            mean: [sum[0], sum[1]],
+            conic: [sum[2], sum[3], sum[4]],
+            opacity: sum[5],
+            depth: sum[6],
+            color: [sum[7], sum[8], sum[9]],
         })
         .collect();
-    drop(slots);
     stats.reduce_s = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
 
@@ -452,6 +520,21 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         by_id[id as usize] = Some(*g);
     }
     drop(screen_grads);
+    accumulate(out, k, |i| {
+        let g = by_id[i].as_ref()?;
+        project::project_vjp(params, i, &view, options, g).map(|p| (p, g.mean))
+    });
+    stats.project_s = start.elapsed().as_secs_f64();
+    Ok(stats)
+}
+
+/// Adds every Gaussian's parameter gradients and screen-space gradient (`grad(i)`; `None` for
+/// culled ones) into `out` (`k` SH coefficients per Gaussian), in parallel over Gaussians.
+fn accumulate(
+    out: &mut GaussianGrads,
+    k: usize,
+    grad: impl Fn(usize) -> Option<(project::ParamGrad, [f64; 2])> + Sync,
+) {
     let GaussianGrads {
         means,
         log_scales,
@@ -470,10 +553,7 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
         .enumerate()
         .for_each(
             |(i, (((((mean, log_scale), rotation), opacity), mean2d), sh))| {
-                let Some(g) = &by_id[i] else {
-                    return;
-                };
-                let Some(p) = project::project_vjp(params, i, &view, options, g) else {
+                let Some((p, screen)) = grad(i) else {
                     return;
                 };
                 for m in 0..3 {
@@ -484,15 +564,13 @@ pub fn backward_into<F: Real, P: DiffParams + ?Sized>(
                     *a += b;
                 }
                 *opacity += p.opacity_logit;
-                mean2d[0] += g.mean[0];
-                mean2d[1] += g.mean[1];
+                mean2d[0] += screen[0];
+                mean2d[1] += screen[1];
                 for (a, b) in sh.iter_mut().zip(&p.sh) {
                     *a += b;
                 }
             },
         );
-    stats.project_s = start.elapsed().as_secs_f64();
-    Ok(stats)
 }
 
 /// Pixels evaluated together in the backward row loop.
@@ -500,14 +578,6 @@ const LANES: usize = 4;
 
 /// Values per (tile, splat) slot: d/d mean (2), conic (3), opacity, depth, colour (3).
 const SLOT: usize = 10;
-
-/// Where a splat's (tile, splat) slots start and the tile rectangle they follow.
-struct SlotRect {
-    offset: usize,
-    x0: u32,
-    y0: u32,
-    width: u32,
-}
 
 /// What both tile loops read.
 struct Ctx<'a, F> {
@@ -806,6 +876,20 @@ struct TileGeom {
     th: usize,
 }
 
+impl TileGeom {
+    /// Tile `(tx, ty)` of a `width` × `height` image.
+    fn new(tx: u32, ty: u32, width: u32, height: u32) -> Self {
+        let x0 = tx * TILE_SIZE;
+        let y0 = ty * TILE_SIZE;
+        Self {
+            x0,
+            y0,
+            tw: (width - x0).min(TILE_SIZE) as usize,
+            th: (height - y0).min(TILE_SIZE) as usize,
+        }
+    }
+}
+
 /// `sigma = ½(a dx² + c dy²) + b dx dy` with `d = mean − pixel`, in the operation order of
 /// [`super::project::EwaKernel`], so `f32` gives the plain forward's values.
 #[inline(always)]
@@ -816,14 +900,7 @@ fn sigma_of<F: Real>(s: &Splat<F>, dx: F, dy: F) -> F {
 
 impl<F: Real> Ctx<'_, F> {
     fn geom(&self, tx: u32, ty: u32) -> TileGeom {
-        let x0 = tx * TILE_SIZE;
-        let y0 = ty * TILE_SIZE;
-        TileGeom {
-            x0,
-            y0,
-            tw: (self.width - x0).min(TILE_SIZE) as usize,
-            th: (self.height - y0).min(TILE_SIZE) as usize,
-        }
+        TileGeom::new(tx, ty, self.width, self.height)
     }
 
     /// The local pixel rectangle of splat `s` in the tile (the plain compositor's).
@@ -935,7 +1012,7 @@ impl<F: Real> Ctx<'_, F> {
         fwd: &GradRender<F>,
         grads: &ImageGrads<'_, F>,
         (tx, ty): (u32, u32),
-        (rects, slots): (&[SlotRect], &[[AtomicU64; SLOT]]),
+        slots: &SlotBuffer<SLOT>,
         s: &mut BackwardTile<F>,
     ) {
         let ts = TILE_SIZE as usize;
@@ -995,11 +1072,7 @@ impl<F: Real> Ctx<'_, F> {
             } else {
                 backward_splat(sp, s, &g, (lx0, lx1, ly0, ly1), k as u32, &r)
             };
-            let rect = &rects[j];
-            let at = rect.offset + ((ty - rect.y0) * rect.width + tx - rect.x0) as usize;
-            for (slot, v) in slots[at].iter().zip(sum) {
-                slot.store(v.to_bits(), Ordering::Relaxed);
-            }
+            slots.store(j, (tx, ty), sum);
         }
     }
 }

@@ -56,7 +56,7 @@ pub(crate) struct ParamGrad {
 }
 
 /// `1 / (1 + e^−x)` without overflow.
-fn sigmoid(x: f64) -> f64 {
+pub(crate) fn sigmoid(x: f64) -> f64 {
     if x >= 0.0 {
         1.0 / (1.0 + (-x).exp())
     } else {
@@ -67,7 +67,7 @@ fn sigmoid(x: f64) -> f64 {
 
 /// The unit quaternion `[w, x, y, z]` of a raw one and its norm (identity and 0 for a zero or
 /// non-finite one).
-fn normalized(q: [f64; 4]) -> ([f64; 4], f64) {
+pub(crate) fn normalized(q: [f64; 4]) -> ([f64; 4], f64) {
     let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
     if norm > 0.0 && norm.is_finite() {
         (q.map(|v| v / norm), norm)
@@ -77,7 +77,7 @@ fn normalized(q: [f64; 4]) -> ([f64; 4], f64) {
 }
 
 /// The rotation matrix of a unit quaternion `[w, x, y, z]`.
-fn rotation_matrix([w, x, y, z]: [f64; 4]) -> DMat3 {
+pub(crate) fn rotation_matrix([w, x, y, z]: [f64; 4]) -> DMat3 {
     DMat3::from_cols(
         DVec3::new(
             1.0 - 2.0 * (y * y + z * z),
@@ -123,12 +123,131 @@ struct Trace {
     sig: f64,
     /// Antialiasing compensation (1 when off).
     comp: f64,
+    color: ColorTrace,
+}
+
+/// What the colour's vector-Jacobian product reuses.
+pub(crate) struct ColorTrace {
     dir: DVec3,
+    degree: u8,
     basis: [f64; 16],
     /// Colour channels with `raw + 0.5 > 0` (not clamped).
     color_free: [bool; 3],
     /// The SH coefficients (file order).
     coeffs: [f64; 48],
+}
+
+/// Gaussian `i`'s colour `max(Σ sh_k Y_k(dir) + 0.5, 0)` seen from `position`
+/// (`dir = mean − position`).
+pub(crate) fn color<P: DiffParams + ?Sized>(
+    p: &P,
+    i: usize,
+    position: DVec3,
+) -> ([f64; 3], ColorTrace) {
+    let degree = p.sh_degree().min(3);
+    let dir = p.mean(i) - position;
+    let basis = sh_basis(degree, dir);
+    let mut coeffs = [0.0; 48];
+    p.sh_coeffs(i, &mut coeffs);
+    let k = sh_coeffs_per_channel(degree);
+    let mut color = [0.0; 3];
+    let mut color_free = [false; 3];
+    for c in 0..3 {
+        let mut sum = coeffs[c] * basis[0];
+        for (j, y) in basis.iter().enumerate().take(k).skip(1) {
+            sum += coeffs[3 + c * (k - 1) + (j - 1)] * y;
+        }
+        color_free[c] = sum + 0.5 > 0.0;
+        color[c] = (sum + 0.5).max(0.0);
+    }
+    let trace = ColorTrace {
+        dir,
+        degree,
+        basis,
+        color_free,
+        coeffs,
+    };
+    (color, trace)
+}
+
+/// Carries the colour gradient `g` to the SH coefficients (written into `sh`) and returns its
+/// part of the mean's gradient (through the view direction).
+pub(crate) fn color_vjp(tr: &ColorTrace, g: [f64; 3], sh: &mut [f64; 48]) -> DVec3 {
+    let degree = tr.degree;
+    let k = sh_coeffs_per_channel(degree);
+    let coeffs = &tr.coeffs;
+    let mut g_basis = [0.0; 16];
+    for c in 0..3 {
+        if !tr.color_free[c] {
+            continue;
+        }
+        let gc = g[c];
+        sh[c] = gc * tr.basis[0];
+        for (j, (gb, y)) in g_basis
+            .iter_mut()
+            .zip(&tr.basis)
+            .enumerate()
+            .take(k)
+            .skip(1)
+        {
+            let idx = 3 + c * (k - 1) + (j - 1);
+            sh[idx] = gc * y;
+            *gb += gc * coeffs[idx];
+        }
+    }
+    if degree == 0 {
+        return DVec3::ZERO;
+    }
+    let len = tr.dir.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return DVec3::ZERO;
+    }
+    let d = tr.dir / len;
+    let dg = sh_basis_grad(degree, d);
+    let mut g_d = DVec3::ZERO;
+    for j in 1..k {
+        g_d += DVec3::from_array(dg[j]) * g_basis[j];
+    }
+    (g_d - d * d.dot(g_d)) / len
+}
+
+/// Carries the gradient `g_r` of the rotation matrix of the unit quaternion `qn` (column `m` of
+/// `g_r` is d loss / d column `m`) through `qn = q / |q|` to the raw quaternion of norm
+/// `qnorm` (zero for a zero or non-finite quaternion, which [`normalized`] replaces).
+pub(crate) fn quaternion_vjp(qn: [f64; 4], qnorm: f64, g_r: [DVec3; 3]) -> [f64; 4] {
+    // g[r][c] = ∂L/∂R_rc = column c, row r.
+    let gr = |r: usize, c: usize| g_r[c][r];
+    let [qw, qx, qy, qz] = qn;
+    let g_qn = [
+        2.0 * (-qz * gr(0, 1) + qy * gr(0, 2) + qz * gr(1, 0) - qx * gr(1, 2) - qy * gr(2, 0)
+            + qx * gr(2, 1)),
+        2.0 * (-2.0 * qx * gr(1, 1) - 2.0 * qx * gr(2, 2)
+            + qy * gr(0, 1)
+            + qz * gr(0, 2)
+            + qy * gr(1, 0)
+            - qw * gr(1, 2)
+            + qz * gr(2, 0)
+            + qw * gr(2, 1)),
+        2.0 * (-2.0 * qy * gr(0, 0) - 2.0 * qy * gr(2, 2)
+            + qx * gr(0, 1)
+            + qw * gr(0, 2)
+            + qx * gr(1, 0)
+            + qz * gr(1, 2)
+            - qw * gr(2, 0)
+            + qz * gr(2, 1)),
+        2.0 * (-2.0 * qz * gr(0, 0) - 2.0 * qz * gr(1, 1) - qw * gr(0, 1)
+            + qx * gr(0, 2)
+            + qw * gr(1, 0)
+            + qy * gr(1, 2)
+            + qx * gr(2, 0)
+            + qy * gr(2, 1)),
+    ];
+    if qnorm > 0.0 {
+        let dot: f64 = (0..4).map(|m| qn[m] * g_qn[m]).sum();
+        std::array::from_fn(|m| (g_qn[m] - qn[m] * dot) / qnorm)
+    } else {
+        [0.0; 4]
+    }
 }
 
 /// Projects Gaussian `i` (module documentation); `None` when culled. The values equal those of
@@ -201,23 +320,7 @@ fn trace<P: DiffParams + ?Sized>(
         [v.width, v.height],
     )?;
     let inv = 1.0 / det;
-    // Colour: max(Σ sh_k Y_k(dir) + 0.5, 0).
-    let degree = p.sh_degree().min(3);
-    let dir = mean - v.position;
-    let basis = sh_basis(degree, dir);
-    let mut coeffs = [0.0; 48];
-    p.sh_coeffs(i, &mut coeffs);
-    let k = sh_coeffs_per_channel(degree);
-    let mut color = [0.0; 3];
-    let mut color_free = [false; 3];
-    for c in 0..3 {
-        let mut sum = coeffs[c] * basis[0];
-        for (j, y) in basis.iter().enumerate().take(k).skip(1) {
-            sum += coeffs[3 + c * (k - 1) + (j - 1)] * y;
-        }
-        color_free[c] = sum + 0.5 > 0.0;
-        color[c] = (sum + 0.5).max(0.0);
-    }
+    let (color, color_trace) = self::color(p, i, v.position);
     let screen = Screen {
         mean: [u, w],
         conic: [d11 * inv, -c01 * inv, d00 * inv],
@@ -247,10 +350,7 @@ fn trace<P: DiffParams + ?Sized>(
         det,
         sig,
         comp,
-        dir,
-        basis,
-        color_free,
-        coeffs,
+        color: color_trace,
     };
     Some((screen, trace))
 }
@@ -325,40 +425,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     let mut g_mean = DVec3::ZERO;
 
     // Colour → SH coefficients and the view direction.
-    let degree = p.sh_degree().min(3);
-    let k = sh_coeffs_per_channel(degree);
-    let coeffs = &tr.coeffs;
-    let mut g_basis = [0.0; 16];
-    for c in 0..3 {
-        if !tr.color_free[c] {
-            continue;
-        }
-        let gc = g.color[c];
-        out.sh[c] = gc * tr.basis[0];
-        for (j, (gb, y)) in g_basis
-            .iter_mut()
-            .zip(&tr.basis)
-            .enumerate()
-            .take(k)
-            .skip(1)
-        {
-            let idx = 3 + c * (k - 1) + (j - 1);
-            out.sh[idx] = gc * y;
-            *gb += gc * coeffs[idx];
-        }
-    }
-    if degree > 0 {
-        let len = tr.dir.length();
-        if len > 0.0 && len.is_finite() {
-            let d = tr.dir / len;
-            let dg = sh_basis_grad(degree, d);
-            let mut g_d = DVec3::ZERO;
-            for j in 1..k {
-                g_d += DVec3::from_array(dg[j]) * g_basis[j];
-            }
-            g_mean += (g_d - d * d.dot(g_d)) / len;
-        }
-    }
+    g_mean += color_vjp(&tr.color, g.color, &mut out.sh);
 
     // Opacity = sigmoid(logit) × compensation.
     out.opacity_logit = g.opacity * tr.comp * tr.sig * (1.0 - tr.sig);
@@ -405,39 +472,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
         let g_s = rcols[m].dot(cols[m]);
         out.log_scale[m] = if sc[m] > 0.0 { g_s * sc[m] } else { 0.0 };
     }
-    // R(q̂): g[r][c] = ∂L/∂R_rc = column c, row r.
-    let gr = |r: usize, c: usize| g_r[c][r];
-    let [qw, qx, qy, qz] = tr.qn;
-    let g_qn = [
-        2.0 * (-qz * gr(0, 1) + qy * gr(0, 2) + qz * gr(1, 0) - qx * gr(1, 2) - qy * gr(2, 0)
-            + qx * gr(2, 1)),
-        2.0 * (-2.0 * qx * gr(1, 1) - 2.0 * qx * gr(2, 2)
-            + qy * gr(0, 1)
-            + qz * gr(0, 2)
-            + qy * gr(1, 0)
-            - qw * gr(1, 2)
-            + qz * gr(2, 0)
-            + qw * gr(2, 1)),
-        2.0 * (-2.0 * qy * gr(0, 0) - 2.0 * qy * gr(2, 2)
-            + qx * gr(0, 1)
-            + qw * gr(0, 2)
-            + qx * gr(1, 0)
-            + qz * gr(1, 2)
-            - qw * gr(2, 0)
-            + qz * gr(2, 1)),
-        2.0 * (-2.0 * qz * gr(0, 0) - 2.0 * qz * gr(1, 1) - qw * gr(0, 1)
-            + qx * gr(0, 2)
-            + qw * gr(1, 0)
-            + qy * gr(1, 2)
-            + qx * gr(2, 0)
-            + qy * gr(2, 1)),
-    ];
-    if tr.qnorm > 0.0 {
-        let dot: f64 = (0..4).map(|m| tr.qn[m] * g_qn[m]).sum();
-        for ((o, g), q) in out.rotation.iter_mut().zip(g_qn).zip(tr.qn) {
-            *o = (g - q * dot) / tr.qnorm;
-        }
-    }
+    out.rotation = quaternion_vjp(tr.qn, tr.qnorm, g_r);
 
     // Camera-space mean t: the Jacobian, the projected mean and the depth.
     let (fx, fy) = (v.fx, v.fy);
