@@ -305,8 +305,8 @@ fn world_parameters_match_the_deformer() {
         let q = world.rotations[i];
         let l = q.iter().map(|v| v * v).sum::<f64>().sqrt();
         let sign = if q[0] < 0.0 { -1.0 } else { 1.0 };
-        for c in 0..4 {
-            let d = f64::from(baked.rotations()[i][c]) - sign * q[c] / l;
+        for (c, &qc) in q.iter().enumerate() {
+            let d = f64::from(baked.rotations()[i][c]) - sign * qc / l;
             assert!(d.abs() < 1e-5, "rotation {i}: {d}");
         }
     }
