@@ -285,3 +285,64 @@ fn fit_refuses_bad_input() {
         &["overwrite"],
     );
 }
+
+#[test]
+fn fit_follows_an_animation_frame_by_frame() {
+    let dir = fresh_dir("fit_anim");
+    let man = fixture("anim/CesiumMan.glb");
+    let g = dir.join("g.ply");
+    run_ok(&["bind", &man, "-o", s(&g)]);
+    let cams = dir.join("cams.json");
+    run_ok(&[
+        "cameras",
+        &man,
+        "-o",
+        s(&cams),
+        "--views",
+        "3",
+        "--size",
+        "24x24",
+    ]);
+    let out = dir.join("fitted.ply");
+    let r = json(&[
+        "fit",
+        s(&g),
+        "--template",
+        &man,
+        "--cameras",
+        s(&cams),
+        "-o",
+        s(&out),
+        "--animation",
+        &man,
+        "--frames",
+        "0..2",
+        "--fps",
+        "3",
+        "--iterations",
+        "6",
+        "--eval-every",
+        "3",
+    ]);
+    assert_eq!(r["frames"], serde_json::json!([0, 1]), "{r}");
+    assert_eq!(r["views"], 6, "{r}");
+    assert_eq!(read_gaussians(&out).expect("fitted").len(), 4672);
+    // The frame range needs an animation.
+    fails(
+        &[
+            "fit",
+            s(&g),
+            "--template",
+            &man,
+            "--cameras",
+            s(&cams),
+            "-o",
+            s(&out),
+            "--frames",
+            "0..2",
+        ],
+        2,
+        &dir,
+        &["--animation"],
+    );
+}
