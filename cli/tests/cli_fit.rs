@@ -216,6 +216,16 @@ fn fit_refuses_bad_input() {
     );
     call(&with(&["--iterations", "0"]), 2, &[]);
     call(&with(&["--lambda-dssim", "2"]), 1, &["lambda-dssim"]);
+    call(
+        &with(&["--max-views", "3"]),
+        1,
+        &["--max-views", "8 target views"],
+    );
+    call(
+        &with(&["--max-pixels", "100"]),
+        1,
+        &["--max-pixels", "train.json"],
+    );
     // An unbound set, a broken cameras file, a missing image folder.
     let world = fixture("render/random_deg3.ply");
     fails(

@@ -21,7 +21,12 @@ use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 use trisplat_splat::render::RenderOptions;
 
 use super::render::parse_rgb;
-use super::{Context, MAX_IMAGE_PIXELS, UsageError, read_camera_file, refuse_to_overwrite};
+use super::{
+    Context, MAX_IMAGE_PIXELS, UsageError, parse_max_pixels, read_camera_file, refuse_to_overwrite,
+};
+
+/// Default of `--max-views`: target views (cameras times frames) held in memory.
+pub const DEFAULT_MAX_VIEWS: u64 = 4096;
 
 /// Arguments of `trisplat fit`.
 #[derive(Debug, clap::Args)]
@@ -140,14 +145,21 @@ pub struct FitArgs {
     /// Seed of the view order (and of refine's sampling).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Largest image (pixels) of any camera, checked before anything is rendered or read.
+    #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
+    pub max_pixels: u64,
+    /// Most target views held in memory (training and held-out cameras times frames).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_VIEWS,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_views: u64,
     /// Score held-out views every N iterations.
     #[arg(long, value_name = "N", default_value_t = 100,
         value_parser = clap::value_parser!(u64).range(1..))]
     pub eval_every: u64,
 }
 
-fn cameras_of(path: &Path, origin: DVec3) -> anyhow::Result<Vec<Camera>> {
-    let cams = read_camera_file(path, None, MAX_IMAGE_PIXELS)?;
+fn cameras_of(path: &Path, origin: DVec3, max_pixels: u64) -> anyhow::Result<Vec<Camera>> {
+    let cams = read_camera_file(path, None, max_pixels)?;
     Ok(cams.iter().map(|c| c.translated(-origin)).collect())
 }
 
@@ -205,11 +217,26 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             )
         }
     };
-    let train_cams = cameras_of(&args.cameras, origin)?;
+    let train_cams = cameras_of(&args.cameras, origin, args.max_pixels)?;
     let eval_cams = match &args.eval_cameras {
-        Some(p) => cameras_of(p, origin)?,
+        Some(p) => cameras_of(p, origin, args.max_pixels)?,
         None => Vec::new(),
     };
+    let frame_count = if args.images.is_some() {
+        1
+    } else {
+        positions.len()
+    };
+    let views = (train_cams.len() + eval_cams.len()) as u64 * frame_count as u64;
+    if views > args.max_views {
+        bail!(
+            "{views} target views ({} + {} cameras x {frame_count} frame(s)): over the limit of \
+             {} views (raise it with --max-views)",
+            train_cams.len(),
+            eval_cams.len(),
+            args.max_views
+        );
+    }
     let make = |cams: &[Camera], images: Option<&PathBuf>| -> anyhow::Result<Vec<FitFrame>> {
         if cams.is_empty() {
             return Ok(Vec::new());
