@@ -242,6 +242,7 @@ fn every_command_prints_one_json_object() {
             "eval_views",
             "target",
             "ms_per_iteration",
+            "stage_ms",
             "seconds",
             "checkpoints",
             "refines",

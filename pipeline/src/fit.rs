@@ -188,6 +188,21 @@ pub struct RefineEvent {
     pub ms: f64,
 }
 
+/// Milliseconds per iteration of each stage (means over the run).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageMs {
+    /// Placing the set with the frame's triangle frames.
+    pub place: f64,
+    /// The differentiable render.
+    pub render: f64,
+    /// The losses and their image gradients.
+    pub loss: f64,
+    /// The backward pass.
+    pub backward: f64,
+    /// The chain rule to the local parameters and the Adam step.
+    pub step: f64,
+}
+
 /// The result of [`fit`].
 #[derive(Clone, Debug)]
 pub struct Fitted {
@@ -199,6 +214,8 @@ pub struct Fitted {
     pub refines: Vec<RefineEvent>,
     /// Seconds per iteration (optimisation only: render, loss, backward, step).
     pub seconds_per_iteration: f64,
+    /// The stages of an iteration, mean milliseconds.
+    pub stage_ms: StageMs,
 }
 
 fn check_options(o: &FitOptions) -> Result<(), FitError> {
@@ -356,6 +373,7 @@ pub fn fit(
     let mut checkpoints = Vec::new();
     let mut refines = Vec::new();
     let mut train_s = 0.0;
+    let mut stage = StageMs::default();
     let mut refine_s = 0.0;
     let (mut acc_loss, mut acc_l1, mut acc_psnr, mut acc_n) = (0.0, 0.0, 0.0, 0usize);
 
@@ -388,7 +406,13 @@ pub fn fit(
             pairs[((rng.uniform_f64() * pairs.len() as f64) as usize).min(pairs.len() - 1)];
         let target = &frames[f].targets[v];
         let camera = &target.camera;
+        let mut lap = Instant::now();
+        let mut tick = |slot: &mut f64| {
+            *slot += lap.elapsed().as_secs_f64() * 1e3;
+            lap = Instant::now();
+        };
         to_world(&bound, &train_frames[f], &mut world);
+        tick(&mut stage.place);
         let render_err = |source| FitError::Render {
             iteration: it,
             view: camera.name.clone(),
@@ -396,6 +420,7 @@ pub fn fit(
         };
         let fwd =
             render_with_grad::<f32, _>(&world, camera, &options.render).map_err(render_err)?;
+        tick(&mut stage.render);
         let px = camera.width as usize * camera.height as usize;
         let b = &mut buffers;
         reset(&mut b.g_rgb, 3 * px);
@@ -432,6 +457,7 @@ pub fn fit(
             }
             grads.alpha = Some(&b.g_alpha[..]);
         }
+        tick(&mut stage.loss);
         if g_world.len() != bound.len() {
             g_world = GaussianGrads::zeros(bound.len(), bound.local.sh_degree);
         } else {
@@ -439,8 +465,10 @@ pub fn fit(
         }
         backward_into(&world, camera, &options.render, &fwd, &grads, &mut g_world)
             .map_err(render_err)?;
+        tick(&mut stage.backward);
         grads_to_local(&bound, &train_frames[f], &g_world, &mut g_local);
         adam.step(&mut bound.local, &g_local);
+        tick(&mut stage.step);
         acc_loss += loss;
         acc_l1 += l1v;
         acc_psnr += psnr(&fwd.rgb, &target.rgb);
@@ -486,11 +514,19 @@ pub fn fit(
             (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
         }
     }
+    let n = options.iterations as f64;
     Ok(Fitted {
         set: bound.write_into(&current),
         checkpoints,
         refines,
-        seconds_per_iteration: train_s / options.iterations as f64,
+        seconds_per_iteration: train_s / n,
+        stage_ms: StageMs {
+            place: stage.place / n,
+            render: stage.render / n,
+            loss: stage.loss / n,
+            backward: stage.backward / n,
+            step: stage.step / n,
+        },
     })
 }
 

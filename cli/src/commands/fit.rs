@@ -355,6 +355,7 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             "eval_views": eval_views,
             "target": if args.images.is_some() { "images" } else { "mesh" },
             "ms_per_iteration": fitted.seconds_per_iteration * 1e3,
+            "stage_ms": fitted.stage_ms,
             "seconds": seconds,
             "checkpoints": fitted.checkpoints,
             "refines": fitted.refines,
