@@ -123,4 +123,20 @@ fn fit_refuses_modes_without_a_backward() {
     let fitted = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap();
     assert_eq!(fitted.set.len(), set.len());
     assert_eq!(fitted.checkpoints.last().unwrap().iteration, 3);
+    // The depth and alpha terms with mesh targets (which carry both).
+    let with_terms = FitOptions {
+        depth_weight: 0.5,
+        alpha_weight: 0.5,
+        ..options.clone()
+    };
+    let fitted = fit(&set, &mesh, &frames, &[], &with_terms, |_| {}).unwrap();
+    assert!(fitted.checkpoints.last().unwrap().loss.unwrap() > 0.0);
+    // Needing a target image that is not there is refused, naming the view.
+    let mut bare = frames.clone();
+    bare[0].targets[0].depth = None;
+    let e = fit(&set, &mesh, &bare, &[], &with_terms, |_| {}).unwrap_err();
+    assert!(
+        e.to_string().contains("'front'") && e.to_string().contains("depth"),
+        "{e}"
+    );
 }

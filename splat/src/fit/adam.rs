@@ -143,8 +143,13 @@ impl Adam {
 
     /// Forgets every moment and step: fresh state for `n` Gaussians.
     pub fn reset(&mut self, n: usize) {
-        *self = Self::new(self.lr, n, self.sh_per_gaussian);
-        self.steps = vec![0; n];
+        let (beta1, beta2, eps) = (self.beta1, self.beta2, self.eps);
+        *self = Self {
+            beta1,
+            beta2,
+            eps,
+            ..Self::new(self.lr, n, self.sh_per_gaussian)
+        };
     }
 
     /// New state after the set changed: Gaussian `i` of the new set takes the state of old
