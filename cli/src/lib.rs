@@ -63,6 +63,8 @@ pub enum Command {
     Init(commands::init::InitArgs),
     /// Surface-guided re-initialisation of a bound avatar (VGA/GVA): alpha shape, smoothing, resampling.
     Refine(Box<commands::refine::RefineArgs>),
+    /// Fit bound Gaussians to target images (mesh renders or user images): L1 + D-SSIM, Adam, refine interleaved.
+    Fit(Box<commands::fit::FitArgs>),
     /// Render Gaussians (3DGS/2DGS/perspective-aware) or a mesh on the CPU: rgb, alpha, depth, normals.
     Render(commands::render::RenderArgs),
     /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
@@ -171,6 +173,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Prune(args) => commands::prune::run(args, &ctx),
         Command::Init(args) => commands::init::run(args, &ctx),
         Command::Refine(args) => commands::refine::run(*args, &ctx),
+        Command::Fit(args) => commands::fit::run(*args, &ctx),
         Command::Render(args) => commands::render::run(args, &ctx),
         Command::Cameras(args) => commands::cameras::run(args, &ctx),
         Command::Extract(args) => commands::extract::run(*args, &ctx),

@@ -213,6 +213,54 @@ fn every_command_prints_one_json_object() {
             "bake", "alpha", "smooth", "sample", "inherit", "bind", "prune", "chamfer",
         ],
     );
+    let f = json(&[
+        "fit",
+        &p("bound.ply"),
+        "--template",
+        &spot,
+        "--cameras",
+        &p("cams.json"),
+        "--eval-cameras",
+        &p("cams.json"),
+        "-o",
+        &p("fitted.ply"),
+        "--iterations",
+        "4",
+        "--eval-every",
+        "2",
+    ]);
+    has(
+        &f,
+        &[
+            "output",
+            "template",
+            "before",
+            "gaussians",
+            "iterations",
+            "frames",
+            "views",
+            "eval_views",
+            "target",
+            "ms_per_iteration",
+            "stage_ms",
+            "seconds",
+            "checkpoints",
+            "refines",
+        ],
+    );
+    has(
+        &f["checkpoints"][1],
+        &[
+            "iteration",
+            "loss",
+            "train_l1",
+            "train_psnr",
+            "eval_psnr",
+            "eval_ssim",
+            "gaussians",
+            "seconds",
+        ],
+    );
     has(
         &json(&["convert", &spot, &p("spot.glb")]),
         &["input", "output", "bytes"],

@@ -64,6 +64,7 @@ pub mod config;
 pub mod deform;
 pub mod error;
 pub mod eval;
+pub mod fit;
 pub mod html;
 pub mod input;
 pub mod journal;

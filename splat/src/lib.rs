@@ -12,6 +12,7 @@ pub mod axes;
 pub mod bind;
 pub mod deform;
 pub mod densify;
+pub mod fit;
 pub mod frames;
 pub mod gaussians;
 pub mod gltf_splat;

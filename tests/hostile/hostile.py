@@ -145,6 +145,8 @@ def commands(kind, path, fixtures, out):
             ["render", "--mesh", path, "--cameras", cams, "-o", o + "/r"],
             ["alpha-shape", path, "--alpha", "0.1", "-o", o + "/a.ply"],
             ["refine", bound, "--template", path, "-o", o + "/rf.ply"],
+            ["fit", bound, "--template", path, "--cameras", cams, "-o", o + "/fit.ply",
+             "--iterations", "2"],
             ["extract", "--template", path, "--method", "alpha,delaunay", "-q", "-o", o + "/x"],
         ]
         if kind in ("gltf", "glb"):
@@ -160,6 +162,8 @@ def commands(kind, path, fixtures, out):
             ["densify", path, "-o", o + "/ds.ply", "--gate", "seed"],
             ["prune", path, "-o", o + "/ps.ply", "--gate", "seed"],
             ["refine", path, "--template", spot, "-o", o + "/rf.ply"],
+            ["fit", path, "--template", spot, "--cameras", cams, "-o", o + "/fit.ply",
+             "--iterations", "2"],
             ["bind", spot, "--gaussians", path, "-o", o + "/b.ply"],
             ["deform", "--template", spot, "--gaussians", path, "--animation", spot,
              "-o", o + "/f"],
@@ -170,6 +174,8 @@ def commands(kind, path, fixtures, out):
             ["tsdf", "--gaussians", world, "--cameras", path, "-o", o + "/t.ply"],
             ["init", "--cameras", path, "--masks", fixtures["masks"], "-o", o + "/i.ply",
              "-n", "500", "--resolution", "16"],
+            ["fit", bound, "--template", spot, "--cameras", path, "-o", o + "/fit.ply",
+             "--iterations", "2"],
         ]
     if kind == "expression":
         return [["extract", "--avatar", fixtures["lam"], "--animation", path, "--method",

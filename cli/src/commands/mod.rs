@@ -10,6 +10,7 @@ pub mod demo;
 pub mod densify;
 pub mod eval;
 pub mod extract;
+pub mod fit;
 pub mod gaussian_io;
 pub mod init;
 pub mod man;

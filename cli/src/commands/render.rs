@@ -111,7 +111,7 @@ fn parse_outputs(s: &str) -> Result<Outputs, String> {
     Ok(o)
 }
 
-fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
+pub(crate) fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != 3 {
         return Err(format!("expected r,g,b (three numbers), got '{s}'"));

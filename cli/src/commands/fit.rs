@@ -1,0 +1,379 @@
+//! `trisplat fit G.ply --template T --cameras CAMS.json -o OUT.ply [--eval-cameras EVAL.json]
+//! [--animation A [--frames A..B] [--clip C] [--fps F] | --images DIR [--eval-images DIR]]
+//! [--iterations N] [--refine-every N] ...`: fits bound Gaussians to target images
+//! (`pipeline::fit`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, bail};
+use trisplat_geometry::Camera;
+use trisplat_geometry::glam::DVec3;
+use trisplat_pipeline::config::{ExtractConfig, ExtractOptions};
+use trisplat_pipeline::fit::{
+    Checkpoint, FitFrame, FitOptions, TargetColor, fit, mesh_targets, read_image_targets,
+};
+use trisplat_pipeline::input::{read_bound, read_template};
+use trisplat_pipeline::refine::{PruneCriteria, RefineOptions};
+use trisplat_pipeline::session::{Session, SessionOptions};
+use trisplat_splat::fit::adam::LearningRates;
+use trisplat_splat::fit::loss::DEFAULT_LAMBDA_DSSIM;
+use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
+use trisplat_splat::render::RenderOptions;
+
+use super::render::parse_rgb;
+use super::{
+    Context, MAX_IMAGE_PIXELS, UsageError, parse_max_pixels, read_camera_file, refuse_to_overwrite,
+};
+
+/// Default of `--max-views`: target views (cameras times frames) held in memory.
+pub const DEFAULT_MAX_VIEWS: u64 = 4096;
+
+/// Arguments of `trisplat fit`.
+#[derive(Debug, clap::Args)]
+#[command(
+    after_long_help = "Fit bound Gaussians (a GaussianAvatars-bound PLY, as `bind` \
+    writes) to target images, on the CPU, and write the fitted bound set.\n\n\
+    Targets: mesh renders of the template (default; ray cast from --cameras: rgb from the \
+    mesh's vertex colours, else its world normal as colour (n+1)/2 (--color normal forces \
+    that), the hit mask as alpha, z-depth), at its rest pose or, with --animation, at each \
+    frame of --frames (each frame's views all train); or user images with --images DIR \
+    (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask). \
+    Held-out views (--eval-cameras, --eval-images) are scored by PSNR and SSIM at every \
+    --eval-every iterations; they never train.\n\n\
+    One iteration: a seeded random (frame, view); the bound set placed with that frame's \
+    triangle frames; the 3DGS render (gsplat rules) and its backward pass; loss (1 - \
+    lambda) L1 + lambda D-SSIM on rgb (lambda 0.2, 3DGS's SSIM: 11x11 Gaussian window, sigma \
+    1.5), + --depth-weight x the depth L1 weighted by the target's alpha, + --alpha-weight x \
+    the alpha L1 against the mask; the gradient carried to the local parameters and one Adam \
+    step (GaussianAvatars' learning rates: means 0.005 in triangle scales, decaying to 0.01x \
+    over the run, log-scales 0.017, rotations 0.001, opacities 0.05, SH DC 0.0025, SH rest \
+    0.0025/20). --refine-every N runs one round of `trisplat refine` (alpha shape of the \
+    centres, smoothing, resampling, binding inheritance, pruning by the seed's gate) every N \
+    iterations and restarts Adam's state. --normal-weight and --distortion-weight (2DGS's \
+    terms) need the surfel backward and are refused for now.\n\n\
+    --json prints one object: every checkpoint (iteration, loss, train_l1, train_psnr, \
+    eval_psnr, eval_ssim, gaussians, seconds) and every refine round."
+)]
+pub struct FitArgs {
+    /// Bound Gaussian PLY (local parameters, binding_0).
+    pub gaussians: PathBuf,
+    /// The template the Gaussians are bound to (its rest state).
+    #[arg(long, value_name = "T")]
+    pub template: PathBuf,
+    /// Training cameras: a 3DGS cameras.json or a NeRF transforms.json.
+    #[arg(long, value_name = "CAMS.json")]
+    pub cameras: PathBuf,
+    /// Held-out cameras, scored and never trained on.
+    #[arg(long, value_name = "CAMS.json")]
+    pub eval_cameras: Option<PathBuf>,
+    /// Output Gaussian PLY (bound like the input).
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Target images instead of mesh renders: DIR/<img_name>.png per training camera.
+    #[arg(long, value_name = "DIR", conflicts_with = "animation")]
+    pub images: Option<PathBuf>,
+    /// Images of the held-out cameras (with --images).
+    #[arg(long, value_name = "DIR", requires = "images")]
+    pub eval_images: Option<PathBuf>,
+    /// Animation whose frames are the targets (default: the template's rest pose).
+    #[arg(long, value_name = "A")]
+    pub animation: Option<String>,
+    /// Animation frames to fit (`A..B`, `A..=B`, `A..`, `..B`, `A`).
+    #[arg(long, value_name = "RANGE", requires = "animation")]
+    pub frames: Option<String>,
+    /// glTF clip (name or index).
+    #[arg(long, value_name = "NAME|INDEX", requires = "animation")]
+    pub clip: Option<String>,
+    /// Frames per second a glTF clip is sampled at.
+    #[arg(long, value_name = "F", default_value_t = 30.0, requires = "animation")]
+    pub fps: f64,
+    /// Colour of mesh targets.
+    #[arg(long, value_enum, default_value_t = TargetColor::Auto)]
+    pub color: TargetColor,
+    /// Background colour r,g,b in 0..1 (renders and mesh targets).
+    #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, default_value = "0,0,0")]
+    pub background: [f32; 3],
+    /// Optimisation steps (one view each).
+    #[arg(long, value_name = "N", default_value_t = 1000,
+        value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    pub iterations: u64,
+    /// Learning rate of the local means (triangle scales).
+    #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.means)]
+    pub lr_means: f64,
+    /// The means' learning rate at the end, as a fraction of --lr-means.
+    #[arg(long, value_name = "F", default_value_t = 0.01)]
+    pub lr_means_final: f64,
+    /// Learning rate of the log-scales.
+    #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.log_scales)]
+    pub lr_scales: f64,
+    /// Learning rate of the quaternions.
+    #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.rotations)]
+    pub lr_rotations: f64,
+    /// Learning rate of the opacity logits.
+    #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.opacities)]
+    pub lr_opacities: f64,
+    /// Learning rate of the SH DC coefficients.
+    #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.sh_dc)]
+    pub lr_sh: f64,
+    /// Learning rate of the higher SH coefficients.
+    #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.sh_rest)]
+    pub lr_sh_rest: f64,
+    /// Weight of D-SSIM in the rgb loss.
+    #[arg(long, value_name = "L", default_value_t = DEFAULT_LAMBDA_DSSIM)]
+    pub lambda_dssim: f64,
+    /// Weight of the depth L1 (mesh targets).
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub depth_weight: f64,
+    /// Weight of the alpha L1 against the target mask.
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub alpha_weight: f64,
+    /// Weight of 2DGS's depth-normal consistency (needs the surfel backward: refused for now).
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub normal_weight: f64,
+    /// Weight of 2DGS's depth distortion (needs the surfel backward: refused for now).
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub distortion_weight: f64,
+    /// Run one refine round every N iterations (not after the last).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub refine_every: Option<u64>,
+    /// Refine's alpha radius in mean spacings of the centres.
+    #[arg(long, value_name = "F", default_value_t = trisplat_pipeline::config::DEFAULT_ALPHA_SPACINGS)]
+    pub refine_alpha_spacings: f64,
+    /// No pruning in the refine rounds.
+    #[arg(long)]
+    pub refine_no_prune: bool,
+    /// Seed of the view order (and of refine's sampling).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Largest image (pixels) of any camera, checked before anything is rendered or read.
+    #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
+    pub max_pixels: u64,
+    /// Most target views held in memory (training and held-out cameras times frames).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_VIEWS,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_views: u64,
+    /// Score held-out views every N iterations.
+    #[arg(long, value_name = "N", default_value_t = 100,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub eval_every: u64,
+}
+
+fn cameras_of(path: &Path, origin: DVec3, max_pixels: u64) -> anyhow::Result<Vec<Camera>> {
+    let cams = read_camera_file(path, None, max_pixels)?;
+    Ok(cams.iter().map(|c| c.translated(-origin)).collect())
+}
+
+/// Runs `trisplat fit`.
+///
+/// # Errors
+/// Unreadable or mismatched inputs (named), options out of range, a failed fit or write.
+pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
+    for input in [&args.gaussians, &args.template, &args.cameras] {
+        refuse_to_overwrite(input, &args.output)?;
+    }
+    if args.eval_cameras.is_none() && args.eval_images.is_some() {
+        return Err(UsageError("--eval-images needs --eval-cameras".into()).into());
+    }
+    let started = std::time::Instant::now();
+    // The template, the set and the frames' positions.
+    let (template, set, positions, origin) = match &args.animation {
+        None => {
+            let template = read_template(&args.template)?;
+            let set = read_bound(&args.gaussians, &template, &args.template)?;
+            let rest = template.positions().to_vec();
+            (template, set, vec![(0usize, rest)], DVec3::ZERO)
+        }
+        Some(animation) => {
+            let config = ExtractConfig {
+                template: args.template.clone(),
+                animation: Some(animation.clone()),
+                gaussians: Some(args.gaussians.clone()),
+                methods: Vec::new(),
+                output: args.output.with_extension("fit-unused"),
+                frames: args.frames.clone(),
+                gt: None,
+                options: ExtractOptions {
+                    clip: args.clip.clone(),
+                    fps: args.fps,
+                    ..ExtractOptions::default()
+                },
+            };
+            let mut session = Session::open_with(
+                &config,
+                &SessionOptions {
+                    weld: false,
+                    ..SessionOptions::default()
+                },
+            )?;
+            let mut positions = Vec::new();
+            for f in session.frames() {
+                positions.push((f, session.positions(f)?));
+            }
+            (
+                session.template().clone(),
+                session.gaussians().clone(),
+                positions,
+                session.origin(),
+            )
+        }
+    };
+    let train_cams = cameras_of(&args.cameras, origin, args.max_pixels)?;
+    let eval_cams = match &args.eval_cameras {
+        Some(p) => cameras_of(p, origin, args.max_pixels)?,
+        None => Vec::new(),
+    };
+    let frame_count = if args.images.is_some() {
+        1
+    } else {
+        positions.len()
+    };
+    let views = (train_cams.len() + eval_cams.len()) as u64 * frame_count as u64;
+    if views > args.max_views {
+        bail!(
+            "{views} target views ({} + {} cameras x {frame_count} frame(s)): over the limit of \
+             {} views (raise it with --max-views)",
+            train_cams.len(),
+            eval_cams.len(),
+            args.max_views
+        );
+    }
+    let make = |cams: &[Camera], images: Option<&PathBuf>| -> anyhow::Result<Vec<FitFrame>> {
+        if cams.is_empty() {
+            return Ok(Vec::new());
+        }
+        match images {
+            Some(dir) => Ok(vec![FitFrame {
+                frame: 0,
+                positions: positions[0].1.clone(),
+                targets: read_image_targets(dir, cams)?,
+            }]),
+            None => positions
+                .iter()
+                .map(|(f, p)| {
+                    Ok(FitFrame {
+                        frame: *f,
+                        positions: p.clone(),
+                        targets: mesh_targets(&template, p, cams, args.color, args.background)
+                            .with_context(|| format!("frame {f}"))?,
+                    })
+                })
+                .collect(),
+        }
+    };
+    let frames = make(&train_cams, args.images.as_ref())?;
+    let eval_images = args.eval_images.as_ref().or(args.images.as_ref());
+    let held_out = make(&eval_cams, eval_images)?;
+    let options = FitOptions {
+        iterations: usize::try_from(args.iterations)?,
+        lr: LearningRates {
+            means: args.lr_means,
+            log_scales: args.lr_scales,
+            rotations: args.lr_rotations,
+            opacities: args.lr_opacities,
+            sh_dc: args.lr_sh,
+            sh_rest: args.lr_sh_rest,
+        },
+        means_lr_final: args.lr_means_final,
+        lambda_dssim: args.lambda_dssim,
+        depth_weight: args.depth_weight,
+        alpha_weight: args.alpha_weight,
+        normal_weight: args.normal_weight,
+        distortion_weight: args.distortion_weight,
+        refine_every: args.refine_every.map(usize::try_from).transpose()?,
+        refine: RefineOptions {
+            alpha_spacings: args.refine_alpha_spacings,
+            prune: if args.refine_no_prune {
+                PruneCriteria::none()
+            } else {
+                PruneCriteria::seed()
+            },
+            sample: trisplat_geometry::sampling::SampleOptions {
+                seed: args.seed,
+                ..Default::default()
+            },
+            ..RefineOptions::default()
+        },
+        render: RenderOptions {
+            background: args.background,
+            ..RenderOptions::default()
+        },
+        seed: args.seed,
+        eval_every: usize::try_from(args.eval_every)?,
+    };
+    let bar = ctx.progress.bar(args.iterations, "fitting");
+    let json = ctx.json;
+    let fitted = fit(&set, &template, &frames, &held_out, &options, |c| {
+        bar.set_position(c.iteration as u64);
+        if !json {
+            bar.suspend(|| print_checkpoint(c));
+        }
+    })
+    .with_context(|| {
+        format!(
+            "{} (template {})",
+            args.gaussians.display(),
+            args.template.display()
+        )
+    });
+    bar.finish_and_clear();
+    let fitted = fitted?;
+    if !fitted.set.is_empty() && fitted.set.binding().is_none() {
+        bail!("internal: the fitted set lost its binding");
+    }
+    write_gaussians(&args.output, &fitted.set, &PlyWriteOptions::default())?;
+    let seconds = started.elapsed().as_secs_f64();
+    let views: usize = frames.iter().map(|f| f.targets.len()).sum();
+    let eval_views: usize = held_out.iter().map(|f| f.targets.len()).sum();
+    if !json {
+        for r in &fitted.refines {
+            println!(
+                "refine after iteration {}: {} -> {} Gaussians ({:.0} ms)",
+                r.iteration, r.before, r.after, r.ms
+            );
+        }
+        println!(
+            "fit: {} -> {} Gaussians, {} iterations on {views} view(s) of {} frame(s), {:.1} ms \
+             per iteration, {seconds:.2} s; wrote {}",
+            set.len(),
+            fitted.set.len(),
+            args.iterations,
+            frames.len(),
+            fitted.seconds_per_iteration * 1e3,
+            args.output.display()
+        );
+    }
+    ctx.emit(
+        "fit",
+        serde_json::json!({
+            "output": args.output,
+            "template": args.template,
+            "before": set.len(),
+            "gaussians": fitted.set.len(),
+            "iterations": args.iterations,
+            "frames": frames.iter().map(|f| f.frame).collect::<Vec<_>>(),
+            "views": views,
+            "eval_views": eval_views,
+            "target": if args.images.is_some() { "images" } else { "mesh" },
+            "ms_per_iteration": fitted.seconds_per_iteration * 1e3,
+            "stage_ms": fitted.stage_ms,
+            "seconds": seconds,
+            "checkpoints": fitted.checkpoints,
+            "refines": fitted.refines,
+        }),
+    )
+}
+
+fn print_checkpoint(c: &Checkpoint) {
+    let opt = |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
+    println!(
+        "iteration {}: loss {}, train PSNR {} dB; held-out PSNR {} dB, SSIM {}; {} Gaussians, \
+         {:.1} s",
+        c.iteration,
+        opt(c.loss, 5),
+        opt(c.train_psnr, 2),
+        opt(c.eval_psnr, 2),
+        opt(c.eval_ssim, 4),
+        c.gaussians,
+        c.seconds
+    );
+}

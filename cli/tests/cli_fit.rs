@@ -1,0 +1,358 @@
+//! `trisplat fit`: a short fit of Spot bound one Gaussian per triangle to mesh renders raises
+//! the held-out PSNR and keeps the binding (with and without refine rounds interleaved); user
+//! images with a mask; bad inputs are one `error:` line with exit 1 (2 for usage) and no output.
+
+mod common;
+use common::{fixture, fresh_dir, listing, run, run_ok, s};
+use serde_json::Value;
+use std::path::Path;
+use trisplat_splat::ply::read_gaussians;
+
+fn json(args: &[&str]) -> Value {
+    let mut all = args.to_vec();
+    all.push("--json");
+    let out = run_ok(&all);
+    serde_json::from_slice(&out.stdout).expect("one JSON object")
+}
+
+/// Exit `code`, one `error:` line naming each of `named`, nothing new in `dir`.
+fn fails(args: &[&str], code: i32, dir: &Path, named: &[&str]) {
+    let before = listing(dir);
+    let out = run(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(code), "{args:?}: {stderr}");
+    if code == 1 {
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{stderr}");
+        assert!(lines[0].starts_with("error: "), "{stderr}");
+    }
+    for n in named {
+        assert!(stderr.contains(n), "`{n}` in: {stderr}");
+    }
+    assert_eq!(listing(dir), before, "{args:?} left files");
+}
+
+/// Spot bound, training and held-out cameras (small images) in `dir`.
+fn setup(dir: &Path) -> (String, String, String, String) {
+    let spot = fixture("spot_triangulated.obj");
+    let g = dir.join("g.ply");
+    run_ok(&["bind", &spot, "-o", s(&g), "--per-triangle", "1"]);
+    let train = dir.join("train.json");
+    let eval = dir.join("eval.json");
+    run_ok(&[
+        "cameras",
+        &spot,
+        "-o",
+        s(&train),
+        "--views",
+        "8",
+        "--size",
+        "40x40",
+    ]);
+    run_ok(&[
+        "cameras",
+        &spot,
+        "-o",
+        s(&eval),
+        "--rig",
+        "orbit",
+        "--views",
+        "3",
+        "--elevation",
+        "40",
+        "--size",
+        "40x40",
+    ]);
+    (
+        spot,
+        s(&g).to_owned(),
+        s(&train).to_owned(),
+        s(&eval).to_owned(),
+    )
+}
+
+#[test]
+fn fit_raises_held_out_psnr_and_keeps_the_binding() {
+    let dir = fresh_dir("fit");
+    let (spot, g, train, eval) = setup(&dir);
+    let tris = trisplat_geometry::io::read_mesh(Path::new(&spot))
+        .expect("spot")
+        .triangle_count();
+    for refine in [None, Some("15")] {
+        let out = dir.join("fitted.ply");
+        let mut args = vec![
+            "fit",
+            &g,
+            "--template",
+            &spot,
+            "--cameras",
+            &train,
+            "--eval-cameras",
+            &eval,
+            "-o",
+            s(&out),
+            "--iterations",
+            "40",
+            "--eval-every",
+            "20",
+            "--threads",
+            "2",
+        ];
+        if let Some(n) = refine {
+            args.extend(["--refine-every", n]);
+        }
+        let r = json(&args);
+        let cps = r["checkpoints"].as_array().expect("checkpoints");
+        assert_eq!(cps.len(), 3, "{r}");
+        let first = cps[0]["eval_psnr"].as_f64().expect("psnr");
+        let last = cps[2]["eval_psnr"].as_f64().expect("psnr");
+        assert!(last > first + 0.5, "held-out PSNR {first} -> {last}");
+        assert!(
+            cps[2]["eval_ssim"].as_f64().expect("ssim")
+                > cps[0]["eval_ssim"].as_f64().expect("ssim")
+        );
+        let fitted = read_gaussians(&out).expect("fitted");
+        assert_eq!(fitted.len() as u64, r["gaussians"].as_u64().expect("count"));
+        let binding = fitted.binding().expect("still bound");
+        assert!(binding.triangles.iter().all(|t| t.index() < tris));
+        assert_eq!(
+            r["refines"].as_array().map(Vec::len),
+            Some(usize::from(refine.is_some()) * 2)
+        );
+    }
+}
+
+#[test]
+fn fit_reads_user_images_and_masks() {
+    let dir = fresh_dir("fit_images");
+    let (spot, g, train, _) = setup(&dir);
+    let cams = trisplat_geometry::camera::read_cameras_json(Path::new(&train)).expect("cameras");
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).expect("mkdir");
+    for c in &cams {
+        // A flat orange picture, its mask a centred square.
+        let img = image::RgbImage::from_pixel(c.width, c.height, image::Rgb([230, 120, 20]));
+        img.save(images.join(format!("{}.png", c.name)))
+            .expect("png");
+        let mask = image::GrayImage::from_fn(c.width, c.height, |x, y| {
+            let inside = (10..30).contains(&x) && (10..30).contains(&y);
+            image::Luma([if inside { 255 } else { 0 }])
+        });
+        mask.save(images.join(format!("{}_mask.png", c.name)))
+            .expect("png");
+    }
+    let out = dir.join("fitted.ply");
+    let r = json(&[
+        "fit",
+        &g,
+        "--template",
+        &spot,
+        "--cameras",
+        &train,
+        "--images",
+        s(&images),
+        "-o",
+        s(&out),
+        "--iterations",
+        "10",
+        "--alpha-weight",
+        "0.5",
+    ]);
+    assert_eq!(r["target"], "images", "{r}");
+    assert_eq!(r["views"], 8, "{r}");
+    // A picture of the wrong size is refused, naming the file.
+    let bad = images.join(format!("{}.png", cams[0].name));
+    image::RgbImage::new(7, 5).save(&bad).expect("png");
+    let out2 = dir.join("x.ply");
+    fails(
+        &[
+            "fit",
+            &g,
+            "--template",
+            &spot,
+            "--cameras",
+            &train,
+            "--images",
+            s(&images),
+            "-o",
+            s(&out2),
+        ],
+        1,
+        &dir,
+        &[s(&bad), "7x5"],
+    );
+}
+
+#[test]
+fn fit_refuses_bad_input() {
+    let dir = fresh_dir("fit_bad");
+    let (spot, g, train, _) = setup(&dir);
+    let out = dir.join("x.ply");
+    let o = s(&out);
+    let base = [
+        "fit",
+        g.as_str(),
+        "--template",
+        spot.as_str(),
+        "--cameras",
+        train.as_str(),
+        "-o",
+        o,
+    ];
+    let with = |extra: &[&str]| {
+        let mut a: Vec<String> = base.iter().map(|v| (*v).to_owned()).collect();
+        a.extend(extra.iter().map(|v| (*v).to_owned()));
+        a
+    };
+    let call = |a: &Vec<String>, code: i32, named: &[&str]| {
+        let refs: Vec<&str> = a.iter().map(String::as_str).collect();
+        fails(&refs, code, &dir, named);
+    };
+    call(&with(&["--normal-weight", "0.1"]), 1, &["surfel backward"]);
+    call(
+        &with(&["--distortion-weight", "0.1"]),
+        1,
+        &["surfel backward"],
+    );
+    call(&with(&["--iterations", "0"]), 2, &[]);
+    call(&with(&["--lambda-dssim", "2"]), 1, &["lambda-dssim"]);
+    call(
+        &with(&["--max-views", "3"]),
+        1,
+        &["--max-views", "8 target views"],
+    );
+    call(
+        &with(&["--max-pixels", "100"]),
+        1,
+        &["--max-pixels", "train.json"],
+    );
+    // An unbound set, a broken cameras file, a missing image folder.
+    let world = fixture("render/random_deg3.ply");
+    fails(
+        &[
+            "fit",
+            &world,
+            "--template",
+            &spot,
+            "--cameras",
+            &train,
+            "-o",
+            o,
+        ],
+        1,
+        &dir,
+        &["random_deg3.ply"],
+    );
+    let broken = dir.join("broken.json");
+    std::fs::write(&broken, "[{\"width\": 3}]").expect("write");
+    fails(
+        &[
+            "fit",
+            &g,
+            "--template",
+            &spot,
+            "--cameras",
+            s(&broken),
+            "-o",
+            o,
+        ],
+        1,
+        &dir,
+        &["broken.json"],
+    );
+    std::fs::remove_file(&broken).expect("rm");
+    fails(
+        &[
+            "fit",
+            &g,
+            "--template",
+            &spot,
+            "--cameras",
+            &train,
+            "--images",
+            "/nonexistent",
+            "-o",
+            o,
+        ],
+        1,
+        &dir,
+        &["/nonexistent"],
+    );
+    // Never over an input.
+    fails(
+        &[
+            "fit",
+            &g,
+            "--template",
+            &spot,
+            "--cameras",
+            &train,
+            "-o",
+            &g,
+        ],
+        1,
+        &dir,
+        &["overwrite"],
+    );
+}
+
+#[test]
+fn fit_follows_an_animation_frame_by_frame() {
+    let dir = fresh_dir("fit_anim");
+    let man = fixture("anim/CesiumMan.glb");
+    let g = dir.join("g.ply");
+    run_ok(&["bind", &man, "-o", s(&g)]);
+    let cams = dir.join("cams.json");
+    run_ok(&[
+        "cameras",
+        &man,
+        "-o",
+        s(&cams),
+        "--views",
+        "3",
+        "--size",
+        "24x24",
+    ]);
+    let out = dir.join("fitted.ply");
+    let r = json(&[
+        "fit",
+        s(&g),
+        "--template",
+        &man,
+        "--cameras",
+        s(&cams),
+        "-o",
+        s(&out),
+        "--animation",
+        &man,
+        "--frames",
+        "0..2",
+        "--fps",
+        "3",
+        "--iterations",
+        "6",
+        "--eval-every",
+        "3",
+    ]);
+    assert_eq!(r["frames"], serde_json::json!([0, 1]), "{r}");
+    assert_eq!(r["views"], 6, "{r}");
+    assert_eq!(read_gaussians(&out).expect("fitted").len(), 4672);
+    // The frame range needs an animation.
+    fails(
+        &[
+            "fit",
+            s(&g),
+            "--template",
+            &man,
+            "--cameras",
+            s(&cams),
+            "-o",
+            s(&out),
+            "--frames",
+            "0..2",
+        ],
+        2,
+        &dir,
+        &["--animation"],
+    );
+}

@@ -1,0 +1,740 @@
+//! `trisplat fit`: fitting bound Gaussians to target images (docs/conventions.md §5 "Fitting").
+//!
+//! The parameters are the bound set's local ones ([`BoundParams`], `f64`); per iteration one
+//! (frame, view) pair is drawn (seeded), the set is placed with that frame's triangle frames
+//! ([`to_world`]), rendered with the 3DGS backward pass in `f32`, and the loss
+//! `(1 − λ) L1 + λ D-SSIM` on rgb, plus `w_depth` × the depth L1 against the target depth
+//! (weighted by the target's alpha) and `w_alpha` × the L1 of alpha against the target mask,
+//! is carried back to the local parameters ([`grads_to_local`]) and one Adam step taken. The
+//! means' learning rate decays exponentially to `means_lr_final` × itself over the run (3DGS).
+//!
+//! With `refine_every = N`, every N iterations (not after the last) the set goes through one
+//! round of [`crate::refine`] (surface-guided re-initialisation with binding inheritance) on
+//! the template's rest pose, and Adam's state starts afresh (every Gaussian is new: refine
+//! gives no old-to-new map).
+//!
+//! Targets are mesh renders of the posed template ([`mesh_targets`]: rgb from vertex colours,
+//! else the world normal as colour `(n + 1) / 2`, depth, camera-frame normals, the hit mask as
+//! alpha) or user images ([`read_image_targets`]). Held-out views are scored by PSNR and SSIM
+//! (3DGS's) at every checkpoint.
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
+use trisplat_geometry::rng::Rng;
+use trisplat_geometry::{Camera, TriMesh};
+use trisplat_splat::GaussianSet;
+use trisplat_splat::fit::adam::{Adam, LearningRates};
+use trisplat_splat::fit::bound::{
+    BoundError, BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,
+};
+use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, Ssim, l1, masked_l1, psnr};
+use trisplat_splat::render::{
+    GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward_into,
+    render_with_grad,
+};
+
+use crate::refine::{RefineError, RefineOptions, refine};
+
+/// Why a fit cannot run.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FitError {
+    /// An option out of range, or options that need what is not there yet.
+    #[error("{0}")]
+    BadOption(String),
+    /// The Gaussians cannot be fitted as bound parameters.
+    #[error("the Gaussians: {0}")]
+    Bound(#[from] BoundError),
+    /// A target does not fit its camera or cannot be read.
+    #[error("{0}")]
+    Target(String),
+    /// The renderer or its backward pass refused.
+    #[error("iteration {iteration}, view '{view}': {source}")]
+    Render {
+        /// Iteration.
+        iteration: usize,
+        /// Camera name.
+        view: String,
+        /// Cause.
+        source: GradError,
+    },
+    /// A refine round failed.
+    #[error("refine after iteration {iteration}: {source}")]
+    Refine {
+        /// Iteration.
+        iteration: usize,
+        /// Cause.
+        source: RefineError,
+    },
+    /// The parameters left the finite numbers (learning rates too high).
+    #[error("iteration {0}: the parameters are no longer finite (lower the learning rates)")]
+    NonFinite(usize),
+}
+
+/// One target view: a camera and its images (row-major; rgb `[H, W, 3]`, normals `[H, W, 3]`
+/// in the camera frame, OpenCV axes).
+#[derive(Clone, Debug)]
+pub struct Target {
+    /// The camera.
+    pub camera: Camera,
+    /// rgb in 0..1 (the background where nothing is seen).
+    pub rgb: Vec<f32>,
+    /// Mask / alpha in 0..1.
+    pub alpha: Option<Vec<f32>>,
+    /// z-depth, 0 where nothing is seen.
+    pub depth: Option<Vec<f32>>,
+    /// Unit normals facing the camera, camera frame.
+    pub normal: Option<Vec<f32>>,
+}
+
+/// One animation frame to fit: the template's positions and the frame's target views.
+#[derive(Clone, Debug)]
+pub struct FitFrame {
+    /// Animation frame index (for reports).
+    pub frame: usize,
+    /// The template's vertex positions at that frame.
+    pub positions: Vec<DVec3>,
+    /// Its views.
+    pub targets: Vec<Target>,
+}
+
+/// Options of [`fit`].
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Optimisation steps (one view each).
+    pub iterations: usize,
+    /// Adam's learning rates (bound parameters).
+    pub lr: LearningRates,
+    /// The means' learning rate at the last iteration, as a fraction of the first (3DGS:
+    /// 1.6e-6 / 1.6e-4 = 0.01).
+    pub means_lr_final: f64,
+    /// `λ` of D-SSIM ([`DEFAULT_LAMBDA_DSSIM`]).
+    pub lambda_dssim: f64,
+    /// Weight of the depth L1 (needs target depths).
+    pub depth_weight: f64,
+    /// Weight of the alpha L1 against the target mask (needs target alphas).
+    pub alpha_weight: f64,
+    /// Weight of 2DGS's depth–normal consistency (needs the surfel backward).
+    pub normal_weight: f64,
+    /// Weight of 2DGS's depth distortion (a renderer term; needs the surfel backward).
+    pub distortion_weight: f64,
+    /// Refine every N iterations (`None`: never).
+    pub refine_every: Option<usize>,
+    /// The refine round's options (`rounds` is forced to 1 per interleaved call).
+    pub refine: RefineOptions,
+    /// Renderer options (3DGS mode).
+    pub render: RenderOptions,
+    /// Seed of the view order.
+    pub seed: u64,
+    /// Score the held-out views every N iterations (and at 0 and the end).
+    pub eval_every: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            iterations: 1000,
+            lr: LearningRates::BOUND,
+            means_lr_final: 0.01,
+            lambda_dssim: DEFAULT_LAMBDA_DSSIM,
+            depth_weight: 0.0,
+            alpha_weight: 0.0,
+            normal_weight: 0.0,
+            distortion_weight: 0.0,
+            refine_every: None,
+            refine: RefineOptions::default(),
+            render: RenderOptions::default(),
+            seed: 0,
+            eval_every: 100,
+        }
+    }
+}
+
+/// The state of a fit at one iteration.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Checkpoint {
+    /// Iterations done.
+    pub iteration: usize,
+    /// Mean training loss over the iterations since the last checkpoint (`None` at 0).
+    pub loss: Option<f64>,
+    /// Mean rgb L1 and PSNR of the training views over those iterations.
+    pub train_l1: Option<f64>,
+    /// Mean PSNR (dB) of the training views seen since the last checkpoint.
+    pub train_psnr: Option<f64>,
+    /// Mean PSNR (dB) over the held-out views (`None` without any).
+    pub eval_psnr: Option<f64>,
+    /// Mean SSIM over the held-out views.
+    pub eval_ssim: Option<f64>,
+    /// Gaussians.
+    pub gaussians: usize,
+    /// Seconds of optimisation so far (refines included, scoring excluded).
+    pub seconds: f64,
+}
+
+/// One interleaved refine round.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RefineEvent {
+    /// After this many iterations.
+    pub iteration: usize,
+    /// Gaussians before and after.
+    pub before: usize,
+    /// After.
+    pub after: usize,
+    /// Milliseconds.
+    pub ms: f64,
+}
+
+/// Milliseconds per iteration of each stage (means over the run).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageMs {
+    /// Placing the set with the frame's triangle frames.
+    pub place: f64,
+    /// The differentiable render.
+    pub render: f64,
+    /// The losses and their image gradients.
+    pub loss: f64,
+    /// The backward pass.
+    pub backward: f64,
+    /// The chain rule to the local parameters and the Adam step.
+    pub step: f64,
+}
+
+/// The result of [`fit`].
+#[derive(Clone, Debug)]
+pub struct Fitted {
+    /// The fitted bound set.
+    pub set: GaussianSet,
+    /// Checkpoints in order.
+    pub checkpoints: Vec<Checkpoint>,
+    /// Refine rounds in order.
+    pub refines: Vec<RefineEvent>,
+    /// Seconds per iteration (optimisation only: render, loss, backward, step).
+    pub seconds_per_iteration: f64,
+    /// The stages of an iteration, mean milliseconds.
+    pub stage_ms: StageMs,
+}
+
+fn check_options(o: &FitOptions) -> Result<(), FitError> {
+    let bad = |m: String| Err(FitError::BadOption(m));
+    if o.iterations == 0 {
+        return bad("--iterations must be at least 1".into());
+    }
+    if o.render.mode != RenderMode::Gaussian3d {
+        return bad(format!(
+            "fitting in {:?} mode needs the surfel backward, which is not available yet; use \
+             3dgs",
+            o.render.mode
+        ));
+    }
+    for (name, v) in [
+        ("lambda-dssim", o.lambda_dssim),
+        ("depth-weight", o.depth_weight),
+        ("alpha-weight", o.alpha_weight),
+        ("normal-weight", o.normal_weight),
+        ("distortion-weight", o.distortion_weight),
+        ("means-lr-final", o.means_lr_final),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(format!("--{name} {v}: expected a finite number >= 0"));
+        }
+    }
+    if o.lambda_dssim > 1.0 {
+        return bad(format!("--lambda-dssim {}: expected 0..1", o.lambda_dssim));
+    }
+    let lr = o.lr;
+    for v in [
+        lr.means,
+        lr.log_scales,
+        lr.rotations,
+        lr.opacities,
+        lr.sh_dc,
+        lr.sh_rest,
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(format!("learning rate {v}: expected a finite number >= 0"));
+        }
+    }
+    if o.normal_weight > 0.0 {
+        return bad(
+            "--normal-weight: the depth-normal consistency term needs the surfel backward (2DGS \
+             mode's normal image); the 3DGS backward has none"
+                .into(),
+        );
+    }
+    if o.distortion_weight > 0.0 {
+        return bad(
+            "--distortion-weight: the depth-distortion term needs the surfel backward (2DGS \
+             mode); the 3DGS backward has none"
+                .into(),
+        );
+    }
+    if o.refine_every == Some(0) || o.eval_every == 0 {
+        return bad("--refine-every and --eval-every must be at least 1".into());
+    }
+    Ok(())
+}
+
+fn check_target(t: &Target, what: &str, o: &FitOptions) -> Result<(), FitError> {
+    let px = t.camera.width as usize * t.camera.height as usize;
+    let name = &t.camera.name;
+    let size = |got: usize, want: usize, image: &str| {
+        if got == want {
+            Ok(())
+        } else {
+            Err(FitError::Target(format!(
+                "{what} view '{name}': the {image} image has {got} values, the camera wants {want}"
+            )))
+        }
+    };
+    size(t.rgb.len(), 3 * px, "rgb")?;
+    if let Some(a) = &t.alpha {
+        size(a.len(), px, "alpha")?;
+    }
+    if let Some(d) = &t.depth {
+        size(d.len(), px, "depth")?;
+    }
+    if o.depth_weight > 0.0 && (t.depth.is_none() || t.alpha.is_none()) {
+        return Err(FitError::Target(format!(
+            "{what} view '{name}': --depth-weight needs target depth and alpha"
+        )));
+    }
+    if o.alpha_weight > 0.0 && t.alpha.is_none() {
+        return Err(FitError::Target(format!(
+            "{what} view '{name}': --alpha-weight needs a target mask"
+        )));
+    }
+    Ok(())
+}
+
+/// Per-view image buffers reused across iterations.
+#[derive(Default)]
+struct Buffers {
+    g_rgb: Vec<f32>,
+    g_alpha: Vec<f32>,
+    g_depth: Vec<f32>,
+}
+
+/// Fits `set` (bound to `template`, GaussianAvatars binding mode) to the targets of `frames`,
+/// scoring `held_out` at checkpoints; `on_checkpoint` is called with each checkpoint as it is
+/// made (progress).
+///
+/// # Errors
+/// [`FitError`]: bad options, a set that cannot be fitted, targets that do not fit their
+/// cameras, a renderer or refine failure, non-finite parameters.
+pub fn fit(
+    set: &GaussianSet,
+    template: &TriMesh,
+    frames: &[FitFrame],
+    held_out: &[FitFrame],
+    options: &FitOptions,
+    mut on_checkpoint: impl FnMut(&Checkpoint),
+) -> Result<Fitted, FitError> {
+    check_options(options)?;
+    if frames.iter().all(|f| f.targets.is_empty()) {
+        return Err(FitError::Target("no training views".into()));
+    }
+    for f in frames {
+        for t in &f.targets {
+            check_target(t, "training", options)?;
+        }
+    }
+    for f in held_out {
+        for t in &f.targets {
+            check_target(t, "held-out", &FitOptions::default())?;
+        }
+    }
+    let ntri = template.triangle_count();
+    let mut bound = BoundParams::from_set(set, ntri)?;
+    if bound.is_empty() {
+        return Err(FitError::BadOption("the set has no Gaussians".into()));
+    }
+    let mut current = set.clone();
+    let frames_of = |f: &FitFrame| TriangleFrames::binding(template, &f.positions);
+    let train_frames: Vec<TriangleFrames> = frames.iter().map(frames_of).collect();
+    let eval_frames: Vec<TriangleFrames> = held_out.iter().map(frames_of).collect();
+    let pairs: Vec<(usize, usize)> = frames
+        .iter()
+        .enumerate()
+        .flat_map(|(f, fr)| (0..fr.targets.len()).map(move |v| (f, v)))
+        .collect();
+
+    let mut adam = Adam::new(options.lr, bound.len(), bound.local.sh_per_gaussian());
+    let mut rng = Rng::new(options.seed);
+    let mut world = GaussianParams::default();
+    let mut g_world = GaussianGrads::default();
+    let mut g_local = GaussianGrads::default();
+    let mut buffers = Buffers::default();
+    // One SSIM workspace, remade when the image size changes.
+    let mut ssim: Option<((usize, usize), Ssim)> = None;
+    let mut checkpoints = Vec::new();
+    let mut refines = Vec::new();
+    let mut train_s = 0.0;
+    let mut stage = StageMs::default();
+    let mut refine_s = 0.0;
+    let (mut acc_loss, mut acc_l1, mut acc_psnr, mut acc_n) = (0.0, 0.0, 0.0, 0usize);
+
+    let mut score =
+        |bound: &BoundParams, iteration: usize, seconds: f64, acc: (f64, f64, f64, usize)| {
+            let (loss, l1v, ps, n) = acc;
+            let mean = |v: f64| (n > 0).then(|| v / n as f64);
+            let (eval_psnr, eval_ssim) = evaluate(bound, held_out, &eval_frames, &options.render);
+            let c = Checkpoint {
+                iteration,
+                loss: mean(loss),
+                train_l1: mean(l1v),
+                train_psnr: mean(ps),
+                eval_psnr,
+                eval_ssim,
+                gaussians: bound.len(),
+                seconds,
+            };
+            on_checkpoint(&c);
+            c
+        };
+    checkpoints.push(score(&bound, 0, 0.0, (0.0, 0.0, 0.0, 0)));
+
+    let base_lr = options.lr.means;
+    for it in 0..options.iterations {
+        let start = Instant::now();
+        let progress = it as f64 / (options.iterations.max(2) - 1) as f64;
+        adam.lr.means = base_lr * options.means_lr_final.powf(progress);
+        let (f, v) =
+            pairs[((rng.uniform_f64() * pairs.len() as f64) as usize).min(pairs.len() - 1)];
+        let target = &frames[f].targets[v];
+        let camera = &target.camera;
+        let mut lap = Instant::now();
+        let mut tick = |slot: &mut f64| {
+            *slot += lap.elapsed().as_secs_f64() * 1e3;
+            lap = Instant::now();
+        };
+        to_world(&bound, &train_frames[f], &mut world);
+        tick(&mut stage.place);
+        let render_err = |source| FitError::Render {
+            iteration: it,
+            view: camera.name.clone(),
+            source,
+        };
+        let fwd =
+            render_with_grad::<f32, _>(&world, camera, &options.render).map_err(render_err)?;
+        tick(&mut stage.render);
+        let px = camera.width as usize * camera.height as usize;
+        let b = &mut buffers;
+        reset(&mut b.g_rgb, 3 * px);
+        let lam = options.lambda_dssim;
+        let l1v = l1(&fwd.rgb, &target.rgb, 1.0 - lam, &mut b.g_rgb);
+        let key = (camera.width as usize, camera.height as usize);
+        if ssim.as_ref().is_some_and(|(k, _)| *k != key) {
+            ssim = None;
+        }
+        let ssim = &mut ssim.get_or_insert_with(|| (key, Ssim::new(key.0, key.1))).1;
+        let s = if lam > 0.0 {
+            ssim.ssim(&fwd.rgb, &target.rgb, 3, -lam, Some(&mut b.g_rgb))
+        } else {
+            1.0
+        };
+        let mut loss = (1.0 - lam) * l1v + lam * (1.0 - s);
+        let mut grads = ImageGrads {
+            rgb: Some(&b.g_rgb[..]),
+            ..ImageGrads::default()
+        };
+        if options.depth_weight > 0.0 {
+            reset(&mut b.g_depth, px);
+            if let (Some(d), Some(a)) = (&target.depth, &target.alpha) {
+                loss += options.depth_weight
+                    * masked_l1(&fwd.depth, d, a, options.depth_weight, &mut b.g_depth);
+            }
+            grads.depth = Some(&b.g_depth[..]);
+        }
+        if options.alpha_weight > 0.0 {
+            reset(&mut b.g_alpha, px);
+            if let Some(a) = &target.alpha {
+                loss +=
+                    options.alpha_weight * l1(&fwd.alpha, a, options.alpha_weight, &mut b.g_alpha);
+            }
+            grads.alpha = Some(&b.g_alpha[..]);
+        }
+        tick(&mut stage.loss);
+        if g_world.len() != bound.len() {
+            g_world = GaussianGrads::zeros(bound.len(), bound.local.sh_degree);
+        } else {
+            g_world.clear();
+        }
+        backward_into(&world, camera, &options.render, &fwd, &grads, &mut g_world)
+            .map_err(render_err)?;
+        tick(&mut stage.backward);
+        grads_to_local(&bound, &train_frames[f], &g_world, &mut g_local);
+        adam.step(&mut bound.local, &g_local);
+        tick(&mut stage.step);
+        acc_loss += loss;
+        acc_l1 += l1v;
+        acc_psnr += psnr(&fwd.rgb, &target.rgb);
+        acc_n += 1;
+        train_s += start.elapsed().as_secs_f64();
+
+        let done = it + 1;
+        if let Some(every) = options.refine_every
+            && done % every == 0
+            && done < options.iterations
+        {
+            let start = Instant::now();
+            let before = bound.len();
+            let as_set = bound.write_into(&current);
+            let round = RefineOptions {
+                rounds: 1,
+                ..options.refine.clone()
+            };
+            let refined = refine(&as_set, template, &round, |_, _| {}).map_err(|source| {
+                FitError::Refine {
+                    iteration: done,
+                    source,
+                }
+            })?;
+            current = refined.set;
+            bound = BoundParams::from_set(&current, ntri)?;
+            adam.reset(bound.len());
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            refine_s += ms / 1e3;
+            refines.push(RefineEvent {
+                iteration: done,
+                before,
+                after: bound.len(),
+                ms,
+            });
+        }
+        if done % options.eval_every == 0 || done == options.iterations {
+            if !all_finite(&bound.local) {
+                return Err(FitError::NonFinite(done));
+            }
+            let acc = (acc_loss, acc_l1, acc_psnr, acc_n);
+            checkpoints.push(score(&bound, done, train_s + refine_s, acc));
+            (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
+        }
+    }
+    let n = options.iterations as f64;
+    Ok(Fitted {
+        set: bound.write_into(&current),
+        checkpoints,
+        refines,
+        seconds_per_iteration: train_s / n,
+        stage_ms: StageMs {
+            place: stage.place / n,
+            render: stage.render / n,
+            loss: stage.loss / n,
+            backward: stage.backward / n,
+            step: stage.step / n,
+        },
+    })
+}
+
+fn reset(v: &mut Vec<f32>, n: usize) {
+    v.clear();
+    v.resize(n, 0.0);
+}
+
+/// Mean PSNR and SSIM of the held-out views (`None` without any).
+fn evaluate(
+    bound: &BoundParams,
+    held_out: &[FitFrame],
+    frames: &[TriangleFrames],
+    render: &RenderOptions,
+) -> (Option<f64>, Option<f64>) {
+    let mut world = GaussianParams::default();
+    let (mut p, mut s, mut n) = (0.0, 0.0, 0usize);
+    for (f, fr) in held_out.iter().enumerate() {
+        to_world(bound, &frames[f], &mut world);
+        for t in &fr.targets {
+            let Ok(out) = render_with_grad::<f32, _>(&world, &t.camera, render) else {
+                continue;
+            };
+            p += psnr(&out.rgb, &t.rgb);
+            let mut ssim = Ssim::new(t.camera.width as usize, t.camera.height as usize);
+            s += ssim.ssim(&out.rgb, &t.rgb, 3, 0.0, None);
+            n += 1;
+        }
+    }
+    if n == 0 {
+        (None, None)
+    } else {
+        (Some(p / n as f64), Some(s / n as f64))
+    }
+}
+
+/// How a mesh target is coloured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum TargetColor {
+    /// The mesh's vertex colours (interpolated at the hit), else `normal`.
+    #[default]
+    Auto,
+    /// The interpolated world-space normal as colour `(n + 1) / 2` (view-independent, so
+    /// Gaussians with SH degree 0 can match it).
+    Normal,
+}
+
+/// Target views of `template` with its vertices at `positions`, ray cast from each camera
+/// (docs/conventions.md §2 "Mesh ray casting"): rgb (module docs; `background` where nothing is
+/// hit), alpha (the hit mask), z-depth and camera-frame normals.
+///
+/// # Errors
+/// [`FitError::Target`] when the posed mesh cannot be indexed.
+pub fn mesh_targets(
+    template: &TriMesh,
+    positions: &[DVec3],
+    cameras: &[Camera],
+    color: TargetColor,
+    background: [f32; 3],
+) -> Result<Vec<Target>, FitError> {
+    let mut posed = template.clone();
+    posed
+        .set_positions(positions.to_vec())
+        .map_err(|e| FitError::Target(format!("the posed template: {e}")))?;
+    let renderer = MeshRenderer::new(
+        &posed,
+        MeshRenderOptions {
+            normals: NormalSource::Interpolated,
+            frame: NormalFrame::World,
+        },
+    )
+    .map_err(|e| FitError::Target(format!("the posed template: {e}")))?;
+    let colors = match color {
+        TargetColor::Auto => posed.colors(),
+        TargetColor::Normal => None,
+    };
+    let tris = posed.triangles();
+    Ok(cameras
+        .par_iter()
+        .map(|camera| {
+            let maps = renderer.render(camera);
+            let px = maps.depth.len();
+            let r = camera.rotation();
+            let rt = r.transpose();
+            let mut rgb = vec![0.0f32; 3 * px];
+            let mut normal = vec![0.0f32; 3 * px];
+            for p in 0..px {
+                let hit = maps.mask[p] > 0.0;
+                let n = DVec3::from_array(maps.normal[p].map(f64::from));
+                let c: [f32; 3] = if !hit {
+                    background
+                } else if let Some(colors) = colors {
+                    let (i, j) = (p / camera.width as usize, p % camera.width as usize);
+                    let ray = DVec3::new(
+                        (j as f64 + 0.5 - camera.cx) / camera.fx,
+                        (i as f64 + 0.5 - camera.cy) / camera.fy,
+                        1.0,
+                    );
+                    let x = camera.position() + r * ray * f64::from(maps.depth[p]);
+                    let t = tris[maps.triangle[p] as usize];
+                    let w = barycentric(x, t.map(|v| positions[v as usize]));
+                    let mut c = [0.0f32; 3];
+                    for (k, &v) in t.iter().enumerate() {
+                        for ch in 0..3 {
+                            c[ch] += w[k] as f32 * colors[v as usize][ch];
+                        }
+                    }
+                    c
+                } else {
+                    (n * 0.5 + 0.5).as_vec3().to_array()
+                };
+                rgb[3 * p..3 * p + 3].copy_from_slice(&c);
+                if hit {
+                    normal[3 * p..3 * p + 3].copy_from_slice(&(rt * n).as_vec3().to_array());
+                }
+            }
+            Target {
+                camera: camera.clone(),
+                rgb,
+                alpha: Some(maps.mask.clone()),
+                depth: Some(maps.depth.clone()),
+                normal: Some(normal),
+            }
+        })
+        .collect())
+}
+
+/// Barycentric weights of `x` (projected onto the triangle's plane), clamped to the triangle.
+fn barycentric(x: DVec3, v: [DVec3; 3]) -> [f64; 3] {
+    let (e0, e1, d) = (v[1] - v[0], v[2] - v[0], x - v[0]);
+    let (a, b, c) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (p, q) = (d.dot(e0), d.dot(e1));
+    let det = a * c - b * b;
+    if det.abs() <= f64::MIN_POSITIVE {
+        return [1.0, 0.0, 0.0];
+    }
+    let u = ((c * p - b * q) / det).clamp(0.0, 1.0);
+    let w = ((a * q - b * p) / det).clamp(0.0, 1.0 - u);
+    [1.0 - u - w, u, w]
+}
+
+/// Target views from user images: per camera `DIR/<img_name>.png` (8-bit or 16-bit, grey,
+/// rgb or rgba; an alpha channel becomes the mask) and, when present, `DIR/<img_name>_mask.png`
+/// (grey, > 0.5 is inside). Images must have the camera's size.
+///
+/// # Errors
+/// [`FitError::Target`] naming the file: missing, unreadable, or of another size.
+pub fn read_image_targets(dir: &Path, cameras: &[Camera]) -> Result<Vec<Target>, FitError> {
+    cameras
+        .iter()
+        .map(|camera| {
+            let stem = camera.name.replace(['/', '\\'], "_");
+            let path = dir.join(format!("{stem}.png"));
+            let img = image::open(&path).map_err(|e| {
+                FitError::Target(format!(
+                    "{}: cannot read the image of camera '{}': {e}",
+                    path.display(),
+                    camera.name
+                ))
+            })?;
+            let (w, h) = (img.width(), img.height());
+            if (w, h) != (camera.width, camera.height) {
+                return Err(FitError::Target(format!(
+                    "{}: the image is {w}x{h}, camera '{}' is {}x{}",
+                    path.display(),
+                    camera.name,
+                    camera.width,
+                    camera.height
+                )));
+            }
+            let has_alpha = img.color().has_alpha();
+            let rgba = img.to_rgba32f();
+            let rgb: Vec<f32> = rgba
+                .pixels()
+                .flat_map(|p| [p.0[0], p.0[1], p.0[2]])
+                .collect();
+            let mut alpha = has_alpha.then(|| rgba.pixels().map(|p| p.0[3]).collect::<Vec<_>>());
+            let mask_path = dir.join(format!("{stem}_mask.png"));
+            if mask_path.exists() {
+                let m = image::open(&mask_path).map_err(|e| {
+                    FitError::Target(format!(
+                        "{}: cannot read the mask: {e}",
+                        mask_path.display()
+                    ))
+                })?;
+                if (m.width(), m.height()) != (w, h) {
+                    return Err(FitError::Target(format!(
+                        "{}: the mask is {}x{}, the image {w}x{h}",
+                        mask_path.display(),
+                        m.width(),
+                        m.height()
+                    )));
+                }
+                let grey = m.to_luma32f();
+                alpha = Some(
+                    grey.pixels()
+                        .map(|p| if p.0[0] > 0.5 { 1.0 } else { 0.0 })
+                        .collect(),
+                );
+            }
+            Ok(Target {
+                camera: camera.clone(),
+                rgb,
+                alpha,
+                depth: None,
+                normal: None,
+            })
+        })
+        .collect()
+}

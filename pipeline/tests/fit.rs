@@ -1,0 +1,142 @@
+//! `pipeline::fit`: mesh targets (vertex colours interpolated at the hit, the normal colour
+//! otherwise, depth and camera-frame normals) and the fit's option checks.
+
+use glam::DVec3;
+use trisplat_geometry::{Camera, TriMesh};
+use trisplat_pipeline::fit::{FitError, FitOptions, TargetColor, fit, mesh_targets};
+use trisplat_splat::bind::{BindOptions, init_bound};
+use trisplat_splat::render::RenderMode;
+
+/// A square in the plane z = 0 seen head-on from z = -2, colours red at x = -1 and blue at
+/// x = +1.
+fn square() -> (TriMesh, Camera) {
+    let p = vec![
+        DVec3::new(-1.0, -1.0, 0.0),
+        DVec3::new(1.0, -1.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.0),
+        DVec3::new(-1.0, 1.0, 0.0),
+    ];
+    let mesh = TriMesh::try_new(p, vec![[0, 1, 2], [0, 2, 3]])
+        .unwrap()
+        .with_colors(vec![
+            [1.0, 0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0],
+            [1.0, 0.0, 0.0, 1.0],
+        ])
+        .unwrap();
+    let camera = Camera::look_at(
+        "front",
+        DVec3::new(0.0, 0.0, -2.0),
+        DVec3::ZERO,
+        DVec3::NEG_Y,
+        (32, 32),
+        30.0,
+    )
+    .unwrap();
+    (mesh, camera)
+}
+
+#[test]
+fn mesh_targets_interpolate_vertex_colours() {
+    let (mesh, camera) = square();
+    let t = &mesh_targets(
+        &mesh,
+        mesh.positions(),
+        std::slice::from_ref(&camera),
+        TargetColor::Auto,
+        [0.0; 3],
+    )
+    .unwrap()[0];
+    let w = 32;
+    for (p, &a) in t.alpha.as_ref().unwrap().iter().enumerate() {
+        if a == 0.0 {
+            continue;
+        }
+        // World x of the hit from the pixel: the colour is linear in x across the square.
+        let (i, j) = (p / w, p % w);
+        let d = f64::from(t.depth.as_ref().unwrap()[p]);
+        let ray = DVec3::new(
+            (j as f64 + 0.5 - camera.cx) / camera.fx,
+            (i as f64 + 0.5 - camera.cy) / camera.fy,
+            1.0,
+        );
+        let x = (camera.position() + camera.rotation() * ray * d).x;
+        let s = (x + 1.0) / 2.0;
+        assert!(
+            (f64::from(t.rgb[3 * p]) - (1.0 - s)).abs() < 1e-4,
+            "red at {p}"
+        );
+        assert!(
+            (f64::from(t.rgb[3 * p + 2]) - s).abs() < 1e-4,
+            "blue at {p}"
+        );
+        assert!((d - 2.0).abs() < 1e-5);
+        // Facing the camera: (0, 0, -1) in the camera frame.
+        let n = &t.normal.as_ref().unwrap()[3 * p..3 * p + 3];
+        assert!((n[2] + 1.0).abs() < 1e-5, "{n:?}");
+    }
+    let normal = &mesh_targets(
+        &mesh,
+        mesh.positions(),
+        std::slice::from_ref(&camera),
+        TargetColor::Normal,
+        [0.0; 3],
+    )
+    .unwrap()[0];
+    let hit = normal
+        .alpha
+        .as_ref()
+        .unwrap()
+        .iter()
+        .position(|&a| a > 0.0)
+        .unwrap();
+    // The world normal facing the camera is (0, 0, -1): colour (0.5, 0.5, 0).
+    assert_eq!(&normal.rgb[3 * hit..3 * hit + 3], &[0.5, 0.5, 0.0]);
+}
+
+#[test]
+fn fit_refuses_modes_without_a_backward() {
+    let (mesh, camera) = square();
+    let set = init_bound(&mesh, &BindOptions::default()).unwrap();
+    let targets = mesh_targets(
+        &mesh,
+        mesh.positions(),
+        &[camera],
+        TargetColor::Auto,
+        [0.0; 3],
+    )
+    .unwrap();
+    let frames = [trisplat_pipeline::fit::FitFrame {
+        frame: 0,
+        positions: mesh.positions().to_vec(),
+        targets,
+    }];
+    let mut options = FitOptions {
+        iterations: 3,
+        ..FitOptions::default()
+    };
+    options.render.mode = RenderMode::Surfel2d;
+    let e = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap_err();
+    assert!(matches!(e, FitError::BadOption(_)) && e.to_string().contains("surfel backward"));
+    options.render.mode = RenderMode::Gaussian3d;
+    let fitted = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap();
+    assert_eq!(fitted.set.len(), set.len());
+    assert_eq!(fitted.checkpoints.last().unwrap().iteration, 3);
+    // The depth and alpha terms with mesh targets (which carry both).
+    let with_terms = FitOptions {
+        depth_weight: 0.5,
+        alpha_weight: 0.5,
+        ..options.clone()
+    };
+    let fitted = fit(&set, &mesh, &frames, &[], &with_terms, |_| {}).unwrap();
+    assert!(fitted.checkpoints.last().unwrap().loss.unwrap() > 0.0);
+    // Needing a target image that is not there is refused, naming the view.
+    let mut bare = frames.clone();
+    bare[0].targets[0].depth = None;
+    let e = fit(&set, &mesh, &bare, &[], &with_terms, |_| {}).unwrap_err();
+    assert!(
+        e.to_string().contains("'front'") && e.to_string().contains("depth"),
+        "{e}"
+    );
+}
