@@ -2,10 +2,11 @@
 //!
 //! The parameters are the bound set's local ones ([`BoundParams`], `f64`); per iteration one
 //! (frame, view) pair is drawn (seeded), the set is placed with that frame's triangle frames
-//! ([`to_world`]), rendered with the 3DGS backward pass in `f32`, and the loss
-//! `(1 − λ) L1 + λ D-SSIM` on rgb, plus `w_depth` × the depth L1 against the target depth
-//! (weighted by the target's alpha) and `w_alpha` × the L1 of alpha against the target mask,
-//! is carried back to the local parameters ([`grads_to_local`]) and one Adam step taken. The
+//! ([`to_world`]), rendered with the backward pass of its mode (3DGS, or 2DGS surfels) in
+//! `f32`, and the loss `(1 − λ) L1 + λ D-SSIM` on rgb, plus `w_depth` × the depth L1 against
+//! the target depth (weighted by the target's alpha) and `w_alpha` × the L1 of alpha against
+//! the target mask, and in 2DGS mode `w_normal` × 2DGS's depth–normal consistency and
+//! `w_distortion` × its depth distortion (mean over the pixels), is carried back to the local parameters ([`grads_to_local`]) and one Adam step taken. The
 //! means' learning rate decays exponentially to `means_lr_final` × itself over the run (3DGS).
 //!
 //! With `refine_every = N`, every N iterations (not after the last) the set goes through one
@@ -26,16 +27,16 @@ use rayon::prelude::*;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::{Camera, TriMesh};
-use trisplat_splat::GaussianSet;
 use trisplat_splat::fit::adam::{Adam, LearningRates};
 use trisplat_splat::fit::bound::{
     BoundError, BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,
 };
-use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, Ssim, l1, masked_l1, psnr};
+use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, DepthNormal, Ssim, l1, masked_l1, psnr};
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward_into,
     render_with_grad,
 };
+use trisplat_splat::{GaussianSet, ScaleDims};
 
 use crate::refine::{RefineError, RefineOptions, refine};
 
@@ -118,9 +119,10 @@ pub struct FitOptions {
     pub depth_weight: f64,
     /// Weight of the alpha L1 against the target mask (needs target alphas).
     pub alpha_weight: f64,
-    /// Weight of 2DGS's depth–normal consistency (needs the surfel backward).
+    /// Weight of 2DGS's depth–normal consistency (2DGS mode only).
     pub normal_weight: f64,
-    /// Weight of 2DGS's depth distortion (a renderer term; needs the surfel backward).
+    /// Weight of 2DGS's depth distortion, a mean over the pixels (a renderer term; 2DGS mode
+    /// only).
     pub distortion_weight: f64,
     /// Refine every N iterations (`None`: never).
     pub refine_every: Option<usize>,
@@ -223,12 +225,11 @@ fn check_options(o: &FitOptions) -> Result<(), FitError> {
     if o.iterations == 0 {
         return bad("--iterations must be at least 1".into());
     }
-    if o.render.mode != RenderMode::Gaussian3d {
-        return bad(format!(
-            "fitting in {:?} mode needs the surfel backward, which is not available yet; use \
-             3dgs",
-            o.render.mode
-        ));
+    if o.render.mode == RenderMode::Perspective {
+        return bad(
+            "fitting in perspective mode is not supported (no backward pass): use 3dgs or 2dgs"
+                .into(),
+        );
     }
     for (name, v) in [
         ("lambda-dssim", o.lambda_dssim),
@@ -258,18 +259,17 @@ fn check_options(o: &FitOptions) -> Result<(), FitError> {
             return bad(format!("learning rate {v}: expected a finite number >= 0"));
         }
     }
-    if o.normal_weight > 0.0 {
+    let surfels = o.render.mode == RenderMode::Surfel2d;
+    if o.normal_weight > 0.0 && !surfels {
         return bad(
-            "--normal-weight: the depth-normal consistency term needs the surfel backward (2DGS \
-             mode's normal image); the 3DGS backward has none"
+            "--normal-weight: the depth-normal consistency term needs the surfels' normal image \
+             (--mode 2dgs); 3dgs renders none"
                 .into(),
         );
     }
-    if o.distortion_weight > 0.0 {
+    if o.distortion_weight > 0.0 && !surfels {
         return bad(
-            "--distortion-weight: the depth-distortion term needs the surfel backward (2DGS \
-             mode); the 3DGS backward has none"
-                .into(),
+            "--distortion-weight: the depth-distortion term is 2DGS's (--mode 2dgs)".into(),
         );
     }
     if o.refine_every == Some(0) || o.eval_every == 0 {
@@ -316,6 +316,8 @@ struct Buffers {
     g_rgb: Vec<f32>,
     g_alpha: Vec<f32>,
     g_depth: Vec<f32>,
+    g_normal: Vec<f32>,
+    depth_normal: DepthNormal,
 }
 
 /// Fits `set` (bound to `template`, GaussianAvatars binding mode) to the targets of `frames`,
@@ -334,6 +336,18 @@ pub fn fit(
     mut on_checkpoint: impl FnMut(&Checkpoint),
 ) -> Result<Fitted, FitError> {
     check_options(options)?;
+    if set.scale_dims() == ScaleDims::Two && options.render.mode != RenderMode::Surfel2d {
+        return Err(FitError::BadOption(
+            "the Gaussians are 2-scale surfels: fit them in 2dgs mode (--mode 2dgs)".into(),
+        ));
+    }
+    // The depth-normal term compares camera-frame normals.
+    let mut render_options = options.render.clone();
+    render_options.normal_frame = NormalFrame::Camera;
+    let options = &FitOptions {
+        render: render_options,
+        ..options.clone()
+    };
     if frames.iter().all(|f| f.targets.is_empty()) {
         return Err(FitError::Target("no training views".into()));
     }
@@ -437,17 +451,16 @@ pub fn fit(
             1.0
         };
         let mut loss = (1.0 - lam) * l1v + lam * (1.0 - s);
-        let mut grads = ImageGrads {
-            rgb: Some(&b.g_rgb[..]),
-            ..ImageGrads::default()
-        };
-        if options.depth_weight > 0.0 {
+        // Each term adds its gradient into its image's buffer; the buffers are lent to the
+        // backward pass once all are made.
+        let depth_term = options.depth_weight > 0.0;
+        let normal_term = options.normal_weight > 0.0;
+        if depth_term || normal_term {
             reset(&mut b.g_depth, px);
-            if let (Some(d), Some(a)) = (&target.depth, &target.alpha) {
-                loss += options.depth_weight
-                    * masked_l1(&fwd.depth, d, a, options.depth_weight, &mut b.g_depth);
-            }
-            grads.depth = Some(&b.g_depth[..]);
+        }
+        if depth_term && let (Some(d), Some(a)) = (&target.depth, &target.alpha) {
+            loss += options.depth_weight
+                * masked_l1(&fwd.depth, d, a, options.depth_weight, &mut b.g_depth);
         }
         if options.alpha_weight > 0.0 {
             reset(&mut b.g_alpha, px);
@@ -455,8 +468,36 @@ pub fn fit(
                 loss +=
                     options.alpha_weight * l1(&fwd.alpha, a, options.alpha_weight, &mut b.g_alpha);
             }
-            grads.alpha = Some(&b.g_alpha[..]);
         }
+        if normal_term {
+            // 2DGS's depth-normal consistency on the rendered depth and normal images,
+            // weighted by the rendered alpha (held fixed).
+            reset(&mut b.g_normal, 3 * px);
+            loss += options.normal_weight
+                * b.depth_normal.loss(
+                    camera,
+                    &fwd.depth,
+                    &fwd.normal,
+                    &fwd.alpha,
+                    options.normal_weight,
+                    Some(&mut b.g_depth),
+                    Some(&mut b.g_normal),
+                );
+        }
+        // The distortion is the renderer's own term (its value comes with the forward, its
+        // gradient with the backward pass), as a mean over the pixels like 2DGS's
+        // `rend_dist.mean()`.
+        let distortion = options.distortion_weight / px as f64;
+        if distortion > 0.0 {
+            loss += distortion * fwd.distortion_total();
+        }
+        let grads = ImageGrads {
+            rgb: Some(&b.g_rgb[..]),
+            depth: (depth_term || normal_term).then_some(&b.g_depth[..]),
+            alpha: (options.alpha_weight > 0.0).then_some(&b.g_alpha[..]),
+            normal: normal_term.then_some(&b.g_normal[..]),
+            distortion: distortion as f32,
+        };
         tick(&mut stage.loss);
         if g_world.len() != bound.len() {
             g_world = GaussianGrads::zeros(bound.len(), bound.local.sh_degree);

@@ -96,7 +96,7 @@ fn mesh_targets_interpolate_vertex_colours() {
 }
 
 #[test]
-fn fit_refuses_modes_without_a_backward() {
+fn fit_modes_and_their_terms() {
     let (mesh, camera) = square();
     let set = init_bound(&mesh, &BindOptions::default()).unwrap();
     let targets = mesh_targets(
@@ -116,9 +116,27 @@ fn fit_refuses_modes_without_a_backward() {
         iterations: 3,
         ..FitOptions::default()
     };
-    options.render.mode = RenderMode::Surfel2d;
+    options.render.mode = RenderMode::Perspective;
     let e = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap_err();
-    assert!(matches!(e, FitError::BadOption(_)) && e.to_string().contains("surfel backward"));
+    assert!(matches!(e, FitError::BadOption(_)) && e.to_string().contains("perspective"));
+    // The 2DGS terms need 2DGS mode.
+    options.render.mode = RenderMode::Gaussian3d;
+    options.normal_weight = 0.1;
+    let e = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap_err();
+    assert!(e.to_string().contains("--mode 2dgs"), "{e}");
+    // In 2DGS mode they run, with finite losses.
+    options.render.mode = RenderMode::Surfel2d;
+    options.distortion_weight = 10.0;
+    let fitted = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap();
+    assert!(
+        fitted
+            .checkpoints
+            .iter()
+            .skip(1)
+            .all(|c| c.loss.is_some_and(f64::is_finite))
+    );
+    options.normal_weight = 0.0;
+    options.distortion_weight = 0.0;
     options.render.mode = RenderMode::Gaussian3d;
     let fitted = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap();
     assert_eq!(fitted.set.len(), set.len());

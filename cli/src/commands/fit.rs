@@ -18,7 +18,8 @@ use trisplat_pipeline::session::{Session, SessionOptions};
 use trisplat_splat::fit::adam::LearningRates;
 use trisplat_splat::fit::loss::DEFAULT_LAMBDA_DSSIM;
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
-use trisplat_splat::render::RenderOptions;
+use trisplat_splat::render::surfel::SURFEL_NEAR;
+use trisplat_splat::render::{RenderMode, RenderOptions};
 
 use super::render::parse_rgb;
 use super::{
@@ -49,8 +50,10 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     over the run, log-scales 0.017, rotations 0.001, opacities 0.05, SH DC 0.0025, SH rest \
     0.0025/20). --refine-every N runs one round of `trisplat refine` (alpha shape of the \
     centres, smoothing, resampling, binding inheritance, pruning by the seed's gate) every N \
-    iterations and restarts Adam's state. --normal-weight and --distortion-weight (2DGS's \
-    terms) need the surfel backward and are refused for now.\n\n\
+    iterations and restarts Adam's state. --mode 2dgs fits surfels with the 2DGS backward \
+    pass; there --normal-weight adds 2DGS's depth-normal consistency (the rendered normals \
+    against the normals of the rendered depth, weighted by the rendered alpha) and \
+    --distortion-weight its depth distortion (mean over the pixels).\n\n\
     --json prints one object: every checkpoint (iteration, loss, train_l1, train_psnr, \
     eval_psnr, eval_ssim, gaussians, seconds) and every refine round."
 )]
@@ -90,6 +93,10 @@ pub struct FitArgs {
     /// Colour of mesh targets.
     #[arg(long, value_enum, default_value_t = TargetColor::Auto)]
     pub color: TargetColor,
+    /// Splatting model fitted: 3dgs (gsplat's rules) or 2dgs (surfels; needed by
+    /// --normal-weight and --distortion-weight, and for 2-scale sets).
+    #[arg(long, value_enum, default_value_t = FitMode::Gaussian3d)]
+    pub mode: FitMode,
     /// Background colour r,g,b in 0..1 (renders and mesh targets).
     #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, default_value = "0,0,0")]
     pub background: [f32; 3],
@@ -127,10 +134,10 @@ pub struct FitArgs {
     /// Weight of the alpha L1 against the target mask.
     #[arg(long, value_name = "W", default_value_t = 0.0)]
     pub alpha_weight: f64,
-    /// Weight of 2DGS's depth-normal consistency (needs the surfel backward: refused for now).
+    /// Weight of 2DGS's depth-normal consistency (--mode 2dgs).
     #[arg(long, value_name = "W", default_value_t = 0.0)]
     pub normal_weight: f64,
-    /// Weight of 2DGS's depth distortion (needs the surfel backward: refused for now).
+    /// Weight of 2DGS's depth distortion, a mean over the pixels (--mode 2dgs).
     #[arg(long, value_name = "W", default_value_t = 0.0)]
     pub distortion_weight: f64,
     /// Run one refine round every N iterations (not after the last).
@@ -293,9 +300,17 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             },
             ..RefineOptions::default()
         },
-        render: RenderOptions {
-            background: args.background,
-            ..RenderOptions::default()
+        render: match args.mode {
+            FitMode::Gaussian3d => RenderOptions {
+                background: args.background,
+                ..RenderOptions::default()
+            },
+            FitMode::Surfel2d => RenderOptions {
+                background: args.background,
+                mode: RenderMode::Surfel2d,
+                near: SURFEL_NEAR,
+                ..RenderOptions::default()
+            },
         },
         seed: args.seed,
         eval_every: usize::try_from(args.eval_every)?,
@@ -376,4 +391,15 @@ fn print_checkpoint(c: &Checkpoint) {
         c.gaussians,
         c.seconds
     );
+}
+
+/// The splatting models `fit` can differentiate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FitMode {
+    /// 3DGS EWA splatting with gsplat's rules.
+    #[value(name = "3dgs")]
+    Gaussian3d,
+    /// 2DGS surfels (hbb1's ray-splat intersection, near plane 0.2 as hbb1).
+    #[value(name = "2dgs")]
+    Surfel2d,
 }

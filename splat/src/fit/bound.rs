@@ -23,9 +23,6 @@ pub enum BoundError {
     /// The set is not bound, or its parameters are not local.
     #[error("the Gaussians are not bound to triangles with local parameters (bind them first)")]
     NotBound,
-    /// Surfels (two scales) need the surfel backward pass.
-    #[error("2-scale (surfel) Gaussians cannot be fitted yet: fitting needs the surfel backward")]
-    Surfels,
     /// A binding names a triangle the template does not have.
     #[error("Gaussian {index}: bound to triangle {triangle}, but the template has {count}")]
     BindingOutOfRange {
@@ -53,14 +50,11 @@ impl BoundParams {
     /// triangles.
     ///
     /// # Errors
-    /// [`BoundError`] for an unbound or world-space set, surfels, a binding past the template.
+    /// [`BoundError`] for an unbound or world-space set, a binding past the template.
     pub fn from_set(set: &GaussianSet, triangle_count: usize) -> Result<Self, BoundError> {
         let binding = set.binding().ok_or(BoundError::NotBound)?;
         if set.space() != ParameterSpace::Local {
             return Err(BoundError::NotBound);
-        }
-        if set.scale_dims() != ScaleDims::Three {
-            return Err(BoundError::Surfels);
         }
         if let Some((index, t)) = binding
             .triangles
