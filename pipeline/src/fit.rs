@@ -342,7 +342,7 @@ pub fn fit(
         ));
     }
     // The depth-normal term compares camera-frame normals.
-    let mut render_options = options.render.clone();
+    let mut render_options = options.render;
     render_options.normal_frame = NormalFrame::Camera;
     let options = &FitOptions {
         render: render_options,
