@@ -44,8 +44,8 @@ use super::RenderError;
 use super::composite::{CompositeRules, RenderStats};
 use super::options::{Outputs, RenderMode, RenderOptions, Rules};
 use super::project::{SPAN_MARGIN, exp_neg4};
-use super::screen::{ScreenEntry, gather_visible};
-use super::tiles::{TILE_SIZE, TileBins, depth_order};
+use super::screen::{ScreenEntry, ScreenSplats, gather_visible};
+use super::tiles::{TILE_SIZE, TileBins, TileRect, depth_order};
 use crate::gaussians::sh_coeffs_per_channel;
 
 /// Pixels per tile.
@@ -296,17 +296,15 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
         project_s: start.elapsed().as_secs_f64(),
         ..RenderStats::default()
     };
-    let start = std::time::Instant::now();
-    let order = depth_order(&screen.depths);
-    let splats: Vec<Splat<F>> = order.iter().map(|&k| splats[k as usize]).collect();
-    let ids: Vec<u32> = order.iter().map(|&k| screen.ids[k as usize]).collect();
-    let centers: Vec<[f32; 2]> = splats.iter().map(|s| s.center).collect();
-    let radii: Vec<[f32; 2]> = splats.iter().map(|s| s.radius).collect();
+    let (splats, ids, bins) = order_and_bin(
+        &screen,
+        &splats,
+        |s| (s.center, s.radius),
+        camera,
+        rules.tile_rect,
+        &mut stats,
+    );
     let (width, height) = (camera.width, camera.height);
-    let bins = TileBins::bin(&centers, &radii, width, height, rules.tile_rect);
-    stats.sort_s = start.elapsed().as_secs_f64();
-    stats.visible = splats.len();
-    stats.intersections = bins.intersections();
 
     let start = std::time::Instant::now();
     let pixels = width as usize * height as usize;
@@ -367,6 +365,29 @@ pub fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
         );
     out.stats.composite_s = start.elapsed().as_secs_f64();
     Ok(out)
+}
+
+/// The visible items (3DGS splats or 2DGS surfels, as `gather_visible` made them) in depth
+/// order, their Gaussian ids, and the tile lists of their screen boxes (`place` gives an item's
+/// box centre and half extents); the time and counts go into `stats`.
+pub(super) fn order_and_bin<T: Copy>(
+    screen: &ScreenSplats,
+    items: &[T],
+    place: impl Fn(&T) -> ([f32; 2], [f32; 2]),
+    camera: &Camera,
+    rect: TileRect,
+    stats: &mut RenderStats,
+) -> (Vec<T>, Vec<u32>, TileBins) {
+    let start = std::time::Instant::now();
+    let order = depth_order(&screen.depths);
+    let items: Vec<T> = order.iter().map(|&k| items[k as usize]).collect();
+    let ids: Vec<u32> = order.iter().map(|&k| screen.ids[k as usize]).collect();
+    let (centers, radii): (Vec<[f32; 2]>, Vec<[f32; 2]>) = items.iter().map(place).unzip();
+    let bins = TileBins::bin(&centers, &radii, camera.width, camera.height, rect);
+    stats.sort_s = start.elapsed().as_secs_f64();
+    stats.visible = items.len();
+    stats.intersections = bins.intersections();
+    (items, ids, bins)
 }
 
 /// The gradients of a loss with respect to the parameters of `params`, given its gradients with

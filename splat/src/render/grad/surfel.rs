@@ -33,7 +33,7 @@ use crate::render::composite::{CompositeRules, RenderStats};
 use crate::render::options::{Outputs, RenderOptions};
 use crate::render::screen::{ScreenEntry, gather_visible};
 use crate::render::surfel::{FILTER_INV_SQUARE, SURFEL_RULES, SurfelSplat, View};
-use crate::render::tiles::{TILE_SIZE, TileBins, TileRect, depth_order, tile_range};
+use crate::render::tiles::{TILE_SIZE, TileBins, TileRect, tile_range};
 
 /// hbb1's near plane of the distortion's depth mapping (`near_n`).
 pub const DIST_NEAR: f64 = 0.2;
@@ -210,17 +210,15 @@ pub(crate) fn render_with_grad<F: Real, P: DiffParams + ?Sized>(
         project_s: start.elapsed().as_secs_f64(),
         ..RenderStats::default()
     };
-    let start = std::time::Instant::now();
-    let order = depth_order(&screen.depths);
-    let surfels: Vec<GradSurfel<F>> = order.iter().map(|&k| surfels[k as usize]).collect();
-    let ids: Vec<u32> = order.iter().map(|&k| screen.ids[k as usize]).collect();
-    let centers: Vec<[f32; 2]> = surfels.iter().map(|s| s.center).collect();
-    let radii: Vec<[f32; 2]> = surfels.iter().map(|s| s.radius).collect();
+    let (surfels, ids, bins) = super::order_and_bin(
+        &screen,
+        &surfels,
+        |s| (s.center, s.radius),
+        camera,
+        rules.tile_rect,
+        &mut stats,
+    );
     let (width, height) = (camera.width, camera.height);
-    let bins = TileBins::bin(&centers, &radii, width, height, rules.tile_rect);
-    stats.sort_s = start.elapsed().as_secs_f64();
-    stats.visible = surfels.len();
-    stats.intersections = bins.intersections();
 
     let start = std::time::Instant::now();
     let pixels = width as usize * height as usize;
