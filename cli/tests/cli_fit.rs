@@ -71,6 +71,32 @@ fn setup(dir: &Path) -> (String, String, String, String) {
     )
 }
 
+/// `fit` of `(gaussians, template, training cameras, held-out cameras)` for 40 iterations
+/// (held-out checkpoints every 20) on 2 threads, with `extra` options; its `--json` object.
+fn fit_with_held_out(inputs: (&str, &str, &str, &str), out: &Path, extra: &[&str]) -> Value {
+    let (g, spot, train, eval) = inputs;
+    let mut args = vec![
+        "fit",
+        g,
+        "--template",
+        spot,
+        "--cameras",
+        train,
+        "--eval-cameras",
+        eval,
+        "-o",
+        s(out),
+        "--iterations",
+        "40",
+        "--eval-every",
+        "20",
+        "--threads",
+        "2",
+    ];
+    args.extend_from_slice(extra);
+    json(&args)
+}
+
 #[test]
 fn surfels_fit_with_the_2dgs_terms() {
     // --mode 2dgs with depth-normal consistency and depth distortion: the held-out PSNR rises
@@ -78,30 +104,18 @@ fn surfels_fit_with_the_2dgs_terms() {
     let dir = fresh_dir("fit_2dgs");
     let (spot, g, train, eval) = setup(&dir);
     let out = dir.join("fitted.ply");
-    let r = json(&[
-        "fit",
-        &g,
-        "--template",
-        &spot,
-        "--cameras",
-        &train,
-        "--eval-cameras",
-        &eval,
-        "-o",
-        s(&out),
-        "--mode",
-        "2dgs",
-        "--normal-weight",
-        "0.05",
-        "--distortion-weight",
-        "100",
-        "--iterations",
-        "40",
-        "--eval-every",
-        "20",
-        "--threads",
-        "2",
-    ]);
+    let r = fit_with_held_out(
+        (&g, &spot, &train, &eval),
+        &out,
+        &[
+            "--mode",
+            "2dgs",
+            "--normal-weight",
+            "0.05",
+            "--distortion-weight",
+            "100",
+        ],
+    );
     let cps = r["checkpoints"].as_array().expect("checkpoints");
     let first = cps[0]["eval_psnr"].as_f64().expect("psnr");
     let last = cps[2]["eval_psnr"].as_f64().expect("psnr");
@@ -126,28 +140,12 @@ fn fit_raises_held_out_psnr_and_keeps_the_binding() {
         .triangle_count();
     for refine in [None, Some("15")] {
         let out = dir.join("fitted.ply");
-        let mut args = vec![
-            "fit",
-            &g,
-            "--template",
-            &spot,
-            "--cameras",
-            &train,
-            "--eval-cameras",
-            &eval,
-            "-o",
-            s(&out),
-            "--iterations",
-            "40",
-            "--eval-every",
-            "20",
-            "--threads",
-            "2",
-        ];
-        if let Some(n) = refine {
-            args.extend(["--refine-every", n]);
-        }
-        let r = json(&args);
+        let refine_args = refine.map(|n| ["--refine-every", n]);
+        let r = fit_with_held_out(
+            (&g, &spot, &train, &eval),
+            &out,
+            refine_args.as_ref().map_or(&[][..], |a| &a[..]),
+        );
         let cps = r["checkpoints"].as_array().expect("checkpoints");
         assert_eq!(cps.len(), 3, "{r}");
         let first = cps[0]["eval_psnr"].as_f64().expect("psnr");
