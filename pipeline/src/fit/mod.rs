@@ -19,12 +19,10 @@
 //! alpha) or user images ([`read_image_targets`]). Held-out views are scored by PSNR and SSIM
 //! (3DGS's) at every checkpoint.
 
-use std::path::Path;
 use std::time::Instant;
 
 use glam::DVec3;
-use rayon::prelude::*;
-use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
+use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::{Camera, TriMesh};
 use trisplat_splat::fit::adam::{Adam, LearningRates};
@@ -39,6 +37,12 @@ use trisplat_splat::render::{
 use trisplat_splat::{GaussianSet, ScaleDims};
 
 use crate::refine::{RefineError, RefineOptions, refine};
+
+mod score;
+mod targets;
+
+use score::evaluate;
+pub use targets::{TargetColor, mesh_targets, read_image_targets};
 
 /// Why a fit cannot run.
 #[derive(Debug, thiserror::Error)]
@@ -576,206 +580,3 @@ fn reset(v: &mut Vec<f32>, n: usize) {
     v.resize(n, 0.0);
 }
 
-/// Mean PSNR and SSIM of the held-out views (`None` without any).
-fn evaluate(
-    bound: &BoundParams,
-    held_out: &[FitFrame],
-    frames: &[TriangleFrames],
-    render: &RenderOptions,
-) -> (Option<f64>, Option<f64>) {
-    let mut world = GaussianParams::default();
-    let (mut p, mut s, mut n) = (0.0, 0.0, 0usize);
-    for (f, fr) in held_out.iter().enumerate() {
-        to_world(bound, &frames[f], &mut world);
-        for t in &fr.targets {
-            let Ok(out) = render_with_grad::<f32, _>(&world, &t.camera, render) else {
-                continue;
-            };
-            p += psnr(&out.rgb, &t.rgb);
-            let mut ssim = Ssim::new(t.camera.width as usize, t.camera.height as usize);
-            s += ssim.ssim(&out.rgb, &t.rgb, 3, 0.0, None);
-            n += 1;
-        }
-    }
-    if n == 0 {
-        (None, None)
-    } else {
-        (Some(p / n as f64), Some(s / n as f64))
-    }
-}
-
-/// How a mesh target is coloured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
-pub enum TargetColor {
-    /// The mesh's vertex colours (interpolated at the hit), else `normal`.
-    #[default]
-    Auto,
-    /// The interpolated world-space normal as colour `(n + 1) / 2` (view-independent, so
-    /// Gaussians with SH degree 0 can match it).
-    Normal,
-}
-
-/// Target views of `template` with its vertices at `positions`, ray cast from each camera
-/// (docs/conventions.md §2 "Mesh ray casting"): rgb (module docs; `background` where nothing is
-/// hit), alpha (the hit mask), z-depth and camera-frame normals.
-///
-/// # Errors
-/// [`FitError::Target`] when the posed mesh cannot be indexed.
-pub fn mesh_targets(
-    template: &TriMesh,
-    positions: &[DVec3],
-    cameras: &[Camera],
-    color: TargetColor,
-    background: [f32; 3],
-) -> Result<Vec<Target>, FitError> {
-    let mut posed = template.clone();
-    posed
-        .set_positions(positions.to_vec())
-        .map_err(|e| FitError::Target(format!("the posed template: {e}")))?;
-    let renderer = MeshRenderer::new(
-        &posed,
-        MeshRenderOptions {
-            normals: NormalSource::Interpolated,
-            frame: NormalFrame::World,
-        },
-    )
-    .map_err(|e| FitError::Target(format!("the posed template: {e}")))?;
-    let colors = match color {
-        TargetColor::Auto => posed.colors(),
-        TargetColor::Normal => None,
-    };
-    let tris = posed.triangles();
-    Ok(cameras
-        .par_iter()
-        .map(|camera| {
-            let maps = renderer.render(camera);
-            let px = maps.depth.len();
-            let r = camera.rotation();
-            let rt = r.transpose();
-            let mut rgb = vec![0.0f32; 3 * px];
-            let mut normal = vec![0.0f32; 3 * px];
-            for p in 0..px {
-                let hit = maps.mask[p] > 0.0;
-                let n = DVec3::from_array(maps.normal[p].map(f64::from));
-                let c: [f32; 3] = if !hit {
-                    background
-                } else if let Some(colors) = colors {
-                    let (i, j) = (p / camera.width as usize, p % camera.width as usize);
-                    let ray = DVec3::new(
-                        (j as f64 + 0.5 - camera.cx) / camera.fx,
-                        (i as f64 + 0.5 - camera.cy) / camera.fy,
-                        1.0,
-                    );
-                    let x = camera.position() + r * ray * f64::from(maps.depth[p]);
-                    let t = tris[maps.triangle[p] as usize];
-                    let w = barycentric(x, t.map(|v| positions[v as usize]));
-                    let mut c = [0.0f32; 3];
-                    for (k, &v) in t.iter().enumerate() {
-                        for ch in 0..3 {
-                            c[ch] += w[k] as f32 * colors[v as usize][ch];
-                        }
-                    }
-                    c
-                } else {
-                    (n * 0.5 + 0.5).as_vec3().to_array()
-                };
-                rgb[3 * p..3 * p + 3].copy_from_slice(&c);
-                if hit {
-                    normal[3 * p..3 * p + 3].copy_from_slice(&(rt * n).as_vec3().to_array());
-                }
-            }
-            Target {
-                camera: camera.clone(),
-                rgb,
-                alpha: Some(maps.mask.clone()),
-                depth: Some(maps.depth.clone()),
-                normal: Some(normal),
-            }
-        })
-        .collect())
-}
-
-/// Barycentric weights of `x` (projected onto the triangle's plane), clamped to the triangle.
-fn barycentric(x: DVec3, v: [DVec3; 3]) -> [f64; 3] {
-    let (e0, e1, d) = (v[1] - v[0], v[2] - v[0], x - v[0]);
-    let (a, b, c) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
-    let (p, q) = (d.dot(e0), d.dot(e1));
-    let det = a * c - b * b;
-    if det.abs() <= f64::MIN_POSITIVE {
-        return [1.0, 0.0, 0.0];
-    }
-    let u = ((c * p - b * q) / det).clamp(0.0, 1.0);
-    let w = ((a * q - b * p) / det).clamp(0.0, 1.0 - u);
-    [1.0 - u - w, u, w]
-}
-
-/// Target views from user images: per camera `DIR/<img_name>.png` (8-bit or 16-bit, grey,
-/// rgb or rgba; an alpha channel becomes the mask) and, when present, `DIR/<img_name>_mask.png`
-/// (grey, > 0.5 is inside). Images must have the camera's size.
-///
-/// # Errors
-/// [`FitError::Target`] naming the file: missing, unreadable, or of another size.
-pub fn read_image_targets(dir: &Path, cameras: &[Camera]) -> Result<Vec<Target>, FitError> {
-    cameras
-        .iter()
-        .map(|camera| {
-            let stem = camera.name.replace(['/', '\\'], "_");
-            let path = dir.join(format!("{stem}.png"));
-            let img = image::open(&path).map_err(|e| {
-                FitError::Target(format!(
-                    "{}: cannot read the image of camera '{}': {e}",
-                    path.display(),
-                    camera.name
-                ))
-            })?;
-            let (w, h) = (img.width(), img.height());
-            if (w, h) != (camera.width, camera.height) {
-                return Err(FitError::Target(format!(
-                    "{}: the image is {w}x{h}, camera '{}' is {}x{}",
-                    path.display(),
-                    camera.name,
-                    camera.width,
-                    camera.height
-                )));
-            }
-            let has_alpha = img.color().has_alpha();
-            let rgba = img.to_rgba32f();
-            let rgb: Vec<f32> = rgba
-                .pixels()
-                .flat_map(|p| [p.0[0], p.0[1], p.0[2]])
-                .collect();
-            let mut alpha = has_alpha.then(|| rgba.pixels().map(|p| p.0[3]).collect::<Vec<_>>());
-            let mask_path = dir.join(format!("{stem}_mask.png"));
-            if mask_path.exists() {
-                let m = image::open(&mask_path).map_err(|e| {
-                    FitError::Target(format!(
-                        "{}: cannot read the mask: {e}",
-                        mask_path.display()
-                    ))
-                })?;
-                if (m.width(), m.height()) != (w, h) {
-                    return Err(FitError::Target(format!(
-                        "{}: the mask is {}x{}, the image {w}x{h}",
-                        mask_path.display(),
-                        m.width(),
-                        m.height()
-                    )));
-                }
-                let grey = m.to_luma32f();
-                alpha = Some(
-                    grey.pixels()
-                        .map(|p| if p.0[0] > 0.5 { 1.0 } else { 0.0 })
-                        .collect(),
-                );
-            }
-            Ok(Target {
-                camera: camera.clone(),
-                rgb,
-                alpha,
-                depth: None,
-                normal: None,
-            })
-        })
-        .collect()
-}
