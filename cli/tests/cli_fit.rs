@@ -125,6 +125,13 @@ fn surfels_fit_with_the_2dgs_terms() {
             .iter()
             .all(|c| c["loss"].as_f64().is_some_and(f64::is_finite))
     );
+    // The mesh targets' depth and normals score the geometry too.
+    for c in cps {
+        let depth = c["eval_depth_l1"].as_f64().expect("depth error");
+        let angle = c["eval_normal_deg"].as_f64().expect("normal error");
+        assert!(depth.is_finite() && depth >= 0.0, "{c}");
+        assert!((0.0..90.0).contains(&angle), "{c}");
+    }
     assert_eq!(
         read_gaussians(&out).expect("fitted").len() as u64,
         r["gaussians"].as_u64().expect("count")

@@ -40,7 +40,9 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     frame of --frames (each frame's views all train); or user images with --images DIR \
     (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask). \
     Held-out views (--eval-cameras, --eval-images) are scored by PSNR and SSIM at every \
-    --eval-every iterations; they never train.\n\n\
+    --eval-every iterations and, with mesh targets, by the mean absolute depth error and the \
+    mean normal angle inside the target mask (2dgs: the rendered normals; 3dgs: normals of the \
+    rendered depth); they never train.\n\n\
     One iteration: a seeded random (frame, view); the bound set placed with that frame's \
     triangle frames; the 3DGS render (gsplat rules) and its backward pass; loss (1 - \
     lambda) L1 + lambda D-SSIM on rgb (lambda 0.2, 3DGS's SSIM: 11x11 Gaussian window, sigma \
@@ -55,7 +57,8 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     against the normals of the rendered depth, weighted by the rendered alpha) and \
     --distortion-weight its depth distortion (mean over the pixels).\n\n\
     --json prints one object: every checkpoint (iteration, loss, train_l1, train_psnr, \
-    eval_psnr, eval_ssim, gaussians, seconds) and every refine round."
+    eval_psnr, eval_ssim, eval_depth_l1, eval_normal_deg, gaussians, seconds) and every \
+    refine round."
 )]
 pub struct FitArgs {
     /// Bound Gaussian PLY (local parameters, binding_0).
@@ -381,13 +384,15 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
 fn print_checkpoint(c: &Checkpoint) {
     let opt = |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
     println!(
-        "iteration {}: loss {}, train PSNR {} dB; held-out PSNR {} dB, SSIM {}; {} Gaussians, \
-         {:.1} s",
+        "iteration {}: loss {}, train PSNR {} dB; held-out PSNR {} dB, SSIM {}, depth L1 {}, \
+         normal {}°; {} Gaussians, {:.1} s",
         c.iteration,
         opt(c.loss, 5),
         opt(c.train_psnr, 2),
         opt(c.eval_psnr, 2),
         opt(c.eval_ssim, 4),
+        opt(c.eval_depth_l1, 5),
+        opt(c.eval_normal_deg, 2),
         c.gaussians,
         c.seconds
     );

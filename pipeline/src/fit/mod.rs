@@ -16,8 +16,8 @@
 //!
 //! Targets are mesh renders of the posed template ([`mesh_targets`]: rgb from vertex colours,
 //! else the world normal as colour `(n + 1) / 2`, depth, camera-frame normals, the hit mask as
-//! alpha) or user images ([`read_image_targets`]). Held-out views are scored by PSNR and SSIM
-//! (3DGS's) at every checkpoint.
+//! alpha) or user images ([`read_image_targets`]). Held-out views are scored at every checkpoint
+//! by PSNR and SSIM (3DGS's) and, with mesh targets, by depth and normal error inside the mask.
 
 use std::time::Instant;
 
@@ -175,6 +175,12 @@ pub struct Checkpoint {
     pub eval_psnr: Option<f64>,
     /// Mean SSIM over the held-out views.
     pub eval_ssim: Option<f64>,
+    /// Mean absolute z-depth error over the held-out targets' masks (scene units; an empty
+    /// rendered pixel counts with depth 0). Needs target depth and masks (mesh targets).
+    pub eval_depth_l1: Option<f64>,
+    /// Mean angle (degrees) between the held-out targets' normals and the rendered ones over
+    /// the masks (2DGS: the normal image; 3DGS: normals of the rendered depth).
+    pub eval_normal_deg: Option<f64>,
     /// Gaussians.
     pub gaussians: usize,
     /// Seconds of optimisation so far (refines included, scoring excluded).
@@ -399,14 +405,16 @@ pub fn fit(
         |bound: &BoundParams, iteration: usize, seconds: f64, acc: (f64, f64, f64, usize)| {
             let (loss, l1v, ps, n) = acc;
             let mean = |v: f64| (n > 0).then(|| v / n as f64);
-            let (eval_psnr, eval_ssim) = evaluate(bound, held_out, &eval_frames, &options.render);
+            let scores = evaluate(bound, held_out, &eval_frames, &options.render);
             let c = Checkpoint {
                 iteration,
                 loss: mean(loss),
                 train_l1: mean(l1v),
                 train_psnr: mean(ps),
-                eval_psnr,
-                eval_ssim,
+                eval_psnr: scores.psnr,
+                eval_ssim: scores.ssim,
+                eval_depth_l1: scores.depth_l1,
+                eval_normal_deg: scores.normal_deg,
                 gaussians: bound.len(),
                 seconds,
             };
@@ -579,4 +587,3 @@ fn reset(v: &mut Vec<f32>, n: usize) {
     v.clear();
     v.resize(n, 0.0);
 }
-
