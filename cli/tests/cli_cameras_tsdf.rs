@@ -120,3 +120,44 @@ fn depth_and_gaussians_are_exclusive() {
     ]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn a_skinned_gltf_is_framed_as_the_pipeline_poses_it() {
+    // LAM's skin.glb sits under a node scaled 0.01, which its skin undoes: the static reader
+    // (trimesh's view) sees a head 2 mm tall, the template reader the real 0.3 m one. The rig
+    // must frame the latter, the mesh `fit` and `render --mesh` ray cast; the folder form too.
+    let dir = fresh_dir("cameras_skinned");
+    let lam = trisplat_fixtures::path("lam_mini");
+    let skin = lam.join("skin.glb");
+    let template = trisplat_pipeline::input::read_template(&skin).expect("template");
+    let (lo, hi) = template.positions().iter().fold(
+        (
+            trisplat_geometry::glam::DVec3::MAX,
+            trisplat_geometry::glam::DVec3::MIN,
+        ),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    let center = (lo + hi) * 0.5;
+    for (input, name) in [(&skin, "file.json"), (&lam, "folder.json")] {
+        let cams = dir.join(name);
+        run_ok(&[
+            "cameras",
+            s(input),
+            "-o",
+            s(&cams),
+            "--views",
+            "6",
+            "--size",
+            "32x32",
+        ]);
+        for c in read_cameras_json(&cams).expect("rig") {
+            let distance = (c.position() - center).length();
+            let radius = (hi - lo).length() * 0.5;
+            assert!(
+                distance > radius && distance < 20.0 * radius,
+                "camera '{}' at {distance} m from a template of radius {radius} m",
+                c.name
+            );
+        }
+    }
+}

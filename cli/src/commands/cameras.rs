@@ -6,7 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::camera::{orbit_rig, sphere_rig, write_cameras_json};
+use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::read_points;
+use trisplat_pipeline::avatar::AvatarFolder;
+use trisplat_pipeline::input::read_template;
 
 use super::{Context, refuse_to_overwrite};
 
@@ -27,10 +30,13 @@ pub const DEFAULT_MAX_VIEWS: u32 = 100_000;
 #[command(after_long_help = "\
 Cameras look at the centre of the mesh's bounding box from a distance at which the bounding \
 sphere (radius: the farthest vertex from that centre) fills the vertical field of view with a \
-10% margin. OpenCV axes, principal point at the image centre, square pixels; names view_000, \
-view_001, ...")]
+10% margin. A glTF is framed at its rest state as the main job, fit and render --mesh pose it \
+(node transforms, skins and default morph weights applied: a skinned mesh under a scaled node is \
+framed at the size its skin gives it, not as stored); a LAM avatar folder by its skin.glb. \
+OpenCV axes, principal point at the image centre, square pixels; names view_000, view_001, ...")]
 pub struct CamerasArgs {
-    /// Mesh or point cloud to frame (.ply, .obj, .gltf, .glb).
+    /// Mesh or point cloud to frame (.ply, .obj, .gltf, .glb; a glTF at its rest state as the
+    /// main job poses it), or a LAM avatar folder.
     pub mesh: PathBuf,
     /// Output cameras.json.
     #[arg(short = 'o', long = "output")]
@@ -64,6 +70,38 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     }
 }
 
+/// The points `cameras` frames: a glTF as the main job, `fit` and `render --mesh` pose it (its
+/// rest state: node transforms, skins and default morph weights applied; a skinned head whose
+/// node carries a cm-to-m scale is framed at the size its skin gives it), a LAM avatar folder
+/// by its template, anything else as read (mesh vertices or points). A glTF whose skin or
+/// animation the template reader refuses is framed as stored, with a note.
+fn framed_positions(path: &std::path::Path) -> anyhow::Result<Vec<DVec3>> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if path.is_dir() {
+        let avatar = AvatarFolder::open(path)?;
+        return Ok(read_template(&avatar.template)?.positions().to_vec());
+    }
+    if matches!(ext.as_deref(), Some("gltf" | "glb")) {
+        match read_template(path) {
+            Ok(t) => return Ok(t.positions().to_vec()),
+            // The static reader takes files whose skins or animations the template reader
+            // refuses; frame those as stored.
+            Err(e) => eprintln!(
+                "note: {}: framing the mesh as stored (node transforms only): {e}",
+                path.display()
+            ),
+        }
+    }
+    Ok(read_points(path)?
+        .positions()
+        .iter()
+        .map(|p| p.as_dvec3())
+        .collect())
+}
+
 /// Runs `trisplat cameras`.
 ///
 /// # Errors
@@ -77,15 +115,19 @@ pub fn run(args: CamerasArgs, ctx: &Context) -> anyhow::Result<()> {
         );
     }
     refuse_to_overwrite(&args.mesh, &args.output)?;
-    let points = read_points(&args.mesh)?;
-    let Some(bounds) = points.bounds() else {
+    let positions = framed_positions(&args.mesh)?;
+    let Some((lo, hi)) = positions
+        .iter()
+        .fold(None, |b: Option<(DVec3, DVec3)>, &p| {
+            Some(b.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p))))
+        })
+    else {
         bail!("{}: no vertices to frame", args.mesh.display());
     };
-    let center = bounds.center();
-    let radius = points
-        .positions()
+    let center = (lo + hi) * 0.5;
+    let radius = positions
         .iter()
-        .map(|p| (p.as_dvec3() - center).length())
+        .map(|&p| (p - center).length())
         .fold(0.0, f64::max);
     // A single point still gets a rig: frame a ball of a tiny but non-zero radius.
     let radius = if radius > 0.0 {
