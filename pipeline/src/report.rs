@@ -19,6 +19,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use glam::DVec3;
+use rayon::prelude::*;
 use trisplat_extract::incremental_delaunay::FrameStats;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::mesh_stats::MeshStats;
@@ -107,7 +108,6 @@ impl GtSamples {
     /// indexed or a point is not finite.
     #[must_use]
     pub fn distances(&self, points: &[DVec3]) -> Option<Vec<f64>> {
-        use rayon::prelude::*;
         points
             .par_iter()
             .with_min_len(256)
@@ -258,7 +258,8 @@ pub fn is_watertight(mesh: &TriMesh) -> bool {
     // ends the search, and TSDF meshes have many).
     let (offsets, around) = triangles_around_vertices(mesh.vertex_count(), t);
     let has = |tri: [u32; 3], x: u32, y: u32| (0..3).any(|k| tri[k] == x && tri[(k + 1) % 3] == y);
-    t.iter().all(|&[a, b, c]| {
+    // In parallel: a run with one method checks its mesh while nothing else runs.
+    t.par_iter().with_min_len(1 << 12).all(|&[a, b, c]| {
         [(a, b), (b, c), (c, a)].into_iter().all(|(x, y)| {
             let ring = &around[offsets[x as usize] as usize..offsets[x as usize + 1] as usize];
             let (mut forward, mut backward) = (0, 0);
