@@ -3,7 +3,9 @@
 
 use glam::DVec3;
 use trisplat_geometry::{Camera, TriMesh};
-use trisplat_pipeline::fit::{FitError, FitOptions, TargetColor, fit, mesh_targets};
+use trisplat_pipeline::fit::{
+    DensifyOptions, FitError, FitOptions, TargetColor, fit, mesh_targets,
+};
 use trisplat_splat::bind::{BindOptions, init_bound};
 use trisplat_splat::render::RenderMode;
 
@@ -157,4 +159,102 @@ fn fit_modes_and_their_terms() {
         e.to_string().contains("'front'") && e.to_string().contains("depth"),
         "{e}"
     );
+}
+
+/// The square seen from `n` cameras on a cone around its normal (z < 0 side), 32 × 32.
+fn cone_cameras(n: usize, tilt: f64, phase: f64, prefix: &str) -> Vec<Camera> {
+    (0..n)
+        .map(|i| {
+            let a = phase + std::f64::consts::TAU * i as f64 / n as f64;
+            let eye = DVec3::new(tilt * a.cos(), tilt * a.sin(), -2.5);
+            Camera::look_at(
+                &format!("{prefix}{i}"),
+                eye,
+                DVec3::ZERO,
+                DVec3::NEG_Y,
+                (32, 32),
+                40.0,
+            )
+            .unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn densification_adds_gaussians_without_losing_held_out_psnr() {
+    // Two triangles, one Gaussian each, cannot draw a red-to-blue gradient: the screen-space
+    // gradients are large, so densification clones and splits; children keep the binding.
+    let (mesh, _) = square();
+    let set = init_bound(&mesh, &BindOptions::default()).unwrap();
+    let frame = |cams: &[Camera]| trisplat_pipeline::fit::FitFrame {
+        frame: 0,
+        positions: mesh.positions().to_vec(),
+        targets: mesh_targets(&mesh, mesh.positions(), cams, TargetColor::Auto, [0.0; 3])
+            .unwrap(),
+    };
+    let train = [frame(&cone_cameras(6, 0.8, 0.0, "train"))];
+    let held_out = [frame(&cone_cameras(3, 0.5, 0.5, "eval"))];
+    let base = FitOptions {
+        iterations: 300,
+        eval_every: 300,
+        ..FitOptions::default()
+    };
+    let densify = DensifyOptions {
+        from: 50,
+        every: 50,
+        until: 250,
+        opacity_reset_every: None,
+        ..DensifyOptions::default()
+    };
+    let with = FitOptions {
+        densify: Some(densify),
+        ..base.clone()
+    };
+    let plain = fit(&set, &mesh, &train, &held_out, &base, |_| {}).unwrap();
+    let dense = fit(&set, &mesh, &train, &held_out, &with, |_| {}).unwrap();
+    assert!(plain.densify.is_empty() && plain.set.len() == set.len());
+    // After 100, 150, 200: above `from`, below `until`.
+    assert_eq!(
+        dense.densify.iter().map(|e| e.iteration).collect::<Vec<_>>(),
+        [100, 150, 200]
+    );
+    let last = dense.densify.last().unwrap();
+    assert_eq!(dense.set.len(), last.gaussians);
+    assert!(dense.set.len() > set.len(), "{:?}", dense.densify);
+    assert!(
+        dense
+            .set
+            .binding()
+            .unwrap()
+            .triangles
+            .iter()
+            .all(|t| t.index() < 2)
+    );
+    let psnr = |f: &trisplat_pipeline::fit::Fitted| f.checkpoints.last().unwrap().eval_psnr.unwrap();
+    assert!(
+        psnr(&dense) > psnr(&plain) - 0.5,
+        "held-out PSNR {} with densification, {} without",
+        psnr(&dense),
+        psnr(&plain)
+    );
+    assert_eq!(dense.checkpoints.last().unwrap().gaussians, dense.set.len());
+    // Reproducible.
+    let again = fit(&set, &mesh, &train, &held_out, &with, |_| {}).unwrap();
+    assert_eq!(again.set, dense.set);
+    // Bad values are refused by name.
+    let bad = FitOptions {
+        densify: Some(DensifyOptions {
+            every: 0,
+            ..densify
+        }),
+        ..base.clone()
+    };
+    let e = fit(&set, &mesh, &train, &held_out, &bad, |_| {}).unwrap_err();
+    assert!(e.to_string().contains("--densify-every"), "{e}");
+    let bad = FitOptions {
+        sh_up_every: Some(0),
+        ..base
+    };
+    let e = fit(&set, &mesh, &train, &held_out, &bad, |_| {}).unwrap_err();
+    assert!(e.to_string().contains("--sh-up-every"), "{e}");
 }
