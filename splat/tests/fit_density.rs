@@ -99,7 +99,7 @@ fn warmed_adam(bound: &mut BoundParams) -> Adam {
 #[test]
 fn statistics_are_mean_ndc_norms_over_visible_views() {
     let (_, _, stats) = scene();
-    assert_eq!(stats.views(), &[2, 2, 1, 0]);
+    assert_eq!(stats.views(), &[2, 2, 1, 1]);
     assert!((stats.mean_grad(0) - 5e-4).abs() < 1e-15);
     assert!((stats.mean_grad(1) - 5e-4).abs() < 1e-15);
     assert_eq!(stats.mean_grad(2), 0.0);
