@@ -201,7 +201,10 @@ fn fit_densifies_with_its_flags_and_reports_each_step() {
     );
     // Densify after 10, 20, 30; opacities reset after 20.
     let events = r["densify"].as_array().expect("densify events");
-    let at: Vec<u64> = events.iter().map(|e| e["iteration"].as_u64().unwrap()).collect();
+    let at: Vec<u64> = events
+        .iter()
+        .map(|e| e["iteration"].as_u64().unwrap())
+        .collect();
     assert_eq!(at, [10, 20, 30], "{r}");
     for e in events {
         for key in ["cloned", "split", "pruned", "spared", "gaussians", "ms"] {
@@ -230,9 +233,25 @@ fn fit_densifies_with_its_flags_and_reports_each_step() {
     let out2 = dir.join("fitted2.ply");
     let (gs, spots, trains) = (g.as_str(), spot.as_str(), train.as_str());
     let text = run_ok(&[
-        "fit", gs, "--template", spots, "--cameras", trains, "-o", s(&out2), "--iterations", "12",
-        "--densify", "--densify-from", "5", "--densify-every", "10", "--densify-grad", "1e-7",
-        "--threads", "2",
+        "fit",
+        gs,
+        "--template",
+        spots,
+        "--cameras",
+        trains,
+        "-o",
+        s(&out2),
+        "--iterations",
+        "12",
+        "--densify",
+        "--densify-from",
+        "5",
+        "--densify-every",
+        "10",
+        "--densify-grad",
+        "1e-7",
+        "--threads",
+        "2",
     ]);
     let stdout = String::from_utf8_lossy(&text.stdout);
     assert!(stdout.contains("densify after iteration 10:"), "{stdout}");
@@ -331,15 +350,37 @@ fn fit_refuses_bad_input() {
     call(&with(&["--lambda-dssim", "2"]), 1, &["lambda-dssim"]);
     // Densification and the SH schedule: bad values are one error line naming the option;
     // densification options without --densify are usage errors.
-    call(&with(&["--densify", "--densify-every", "0"]), 1, &["--densify-every"]);
     call(
-        &with(&["--densify", "--densify-from", "900", "--densify-until", "800"]),
+        &with(&["--densify", "--densify-every", "0"]),
+        1,
+        &["--densify-every"],
+    );
+    call(
+        &with(&[
+            "--densify",
+            "--densify-from",
+            "900",
+            "--densify-until",
+            "800",
+        ]),
         1,
         &["--densify-from 900", "--densify-until 800"],
     );
-    call(&with(&["--densify", "--prune-opacity", "1.5"]), 1, &["--prune-opacity"]);
-    call(&with(&["--densify", "--densify-grad", "-1"]), 1, &["--densify-grad"]);
-    call(&with(&["--densify", "--percent-dense", "0"]), 1, &["--percent-dense"]);
+    call(
+        &with(&["--densify", "--prune-opacity", "1.5"]),
+        1,
+        &["--prune-opacity"],
+    );
+    call(
+        &with(&["--densify", "--densify-grad=-1"]),
+        1,
+        &["--densify-grad"],
+    );
+    call(
+        &with(&["--densify", "--percent-dense", "0"]),
+        1,
+        &["--percent-dense"],
+    );
     call(&with(&["--sh-up-every", "0"]), 1, &["--sh-up-every"]);
     call(&with(&["--percent-dense", "0.1"]), 2, &["--densify"]);
     call(

@@ -189,8 +189,7 @@ fn densification_adds_gaussians_without_losing_held_out_psnr() {
     let frame = |cams: &[Camera]| trisplat_pipeline::fit::FitFrame {
         frame: 0,
         positions: mesh.positions().to_vec(),
-        targets: mesh_targets(&mesh, mesh.positions(), cams, TargetColor::Auto, [0.0; 3])
-            .unwrap(),
+        targets: mesh_targets(&mesh, mesh.positions(), cams, TargetColor::Auto, [0.0; 3]).unwrap(),
     };
     let train = [frame(&cone_cameras(6, 0.8, 0.0, "train"))];
     let held_out = [frame(&cone_cameras(3, 0.5, 0.5, "eval"))];
@@ -215,7 +214,11 @@ fn densification_adds_gaussians_without_losing_held_out_psnr() {
     assert!(plain.densify.is_empty() && plain.set.len() == set.len());
     // After 100, 150, 200: above `from`, below `until`.
     assert_eq!(
-        dense.densify.iter().map(|e| e.iteration).collect::<Vec<_>>(),
+        dense
+            .densify
+            .iter()
+            .map(|e| e.iteration)
+            .collect::<Vec<_>>(),
         [100, 150, 200]
     );
     let last = dense.densify.last().unwrap();
@@ -230,7 +233,8 @@ fn densification_adds_gaussians_without_losing_held_out_psnr() {
             .iter()
             .all(|t| t.index() < 2)
     );
-    let psnr = |f: &trisplat_pipeline::fit::Fitted| f.checkpoints.last().unwrap().eval_psnr.unwrap();
+    let psnr =
+        |f: &trisplat_pipeline::fit::Fitted| f.checkpoints.last().unwrap().eval_psnr.unwrap();
     assert!(
         psnr(&dense) > psnr(&plain) - 0.5,
         "held-out PSNR {} with densification, {} without",

@@ -45,7 +45,12 @@ fn scene() -> (BoundParams, TriangleFrames, DensityStats) {
     let small = (0.005 / k).ln();
     let large = (0.05 / k).ln();
     let local = GaussianParams {
-        means: vec![[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
+        means: vec![
+            [0.1, 0.0, 0.0],
+            [0.0, 0.2, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+        ],
         log_scales: vec![
             [small, small - 1.0, small - 2.0],
             [large, large - 1.0, large - 0.5],
@@ -76,7 +81,11 @@ fn scene() -> (BoundParams, TriangleFrames, DensityStats) {
 }
 
 fn warmed_adam(bound: &mut BoundParams) -> Adam {
-    let mut adam = Adam::new(LearningRates::BOUND, bound.len(), bound.local.sh_per_gaussian());
+    let mut adam = Adam::new(
+        LearningRates::BOUND,
+        bound.len(),
+        bound.local.sh_per_gaussian(),
+    );
     let mut g = GaussianGrads::zeros(bound.len(), bound.local.sh_degree);
     for (i, m) in g.means.iter_mut().enumerate() {
         *m = [1.0 + i as f64, -2.0, 0.5];
@@ -118,16 +127,26 @@ fn clone_small_split_large_prune_transparent_spare_the_last() {
     let mut adam = warmed_adam(&mut bound);
     let old_adam = adam.clone();
     let options = DensifyOptions::default();
-    let step =
-        densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 7).unwrap();
+    let step = densify_and_prune(
+        &mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 7,
+    )
+    .unwrap();
     let c = step.counts;
-    assert_eq!((c.cloned, c.split, c.pruned, c.spared), (1, 1, 1, 1), "{c:?}");
+    assert_eq!(
+        (c.cloned, c.split, c.pruned, c.spared),
+        (1, 1, 1, 1),
+        "{c:?}"
+    );
     // 4 + 1 clone + 2 children − 1 parent − 1 pruned.
     assert_eq!(c.count, 5);
     assert_eq!(bound.len(), 5);
     // Order (3DGS): survivors [0, 3], the clone of 0, then the two children of 1.
     assert_eq!(step.origins, vec![0, 3, 0, 1, 1]);
-    assert_eq!(bound.triangles, vec![0, 1, 0, 0, 0], "children keep the binding");
+    assert_eq!(
+        bound.triangles,
+        vec![0, 1, 0, 0, 0],
+        "children keep the binding"
+    );
     let p = &bound.local;
     let b = &before.local;
     // Survivors and the clone are exact f64 copies.
@@ -167,7 +186,11 @@ fn clone_small_split_large_prune_transparent_spare_the_last() {
     assert_eq!(adam.opacity_state(1), old_adam.opacity_state(3));
     assert_eq!(adam.opacity_state(0).2, 2);
     for new in [2, 3, 4] {
-        assert_eq!(adam.mean_moments(new), ([0.0; 3], [0.0; 3]), "Gaussian {new}");
+        assert_eq!(
+            adam.mean_moments(new),
+            ([0.0; 3], [0.0; 3]),
+            "Gaussian {new}"
+        );
         assert_eq!(adam.opacity_state(new), (0.0, 0.0, 0));
     }
     // The next step runs on the new count.
@@ -181,8 +204,10 @@ fn sampling_is_seeded() {
         let (mut bound, rest, stats) = scene();
         let mut adam = Adam::new(LearningRates::BOUND, 4, 12);
         let options = DensifyOptions::default();
-        densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, false, seed)
-            .unwrap();
+        densify_and_prune(
+            &mut bound, &mut adam, &stats, &rest, 1.0, &options, false, seed,
+        )
+        .unwrap();
         bound
     };
     assert_eq!(run(3), run(3));
@@ -198,10 +223,15 @@ fn threshold_and_size_limits_decide() {
         grad_threshold: 6e-4,
         ..DensifyOptions::default()
     };
-    let c = densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 0)
-        .unwrap()
-        .counts;
-    assert_eq!((c.cloned, c.split, c.pruned, c.spared, c.count), (0, 0, 1, 1, 3));
+    let c = densify_and_prune(
+        &mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 0,
+    )
+    .unwrap()
+    .counts;
+    assert_eq!(
+        (c.cloned, c.split, c.pruned, c.spared, c.count),
+        (0, 0, 1, 1, 3)
+    );
     // A ten times larger extent makes both hot Gaussians small: two clones.
     let (mut bound, rest, stats) = scene();
     let mut adam = Adam::new(LearningRates::BOUND, 4, 12);
@@ -227,14 +257,16 @@ fn threshold_and_size_limits_decide() {
         max_world_size: Some(0.04),
         ..DensifyOptions::default()
     };
-    let step = densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, true, 0)
-        .unwrap();
+    let step =
+        densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, true, 0).unwrap();
     assert_eq!(step.origins, vec![0, 3]);
     // Without `prune_large` the size rule is off.
     let (mut bound, rest, stats) = scene();
     let mut adam = Adam::new(LearningRates::BOUND, 4, 12);
-    let step = densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 0)
-        .unwrap();
+    let step = densify_and_prune(
+        &mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 0,
+    )
+    .unwrap();
     assert_eq!(step.origins, vec![0, 1, 3]);
 }
 
@@ -248,9 +280,11 @@ fn every_gaussian_of_a_triangle_flagged_keeps_them_all() {
         grad_threshold: 1.0,
         ..DensifyOptions::default()
     };
-    let c = densify_and_prune(&mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 0)
-        .unwrap()
-        .counts;
+    let c = densify_and_prune(
+        &mut bound, &mut adam, &stats, &rest, 1.0, &options, false, 0,
+    )
+    .unwrap()
+    .counts;
     assert_eq!((c.pruned, c.spared, c.count), (0, 4, 4));
 }
 
@@ -331,7 +365,13 @@ fn inactive_sh_bands_get_zero_gradient_and_stay_unchanged() {
     let n = 6;
     let full = GaussianParams {
         means: (0..n)
-            .map(|i| [0.2 + 0.12 * i as f64, 0.3 + 0.07 * i as f64, 0.05 * i as f64])
+            .map(|i| {
+                [
+                    0.2 + 0.12 * i as f64,
+                    0.3 + 0.07 * i as f64,
+                    0.05 * i as f64,
+                ]
+            })
             .collect(),
         log_scales: vec![[-2.5, -2.8, -3.0]; n],
         rotations: (0..n)

@@ -35,16 +35,16 @@ use glam::DVec3;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::{Rng, splitmix64};
 use trisplat_geometry::{Camera, TriMesh};
-use trisplat_splat::fit::adam::{Adam, LearningRates};
 use trisplat_splat::densify::DensifyError;
+use trisplat_splat::fit::adam::{Adam, LearningRates};
 use trisplat_splat::fit::bound::{
     BoundError, BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,
 };
 use trisplat_splat::fit::density::{
     DensityStats, RESET_OPACITY, camera_extent, densify_and_prune, reset_opacity,
 };
-use trisplat_splat::fit::sh_schedule::{active_degree, expand_sh_grads, truncate_sh};
 use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, DepthNormal, Ssim, l1, masked_l1, psnr};
+use trisplat_splat::fit::sh_schedule::{active_degree, expand_sh_grads, truncate_sh};
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward_into,
     render_with_grad,
@@ -742,4 +742,3 @@ fn reset(v: &mut Vec<f32>, n: usize) {
     v.clear();
     v.resize(n, 0.0);
 }
-

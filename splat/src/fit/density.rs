@@ -140,7 +140,9 @@ impl DensifyOptions {
         if let Some(w) = self.max_world_size
             && !(w.is_finite() && w > 0.0)
         {
-            return Err(format!("--max-world-size {w}: expected a finite number > 0"));
+            return Err(format!(
+                "--max-world-size {w}: expected a finite number > 0"
+            ));
         }
         Ok(())
     }
@@ -175,10 +177,7 @@ pub fn camera_extent(centres: &[DVec3]) -> f64 {
         return 0.0;
     }
     let mean = centres.iter().copied().sum::<DVec3>() / centres.len() as f64;
-    1.1 * centres
-        .iter()
-        .map(|c| c.distance(mean))
-        .fold(0.0, f64::max)
+    1.1 * centres.iter().map(|c| c.distance(mean)).fold(0.0, f64::max)
 }
 
 /// Densification statistics per Gaussian (module docs): the summed NDC norm of the
@@ -297,7 +296,11 @@ pub fn select(
     extent: f64,
     options: &DensifyOptions,
 ) -> (Vec<bool>, Vec<bool>) {
-    assert_eq!(stats.len(), bound.len(), "select: statistics for another count");
+    assert_eq!(
+        stats.len(),
+        bound.len(),
+        "select: statistics for another count"
+    );
     let limit = options.percent_dense * extent;
     (0..bound.len())
         .map(|i| {
@@ -328,7 +331,11 @@ pub fn densify_and_prune(
     prune_large: bool,
     seed: u64,
 ) -> Result<DensifyStep, DensifyError> {
-    assert_eq!(adam.len(), bound.len(), "densify: Adam state for another count");
+    assert_eq!(
+        adam.len(),
+        bound.len(),
+        "densify: Adam state for another count"
+    );
     let n0 = bound.len();
     let (clone_mask, split_mask) = select(bound, stats, rest, extent, options);
     // The structural steps run on an f32 copy (the shared operations); the parameters of
@@ -403,13 +410,12 @@ pub fn densify_and_prune(
         map.push((!new).then_some(o));
         origins.push(o);
     }
-    debug_assert!(
-        pruned
-            .result
-            .set
-            .binding()
-            .is_some_and(|b| b.triangles.iter().zip(&triangles).all(|(a, &t)| *a == TriId(t)))
-    );
+    debug_assert!(pruned.result.set.binding().is_some_and(|b| {
+        b.triangles
+            .iter()
+            .zip(&triangles)
+            .all(|(a, &t)| *a == TriId(t))
+    }));
     let counts = DensifyCounts {
         cloned: cloned.sources.len() - n0,
         split: n_split,

@@ -114,7 +114,9 @@ mod tests {
         let n = 2;
         let mut p = GaussianParams {
             sh_degree: 2,
-            sh: (0..n * 27).map(|x| (100 * (x / 27) + x % 27) as f64).collect(),
+            sh: (0..n * 27)
+                .map(|x| (100 * (x / 27) + x % 27) as f64)
+                .collect(),
             ..GaussianParams::default()
         };
         let full = p.sh.clone();
