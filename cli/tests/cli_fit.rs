@@ -229,6 +229,36 @@ fn fit_densifies_with_its_flags_and_reports_each_step() {
         seen[t.index()] = true;
     }
     assert!(seen.iter().all(|&b| b));
+    // Interleaved with refine rounds (after 15 and 30; at 30 the densify step comes first):
+    // both run, and the counts stay consistent.
+    let out3 = dir.join("fitted3.ply");
+    let r = fit_with_held_out(
+        (&g, &spot, &train, &eval),
+        &out3,
+        &[
+            "--densify",
+            "--densify-from",
+            "5",
+            "--densify-every",
+            "10",
+            "--densify-grad",
+            "1e-7",
+            "--refine-every",
+            "15",
+        ],
+    );
+    let refines = r["refines"].as_array().expect("refines");
+    let events = r["densify"].as_array().expect("densify");
+    assert_eq!((refines.len(), events.len()), (2, 3), "{r}");
+    assert_eq!(
+        refines[1]["before"].as_u64(),
+        events[2]["gaussians"].as_u64(),
+        "{r}"
+    );
+    assert_eq!(
+        read_gaussians(&out3).expect("fitted").len() as u64,
+        r["gaussians"].as_u64().expect("count")
+    );
     // The text output names the steps.
     let out2 = dir.join("fitted2.ply");
     let (gs, spots, trains) = (g.as_str(), spot.as_str(), train.as_str());

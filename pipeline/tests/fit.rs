@@ -168,7 +168,7 @@ fn cone_cameras(n: usize, tilt: f64, phase: f64, prefix: &str) -> Vec<Camera> {
             let a = phase + std::f64::consts::TAU * i as f64 / n as f64;
             let eye = DVec3::new(tilt * a.cos(), tilt * a.sin(), -2.5);
             Camera::look_at(
-                &format!("{prefix}{i}"),
+                format!("{prefix}{i}"),
                 eye,
                 DVec3::ZERO,
                 DVec3::NEG_Y,

@@ -85,11 +85,8 @@ pub fn expand_sh_grads(sh: &mut Vec<f64>, n: usize, active: u8, full: u8) {
         let mut block = [0.0f64; 48];
         block[..ka].copy_from_slice(&sh[i * ka..(i + 1) * ka]);
         let out = &mut sh[i * kf..(i + 1) * kf];
-        out.fill(0.0);
-        for j in 0..kf {
-            if let Some(a) = position(j, full, active) {
-                out[j] = block[a];
-            }
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = position(j, full, active).map_or(0.0, |a| block[a]);
         }
     }
 }
