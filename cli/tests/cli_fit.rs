@@ -174,6 +174,127 @@ fn fit_raises_held_out_psnr_and_keeps_the_binding() {
 }
 
 #[test]
+fn fit_densifies_with_its_flags_and_reports_each_step() {
+    let dir = fresh_dir("fit_densify");
+    let (spot, g, train, eval) = setup(&dir);
+    let tris = trisplat_geometry::io::read_mesh(Path::new(&spot))
+        .expect("spot")
+        .triangle_count();
+    let out = dir.join("fitted.ply");
+    let r = fit_with_held_out(
+        (&g, &spot, &train, &eval),
+        &out,
+        &[
+            "--densify",
+            "--densify-from",
+            "5",
+            "--densify-every",
+            "10",
+            "--densify-until",
+            "35",
+            "--densify-grad",
+            "1e-7",
+            "--percent-dense",
+            "0.01",
+            "--prune-opacity",
+            "0.005",
+            "--opacity-reset-every",
+            "20",
+            "--max-world-size",
+            "0.1",
+            "--sh-up-every",
+            "10",
+        ],
+    );
+    // Densify after 10, 20, 30; opacities reset after 20.
+    let events = r["densify"].as_array().expect("densify events");
+    let at: Vec<u64> = events
+        .iter()
+        .map(|e| e["iteration"].as_u64().unwrap())
+        .collect();
+    assert_eq!(at, [10, 20, 30], "{r}");
+    for e in events {
+        for key in ["cloned", "split", "pruned", "spared", "gaussians", "ms"] {
+            assert!(e[key].is_number(), "{key} in {e}");
+        }
+    }
+    assert!(events[0]["cloned"].as_u64().unwrap() + events[0]["split"].as_u64().unwrap() > 0);
+    assert_eq!(r["opacity_resets"], serde_json::json!([20]), "{r}");
+    let count = events.last().unwrap()["gaussians"].as_u64().unwrap();
+    assert_eq!(r["gaussians"].as_u64(), Some(count));
+    assert!(count > r["before"].as_u64().unwrap(), "{r}");
+    let cps = r["checkpoints"].as_array().expect("checkpoints");
+    assert_eq!(cps.last().unwrap()["gaussians"].as_u64(), Some(count));
+    assert!(cps.iter().all(|c| c["sh_degree"].is_number()), "{r}");
+    let fitted = read_gaussians(&out).expect("fitted");
+    assert_eq!(fitted.len() as u64, count);
+    let binding = fitted.binding().expect("still bound");
+    assert!(binding.triangles.iter().all(|t| t.index() < tris));
+    // Every triangle keeps at least one Gaussian.
+    let mut seen = vec![false; tris];
+    for t in &binding.triangles {
+        seen[t.index()] = true;
+    }
+    assert!(seen.iter().all(|&b| b));
+    // Interleaved with refine rounds (after 15 and 30; at 30 the densify step comes first):
+    // both run, and the counts stay consistent.
+    let out3 = dir.join("fitted3.ply");
+    let r = fit_with_held_out(
+        (&g, &spot, &train, &eval),
+        &out3,
+        &[
+            "--densify",
+            "--densify-from",
+            "5",
+            "--densify-every",
+            "10",
+            "--densify-grad",
+            "1e-7",
+            "--refine-every",
+            "15",
+        ],
+    );
+    let refines = r["refines"].as_array().expect("refines");
+    let events = r["densify"].as_array().expect("densify");
+    assert_eq!((refines.len(), events.len()), (2, 3), "{r}");
+    assert_eq!(
+        refines[1]["before"].as_u64(),
+        events[2]["gaussians"].as_u64(),
+        "{r}"
+    );
+    assert_eq!(
+        read_gaussians(&out3).expect("fitted").len() as u64,
+        r["gaussians"].as_u64().expect("count")
+    );
+    // The text output names the steps.
+    let out2 = dir.join("fitted2.ply");
+    let (gs, spots, trains) = (g.as_str(), spot.as_str(), train.as_str());
+    let text = run_ok(&[
+        "fit",
+        gs,
+        "--template",
+        spots,
+        "--cameras",
+        trains,
+        "-o",
+        s(&out2),
+        "--iterations",
+        "12",
+        "--densify",
+        "--densify-from",
+        "5",
+        "--densify-every",
+        "10",
+        "--densify-grad",
+        "1e-7",
+        "--threads",
+        "2",
+    ]);
+    let stdout = String::from_utf8_lossy(&text.stdout);
+    assert!(stdout.contains("densify after iteration 10:"), "{stdout}");
+}
+
+#[test]
 fn fit_reads_user_images_and_masks() {
     let dir = fresh_dir("fit_images");
     let (spot, g, train, _) = setup(&dir);
@@ -264,6 +385,41 @@ fn fit_refuses_bad_input() {
     call(&with(&["--mode", "perspective"]), 2, &[]);
     call(&with(&["--iterations", "0"]), 2, &[]);
     call(&with(&["--lambda-dssim", "2"]), 1, &["lambda-dssim"]);
+    // Densification and the SH schedule: bad values are one error line naming the option;
+    // densification options without --densify are usage errors.
+    call(
+        &with(&["--densify", "--densify-every", "0"]),
+        1,
+        &["--densify-every"],
+    );
+    call(
+        &with(&[
+            "--densify",
+            "--densify-from",
+            "900",
+            "--densify-until",
+            "800",
+        ]),
+        1,
+        &["--densify-from 900", "--densify-until 800"],
+    );
+    call(
+        &with(&["--densify", "--prune-opacity", "1.5"]),
+        1,
+        &["--prune-opacity"],
+    );
+    call(
+        &with(&["--densify", "--densify-grad=-1"]),
+        1,
+        &["--densify-grad"],
+    );
+    call(
+        &with(&["--densify", "--percent-dense", "0"]),
+        1,
+        &["--percent-dense"],
+    );
+    call(&with(&["--sh-up-every", "0"]), 1, &["--sh-up-every"]);
+    call(&with(&["--percent-dense", "0.1"]), 2, &["--densify"]);
     call(
         &with(&["--max-views", "3"]),
         1,

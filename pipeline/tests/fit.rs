@@ -3,8 +3,11 @@
 
 use glam::DVec3;
 use trisplat_geometry::{Camera, TriMesh};
-use trisplat_pipeline::fit::{FitError, FitOptions, TargetColor, fit, mesh_targets};
+use trisplat_pipeline::fit::{
+    DensifyOptions, FitError, FitOptions, TargetColor, fit, mesh_targets,
+};
 use trisplat_splat::bind::{BindOptions, init_bound};
+use trisplat_splat::fit::bound::{BoundParams, to_set};
 use trisplat_splat::render::RenderMode;
 
 /// A square in the plane z = 0 seen head-on from z = -2, colours red at x = -1 and blue at
@@ -157,4 +160,175 @@ fn fit_modes_and_their_terms() {
         e.to_string().contains("'front'") && e.to_string().contains("depth"),
         "{e}"
     );
+}
+
+/// The square seen from `n` cameras on a cone around its normal (z < 0 side), 32 × 32.
+fn cone_cameras(n: usize, tilt: f64, phase: f64, prefix: &str) -> Vec<Camera> {
+    (0..n)
+        .map(|i| {
+            let a = phase + std::f64::consts::TAU * i as f64 / n as f64;
+            let eye = DVec3::new(tilt * a.cos(), tilt * a.sin(), -2.5);
+            Camera::look_at(
+                format!("{prefix}{i}"),
+                eye,
+                DVec3::ZERO,
+                DVec3::NEG_Y,
+                (32, 32),
+                40.0,
+            )
+            .unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn densification_adds_gaussians_without_losing_held_out_psnr() {
+    // Two triangles, one Gaussian each, cannot draw a red-to-blue gradient: the screen-space
+    // gradients are large, so densification clones and splits; children keep the binding.
+    let (mesh, _) = square();
+    let set = init_bound(&mesh, &BindOptions::default()).unwrap();
+    let frame = |cams: &[Camera]| trisplat_pipeline::fit::FitFrame {
+        frame: 0,
+        positions: mesh.positions().to_vec(),
+        targets: mesh_targets(&mesh, mesh.positions(), cams, TargetColor::Auto, [0.0; 3]).unwrap(),
+    };
+    let train = [frame(&cone_cameras(6, 0.8, 0.0, "train"))];
+    let held_out = [frame(&cone_cameras(3, 0.5, 0.5, "eval"))];
+    let base = FitOptions {
+        iterations: 300,
+        eval_every: 300,
+        ..FitOptions::default()
+    };
+    let densify = DensifyOptions {
+        from: 50,
+        every: 50,
+        until: 250,
+        opacity_reset_every: None,
+        ..DensifyOptions::default()
+    };
+    let with = FitOptions {
+        densify: Some(densify),
+        ..base.clone()
+    };
+    let plain = fit(&set, &mesh, &train, &held_out, &base, |_| {}).unwrap();
+    let dense = fit(&set, &mesh, &train, &held_out, &with, |_| {}).unwrap();
+    assert!(plain.densify.is_empty() && plain.set.len() == set.len());
+    // After 100, 150, 200: above `from`, below `until`.
+    assert_eq!(
+        dense
+            .densify
+            .iter()
+            .map(|e| e.iteration)
+            .collect::<Vec<_>>(),
+        [100, 150, 200]
+    );
+    let last = dense.densify.last().unwrap();
+    assert_eq!(dense.set.len(), last.gaussians);
+    assert!(dense.set.len() > set.len(), "{:?}", dense.densify);
+    assert!(
+        dense
+            .set
+            .binding()
+            .unwrap()
+            .triangles
+            .iter()
+            .all(|t| t.index() < 2)
+    );
+    let psnr =
+        |f: &trisplat_pipeline::fit::Fitted| f.checkpoints.last().unwrap().eval_psnr.unwrap();
+    assert!(
+        psnr(&dense) > psnr(&plain) - 0.5,
+        "held-out PSNR {} with densification, {} without",
+        psnr(&dense),
+        psnr(&plain)
+    );
+    assert_eq!(dense.checkpoints.last().unwrap().gaussians, dense.set.len());
+    // Reproducible.
+    let again = fit(&set, &mesh, &train, &held_out, &with, |_| {}).unwrap();
+    assert_eq!(again.set, dense.set);
+    // Bad values are refused by name.
+    let bad = FitOptions {
+        densify: Some(DensifyOptions {
+            every: 0,
+            ..densify
+        }),
+        ..base.clone()
+    };
+    let e = fit(&set, &mesh, &train, &held_out, &bad, |_| {}).unwrap_err();
+    assert!(e.to_string().contains("--densify-every"), "{e}");
+    let bad = FitOptions {
+        sh_up_every: Some(0),
+        ..base
+    };
+    let e = fit(&set, &mesh, &train, &held_out, &bad, |_| {}).unwrap_err();
+    assert!(e.to_string().contains("--sh-up-every"), "{e}");
+}
+
+#[test]
+fn sh_schedule_leaves_inactive_bands_untouched_in_the_fit() {
+    // The square's set widened to SH degree 3 (bands 1-3 non-zero): with a degree raised every
+    // 100 iterations, 150 iterations train bands 0 and 1 only; bands 2 and 3 come out as they
+    // went in, bit for bit.
+    let (mesh, camera) = square();
+    let set = init_bound(&mesh, &BindOptions::default()).unwrap();
+    let mut bound = BoundParams::from_set(&set, mesh.triangle_count()).unwrap();
+    let n = bound.len();
+    bound.local.sh_degree = 3;
+    bound.local.sh = (0..n * 48)
+        .map(|x| 0.05 * ((x % 48) as f64).cos())
+        .collect();
+    let set = to_set(&bound);
+    let frames = [trisplat_pipeline::fit::FitFrame {
+        frame: 0,
+        positions: mesh.positions().to_vec(),
+        targets: mesh_targets(
+            &mesh,
+            mesh.positions(),
+            &[camera],
+            TargetColor::Auto,
+            [0.0; 3],
+        )
+        .unwrap(),
+    }];
+    let options = FitOptions {
+        iterations: 150,
+        eval_every: 50,
+        sh_up_every: Some(100),
+        ..FitOptions::default()
+    };
+    let fitted = fit(&set, &mesh, &frames, &frames, &options, |_| {}).unwrap();
+    let degrees: Vec<u8> = fitted.checkpoints.iter().map(|c| c.sh_degree).collect();
+    assert_eq!(degrees, [0, 0, 1, 1]);
+    let (before, after) = (set.sh(), fitted.set.sh());
+    // File order: DC 0..3, then per channel 15 rest coefficients (band 1: the first 3).
+    let band = |j: usize| {
+        if j < 3 {
+            0
+        } else {
+            match (j - 3) % 15 {
+                0..3 => 1,
+                3..8 => 2,
+                _ => 3,
+            }
+        }
+    };
+    let mut moved = [false; 4];
+    for x in 0..n * 48 {
+        let b = band(x % 48);
+        if before[x] != after[x] {
+            moved[b] = true;
+        }
+        if b >= 2 {
+            assert_eq!(before[x], after[x], "coefficient {x} (band {b})");
+        }
+    }
+    assert_eq!(moved, [true, true, false, false]);
+    // Without the schedule every band trains.
+    let all = FitOptions {
+        sh_up_every: None,
+        ..options
+    };
+    let fitted = fit(&set, &mesh, &frames, &frames, &all, |_| {}).unwrap();
+    assert!(fitted.checkpoints.iter().all(|c| c.sh_degree == 3));
+    assert!((0..n * 48).any(|x| band(x % 48) == 3 && set.sh()[x] != fitted.set.sh()[x]));
 }

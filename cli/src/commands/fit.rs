@@ -16,6 +16,7 @@ use trisplat_pipeline::input::{read_bound, read_template};
 use trisplat_pipeline::refine::{PruneCriteria, RefineOptions};
 use trisplat_pipeline::session::{Session, SessionOptions};
 use trisplat_splat::fit::adam::LearningRates;
+use trisplat_splat::fit::density::{self, DensifyOptions};
 use trisplat_splat::fit::loss::DEFAULT_LAMBDA_DSSIM;
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 use trisplat_splat::render::surfel::SURFEL_NEAR;
@@ -56,9 +57,27 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     pass; there --normal-weight adds 2DGS's depth-normal consistency (the rendered normals \
     against the normals of the rendered depth, weighted by the rendered alpha) and \
     --distortion-weight its depth distortion (mean over the pixels).\n\n\
+    --densify turns on 3DGS's adaptive density control as GaussianAvatars runs it on a bound \
+    set. Per Gaussian, over the views where it is visible, the mean of |d loss / d ndc|, the \
+    screen-space gradient of its projected mean in NDC units (pixels x (W/2, H/2)), 3DGS's \
+    units. Every --densify-every iterations after --densify-from and before --densify-until \
+    (3DGS's 100, 500, 15000; the statistics then start again): where that mean is >= \
+    --densify-grad (3DGS's 0.0002) a Gaussian is cloned if its largest world scale at the \
+    template's rest pose, max exp(log s') k_f, is <= --percent-dense x extent (0.01; extent = \
+    1.1 x the largest distance of a training camera from their mean, 3DGS's), else split into \
+    2 children sampled from it in its triangle's frame with scales / 1.6; then Gaussians with \
+    opacity < --prune-opacity (0.005) are pruned (and, with --max-world-size F, after the \
+    first opacity reset those larger than F x extent), never a triangle's last. New Gaussians \
+    keep their parent's triangle and attributes and start with zero Adam moments; survivors \
+    keep theirs. Every --opacity-reset-every iterations (3000; 0 never) before \
+    --densify-until every opacity becomes min(opacity, 0.01) and its moments are zeroed. \
+    Nothing happens after the last iteration. --sh-up-every N renders SH bands up to an active \
+    degree that starts at 0 and rises by one every N iterations (3DGS: 1000) up to the set's; \
+    inactive bands get no gradient and are kept as they are.\n\n\
     --json prints one object: every checkpoint (iteration, loss, train_l1, train_psnr, \
-    eval_psnr, eval_ssim, eval_depth_l1, eval_normal_deg, gaussians, seconds) and every \
-    refine round."
+    eval_psnr, eval_ssim, eval_depth_l1, eval_normal_deg, gaussians, sh_degree, seconds), \
+    every refine round, every densify step (iteration, cloned, split, pruned, spared, \
+    gaussians after, ms) and the iterations of the opacity resets."
 )]
 pub struct FitArgs {
     /// Bound Gaussian PLY (local parameters, binding_0).
@@ -166,6 +185,38 @@ pub struct FitArgs {
     #[arg(long, value_name = "N", default_value_t = 100,
         value_parser = clap::value_parser!(u64).range(1..))]
     pub eval_every: u64,
+    /// Adaptive density control: clone, split, prune, opacity resets (3DGS, GaussianAvatars).
+    #[arg(long)]
+    pub densify: bool,
+    /// Densify only after this iteration.
+    #[arg(long, value_name = "N", default_value_t = density::DEFAULT_DENSIFY_FROM as u64, requires = "densify")]
+    pub densify_from: u64,
+    /// Densify and reset opacities only before this iteration.
+    #[arg(long, value_name = "N", default_value_t = density::DEFAULT_DENSIFY_UNTIL as u64, requires = "densify")]
+    pub densify_until: u64,
+    /// Densify every N iterations.
+    #[arg(long, value_name = "N", default_value_t = density::DEFAULT_DENSIFY_EVERY as u64, requires = "densify")]
+    pub densify_every: u64,
+    /// Mean NDC screen-space gradient norm at or above which a Gaussian densifies.
+    #[arg(long, value_name = "T", default_value_t = density::DEFAULT_GRAD_THRESHOLD, requires = "densify")]
+    pub densify_grad: f64,
+    /// Clone at or below this fraction of the camera extent (largest world scale at rest),
+    /// split above.
+    #[arg(long, value_name = "F", default_value_t = density::DEFAULT_PERCENT_DENSE, requires = "densify")]
+    pub percent_dense: f64,
+    /// Prune below this opacity (never a triangle's last Gaussian).
+    #[arg(long, value_name = "F", default_value_t = density::DEFAULT_PRUNE_OPACITY, requires = "densify")]
+    pub prune_opacity: f64,
+    /// Reset opacities to at most 0.01 every N iterations (0: never).
+    #[arg(long, value_name = "N", default_value_t = density::DEFAULT_OPACITY_RESET_EVERY as u64, requires = "densify")]
+    pub opacity_reset_every: u64,
+    /// Also prune Gaussians larger than F x the camera extent after the first opacity reset
+    /// (3DGS: 0.1).
+    #[arg(long, value_name = "F", requires = "densify")]
+    pub max_world_size: Option<f64>,
+    /// Raise the active SH degree by one every N iterations, from 0 (3DGS: 1000).
+    #[arg(long, value_name = "N")]
+    pub sh_up_every: Option<u64>,
 }
 
 fn cameras_of(path: &Path, origin: DVec3, max_pixels: u64) -> anyhow::Result<Vec<Camera>> {
@@ -317,6 +368,24 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
         },
         seed: args.seed,
         eval_every: usize::try_from(args.eval_every)?,
+        densify: if args.densify {
+            Some(DensifyOptions {
+                from: usize::try_from(args.densify_from)?,
+                until: usize::try_from(args.densify_until)?,
+                every: usize::try_from(args.densify_every)?,
+                grad_threshold: args.densify_grad,
+                percent_dense: args.percent_dense,
+                prune_opacity: args.prune_opacity,
+                opacity_reset_every: match args.opacity_reset_every {
+                    0 => None,
+                    n => Some(usize::try_from(n)?),
+                },
+                max_world_size: args.max_world_size,
+            })
+        } else {
+            None
+        },
+        sh_up_every: args.sh_up_every.map(usize::try_from).transpose()?,
     };
     let bar = ctx.progress.bar(args.iterations, "fitting");
     let json = ctx.json;
@@ -349,6 +418,16 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
                 r.iteration, r.before, r.after, r.ms
             );
         }
+        for d in &fitted.densify {
+            println!(
+                "densify after iteration {}: {} cloned, {} split, {} pruned ({} spared as their \
+                 triangle's last) -> {} Gaussians ({:.0} ms)",
+                d.iteration, d.cloned, d.split, d.pruned, d.spared, d.gaussians, d.ms
+            );
+        }
+        for i in &fitted.opacity_resets {
+            println!("opacities reset after iteration {i}");
+        }
         println!(
             "fit: {} -> {} Gaussians, {} iterations on {views} view(s) of {} frame(s), {:.1} ms \
              per iteration, {seconds:.2} s; wrote {}",
@@ -377,6 +456,8 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             "seconds": seconds,
             "checkpoints": fitted.checkpoints,
             "refines": fitted.refines,
+            "densify": fitted.densify,
+            "opacity_resets": fitted.opacity_resets,
         }),
     )
 }
@@ -385,7 +466,7 @@ fn print_checkpoint(c: &Checkpoint) {
     let opt = |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
     println!(
         "iteration {}: loss {}, train PSNR {} dB; held-out PSNR {} dB, SSIM {}, depth L1 {}, \
-         normal {}°; {} Gaussians, {:.1} s",
+         normal {}°; {} Gaussians, SH degree {}, {:.1} s",
         c.iteration,
         opt(c.loss, 5),
         opt(c.train_psnr, 2),
@@ -394,6 +475,7 @@ fn print_checkpoint(c: &Checkpoint) {
         opt(c.eval_depth_l1, 5),
         opt(c.eval_normal_deg, 2),
         c.gaussians,
+        c.sh_degree,
         c.seconds
     );
 }

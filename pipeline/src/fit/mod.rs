@@ -14,6 +14,16 @@
 //! the template's rest pose, and Adam's state starts afresh (every Gaussian is new: refine
 //! gives no old-to-new map).
 //!
+//! With `densify` set, 3DGS's adaptive density control runs on the bound set as GaussianAvatars
+//! does ([`trisplat_splat::fit::density`]): screen-space gradient statistics per Gaussian,
+//! clone / split / prune every `every` iterations between `from` and `until` (children keep
+//! their parent's triangle, a triangle's last Gaussian is never pruned, Adam's moments follow
+//! the survivors and start at zero for new Gaussians), opacities reset every
+//! `opacity_reset_every` iterations. With `sh_up_every = N` the render uses SH bands up to an
+//! active degree that starts at 0 and rises by one every N iterations
+//! ([`trisplat_splat::fit::sh_schedule`]); the inactive bands get no gradient. Per iteration
+//! the order is: step, densify, opacity reset, refine, checkpoint.
+//!
 //! Targets are mesh renders of the posed template ([`mesh_targets`]: rgb from vertex colours,
 //! else the world normal as colour `(n + 1) / 2`, depth, camera-frame normals, the hit mask as
 //! alpha) or user images ([`read_image_targets`]). Held-out views are scored at every checkpoint
@@ -23,13 +33,18 @@ use std::time::Instant;
 
 use glam::DVec3;
 use trisplat_geometry::mesh_render::NormalFrame;
-use trisplat_geometry::rng::Rng;
+use trisplat_geometry::rng::{Rng, splitmix64};
 use trisplat_geometry::{Camera, TriMesh};
+use trisplat_splat::densify::DensifyError;
 use trisplat_splat::fit::adam::{Adam, LearningRates};
 use trisplat_splat::fit::bound::{
     BoundError, BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,
 };
+use trisplat_splat::fit::density::{
+    DensityStats, RESET_OPACITY, camera_extent, densify_and_prune, reset_opacity,
+};
 use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, DepthNormal, Ssim, l1, masked_l1, psnr};
+use trisplat_splat::fit::sh_schedule::{active_degree, expand_sh_grads, truncate_sh};
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward_into,
     render_with_grad,
@@ -43,6 +58,7 @@ mod targets;
 
 use score::evaluate;
 pub use targets::{TargetColor, mesh_targets, read_image_targets};
+pub use trisplat_splat::fit::density::DensifyOptions;
 
 /// Why a fit cannot run.
 #[derive(Debug, thiserror::Error)]
@@ -66,6 +82,14 @@ pub enum FitError {
         view: String,
         /// Cause.
         source: GradError,
+    },
+    /// A densification step failed.
+    #[error("densify after iteration {iteration}: {source}")]
+    Densify {
+        /// Iteration.
+        iteration: usize,
+        /// Cause.
+        source: DensifyError,
     },
     /// A refine round failed.
     #[error("refine after iteration {iteration}: {source}")]
@@ -138,6 +162,11 @@ pub struct FitOptions {
     pub seed: u64,
     /// Score the held-out views every N iterations (and at 0 and the end).
     pub eval_every: usize,
+    /// Adaptive density control (`None`: the count changes only by refine rounds).
+    pub densify: Option<DensifyOptions>,
+    /// Raise the active SH degree by one every N iterations, from 0 up to the set's degree
+    /// (`None`: every band from the start).
+    pub sh_up_every: Option<usize>,
 }
 
 impl Default for FitOptions {
@@ -156,6 +185,8 @@ impl Default for FitOptions {
             render: RenderOptions::default(),
             seed: 0,
             eval_every: 100,
+            densify: None,
+            sh_up_every: None,
         }
     }
 }
@@ -183,6 +214,8 @@ pub struct Checkpoint {
     pub eval_normal_deg: Option<f64>,
     /// Gaussians.
     pub gaussians: usize,
+    /// The SH degree the render used at this iteration (the set's own without a schedule).
+    pub sh_degree: u8,
     /// Seconds of optimisation so far (refines included, scoring excluded).
     pub seconds: f64,
 }
@@ -196,6 +229,25 @@ pub struct RefineEvent {
     pub before: usize,
     /// After.
     pub after: usize,
+    /// Milliseconds.
+    pub ms: f64,
+}
+
+/// One densification step (clone, split, prune) of a fit.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DensifyEvent {
+    /// After this many iterations.
+    pub iteration: usize,
+    /// Gaussians cloned.
+    pub cloned: usize,
+    /// Gaussians split (each replaced by 2 children).
+    pub split: usize,
+    /// Gaussians pruned.
+    pub pruned: usize,
+    /// Flagged for pruning but kept as their triangle's last.
+    pub spared: usize,
+    /// Gaussians after.
+    pub gaussians: usize,
     /// Milliseconds.
     pub ms: f64,
 }
@@ -224,6 +276,10 @@ pub struct Fitted {
     pub checkpoints: Vec<Checkpoint>,
     /// Refine rounds in order.
     pub refines: Vec<RefineEvent>,
+    /// Densification steps in order (empty without `densify`).
+    pub densify: Vec<DensifyEvent>,
+    /// Iterations after which the opacities were reset.
+    pub opacity_resets: Vec<usize>,
     /// Seconds per iteration (optimisation only: render, loss, backward, step).
     pub seconds_per_iteration: f64,
     /// The stages of an iteration, mean milliseconds.
@@ -284,6 +340,12 @@ fn check_options(o: &FitOptions) -> Result<(), FitError> {
     }
     if o.refine_every == Some(0) || o.eval_every == 0 {
         return bad("--refine-every and --eval-every must be at least 1".into());
+    }
+    if o.sh_up_every == Some(0) {
+        return bad("--sh-up-every must be at least 1".into());
+    }
+    if let Some(d) = &o.densify {
+        d.check().map_err(FitError::BadOption)?;
     }
     Ok(())
 }
@@ -386,6 +448,19 @@ pub fn fit(
         .flat_map(|(f, fr)| (0..fr.targets.len()).map(move |v| (f, v)))
         .collect();
 
+    let full_degree = bound.local.sh_degree.min(3);
+    // Densification: the template's rest frames (the size rule), the 3DGS camera extent.
+    let rest_frames = TriangleFrames::binding(template, template.positions());
+    let extent = scene_extent(frames, template);
+    let mut stats = DensityStats::new(if options.densify.is_some() {
+        bound.len()
+    } else {
+        0
+    });
+    let mut densify_events = Vec::new();
+    let mut opacity_resets = Vec::new();
+    let mut densify_s = 0.0;
+
     let mut adam = Adam::new(options.lr, bound.len(), bound.local.sh_per_gaussian());
     let mut rng = Rng::new(options.seed);
     let mut world = GaussianParams::default();
@@ -405,7 +480,18 @@ pub fn fit(
         |bound: &BoundParams, iteration: usize, seconds: f64, acc: (f64, f64, f64, usize)| {
             let (loss, l1v, ps, n) = acc;
             let mean = |v: f64| (n > 0).then(|| v / n as f64);
-            let scores = evaluate(bound, held_out, &eval_frames, &options.render);
+            // Held-out views are rendered with the bands the training render uses.
+            let sh_degree = active_degree(iteration, options.sh_up_every, full_degree);
+            let cut;
+            let scored = if sh_degree < full_degree {
+                let mut b = bound.clone();
+                truncate_sh(&mut b.local, sh_degree);
+                cut = b;
+                &cut
+            } else {
+                bound
+            };
+            let scores = evaluate(scored, held_out, &eval_frames, &options.render);
             let c = Checkpoint {
                 iteration,
                 loss: mean(loss),
@@ -416,6 +502,7 @@ pub fn fit(
                 eval_depth_l1: scores.depth_l1,
                 eval_normal_deg: scores.normal_deg,
                 gaussians: bound.len(),
+                sh_degree,
                 seconds,
             };
             on_checkpoint(&c);
@@ -438,6 +525,8 @@ pub fn fit(
             lap = Instant::now();
         };
         to_world(&bound, &train_frames[f], &mut world);
+        let sh_active = active_degree(it + 1, options.sh_up_every, full_degree);
+        truncate_sh(&mut world, sh_active);
         tick(&mut stage.place);
         let render_err = |source| FitError::Render {
             iteration: it,
@@ -511,15 +600,26 @@ pub fn fit(
             distortion: distortion as f32,
         };
         tick(&mut stage.loss);
-        if g_world.len() != bound.len() {
-            g_world = GaussianGrads::zeros(bound.len(), bound.local.sh_degree);
+        if g_world.len() != bound.len() || g_world.sh.len() != world.sh.len() {
+            g_world = GaussianGrads::zeros(bound.len(), world.sh_degree);
         } else {
             g_world.clear();
         }
         backward_into(&world, camera, &options.render, &fwd, &grads, &mut g_world)
             .map_err(render_err)?;
         tick(&mut stage.backward);
+        if let Some(d) = &options.densify
+            && d.gathers(it + 1)
+        {
+            stats.add_view(
+                &g_world.means2d,
+                fwd.visible_ids(),
+                camera.width,
+                camera.height,
+            );
+        }
         grads_to_local(&bound, &train_frames[f], &g_world, &mut g_local);
+        expand_sh_grads(&mut g_local.sh, bound.len(), sh_active, full_degree);
         adam.step(&mut bound.local, &g_local);
         tick(&mut stage.step);
         acc_loss += loss;
@@ -529,6 +629,45 @@ pub fn fit(
         train_s += start.elapsed().as_secs_f64();
 
         let done = it + 1;
+        if let Some(d) = &options.densify {
+            if d.densifies_at(done, options.iterations) {
+                let start = Instant::now();
+                // One sampling seed per event.
+                let seed = splitmix64(options.seed ^ splitmix64(done as u64));
+                let step = densify_and_prune(
+                    &mut bound,
+                    &mut adam,
+                    &stats,
+                    &rest_frames,
+                    extent,
+                    d,
+                    !opacity_resets.is_empty(),
+                    seed,
+                )
+                .map_err(|source| FitError::Densify {
+                    iteration: done,
+                    source,
+                })?;
+                current = current.select(&step.origins);
+                stats.reset(bound.len());
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                densify_s += ms / 1e3;
+                let c = step.counts;
+                densify_events.push(DensifyEvent {
+                    iteration: done,
+                    cloned: c.cloned,
+                    split: c.split,
+                    pruned: c.pruned,
+                    spared: c.spared,
+                    gaussians: c.count,
+                    ms,
+                });
+            }
+            if d.resets_opacity_at(done, options.iterations) {
+                reset_opacity(&mut bound, &mut adam, RESET_OPACITY);
+                opacity_resets.push(done);
+            }
+        }
         if let Some(every) = options.refine_every
             && done % every == 0
             && done < options.iterations
@@ -549,6 +688,9 @@ pub fn fit(
             current = refined.set;
             bound = BoundParams::from_set(&current, ntri)?;
             adam.reset(bound.len());
+            if options.densify.is_some() {
+                stats.reset(bound.len());
+            }
             let ms = start.elapsed().as_secs_f64() * 1e3;
             refine_s += ms / 1e3;
             refines.push(RefineEvent {
@@ -563,7 +705,7 @@ pub fn fit(
                 return Err(FitError::NonFinite(done));
             }
             let acc = (acc_loss, acc_l1, acc_psnr, acc_n);
-            checkpoints.push(score(&bound, done, train_s + refine_s, acc));
+            checkpoints.push(score(&bound, done, train_s + refine_s + densify_s, acc));
             (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
         }
     }
@@ -572,6 +714,8 @@ pub fn fit(
         set: bound.write_into(&current),
         checkpoints,
         refines,
+        densify: densify_events,
+        opacity_resets,
         seconds_per_iteration: train_s / n,
         stage_ms: StageMs {
             place: stage.place / n,
@@ -581,6 +725,25 @@ pub fn fit(
             step: stage.step / n,
         },
     })
+}
+
+/// 3DGS's camera extent ([`camera_extent`]) of the training cameras; with one camera position,
+/// 1.1 × its distance to the template's centroid.
+fn scene_extent(frames: &[FitFrame], template: &TriMesh) -> f64 {
+    let centres: Vec<DVec3> = frames
+        .iter()
+        .flat_map(|f| f.targets.iter().map(|t| t.camera.position()))
+        .collect();
+    let extent = camera_extent(&centres);
+    if extent > 0.0 {
+        return extent;
+    }
+    let p = template.positions();
+    let centroid = p.iter().copied().sum::<DVec3>() / p.len().max(1) as f64;
+    centres
+        .first()
+        .map_or(1.0, |c| 1.1 * c.distance(centroid))
+        .max(f64::MIN_POSITIVE)
 }
 
 fn reset(v: &mut Vec<f32>, n: usize) {

@@ -167,6 +167,34 @@ impl Adam {
             .collect();
     }
 
+    /// Zeroes the opacity logits' moments of every Gaussian (steps kept): what 3DGS's opacity
+    /// reset does to the optimiser (`replace_tensor_to_optimizer`).
+    pub fn zero_opacity_moments(&mut self) {
+        self.m.opacities.fill(0.0);
+        self.v.opacities.fill(0.0);
+    }
+
+    /// The first and second moments of Gaussian `i`'s opacity logit and its step count (for
+    /// tests and diagnostics).
+    ///
+    /// # Panics
+    /// When `i` is past the count.
+    #[must_use]
+    pub fn opacity_state(&self, i: usize) -> (f64, f64, u32) {
+        (self.m.opacities[i], self.v.opacities[i], self.steps[i])
+    }
+
+    /// The first moments of Gaussian `i`'s mean (for tests and diagnostics).
+    ///
+    /// # Panics
+    /// When `i` is past the count.
+    #[must_use]
+    pub fn mean_moments(&self, i: usize) -> ([f64; 3], [f64; 3]) {
+        let m = &self.m.means[3 * i..3 * i + 3];
+        let v = &self.v.means[3 * i..3 * i + 3];
+        ([m[0], m[1], m[2]], [v[0], v[1], v[2]])
+    }
+
     /// One step on `params` with gradients `grads` (same count and SH layout as the state).
     ///
     /// # Panics

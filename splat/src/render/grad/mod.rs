@@ -164,6 +164,13 @@ impl<F: Real> GradRender<F> {
         self.ids.len()
     }
 
+    /// The Gaussian index of each visible splat (those the projection did not cull: 3DGS's
+    /// `radii > 0`), in depth order; each Gaussian at most once.
+    #[must_use]
+    pub fn visible_ids(&self) -> &[u32] {
+        &self.ids
+    }
+
     /// Final transmittance per pixel.
     #[must_use]
     pub fn final_transmittance(&self) -> &[F] {
