@@ -144,6 +144,31 @@ fn fit_modes_and_their_terms() {
     let fitted = fit(&set, &mesh, &frames, &[], &options, |_| {}).unwrap();
     assert_eq!(fitted.set.len(), set.len());
     assert_eq!(fitted.checkpoints.last().unwrap().iteration, 3);
+    assert_eq!((fitted.iterations, fitted.out_of_time), (3, false));
+    // A time budget stops the fit after the iteration that spends it, with a checkpoint there.
+    let timed = FitOptions {
+        iterations: 1000,
+        time_budget: Some(1e-9),
+        ..options.clone()
+    };
+    let fitted = fit(&set, &mesh, &frames, &[], &timed, |_| {}).unwrap();
+    assert_eq!((fitted.iterations, fitted.out_of_time), (1, true));
+    assert_eq!(fitted.checkpoints.last().unwrap().iteration, 1);
+    for bad in [0.0, -1.0, f64::NAN] {
+        let e = fit(
+            &set,
+            &mesh,
+            &frames,
+            &[],
+            &FitOptions {
+                time_budget: Some(bad),
+                ..timed.clone()
+            },
+            |_| {},
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("--time-budget"), "{e}");
+    }
     // The depth and alpha terms with mesh targets (which carry both).
     let with_terms = FitOptions {
         depth_weight: 0.5,

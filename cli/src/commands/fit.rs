@@ -51,7 +51,9 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     the alpha L1 against the mask; the gradient carried to the local parameters and one Adam \
     step (GaussianAvatars' learning rates: means 0.005 in triangle scales, decaying to 0.01x \
     over the run, log-scales 0.017, rotations 0.001, opacities 0.05, SH DC 0.0025, SH rest \
-    0.0025/20). --refine-every N runs one round of `trisplat refine` (alpha shape of the \
+    0.0025/20). --time-budget S stops after the iteration that spends S seconds of \
+    optimisation (scoring excluded; the decay then follows the larger of the iterations' and \
+    the time's share). --refine-every N runs one round of `trisplat refine` (alpha shape of the \
     centres, smoothing, resampling, binding inheritance, pruning by the seed's gate) every N \
     iterations and restarts Adam's state. --mode 2dgs fits surfels with the 2DGS backward \
     pass; there --normal-weight adds 2DGS's depth-normal consistency (the rendered normals \
@@ -126,6 +128,10 @@ pub struct FitArgs {
     #[arg(long, value_name = "N", default_value_t = 1000,
         value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     pub iterations: u64,
+    /// Stop once this many seconds of optimisation are spent (scoring excluded), or at
+    /// --iterations, whichever comes first: fits compared at a fixed time.
+    #[arg(long, value_name = "SECONDS")]
+    pub time_budget: Option<f64>,
     /// Learning rate of the local means (triangle scales).
     #[arg(long, value_name = "LR", default_value_t = LearningRates::BOUND.means)]
     pub lr_means: f64,
@@ -386,6 +392,7 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             None
         },
         sh_up_every: args.sh_up_every.map(usize::try_from).transpose()?,
+        time_budget: args.time_budget,
     };
     let bar = ctx.progress.bar(args.iterations, "fitting");
     let json = ctx.json;
@@ -429,11 +436,16 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             println!("opacities reset after iteration {i}");
         }
         println!(
-            "fit: {} -> {} Gaussians, {} iterations on {views} view(s) of {} frame(s), {:.1} ms \
+            "fit: {} -> {} Gaussians, {} iterations{} on {views} view(s) of {} frame(s), {:.1} ms \
              per iteration, {seconds:.2} s; wrote {}",
             set.len(),
             fitted.set.len(),
-            args.iterations,
+            fitted.iterations,
+            if fitted.out_of_time {
+                " (the time budget ran out)"
+            } else {
+                ""
+            },
             frames.len(),
             fitted.seconds_per_iteration * 1e3,
             args.output.display()
@@ -446,7 +458,8 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             "template": args.template,
             "before": set.len(),
             "gaussians": fitted.set.len(),
-            "iterations": args.iterations,
+            "iterations": fitted.iterations,
+            "out_of_time": fitted.out_of_time,
             "frames": frames.iter().map(|f| f.frame).collect::<Vec<_>>(),
             "views": views,
             "eval_views": eval_views,

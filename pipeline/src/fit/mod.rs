@@ -8,6 +8,8 @@
 //! the target mask, and in 2DGS mode `w_normal` × 2DGS's depth–normal consistency and
 //! `w_distortion` × its depth distortion (mean over the pixels), is carried back to the local parameters ([`grads_to_local`]) and one Adam step taken. The
 //! means' learning rate decays exponentially to `means_lr_final` × itself over the run (3DGS).
+//! With a `time_budget` the fit stops after the iteration that spends it (a fixed-time
+//! comparison), and the run's progress is the larger of the iterations' and the time's share.
 //!
 //! With `refine_every = N`, every N iterations (not after the last) the set goes through one
 //! round of [`crate::refine`] (surface-guided re-initialisation with binding inheritance) on
@@ -167,6 +169,10 @@ pub struct FitOptions {
     /// Raise the active SH degree by one every N iterations, from 0 up to the set's degree
     /// (`None`: every band from the start).
     pub sh_up_every: Option<usize>,
+    /// Stop once this many seconds of optimisation are spent (render, losses, backward, step,
+    /// densify and refine; scoring excluded), or at `iterations`, whichever comes first; the
+    /// means' learning rate then decays with the larger of the two fractions done.
+    pub time_budget: Option<f64>,
 }
 
 impl Default for FitOptions {
@@ -187,6 +193,7 @@ impl Default for FitOptions {
             eval_every: 100,
             densify: None,
             sh_up_every: None,
+            time_budget: None,
         }
     }
 }
@@ -276,6 +283,10 @@ pub struct Fitted {
     pub checkpoints: Vec<Checkpoint>,
     /// Refine rounds in order.
     pub refines: Vec<RefineEvent>,
+    /// Iterations run (fewer than asked when the time budget ran out).
+    pub iterations: usize,
+    /// Whether the time budget ended the fit.
+    pub out_of_time: bool,
     /// Densification steps in order (empty without `densify`).
     pub densify: Vec<DensifyEvent>,
     /// Iterations after which the opacities were reset.
@@ -340,6 +351,13 @@ fn check_options(o: &FitOptions) -> Result<(), FitError> {
     }
     if o.refine_every == Some(0) || o.eval_every == 0 {
         return bad("--refine-every and --eval-every must be at least 1".into());
+    }
+    if let Some(t) = o.time_budget
+        && !(t.is_finite() && t > 0.0)
+    {
+        return bad(format!(
+            "--time-budget {t}: expected a number of seconds > 0"
+        ));
     }
     if o.sh_up_every == Some(0) {
         return bad("--sh-up-every must be at least 1".into());
@@ -511,9 +529,16 @@ pub fn fit(
     checkpoints.push(score(&bound, 0, 0.0, (0.0, 0.0, 0.0, 0)));
 
     let base_lr = options.lr.means;
+    // The iterations run, and the last one: `options.iterations`, or the one that used up the
+    // time budget.
+    let mut last = options.iterations;
+    let mut out_of_time = false;
     for it in 0..options.iterations {
         let start = Instant::now();
-        let progress = it as f64 / (options.iterations.max(2) - 1) as f64;
+        let spent = train_s + refine_s + densify_s;
+        let progress = (it as f64 / (options.iterations.max(2) - 1) as f64)
+            .max(options.time_budget.map_or(0.0, |b| spent / b))
+            .min(1.0);
         adam.lr.means = base_lr * options.means_lr_final.powf(progress);
         let (f, v) =
             pairs[((rng.uniform_f64() * pairs.len() as f64) as usize).min(pairs.len() - 1)];
@@ -629,8 +654,15 @@ pub fn fit(
         train_s += start.elapsed().as_secs_f64();
 
         let done = it + 1;
+        if options
+            .time_budget
+            .is_some_and(|b| train_s + refine_s + densify_s >= b)
+        {
+            last = done;
+            out_of_time = true;
+        }
         if let Some(d) = &options.densify {
-            if d.densifies_at(done, options.iterations) {
+            if d.densifies_at(done, last) {
                 let start = Instant::now();
                 // One sampling seed per event.
                 let seed = splitmix64(options.seed ^ splitmix64(done as u64));
@@ -663,14 +695,14 @@ pub fn fit(
                     ms,
                 });
             }
-            if d.resets_opacity_at(done, options.iterations) {
+            if d.resets_opacity_at(done, last) {
                 reset_opacity(&mut bound, &mut adam, RESET_OPACITY);
                 opacity_resets.push(done);
             }
         }
         if let Some(every) = options.refine_every
             && done % every == 0
-            && done < options.iterations
+            && done < last
         {
             let start = Instant::now();
             let before = bound.len();
@@ -700,7 +732,7 @@ pub fn fit(
                 ms,
             });
         }
-        if done % options.eval_every == 0 || done == options.iterations {
+        if done % options.eval_every == 0 || done == last {
             if !all_finite(&bound.local) {
                 return Err(FitError::NonFinite(done));
             }
@@ -708,12 +740,17 @@ pub fn fit(
             checkpoints.push(score(&bound, done, train_s + refine_s + densify_s, acc));
             (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
         }
+        if out_of_time {
+            break;
+        }
     }
-    let n = options.iterations as f64;
+    let n = last as f64;
     Ok(Fitted {
         set: bound.write_into(&current),
         checkpoints,
         refines,
+        iterations: last,
+        out_of_time,
         densify: densify_events,
         opacity_resets,
         seconds_per_iteration: train_s / n,
