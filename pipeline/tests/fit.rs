@@ -158,3 +158,129 @@ fn fit_modes_and_their_terms() {
         "{e}"
     );
 }
+
+/// A 4 x 4 PNG: texel (i, j) has red i / 3 and green j / 3 (exact in 8 bits), blue 51 / 255.
+fn ramp_png() -> Vec<u8> {
+    let img = image::RgbImage::from_fn(4, 4, |i, j| {
+        image::Rgb([(85 * i) as u8, (85 * j) as u8, 51])
+    });
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+/// The square of [`square`] as a glTF file: uv = ((x + 1) / 2, (y + 1) / 2), material 0
+/// textured with [`ramp_png`] (in a buffer view), CLAMP_TO_EDGE, LINEAR.
+fn textured_square(path: &std::path::Path) -> TriMesh {
+    use serde_json::json;
+    let (mesh, _) = square();
+    let mut bin = Vec::new();
+    for p in mesh.positions() {
+        for c in p.to_array() {
+            bin.extend_from_slice(&(c as f32).to_le_bytes());
+        }
+    }
+    for p in mesh.positions() {
+        for c in [(p.x + 1.0) / 2.0, (p.y + 1.0) / 2.0] {
+            bin.extend_from_slice(&(c as f32).to_le_bytes());
+        }
+    }
+    for i in mesh.triangles().iter().flatten() {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let png = ramp_png();
+    let png_offset = bin.len();
+    bin.extend_from_slice(&png);
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{
+            "attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0
+        }]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "textures": [{"source": 0, "sampler": 0}],
+        "samplers": [{"wrapS": 33071, "wrapT": 33071, "magFilter": 9729}],
+        "images": [{"bufferView": 3, "mimeType": "image/png"}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [-1.0, -1.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+            {"bufferView": 2, "componentType": 5125, "count": 6, "type": "SCALAR"}
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 32},
+            {"buffer": 0, "byteOffset": 80, "byteLength": 24},
+            {"buffer": 0, "byteOffset": png_offset, "byteLength": png.len()}
+        ],
+        "buffers": [{"byteLength": bin.len()}],
+    });
+    std::fs::write(
+        path,
+        trisplat_geometry::io::gltf::gltf_text_from_parts(doc, &bin),
+    )
+    .unwrap();
+    let base = trisplat_geometry::io::read_gltf_base_color(path).unwrap();
+    trisplat_geometry::io::read_mesh(path)
+        .unwrap()
+        .with_base_color(std::sync::Arc::new(base))
+        .unwrap()
+}
+
+#[test]
+fn mesh_targets_sample_the_base_colour_texture() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = textured_square(&dir.path().join("square.gltf"));
+    let (_, camera) = square();
+    let render = |color| {
+        mesh_targets(
+            &mesh,
+            mesh.positions(),
+            std::slice::from_ref(&camera),
+            color,
+            [0.0; 3],
+        )
+        .unwrap()
+        .remove(0)
+    };
+    let t = render(TargetColor::Texture);
+    assert_eq!(render(TargetColor::Auto).rgb, t.rgb, "auto takes the texture");
+    let w = 32;
+    let mut hits = 0;
+    for (p, &a) in t.alpha.as_ref().unwrap().iter().enumerate() {
+        if a == 0.0 {
+            continue;
+        }
+        hits += 1;
+        let (i, j) = (p / w, p % w);
+        let d = f64::from(t.depth.as_ref().unwrap()[p]);
+        let ray = DVec3::new(
+            (j as f64 + 0.5 - camera.cx) / camera.fx,
+            (i as f64 + 0.5 - camera.cy) / camera.fy,
+            1.0,
+        );
+        let x = camera.position() + camera.rotation() * ray * d;
+        let (u, v) = ((x.x + 1.0) / 2.0, (x.y + 1.0) / 2.0);
+        // Bilinear between texel centres of a ramp is the ramp: (4u - 1/2) / 3, clamped to
+        // the edge texels beyond the outer centres; v runs down the image's rows.
+        let ramp = |s: f64| ((4.0 * s - 0.5) / 3.0).clamp(0.0, 1.0);
+        let got = &t.rgb[3 * p..3 * p + 3];
+        assert!((f64::from(got[0]) - ramp(u)).abs() < 1e-4, "red at {p}: {got:?}");
+        assert!((f64::from(got[1]) - ramp(v)).abs() < 1e-4, "green at {p}: {got:?}");
+        assert!((got[2] - 0.2).abs() < 1e-6, "blue at {p}: {got:?}");
+    }
+    assert!(hits > 100, "{hits}");
+    // The normal colour ignores the texture; no texture, no texture colour.
+    let normal = render(TargetColor::Normal);
+    assert_ne!(normal.rgb, t.rgb);
+    let (plain, _) = square();
+    let e = mesh_targets(
+        &plain,
+        plain.positions(),
+        std::slice::from_ref(&camera),
+        TargetColor::Texture,
+        [0.0; 3],
+    )
+    .unwrap_err();
+    assert!(matches!(e, FitError::Target(_)) && e.to_string().contains("base-colour texture"));
+}
