@@ -284,3 +284,110 @@ fn mesh_targets_sample_the_base_colour_texture() {
     .unwrap_err();
     assert!(matches!(e, FitError::Target(_)) && e.to_string().contains("base-colour texture"));
 }
+
+/// CesiumMan's rest pose as `trisplat fit` reads it (the animated template), with its base
+/// colour, and 8 cameras around it of `size` pixels.
+fn cesium_man(size: u32) -> (TriMesh, Vec<Camera>) {
+    use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate};
+    let path = trisplat_fixtures::path("anim/CesiumMan.glb");
+    let template = GltfTemplate::open(&path, &Clip::None).unwrap().rest().clone();
+    let base = trisplat_geometry::io::read_gltf_base_color(&path).unwrap();
+    let mesh = template.with_base_color(std::sync::Arc::new(base)).unwrap();
+    // An orbit about the box's longest axis (the figure's height).
+    let b = mesh.bounds().unwrap();
+    let extent = (b.max - b.min).to_array();
+    let up = (0..3).max_by(|&i, &j| extent[i].total_cmp(&extent[j])).unwrap();
+    let (h1, h2) = ((up + 1) % 3, (up + 2) % 3);
+    let axis = |i: usize| DVec3::from_array(std::array::from_fn(|k| f64::from(u8::from(k == i))));
+    let cameras = (0..8)
+        .map(|k| {
+            let a = f64::from(k) * std::f64::consts::TAU / 8.0;
+            let dir = a.cos() * axis(h1) + a.sin() * axis(h2) + 0.3 * axis(up);
+            let eye = b.center() + 1.2 * b.diagonal() * dir;
+            Camera::look_at(format!("v{k}"), eye, b.center(), axis(up), (size, size), 40.0)
+                .unwrap()
+        })
+        .collect();
+    (mesh, cameras)
+}
+
+#[test]
+fn cesium_man_texture_targets_are_sane() {
+    let (mesh, cameras) = cesium_man(48);
+    let textured = mesh_targets(&mesh, mesh.positions(), &cameras, TargetColor::Auto, [0.0; 3])
+        .unwrap();
+    let normal = mesh_targets(&mesh, mesh.positions(), &cameras, TargetColor::Normal, [0.0; 3])
+        .unwrap();
+    let mut hits = 0usize;
+    let mut sum = [0.0f64; 3];
+    for (t, n) in textured.iter().zip(&normal) {
+        assert_eq!(t.alpha, n.alpha, "the texture changes rgb only");
+        for (p, &a) in t.alpha.as_ref().unwrap().iter().enumerate() {
+            let c = &t.rgb[3 * p..3 * p + 3];
+            assert!(c.iter().all(|x| (0.0..=1.0).contains(x)), "{c:?}");
+            if a > 0.0 {
+                hits += 1;
+                for ch in 0..3 {
+                    sum[ch] += f64::from(c[ch]);
+                }
+            } else {
+                assert_eq!(c, [0.0; 3], "background");
+            }
+        }
+    }
+    assert!(hits > 1000, "{hits}");
+    // The surface's area-weighted mean colour (the base colour at the triangles' centroids)
+    // matches the one computed outside: trimesh 5.2.0's uvs (its v flipped back to glTF's)
+    // on Pillow 13.0.0's decode, nearest texel: (0.820, 0.886, 0.873); with v the other way
+    // up it would be (0.849, 0.902, 0.882), the texture's own mean is (0.869, 0.917, 0.907).
+    // The mean over the hit pixels is near it, and it is not the normal colour.
+    let mean = sum.map(|s| s / hits as f64);
+    let base = mesh.base_color().unwrap();
+    let areas = mesh.triangle_areas();
+    let mut surface = [0.0f64; 3];
+    for (t, a) in areas.iter().enumerate() {
+        let c = base.rgb_at(t, [1.0 / 3.0; 3]);
+        for ch in 0..3 {
+            surface[ch] += a * f64::from(c[ch]);
+        }
+    }
+    let total: f64 = areas.iter().sum();
+    let surface = surface.map(|s| s / total);
+    println!("{hits} hits, mean rgb {mean:?}; area-weighted surface mean {surface:?}");
+    for ch in 0..3 {
+        assert!((surface[ch] - [0.820, 0.886, 0.873][ch]).abs() < 0.01, "{surface:?}");
+        assert!((mean[ch] - surface[ch]).abs() < 0.05, "{mean:?} vs {surface:?}");
+    }
+    assert!(textured.iter().zip(&normal).any(|(t, n)| t.rgb != n.rgb));
+}
+
+/// Timing (run with `--release -- --ignored --nocapture`): decoding CesiumMan's texture and
+/// making 8 textured 256 x 256 targets.
+#[test]
+#[ignore = "a timing, not a check"]
+fn time_cesium_man_texture_targets() {
+    let path = trisplat_fixtures::path("anim/CesiumMan.glb");
+    let start = std::time::Instant::now();
+    let runs = 5;
+    for _ in 0..runs {
+        trisplat_geometry::io::read_gltf_base_color(&path).unwrap();
+    }
+    let read = start.elapsed().as_secs_f64() / f64::from(runs);
+    let (mesh, cameras) = cesium_man(256);
+    let mut times = Vec::new();
+    for color in [TargetColor::Texture, TargetColor::Normal] {
+        let start = std::time::Instant::now();
+        for _ in 0..runs {
+            mesh_targets(&mesh, mesh.positions(), &cameras, color, [0.0; 3]).unwrap();
+        }
+        times.push(start.elapsed().as_secs_f64() / f64::from(runs));
+    }
+    println!(
+        "read_gltf_base_color (JSON, buffers, JPEG decode, corners): {:.1} ms; 8 targets \
+         256x256 on {} threads: texture {:.1} ms, normal {:.1} ms",
+        read * 1e3,
+        rayon::current_num_threads(),
+        times[0] * 1e3,
+        times[1] * 1e3
+    );
+}

@@ -5,9 +5,11 @@
 //!
 //! JPEG decoders may differ: the image crate decodes with zune-jpeg, Pillow with
 //! libjpeg-turbo, and the standard leaves the inverse DCT's rounding and the chroma
-//! upsampling to the decoder. Measured on this image (200 texels, 200 lookups): at most
-//! 1 code in 255 (0.0039); the tolerance is 1.5 codes, just above it. The lookup itself (the
-//! same texels in both, f32 against f64) differs by far less than a code.
+//! upsampling to the decoder. Measured once on the whole image (our decode rounded to 8 bits
+//! against Pillow's, 3 × 1024² values): 0.23% differ, 6,430 by 1 code, 944 by 2, 7 by 3, none
+//! by more; at the fixture's points, at most 1 code. The tolerance is 3.5 codes, just above
+//! the image's maximum, so that any lookup may land on the worst texels. The lookup itself
+//! (the same texels, f32 against f64) differs by less than 1e-6.
 
 use serde_json::Value;
 use trisplat_geometry::glam::Vec2;
@@ -15,7 +17,7 @@ use trisplat_geometry::io::read_gltf_base_color;
 use trisplat_geometry::texture::{Filter, Wrap};
 
 /// Largest difference allowed between our texel values and Pillow's, per channel in 0..1.
-const MAX_DECODE_DIFF: f32 = 1.5 / 255.0;
+const MAX_DECODE_DIFF: f32 = 3.5 / 255.0;
 
 fn rows(v: &Value) -> Vec<Vec<f64>> {
     v.as_array()
