@@ -408,10 +408,29 @@ fn fit_to_cesium_man_texture_targets() {
     run_ok(&["bind", &man, "-o", s(&g)]);
     let train = dir.join("train.json");
     let eval = dir.join("eval.json");
-    run_ok(&["cameras", &man, "-o", s(&train), "--views", "8", "--size", "40x40"]);
     run_ok(&[
-        "cameras", &man, "-o", s(&eval), "--rig", "orbit", "--views", "3", "--elevation", "30",
-        "--size", "40x40",
+        "cameras",
+        &man,
+        "-o",
+        s(&train),
+        "--views",
+        "8",
+        "--size",
+        "40x40",
+    ]);
+    run_ok(&[
+        "cameras",
+        &man,
+        "-o",
+        s(&eval),
+        "--rig",
+        "orbit",
+        "--views",
+        "3",
+        "--elevation",
+        "30",
+        "--size",
+        "40x40",
     ]);
     let out = dir.join("fitted.ply");
     let inputs = (s(&g), man.as_str(), s(&train), s(&eval));
@@ -439,8 +458,16 @@ fn fit_to_cesium_man_texture_targets() {
     let refused = spot_dir.join("refused.ply");
     fails(
         &[
-            "fit", &spot_g, "--template", &spot, "--cameras", &spot_train, "-o", s(&refused),
-            "--color", "texture",
+            "fit",
+            &spot_g,
+            "--template",
+            &spot,
+            "--cameras",
+            &spot_train,
+            "-o",
+            s(&refused),
+            "--color",
+            "texture",
         ],
         1,
         &spot_dir,

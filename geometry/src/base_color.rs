@@ -129,7 +129,10 @@ impl BaseColor {
                 });
             }
         }
-        if let Some(triangle) = corner_uvs.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
+        if let Some(triangle) = corner_uvs
+            .iter()
+            .position(|c| !c.iter().all(|v| v.is_finite()))
+        {
             return Err(BaseColorError::NonFinite {
                 triangle,
                 what: "uv",
@@ -207,8 +210,8 @@ impl BaseColor {
         let mut multiplier = [material.factor[0], material.factor[1], material.factor[2]];
         if let Some(colors) = &self.corner_colors {
             let corners = colors[t];
+            #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
             for (ch, m) in multiplier.iter_mut().enumerate() {
-                #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
                 let c: f64 = (0..3)
                     .map(|k| weights[k] * f64::from(corners[k][ch]))
                     .sum::<f64>();
@@ -236,7 +239,11 @@ mod tests {
     }
 
     fn one_triangle(material: Material, colors: Option<[Rgba; 3]>) -> BaseColor {
-        let uvs = [Vec2::new(0.25, 0.5), Vec2::new(0.75, 0.5), Vec2::new(0.25, 0.5)];
+        let uvs = [
+            Vec2::new(0.25, 0.5),
+            Vec2::new(0.75, 0.5),
+            Vec2::new(0.25, 0.5),
+        ];
         BaseColor::new(vec![uvs], colors.map(|c| vec![c]), vec![0], vec![material]).unwrap()
     }
 
@@ -261,7 +268,10 @@ mod tests {
         assert_eq!(b.rgb_at(0, [0.0, 1.0, 0.0]), [0.0, 0.4, 0.6]);
         // Halfway: the mean of the stored (encoded) values; alpha plays no part.
         let mid = b.rgb_at(0, [0.5, 0.5, 0.0]);
-        assert!((mid[0] - 0.4).abs() < 1e-6 && (mid[2] - 0.3).abs() < 1e-6, "{mid:?}");
+        assert!(
+            (mid[0] - 0.4).abs() < 1e-6 && (mid[2] - 0.3).abs() < 1e-6,
+            "{mid:?}"
+        );
     }
 
     #[test]
@@ -269,7 +279,11 @@ mod tests {
         let half = srgb_to_linear(0.5);
         let b = one_triangle(
             textured([0.5, 1.0, 1.0, 1.0]),
-            Some([[1.0, 1.0, 0.25, 1.0], [1.0, 1.0, 0.25, 1.0], [1.0, 1.0, 0.25, 1.0]]),
+            Some([
+                [1.0, 1.0, 0.25, 1.0],
+                [1.0, 1.0, 0.25, 1.0],
+                [1.0, 1.0, 0.25, 1.0],
+            ]),
         );
         let c = b.rgb_at(0, [1.0, 0.0, 0.0]);
         let want = [
@@ -310,6 +324,10 @@ mod tests {
             BaseColor::new(vec![uv, nan], None, vec![0, 0], m()),
             Err(BaseColorError::NonFinite { triangle: 1, .. })
         ));
-        assert!(!BaseColor::new(vec![uv], None, vec![0], m()).unwrap().has_texture());
+        assert!(
+            !BaseColor::new(vec![uv], None, vec![0], m())
+                .unwrap()
+                .has_texture()
+        );
     }
 }

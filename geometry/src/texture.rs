@@ -146,7 +146,10 @@ impl Texture {
     /// When the texel is outside the image.
     #[must_use]
     pub fn texel(&self, i: u32, j: u32) -> [f32; 4] {
-        assert!(i < self.width && j < self.height, "texel ({i}, {j}) outside the image");
+        assert!(
+            i < self.width && j < self.height,
+            "texel ({i}, {j}) outside the image"
+        );
         self.texels[j as usize * self.width as usize + i as usize]
     }
 
@@ -165,9 +168,8 @@ impl Texture {
         let x = f64::from(uv.x) * f64::from(w);
         let y = f64::from(uv.y) * f64::from(h);
         let (x, y) = (finite_or_zero(x), finite_or_zero(y));
-        let at = |i: i64, j: i64| {
-            self.texel(sampler.wrap_u.index(i, w), sampler.wrap_v.index(j, h))
-        };
+        let at =
+            |i: i64, j: i64| self.texel(sampler.wrap_u.index(i, w), sampler.wrap_v.index(j, h));
         match sampler.filter {
             Filter::Nearest => at(floor_index(x), floor_index(y)),
             Filter::Linear => {
@@ -262,7 +264,11 @@ mod tests {
         for j in 0..2 {
             for i in 0..4 {
                 let uv = Vec2::new((i as f32 + 0.5) / 4.0, (j as f32 + 0.5) / 2.0);
-                assert_eq!(t.sample(uv, Sampler::default()), t.texel(i, j), "({i}, {j})");
+                assert_eq!(
+                    t.sample(uv, Sampler::default()),
+                    t.texel(i, j),
+                    "({i}, {j})"
+                );
             }
         }
     }

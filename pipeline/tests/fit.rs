@@ -244,7 +244,11 @@ fn mesh_targets_sample_the_base_colour_texture() {
         .remove(0)
     };
     let t = render(TargetColor::Texture);
-    assert_eq!(render(TargetColor::Auto).rgb, t.rgb, "auto takes the texture");
+    assert_eq!(
+        render(TargetColor::Auto).rgb,
+        t.rgb,
+        "auto takes the texture"
+    );
     let w = 32;
     let mut hits = 0;
     for (p, &a) in t.alpha.as_ref().unwrap().iter().enumerate() {
@@ -265,8 +269,14 @@ fn mesh_targets_sample_the_base_colour_texture() {
         // the edge texels beyond the outer centres; v runs down the image's rows.
         let ramp = |s: f64| ((4.0 * s - 0.5) / 3.0).clamp(0.0, 1.0);
         let got = &t.rgb[3 * p..3 * p + 3];
-        assert!((f64::from(got[0]) - ramp(u)).abs() < 1e-4, "red at {p}: {got:?}");
-        assert!((f64::from(got[1]) - ramp(v)).abs() < 1e-4, "green at {p}: {got:?}");
+        assert!(
+            (f64::from(got[0]) - ramp(u)).abs() < 1e-4,
+            "red at {p}: {got:?}"
+        );
+        assert!(
+            (f64::from(got[1]) - ramp(v)).abs() < 1e-4,
+            "green at {p}: {got:?}"
+        );
         assert!((got[2] - 0.2).abs() < 1e-6, "blue at {p}: {got:?}");
     }
     assert!(hits > 100, "{hits}");
@@ -290,13 +300,18 @@ fn mesh_targets_sample_the_base_colour_texture() {
 fn cesium_man(size: u32) -> (TriMesh, Vec<Camera>) {
     use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate};
     let path = trisplat_fixtures::path("anim/CesiumMan.glb");
-    let template = GltfTemplate::open(&path, &Clip::None).unwrap().rest().clone();
+    let template = GltfTemplate::open(&path, &Clip::None)
+        .unwrap()
+        .rest()
+        .clone();
     let base = trisplat_geometry::io::read_gltf_base_color(&path).unwrap();
     let mesh = template.with_base_color(std::sync::Arc::new(base)).unwrap();
     // An orbit about the box's longest axis (the figure's height).
     let b = mesh.bounds().unwrap();
     let extent = (b.max - b.min).to_array();
-    let up = (0..3).max_by(|&i, &j| extent[i].total_cmp(&extent[j])).unwrap();
+    let up = (0..3)
+        .max_by(|&i, &j| extent[i].total_cmp(&extent[j]))
+        .unwrap();
     let (h1, h2) = ((up + 1) % 3, (up + 2) % 3);
     let axis = |i: usize| DVec3::from_array(std::array::from_fn(|k| f64::from(u8::from(k == i))));
     let cameras = (0..8)
@@ -304,8 +319,15 @@ fn cesium_man(size: u32) -> (TriMesh, Vec<Camera>) {
             let a = f64::from(k) * std::f64::consts::TAU / 8.0;
             let dir = a.cos() * axis(h1) + a.sin() * axis(h2) + 0.3 * axis(up);
             let eye = b.center() + 1.2 * b.diagonal() * dir;
-            Camera::look_at(format!("v{k}"), eye, b.center(), axis(up), (size, size), 40.0)
-                .unwrap()
+            Camera::look_at(
+                format!("v{k}"),
+                eye,
+                b.center(),
+                axis(up),
+                (size, size),
+                40.0,
+            )
+            .unwrap()
         })
         .collect();
     (mesh, cameras)
@@ -314,10 +336,22 @@ fn cesium_man(size: u32) -> (TriMesh, Vec<Camera>) {
 #[test]
 fn cesium_man_texture_targets_are_sane() {
     let (mesh, cameras) = cesium_man(48);
-    let textured = mesh_targets(&mesh, mesh.positions(), &cameras, TargetColor::Auto, [0.0; 3])
-        .unwrap();
-    let normal = mesh_targets(&mesh, mesh.positions(), &cameras, TargetColor::Normal, [0.0; 3])
-        .unwrap();
+    let textured = mesh_targets(
+        &mesh,
+        mesh.positions(),
+        &cameras,
+        TargetColor::Auto,
+        [0.0; 3],
+    )
+    .unwrap();
+    let normal = mesh_targets(
+        &mesh,
+        mesh.positions(),
+        &cameras,
+        TargetColor::Normal,
+        [0.0; 3],
+    )
+    .unwrap();
     let mut hits = 0usize;
     let mut sum = [0.0f64; 3];
     for (t, n) in textured.iter().zip(&normal) {
@@ -355,8 +389,14 @@ fn cesium_man_texture_targets_are_sane() {
     let surface = surface.map(|s| s / total);
     println!("{hits} hits, mean rgb {mean:?}; area-weighted surface mean {surface:?}");
     for ch in 0..3 {
-        assert!((surface[ch] - [0.820, 0.886, 0.873][ch]).abs() < 0.01, "{surface:?}");
-        assert!((mean[ch] - surface[ch]).abs() < 0.05, "{mean:?} vs {surface:?}");
+        assert!(
+            (surface[ch] - [0.820, 0.886, 0.873][ch]).abs() < 0.01,
+            "{surface:?}"
+        );
+        assert!(
+            (mean[ch] - surface[ch]).abs() < 0.05,
+            "{mean:?} vs {surface:?}"
+        );
     }
     assert!(textured.iter().zip(&normal).any(|(t, n)| t.rgb != n.rgb));
 }

@@ -19,7 +19,8 @@ fn png_4x4() -> Vec<u8> {
         image::Rgba([(85 * i) as u8, (85 * j) as u8, 51, 255])
     });
     let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png).expect("png");
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .expect("png");
     out.into_inner()
 }
 
@@ -30,11 +31,18 @@ const UVS: [[f32; 2]; 4] = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
 /// is set the PNG is appended to the buffer as buffer view 3.
 fn quad(image: Value, png_view: bool) -> (Value, Vec<u8>) {
     let mut bin = Vec::new();
-    for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]] {
-        p.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+    for p in [
+        [0.0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ] {
+        p.iter()
+            .for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
     }
     for uv in UVS {
-        uv.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+        uv.iter()
+            .for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
     }
     for i in [0u32, 1, 2, 0, 2, 3] {
         bin.extend_from_slice(&i.to_le_bytes());
@@ -196,11 +204,17 @@ fn bad_textures_are_clear_errors() {
         .expect("attributes")
         .remove("TEXCOORD_0");
     let e = error_of(d, "no_uv.gltf", doc, &bin);
-    assert!(e.contains("mesh 0 primitive 0") && e.contains("TEXCOORD_0"), "{e}");
+    assert!(
+        e.contains("mesh 0 primitive 0") && e.contains("TEXCOORD_0"),
+        "{e}"
+    );
     let (mut doc, bin) = quad(json!({"bufferView": 3, "mimeType": "image/png"}), true);
     doc["accessors"][1]["count"] = json!(3);
     let e = error_of(d, "uv_count.gltf", doc, &bin);
-    assert!(e.contains("mesh 0 primitive 0") && e.contains("3 entries"), "{e}");
+    assert!(
+        e.contains("mesh 0 primitive 0") && e.contains("3 entries"),
+        "{e}"
+    );
     // A NaN uv.
     let (doc, mut bin) = quad(json!({"bufferView": 3, "mimeType": "image/png"}), true);
     bin[48 + 8..48 + 12].copy_from_slice(&f32::NAN.to_le_bytes());
@@ -234,7 +248,11 @@ fn cesium_man_corner_uvs_keep_the_seams_that_welding_merges() {
     assert_eq!(template.rest().triangles(), stored.triangles());
     let uvs = stored.uvs().expect("CesiumMan has TEXCOORD_0");
     for (t, tri) in stored.triangles().iter().enumerate() {
-        assert_eq!(base.corner_uvs(t), tri.map(|v| uvs[v as usize]), "triangle {t}");
+        assert_eq!(
+            base.corner_uvs(t),
+            tri.map(|v| uvs[v as usize]),
+            "triangle {t}"
+        );
     }
     // Welded by position, the template keeps the base colour; its per-vertex uvs are those
     // of each welded vertex's first copy, wrong on the other side of a seam, where the

@@ -36,27 +36,44 @@ fn rows(v: &Value) -> Vec<Vec<f64>> {
 #[test]
 fn cesium_man_texture_matches_pillow_and_scipy() {
     let doc: Value = serde_json::from_str(
-        &std::fs::read_to_string(trisplat_fixtures::path(
-            "reference/texture/cesium_man.json",
-        ))
-        .expect("fixture"),
+        &std::fs::read_to_string(trisplat_fixtures::path("reference/texture/cesium_man.json"))
+            .expect("fixture"),
     )
     .expect("json");
     let started = std::time::Instant::now();
     let base = read_gltf_base_color(&trisplat_fixtures::path("anim/CesiumMan.glb")).expect("read");
-    println!("read and decoded in {:.1} ms", started.elapsed().as_secs_f64() * 1e3);
+    println!(
+        "read and decoded in {:.1} ms",
+        started.elapsed().as_secs_f64() * 1e3
+    );
     assert!(base.has_texture());
-    let m = base.materials()[0].texture.as_ref().expect("material 0 is textured");
+    let m = base.materials()[0]
+        .texture
+        .as_ref()
+        .expect("material 0 is textured");
     let texture = &m.texture;
-    assert_eq!(u64::from(texture.width()), doc["width"].as_u64().expect("width"));
-    assert_eq!(u64::from(texture.height()), doc["height"].as_u64().expect("height"));
+    assert_eq!(
+        u64::from(texture.width()),
+        doc["width"].as_u64().expect("width")
+    );
+    assert_eq!(
+        u64::from(texture.height()),
+        doc["height"].as_u64().expect("height")
+    );
     // The file's sampler: REPEAT both ways, LINEAR magnification.
-    assert_eq!((m.sampler.wrap_u, m.sampler.wrap_v), (Wrap::Repeat, Wrap::Repeat));
+    assert_eq!(
+        (m.sampler.wrap_u, m.sampler.wrap_v),
+        (Wrap::Repeat, Wrap::Repeat)
+    );
     assert_eq!(m.sampler.filter, Filter::Linear);
 
     let mut worst_texel = 0.0f32;
     for (ij, want) in rows(&doc["texel_ij"]).iter().zip(rows(&doc["texel_rgba"])) {
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "indices")]
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "indices"
+        )]
         let ours = texture.texel(ij[0] as u32, ij[1] as u32);
         for ch in 0..4 {
             worst_texel = worst_texel.max((ours[ch] - want[ch] as f32).abs());
@@ -64,12 +81,18 @@ fn cesium_man_texture_matches_pillow_and_scipy() {
     }
     let mut worst_lookup = 0.0f32;
     for (uv, want) in rows(&doc["uv"]).iter().zip(rows(&doc["rgba"])) {
-        #[expect(clippy::cast_possible_truncation, reason = "the fixture's uvs are f32 values")]
+        #[expect(
+            clippy::cast_possible_truncation,
+            reason = "the fixture's uvs are f32 values"
+        )]
         let uv = Vec2::new(uv[0] as f32, uv[1] as f32);
         let ours = texture.sample(uv, m.sampler);
         for ch in 0..4 {
             let d = (ours[ch] - want[ch] as f32).abs();
-            assert!(d <= MAX_DECODE_DIFF, "uv {uv:?} channel {ch}: {ours:?} vs {want:?}");
+            assert!(
+                d <= MAX_DECODE_DIFF,
+                "uv {uv:?} channel {ch}: {ours:?} vs {want:?}"
+            );
             worst_lookup = worst_lookup.max(d);
         }
     }

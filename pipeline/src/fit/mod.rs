@@ -579,4 +579,3 @@ fn reset(v: &mut Vec<f32>, n: usize) {
     v.clear();
     v.resize(n, 0.0);
 }
-

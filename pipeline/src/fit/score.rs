@@ -33,4 +33,3 @@ pub(super) fn evaluate(
         (Some(p / n as f64), Some(s / n as f64))
     }
 }
-

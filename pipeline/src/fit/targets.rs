@@ -12,9 +12,9 @@ use std::path::Path;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::base_color::BaseColor;
 use trisplat_geometry::mesh::Rgba;
+use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::{Camera, TriMesh};
 
 use super::{FitError, Target};
