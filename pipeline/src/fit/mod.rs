@@ -579,3 +579,4 @@ fn reset(v: &mut Vec<f32>, n: usize) {
     v.clear();
     v.resize(n, 0.0);
 }
+

@@ -33,3 +33,4 @@ pub(super) fn evaluate(
         (Some(p / n as f64), Some(s / n as f64))
     }
 }
+
