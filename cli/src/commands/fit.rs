@@ -43,8 +43,8 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     at the hit's uv (TEXCOORD_0, interpolated per triangle corner, so uv seams stay sharp), \
     bilinear, with the sampler's wrap modes, no mipmaps, and kept in the image's own encoding \
     (sRGB), times the material's baseColorFactor and COLOR_0 (multiplied in linear, encoded \
-    again); its alpha is ignored. The hit mask is the alpha, z-depth), at its rest pose or, with --animation, at each \
-    frame of --frames (each frame's views all train); or user images with --images DIR \
+    again), its alpha ignored; the hit mask as alpha, z-depth), at its rest pose or, with \
+    --animation, at each frame of --frames (each frame's views all train); or user images with --images DIR \
     (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask). \
     Held-out views (--eval-cameras, --eval-images) are scored by PSNR and SSIM at every \
     --eval-every iterations; they never train.\n\n\
