@@ -44,7 +44,8 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     bilinear, with the sampler's wrap modes, no mipmaps, and kept in the image's own encoding \
     (sRGB), times the material's baseColorFactor and COLOR_0 (multiplied in linear, encoded \
     again), its alpha ignored; the hit mask as alpha, z-depth), at its rest pose or, with \
-    --animation, at each frame of --frames (each frame's views all train); or user images with --images DIR \
+    --animation, at each \
+    frame of --frames (each frame's views all train); or user images with --images DIR \
     (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask). \
     Held-out views (--eval-cameras, --eval-images) are scored by PSNR and SSIM at every \
     --eval-every iterations; they never train.\n\n\
