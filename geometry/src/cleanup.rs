@@ -116,8 +116,9 @@ pub fn clean(mesh: &TriMesh) -> TriMesh {
 /// New vertices are numbered in the order of their first occurrence (as trimesh and Open3D
 /// do), so `map` is non-decreasing over first occurrences and an input without duplicates
 /// comes back unchanged with the identity map. A welded vertex keeps the position, normal,
-/// UV and colour of its first (lowest-index) original vertex. Vertices are merged whether or
-/// not a triangle uses them.
+/// UV and colour of its first (lowest-index) original vertex (so per-vertex UVs are wrong
+/// across a UV seam; the per-corner UVs of an attached base colour, which is kept, are not).
+/// Vertices are merged whether or not a triangle uses them.
 ///
 /// Every triangle is kept, in order, with its indices remapped: triangle `t` of the output is
 /// triangle `t` of the input, so per-triangle data (e.g. Gaussian bindings) stays valid.
@@ -145,7 +146,13 @@ pub fn weld_vertices(mesh: &TriMesh, tolerance: f32) -> (TriMesh, Vec<u32>) {
         .iter()
         .map(|t| t.map(|v| map.get(v as usize).copied().unwrap_or(v)))
         .collect();
-    let welded = rebuild(mesh, welded_positions, triangles, Some(&first));
+    let mut welded = rebuild(mesh, welded_positions, triangles, Some(&first));
+    // Same triangles in the same order: the per-corner base colour still fits.
+    if let Some(b) = mesh.base_color() {
+        welded = welded
+            .with_base_color(b.clone())
+            .unwrap_or_else(|_| unreachable!());
+    }
     (welded, map)
 }
 

@@ -1,5 +1,5 @@
 //! Geometry core of trisplat: indexed triangle meshes and point clouds, their validation and
-//! clean-up, mesh I/O (PLY, OBJ, glTF/GLB), spatial indexes (k-d tree, triangle BVH), metrics
+//! clean-up, mesh I/O (PLY, OBJ, glTF/GLB; glTF base-colour textures), spatial indexes (k-d tree, triangle BVH), metrics
 //! with trimesh/Open3D definitions, smoothing and sampling.
 //!
 //! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
@@ -8,6 +8,7 @@
 pub use glam;
 
 pub mod animation;
+pub mod base_color;
 pub mod camera;
 pub mod cleanup;
 pub mod ids;
@@ -22,6 +23,7 @@ pub mod sampling;
 pub mod smoothing;
 pub mod spatial;
 pub mod subdivide;
+pub mod texture;
 pub mod topology;
 pub mod validation;
 

@@ -5,8 +5,12 @@
 //! storage of its vertices, amplified by sliver triangles, was the largest error in deformed
 //! covariances (docs/numerics.md).
 
+use std::sync::Arc;
+
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
+
+use crate::base_color::BaseColor;
 
 use crate::validation::MeshReport;
 
@@ -110,6 +114,16 @@ pub enum MeshError {
         /// Number of vertices.
         vertex_count: usize,
     },
+    /// A per-triangle attribute does not have one entry per triangle.
+    #[error("{attribute} has {len} entries, but the mesh has {triangle_count} triangles")]
+    TriangleAttributeLength {
+        /// `"base colour"`.
+        attribute: &'static str,
+        /// Entries found.
+        len: usize,
+        /// Number of triangles.
+        triangle_count: usize,
+    },
     /// More vertices than a `u32` index can address.
     #[error("{count} vertices do not fit in u32 indices")]
     TooManyVertices {
@@ -121,7 +135,8 @@ pub enum MeshError {
 /// An indexed triangle mesh.
 ///
 /// Invariants (checked by [`TriMesh::try_new`]): every triangle index is `< vertex_count`, every
-/// position is finite, and optional attributes have one entry per vertex. Triangles may still be
+/// position is finite, optional attributes have one entry per vertex and the optional base
+/// colour one entry per triangle. Triangles may still be
 /// degenerate (zero area, repeated indices) or non-manifold: [`TriMesh::report`] lists those, and
 /// [`crate::cleanup`] removes them.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -131,6 +146,8 @@ pub struct TriMesh {
     normals: Option<Vec<Vec3>>,
     uvs: Option<Vec<Vec2>>,
     colors: Option<Vec<Rgba>>,
+    /// Per-triangle base colour (material, texture, corner uvs); shared by clones.
+    base_color: Option<Arc<BaseColor>>,
 }
 
 impl TriMesh {
@@ -187,6 +204,7 @@ impl TriMesh {
             normals: None,
             uvs: None,
             colors: None,
+            base_color: None,
         }
     }
 
@@ -217,6 +235,25 @@ impl TriMesh {
     pub fn with_colors(mut self, colors: Vec<Rgba>) -> Result<Self, MeshError> {
         self.check_len("colors", colors.len())?;
         self.colors = Some(colors);
+        Ok(self)
+    }
+
+    /// Attaches a base colour (material, texture and corner uvs per triangle; see
+    /// [`crate::base_color`]). It stays with clones and [`TriMesh::set_positions`];
+    /// [`crate::cleanup::weld_vertices`] keeps it (triangles keep their order), operations that
+    /// rebuild the triangles drop it.
+    ///
+    /// # Errors
+    /// [`MeshError::TriangleAttributeLength`] when it does not describe one entry per triangle.
+    pub fn with_base_color(mut self, base_color: Arc<BaseColor>) -> Result<Self, MeshError> {
+        if base_color.triangle_count() != self.triangles.len() {
+            return Err(MeshError::TriangleAttributeLength {
+                attribute: "base colour",
+                len: base_color.triangle_count(),
+                triangle_count: self.triangles.len(),
+            });
+        }
+        self.base_color = Some(base_color);
         Ok(self)
     }
 
@@ -269,6 +306,12 @@ impl TriMesh {
         self.colors.as_deref()
     }
 
+    /// Per-triangle base colour, if attached ([`TriMesh::with_base_color`]).
+    #[must_use]
+    pub fn base_color(&self) -> Option<&Arc<BaseColor>> {
+        self.base_color.as_ref()
+    }
+
     /// Number of vertices.
     #[must_use]
     pub fn vertex_count(&self) -> usize {
@@ -315,7 +358,8 @@ impl TriMesh {
         self.normals = None;
     }
 
-    /// Splits the mesh into its raw arrays: positions, triangles, normals, uvs, colours.
+    /// Splits the mesh into its raw arrays: positions, triangles, normals, uvs, colours (the
+    /// base colour, if any, is dropped).
     #[must_use]
     #[expect(
         clippy::type_complexity,

@@ -24,7 +24,8 @@ pub enum Target {
     PlyGaussians,
     /// `parse_obj` in its three vertex modes.
     Obj,
-    /// The static glTF/GLB mesh reader (`io::gltf::read_gltf`).
+    /// The static glTF/GLB mesh reader (`io::gltf::read_gltf`) and its base-colour reader
+    /// (`io::read_gltf_base_color`).
     Gltf,
     /// The animated template loader (`GltfTemplate::open`, its first clip) and frame 0.
     GltfAnimated,
@@ -128,10 +129,14 @@ pub fn obj(data: &[u8]) -> bool {
     ok
 }
 
-/// The static glTF/GLB reader.
+/// The static glTF/GLB reader, then the base-colour reader (materials, PNG/JPEG images,
+/// corner uvs) on the same file; whether the mesh was read.
 #[must_use]
 pub fn gltf_static(data: &[u8]) -> bool {
-    gltf::read_gltf(&input_file(data)).is_ok()
+    let path = input_file(data);
+    let read = gltf::read_gltf(&path).is_ok();
+    let _ = trisplat_geometry::io::read_gltf_base_color(&path);
+    read
 }
 
 /// The animated template loader: open with the first clip (if any), then frame 0.

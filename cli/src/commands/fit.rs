@@ -4,10 +4,12 @@
 //! (`pipeline::fit`).
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::Camera;
 use trisplat_geometry::glam::DVec3;
+use trisplat_geometry::io::{Format, IoError, read_gltf_base_color};
+use trisplat_geometry::{Camera, TriMesh};
 use trisplat_pipeline::config::{ExtractConfig, ExtractOptions};
 use trisplat_pipeline::fit::{
     Checkpoint, FitFrame, FitOptions, TargetColor, fit, mesh_targets, read_image_targets,
@@ -35,9 +37,15 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
 #[command(
     after_long_help = "Fit bound Gaussians (a GaussianAvatars-bound PLY, as `bind` \
     writes) to target images, on the CPU, and write the fitted bound set.\n\n\
-    Targets: mesh renders of the template (default; ray cast from --cameras: rgb from the \
-    mesh's vertex colours, else its world normal as colour (n+1)/2 (--color normal forces \
-    that), the hit mask as alpha, z-depth), at its rest pose or, with --animation, at each \
+    Targets: mesh renders of the template (default; ray cast from --cameras: rgb per --color: \
+    auto is the glTF base-colour texture when the template's material has one, else the \
+    mesh's vertex colours, else its world normal as colour (n+1)/2; texture insists on the \
+    texture (an error without one); normal forces the normal colour. The texture is sampled \
+    at the hit's uv (TEXCOORD_0, interpolated per triangle corner, so uv seams stay sharp), \
+    bilinear, with the sampler's wrap modes, no mipmaps, and kept in the image's own encoding \
+    (sRGB), times the material's baseColorFactor and COLOR_0 (multiplied in linear, encoded \
+    again), its alpha ignored; the hit mask as alpha, z-depth), at its rest pose or, with \
+    --animation, at each \
     frame of --frames (each frame's views all train); or user images with --images DIR \
     (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask). \
     Held-out views (--eval-cameras, --eval-images) are scored by PSNR and SSIM at every \
@@ -114,7 +122,8 @@ pub struct FitArgs {
     /// Frames per second a glTF clip is sampled at.
     #[arg(long, value_name = "F", default_value_t = 30.0, requires = "animation")]
     pub fps: f64,
-    /// Colour of mesh targets.
+    /// Colour of mesh targets: auto (the glTF base-colour texture, else vertex colours, else
+    /// normal), normal (world normal as colour), texture (the base-colour texture, required).
     #[arg(long, value_enum, default_value_t = TargetColor::Auto)]
     pub color: TargetColor,
     /// Splatting model fitted: 3dgs (gsplat's rules) or 2dgs (surfels; needed by
@@ -225,6 +234,42 @@ pub struct FitArgs {
     pub sh_up_every: Option<u64>,
 }
 
+/// The template mesh targets are rendered from: `template` with the base colour (materials,
+/// base-colour textures, corner uvs) of its glTF/GLB file `path` attached when `color` may use
+/// it. With `auto`, a texture this reader does not support (another uv set, a texture
+/// transform, another image format) is a warning and the targets fall back to vertex colours
+/// or normals; with `texture` it is an error, as is a template without a base-colour texture.
+fn target_template(template: &TriMesh, path: &Path, color: TargetColor) -> anyhow::Result<TriMesh> {
+    let gltf = matches!(Format::from_path(path), Ok(Format::Gltf | Format::Glb));
+    if color == TargetColor::Normal || (!gltf && color == TargetColor::Auto) {
+        return Ok(template.clone());
+    }
+    if !gltf {
+        bail!(
+            "{}: --color texture needs a glTF/GLB template with a base-colour texture",
+            path.display()
+        );
+    }
+    let base = match read_gltf_base_color(path) {
+        Ok(base) => base,
+        Err(e @ IoError::Unsupported { .. }) if color == TargetColor::Auto => {
+            eprintln!("warning: {e}; --color auto renders the targets without the texture");
+            return Ok(template.clone());
+        }
+        Err(e) => return Err(e.into()),
+    };
+    if color == TargetColor::Texture && !base.has_texture() {
+        bail!(
+            "{}: --color texture: no material of the template has a baseColorTexture",
+            path.display()
+        );
+    }
+    template
+        .clone()
+        .with_base_color(Arc::new(base))
+        .with_context(|| format!("{}: the base colour", path.display()))
+}
+
 fn cameras_of(path: &Path, origin: DVec3, max_pixels: u64) -> anyhow::Result<Vec<Camera>> {
     let cams = read_camera_file(path, None, max_pixels)?;
     Ok(cams.iter().map(|c| c.translated(-origin)).collect())
@@ -304,6 +349,11 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             args.max_views
         );
     }
+    let target_template = if args.images.is_none() {
+        target_template(&template, &args.template, args.color)?
+    } else {
+        template.clone()
+    };
     let make = |cams: &[Camera], images: Option<&PathBuf>| -> anyhow::Result<Vec<FitFrame>> {
         if cams.is_empty() {
             return Ok(Vec::new());
@@ -320,8 +370,14 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
                     Ok(FitFrame {
                         frame: *f,
                         positions: p.clone(),
-                        targets: mesh_targets(&template, p, cams, args.color, args.background)
-                            .with_context(|| format!("frame {f}"))?,
+                        targets: mesh_targets(
+                            &target_template,
+                            p,
+                            cams,
+                            args.color,
+                            args.background,
+                        )
+                        .with_context(|| format!("frame {f}"))?,
                     })
                 })
                 .collect(),

@@ -66,9 +66,24 @@ fn read_vec<const N: usize>(
         .collect())
 }
 
+/// Per-triangle inputs of the base colour ([`super::gltf_material`]), gathered when asked.
+#[derive(Default)]
+pub(super) struct SurfaceParts {
+    /// Per triangle, its corners' `TEXCOORD_0` (zero where the primitive has none).
+    pub(super) corner_uvs: Vec<[Vec2; 3]>,
+    /// Per triangle, its corners' `COLOR_0` (white where the primitive has none).
+    pub(super) corner_colors: Vec<[Rgba; 3]>,
+    /// Whether any primitive has `COLOR_0`.
+    pub(super) any_colors: bool,
+    /// Per triangle, its primitive's material (`None`: glTF's default material).
+    pub(super) material: Vec<Option<usize>>,
+    /// Primitives without a usable `TEXCOORD_0`: their element name, material and why.
+    pub(super) without_uvs: Vec<(String, Option<usize>, String)>,
+}
+
 /// The vertex and triangle blocks gathered so far.
 #[derive(Default)]
-struct Gathered {
+pub(super) struct Gathered {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     uvs: Vec<Vec2>,
@@ -78,6 +93,8 @@ struct Gathered {
     all_uvs: bool,
     all_colors: bool,
     primitives: usize,
+    /// Base-colour inputs, when asked for.
+    pub(super) surface: Option<SurfaceParts>,
 }
 
 #[expect(
@@ -201,8 +218,91 @@ fn add_primitive(
             t.swap(1, 2);
         }
     }
+    if let Some(surface) = &mut out.surface {
+        add_surface(path, surface, data, prim, &element, n, base_u32, &triangles)?;
+    }
     out.triangles.extend(triangles);
     out.primitives += 1;
+    Ok(())
+}
+
+/// Adds the corner uvs and colours of a primitive's `triangles` (global indices, `base` its
+/// first vertex; `n` vertices) and their material.
+#[expect(clippy::too_many_arguments, reason = "the primitive's context")]
+#[expect(
+    clippy::cast_possible_truncation,
+    reason = "f32 storage is the documented precision of meshes"
+)]
+fn add_surface(
+    path: &Path,
+    out: &mut SurfaceParts,
+    data: &GltfData,
+    prim: &gltf::Primitive<'_>,
+    element: &str,
+    n: usize,
+    base: u32,
+    triangles: &[[u32; 3]],
+) -> Result<(), IoError> {
+    let material = prim.material().index();
+    let uvs = match prim.get(&Semantic::TexCoords(0)) {
+        Some(acc) if acc.count() == n => read_vec::<2>(data, &acc, "TEXCOORD_0")?
+            .into_iter()
+            .map(|v| Vec2::new(v[0] as f32, v[1] as f32))
+            .collect(),
+        other => {
+            let why = match other {
+                Some(acc) => format!(
+                    "TEXCOORD_0 (accessor {}) has {} entries for {n} vertices",
+                    acc.index(),
+                    acc.count()
+                ),
+                None => "it has no TEXCOORD_0".to_string(),
+            };
+            out.without_uvs.push((element.to_string(), material, why));
+            vec![Vec2::ZERO; n]
+        }
+    };
+    if let Some(k) = uvs.iter().position(|v| !v.is_finite()) {
+        return Err(IoError::malformed(
+            path,
+            format!("{element} vertex {k}"),
+            "TEXCOORD_0 is not finite in f32",
+        ));
+    }
+    let colors: Vec<Rgba> = match prim.get(&Semantic::Colors(0)) {
+        Some(acc) if acc.count() == n => {
+            let comps = acc.dimensions().multiplicity();
+            if !matches!(acc.dimensions(), Dimensions::Vec3 | Dimensions::Vec4) {
+                return Err(IoError::malformed(
+                    path,
+                    format!("accessor {}", acc.index()),
+                    "COLOR_0 must be VEC3 or VEC4",
+                ));
+            }
+            out.any_colors = true;
+            data.read(&acc)?
+                .chunks_exact(comps)
+                .map(|c| {
+                    let alpha = if comps == 4 { c[3] as f32 } else { 1.0 };
+                    [c[0] as f32, c[1] as f32, c[2] as f32, alpha]
+                })
+                .collect()
+        }
+        Some(acc) => {
+            return Err(IoError::malformed(
+                path,
+                format!("accessor {}", acc.index()),
+                format!("COLOR_0 has {} entries for {n} vertices", acc.count()),
+            ));
+        }
+        None => vec![[1.0; 4]; n],
+    };
+    for t in triangles {
+        let local = t.map(|v| (v - base) as usize);
+        out.corner_uvs.push(local.map(|v| uvs[v]));
+        out.corner_colors.push(local.map(|v| colors[v]));
+        out.material.push(material);
+    }
     Ok(())
 }
 
@@ -274,18 +374,7 @@ fn for_each_instance(
 /// buffer is missing, [`IoError::Malformed`] naming the accessor, primitive or node at fault.
 pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
     let data = GltfData::open(path)?;
-    let mut out = Gathered {
-        all_normals: true,
-        all_uvs: true,
-        all_colors: true,
-        ..Gathered::default()
-    };
-    for_each_instance(&data, &mut |mesh, world| {
-        for prim in mesh.primitives() {
-            add_primitive(path, &mut out, mesh, &prim, world, &data)?;
-        }
-        Ok(())
-    })?;
+    let out = gather(&data, false)?;
     let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
     let has = out.primitives > 0;
     let mut mesh = TriMesh::try_new(out.positions, out.triangles).map_err(bad)?;
@@ -299,6 +388,26 @@ pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
         mesh = mesh.with_colors(out.colors).map_err(bad)?;
     }
     Ok(mesh)
+}
+
+/// Every triangle primitive of the scene read, in order (module docs), with the per-triangle
+/// base-colour inputs when `surface` is set.
+pub(super) fn gather(data: &GltfData, surface: bool) -> Result<Gathered, IoError> {
+    let path = data.path();
+    let mut out = Gathered {
+        all_normals: true,
+        all_uvs: true,
+        all_colors: true,
+        surface: surface.then(SurfaceParts::default),
+        ..Gathered::default()
+    };
+    for_each_instance(data, &mut |mesh, world| {
+        for prim in mesh.primitives() {
+            add_primitive(path, &mut out, mesh, &prim, world, data)?;
+        }
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 /// A glTF/GLB file opened for readers of other crates (the Gaussian splats reader of

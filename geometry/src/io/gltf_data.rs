@@ -150,6 +150,27 @@ impl GltfData {
         }
     }
 
+    /// The bytes of buffer view `view` (an image's), checked against its buffer; the message
+    /// says what is wrong.
+    pub(crate) fn buffer_view_bytes(&self, view: &gltf::buffer::View<'_>) -> Result<&[u8], String> {
+        let buffer = self
+            .buffers
+            .get(view.buffer().index())
+            .ok_or_else(|| format!("buffer view {} refers to a missing buffer", view.index()))?;
+        view.offset()
+            .checked_add(view.length())
+            .and_then(|end| buffer.get(view.offset()..end))
+            .ok_or_else(|| {
+                format!(
+                    "buffer view {} (offset {}, length {}) runs past its buffer of {} bytes",
+                    view.index(),
+                    view.offset(),
+                    view.length(),
+                    buffer.len()
+                )
+            })
+    }
+
     /// The bytes of a buffer view, checked against its buffer.
     fn view_bytes(
         &self,
@@ -496,7 +517,7 @@ fn load_buffers(
 }
 
 /// Decodes `%XX` escapes in a relative URI (spaces and non-ASCII names in real files).
-fn percent_decode(uri: &str) -> String {
+pub(crate) fn percent_decode(uri: &str) -> String {
     let bytes = uri.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;

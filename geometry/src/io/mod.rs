@@ -6,13 +6,15 @@
 //! renames it into place, so a failed write never leaves a partial file.
 //!
 //! Per format, see [`ply`] (what PLY elements and properties become, what is kept for writing
-//! back), [`obj`] (vertex order and uv seams) and [`gltf`] (scene graph, primitives, rest state).
+//! back), [`obj`] (vertex order and uv seams), [`gltf`] (scene graph, primitives, rest state)
+//! and [`gltf_material`] (base colour: materials, textures, corner uvs).
 
 mod atomic;
 mod error;
 pub mod gltf;
 pub mod gltf_codes;
 pub(crate) mod gltf_data;
+pub mod gltf_material;
 pub mod gltf_sequence;
 mod npy;
 pub mod obj;
@@ -24,6 +26,7 @@ use glam::DVec3;
 
 pub use atomic::{abandon_writes, write_atomically};
 pub use error::IoError;
+pub use gltf_material::{MAX_TEXTURE_PIXELS, read_gltf_base_color};
 pub use gltf_sequence::{
     FrameFiles, FrameSource, GLB_PART_LIMIT, SequenceLayout, write_mesh_sequence, write_sequence,
     write_sequence_parts,

@@ -1,10 +1,19 @@
 //! Target views for [`super::fit`]: mesh renders of the posed template ([`mesh_targets`]) and
 //! user images ([`read_image_targets`]).
+//!
+//! A mesh target's rgb at a hit (docs/conventions.md §5 "Fitting") is, per [`TargetColor`]:
+//! the template's base colour ([`trisplat_geometry::base_color`]: material factor × base-colour
+//! texture × `COLOR_0`, in the texture's own encoding, sRGB for glTF; uv interpolated from the
+//! hit triangle's corners), its vertex colours interpolated, or the world normal as colour
+//! `(n + 1) / 2`; the barycentric weights are those of the hit point projected onto the hit
+//! triangle.
 
 use std::path::Path;
 
 use glam::DVec3;
 use rayon::prelude::*;
+use trisplat_geometry::base_color::BaseColor;
+use trisplat_geometry::mesh::Rgba;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::{Camera, TriMesh};
 
@@ -14,12 +23,45 @@ use super::{FitError, Target};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum TargetColor {
-    /// The mesh's vertex colours (interpolated at the hit), else `normal`.
+    /// `texture` when the template carries a base colour with a texture
+    /// ([`TriMesh::base_color`]), else its vertex colours (interpolated at the hit), else
+    /// `normal`.
     #[default]
     Auto,
     /// The interpolated world-space normal as colour `(n + 1) / 2` (view-independent, so
     /// Gaussians with SH degree 0 can match it).
     Normal,
+    /// The template's base colour (material factor × base-colour texture × `COLOR_0`, module
+    /// docs); an error when it has no base-colour texture.
+    Texture,
+}
+
+/// Where a mesh target's rgb comes from.
+#[derive(Clone, Copy)]
+enum Rgb<'a> {
+    BaseColor(&'a BaseColor),
+    Vertex(&'a [Rgba]),
+    Normal,
+}
+
+fn rgb_source(template: &TriMesh, color: TargetColor) -> Result<Rgb<'_>, FitError> {
+    let textured = template
+        .base_color()
+        .filter(|b| b.has_texture())
+        .map(|b| Rgb::BaseColor(b));
+    Ok(match color {
+        TargetColor::Normal => Rgb::Normal,
+        TargetColor::Auto => textured
+            .or_else(|| template.colors().map(Rgb::Vertex))
+            .unwrap_or(Rgb::Normal),
+        TargetColor::Texture => textured.ok_or_else(|| {
+            FitError::Target(
+                "texture colour asked for, but the template has no base-colour texture (a \
+                 glTF material's baseColorTexture, read with its base colour)"
+                    .into(),
+            )
+        })?,
+    })
 }
 
 /// Target views of `template` with its vertices at `positions`, ray cast from each camera
@@ -27,7 +69,8 @@ pub enum TargetColor {
 /// hit), alpha (the hit mask), z-depth and camera-frame normals.
 ///
 /// # Errors
-/// [`FitError::Target`] when the posed mesh cannot be indexed.
+/// [`FitError::Target`] when the posed mesh cannot be indexed, or `color` is
+/// [`TargetColor::Texture`] and the template has no base-colour texture.
 pub fn mesh_targets(
     template: &TriMesh,
     positions: &[DVec3],
@@ -35,6 +78,7 @@ pub fn mesh_targets(
     color: TargetColor,
     background: [f32; 3],
 ) -> Result<Vec<Target>, FitError> {
+    let source = rgb_source(template, color)?;
     let mut posed = template.clone();
     posed
         .set_positions(positions.to_vec())
@@ -47,10 +91,6 @@ pub fn mesh_targets(
         },
     )
     .map_err(|e| FitError::Target(format!("the posed template: {e}")))?;
-    let colors = match color {
-        TargetColor::Auto => posed.colors(),
-        TargetColor::Normal => None,
-    };
     let tris = posed.triangles();
     Ok(cameras
         .par_iter()
@@ -66,7 +106,9 @@ pub fn mesh_targets(
                 let n = DVec3::from_array(maps.normal[p].map(f64::from));
                 let c: [f32; 3] = if !hit {
                     background
-                } else if let Some(colors) = colors {
+                } else if let Rgb::Normal = source {
+                    (n * 0.5 + 0.5).as_vec3().to_array()
+                } else {
                     let (i, j) = (p / camera.width as usize, p % camera.width as usize);
                     let ray = DVec3::new(
                         (j as f64 + 0.5 - camera.cx) / camera.fx,
@@ -74,17 +116,22 @@ pub fn mesh_targets(
                         1.0,
                     );
                     let x = camera.position() + r * ray * f64::from(maps.depth[p]);
-                    let t = tris[maps.triangle[p] as usize];
+                    let tri = maps.triangle[p] as usize;
+                    let t = tris[tri];
                     let w = barycentric(x, t.map(|v| positions[v as usize]));
-                    let mut c = [0.0f32; 3];
-                    for (k, &v) in t.iter().enumerate() {
-                        for ch in 0..3 {
-                            c[ch] += w[k] as f32 * colors[v as usize][ch];
+                    match source {
+                        Rgb::BaseColor(b) => b.rgb_at(tri, w),
+                        Rgb::Vertex(colors) => {
+                            let mut c = [0.0f32; 3];
+                            for (k, &v) in t.iter().enumerate() {
+                                for ch in 0..3 {
+                                    c[ch] += w[k] as f32 * colors[v as usize][ch];
+                                }
+                            }
+                            c
                         }
+                        Rgb::Normal => unreachable!("handled above"),
                     }
-                    c
-                } else {
-                    (n * 0.5 + 0.5).as_vec3().to_array()
                 };
                 rgb[3 * p..3 * p + 3].copy_from_slice(&c);
                 if hit {
