@@ -34,37 +34,50 @@ fn fails(args: &[&str], code: i32, dir: &Path, named: &[&str]) {
 
 /// Spot bound, training and held-out cameras (small images) in `dir`.
 fn setup(dir: &Path) -> (String, String, String, String) {
-    let spot = fixture("spot_triangulated.obj");
+    setup_for(dir, "spot_triangulated.obj", &["--per-triangle", "1"], "40")
+}
+
+/// The fixture `mesh` bound (with `bind_extra`), 8 training cameras on a sphere and 3 held-out
+/// ones on an orbit at `elevation`°, 40 × 40, in `dir`: `(template, gaussians, training
+/// cameras, held-out cameras)`.
+fn setup_for(
+    dir: &Path,
+    mesh: &str,
+    bind_extra: &[&str],
+    elevation: &str,
+) -> (String, String, String, String) {
+    let mesh = fixture(mesh);
     let g = dir.join("g.ply");
-    run_ok(&["bind", &spot, "-o", s(&g), "--per-triangle", "1"]);
+    run_ok(&[&["bind", &mesh, "-o", s(&g)], bind_extra].concat());
     let train = dir.join("train.json");
     let eval = dir.join("eval.json");
-    run_ok(&[
-        "cameras",
-        &spot,
-        "-o",
-        s(&train),
-        "--views",
-        "8",
-        "--size",
-        "40x40",
-    ]);
-    run_ok(&[
-        "cameras",
-        &spot,
-        "-o",
-        s(&eval),
-        "--rig",
-        "orbit",
-        "--views",
-        "3",
-        "--elevation",
-        "40",
-        "--size",
-        "40x40",
-    ]);
+    let size = ["--size", "40x40"];
+    run_ok(
+        &[
+            &["cameras", &mesh, "-o", s(&train), "--views", "8"][..],
+            &size,
+        ]
+        .concat(),
+    );
+    run_ok(
+        &[
+            &[
+                "cameras",
+                &mesh,
+                "-o",
+                s(&eval),
+                "--rig",
+                "orbit",
+                "--views",
+                "3",
+            ][..],
+            &["--elevation", elevation],
+            &size,
+        ]
+        .concat(),
+    );
     (
-        spot,
+        mesh,
         s(&g).to_owned(),
         s(&train).to_owned(),
         s(&eval).to_owned(),
@@ -566,37 +579,9 @@ fn fit_to_cesium_man_texture_targets() {
     // `--color texture`: targets coloured from CesiumMan's JPEG base-colour texture; a short
     // fit raises the held-out PSNR, and the scores differ from those of the normal colour.
     let dir = fresh_dir("fit_texture");
-    let man = fixture("anim/CesiumMan.glb");
-    let g = dir.join("g.ply");
-    run_ok(&["bind", &man, "-o", s(&g)]);
-    let train = dir.join("train.json");
-    let eval = dir.join("eval.json");
-    run_ok(&[
-        "cameras",
-        &man,
-        "-o",
-        s(&train),
-        "--views",
-        "8",
-        "--size",
-        "40x40",
-    ]);
-    run_ok(&[
-        "cameras",
-        &man,
-        "-o",
-        s(&eval),
-        "--rig",
-        "orbit",
-        "--views",
-        "3",
-        "--elevation",
-        "30",
-        "--size",
-        "40x40",
-    ]);
+    let (man, g, train, eval) = setup_for(&dir, "anim/CesiumMan.glb", &[], "30");
     let out = dir.join("fitted.ply");
-    let inputs = (s(&g), man.as_str(), s(&train), s(&eval));
+    let inputs = (g.as_str(), man.as_str(), train.as_str(), eval.as_str());
     let textured = fit_with_held_out(inputs, &out, &["--color", "texture"]);
     let cps = textured["checkpoints"].as_array().expect("checkpoints");
     assert_eq!(cps.len(), 3, "{textured}");

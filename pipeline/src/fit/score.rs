@@ -1,6 +1,7 @@
 //! Scoring the held-out views of a fit: rgb by PSNR and SSIM, geometry by the depth and
 //! normal errors inside the target's mask (docs/conventions.md §5 "Fitting").
 
+use glam::DVec3;
 use trisplat_geometry::Camera;
 use trisplat_splat::fit::bound::{BoundParams, TriangleFrames, to_world};
 use trisplat_splat::fit::loss::{Ssim, psnr};
@@ -102,26 +103,20 @@ fn normal_deg(t: &Target, normals: &[f32]) -> Option<f64> {
     if normals.len() != target.len() {
         return None;
     }
-    let (w, cam) = (t.camera.width as usize, &t.camera);
+    let w = t.camera.width as usize;
     let mut m = Mean::default();
     for p in inside(t)? {
-        let (i, j) = (p / w, p % w);
-        let ray = [
-            (j as f64 + 0.5 - cam.cx) / cam.fx,
-            (i as f64 + 0.5 - cam.cy) / cam.fy,
-            1.0,
-        ];
+        let ray = pixel_ray(&t.camera, p / w, p % w);
         let facing = |v: &[f32]| {
-            let n = [0, 1, 2].map(|k| f64::from(v[3 * p + k]));
-            let len = dot(n, n).sqrt();
+            let n = DVec3::new(v[3 * p].into(), v[3 * p + 1].into(), v[3 * p + 2].into());
+            let len = n.length();
             if !(len > 0.0 && len.is_finite()) {
                 return None;
             }
-            let s = if dot(n, ray) > 0.0 { -1.0 } else { 1.0 } / len;
-            Some(n.map(|x| x * s))
+            Some(n * if n.dot(ray) > 0.0 { -1.0 } else { 1.0 } / len)
         };
         if let (Some(a), Some(b)) = (facing(target), facing(normals)) {
-            m.add(Some(dot(a, b).clamp(-1.0, 1.0).acos().to_degrees()));
+            m.add(Some(a.dot(b).clamp(-1.0, 1.0).acos().to_degrees()));
         }
     }
     m.get()
@@ -133,14 +128,7 @@ fn normal_deg(t: &Target, normals: &[f32]) -> Option<f64> {
 fn depth_normals(camera: &Camera, depth: &[f32]) -> Vec<f32> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut out = vec![0.0f32; 3 * w * h];
-    let point = |i: usize, j: usize| {
-        let z = f64::from(depth[i * w + j]);
-        [
-            (j as f64 + 0.5 - camera.cx) / camera.fx * z,
-            (i as f64 + 0.5 - camera.cy) / camera.fy * z,
-            z,
-        ]
-    };
+    let point = |i: usize, j: usize| pixel_ray(camera, i, j) * f64::from(depth[i * w + j]);
     let valid = |i: usize, j: usize| depth[i * w + j] > 0.0;
     for i in 1..h.saturating_sub(1) {
         for j in 1..w.saturating_sub(1) {
@@ -152,38 +140,27 @@ fn depth_normals(camera: &Camera, depth: &[f32]) -> Vec<f32> {
             {
                 continue;
             }
-            let dx = sub(point(i, j + 1), point(i, j - 1));
-            let dy = sub(point(i + 1, j), point(i - 1, j));
-            let c = cross(dy, dx);
+            let dx = point(i, j + 1) - point(i, j - 1);
+            let dy = point(i + 1, j) - point(i - 1, j);
             let p = i * w + j;
-            for k in 0..3 {
-                out[3 * p + k] = c[k] as f32;
-            }
+            out[3 * p..3 * p + 3].copy_from_slice(&dy.cross(dx).as_vec3().to_array());
         }
     }
     out
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+/// The ray through the centre of pixel (row `i`, column `j`), camera frame, `z = 1`.
+fn pixel_ray(camera: &Camera, i: usize, j: usize) -> DVec3 {
+    DVec3::new(
+        (j as f64 + 0.5 - camera.cx) / camera.fx,
+        (i as f64 + 0.5 - camera.cy) / camera.fy,
+        1.0,
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
 
     fn camera(w: u32, h: u32) -> Camera {
         Camera::look_at(
