@@ -345,6 +345,47 @@ fn fit_reads_user_images_and_masks() {
     ]);
     assert_eq!(r["target"], "images", "{r}");
     assert_eq!(r["views"], 8, "{r}");
+    assert!(
+        r["checkpoints"][0]["eval_depth_l1"].is_null(),
+        "no depth yet: {r}"
+    );
+    // RGB-D: depth maps beside the images (here the mesh's own, as `render --mesh` writes
+    // them) are read, fitted with --depth-weight and scored on the held-out views.
+    run_ok(&[
+        "render",
+        "--mesh",
+        &spot,
+        "--cameras",
+        &train,
+        "-o",
+        s(&images),
+        "--outputs",
+        "depth",
+    ]);
+    let r = json(&[
+        "fit",
+        &g,
+        "--template",
+        &spot,
+        "--cameras",
+        &train,
+        "--images",
+        s(&images),
+        "--eval-cameras",
+        &train,
+        "--eval-images",
+        s(&images),
+        "-o",
+        s(&out),
+        "--iterations",
+        "10",
+        "--depth-weight",
+        "0.5",
+    ]);
+    let depth = r["checkpoints"][0]["eval_depth_l1"]
+        .as_f64()
+        .expect("depth scored");
+    assert!(depth.is_finite() && depth > 0.0, "{r}");
     // A picture of the wrong size is refused, naming the file.
     let bad = images.join(format!("{}.png", cams[0].name));
     image::RgbImage::new(7, 5).save(&bad).expect("png");

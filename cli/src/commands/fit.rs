@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{Context as _, bail};
+use trisplat_extract::tsdf::DEFAULT_DEPTH_SCALE;
 use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::{Format, IoError, read_gltf_base_color};
 use trisplat_geometry::{Camera, TriMesh};
@@ -47,10 +48,13 @@ pub const DEFAULT_MAX_VIEWS: u64 = 4096;
     again), its alpha ignored; the hit mask as alpha, z-depth), at its rest pose or, with \
     --animation, at each \
     frame of --frames (each frame's views all train); or user images with --images DIR \
-    (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask). \
+    (DIR/<img_name>.png per camera, an alpha channel or DIR/<img_name>_mask.png as mask, and \
+    for RGB-D captures DIR/<img_name>_depth.npy or 16-bit _depth.png divided by --depth-scale, \
+    as tsdf reads them, which --depth-weight then fits and the held-out views score). \
     Held-out views (--eval-cameras, --eval-images) are scored by PSNR and SSIM at every \
-    --eval-every iterations and, with mesh targets, by the mean absolute depth error and the \
-    mean normal angle inside the target mask (2dgs: the rendered normals; 3dgs: normals of the \
+    --eval-every iterations and, where the targets have depth, normals and a mask (mesh \
+    targets; RGB-D images give depth), by the mean absolute depth error and the mean normal \
+    angle inside the target mask (2dgs: the rendered normals; 3dgs: normals of the \
     rendered depth); they never train.\n\n\
     One iteration: a seeded random (frame, view); the bound set placed with that frame's \
     triangle frames; the 3DGS render (gsplat rules) and its backward pass; loss (1 - \
@@ -107,6 +111,9 @@ pub struct FitArgs {
     /// Target images instead of mesh renders: DIR/<img_name>.png per training camera.
     #[arg(long, value_name = "DIR", conflicts_with = "animation")]
     pub images: Option<PathBuf>,
+    /// Divisor of 16-bit PNG depth maps beside the images (1000: millimetres to metres).
+    #[arg(long, value_name = "S", default_value_t = DEFAULT_DEPTH_SCALE, requires = "images")]
+    pub depth_scale: f64,
     /// Images of the held-out cameras (with --images).
     #[arg(long, value_name = "DIR", requires = "images")]
     pub eval_images: Option<PathBuf>,
@@ -362,7 +369,7 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             Some(dir) => Ok(vec![FitFrame {
                 frame: 0,
                 positions: positions[0].1.clone(),
-                targets: read_image_targets(dir, cams)?,
+                targets: read_image_targets(dir, cams, args.depth_scale)?,
             }]),
             None => positions
                 .iter()

@@ -12,6 +12,7 @@ use std::path::Path;
 
 use glam::DVec3;
 use rayon::prelude::*;
+use trisplat_extract::tsdf::{find_image, read_depth};
 use trisplat_geometry::base_color::BaseColor;
 use trisplat_geometry::mesh::Rgba;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
@@ -165,11 +166,17 @@ fn barycentric(x: DVec3, v: [DVec3; 3]) -> [f64; 3] {
 
 /// Target views from user images: per camera `DIR/<img_name>.png` (8-bit or 16-bit, grey,
 /// rgb or rgba; an alpha channel becomes the mask) and, when present, `DIR/<img_name>_mask.png`
-/// (grey, > 0.5 is inside). Images must have the camera's size.
+/// (grey, > 0.5 is inside), and `DIR/<img_name>_depth.npy` or `_depth.png` (z-depth as
+/// `trisplat tsdf` reads it: float `.npy`, or 16-bit `.png` divided by `depth_scale`; 0, NaN
+/// and negative values mean no depth) for RGB-D captures. Images must have the camera's size.
 ///
 /// # Errors
 /// [`FitError::Target`] naming the file: missing, unreadable, or of another size.
-pub fn read_image_targets(dir: &Path, cameras: &[Camera]) -> Result<Vec<Target>, FitError> {
+pub fn read_image_targets(
+    dir: &Path,
+    cameras: &[Camera],
+    depth_scale: f64,
+) -> Result<Vec<Target>, FitError> {
     cameras
         .iter()
         .map(|camera| {
@@ -222,11 +229,22 @@ pub fn read_image_targets(dir: &Path, cameras: &[Camera]) -> Result<Vec<Target>,
                         .collect(),
                 );
             }
+            let depth = match find_image(dir, camera, "depth") {
+                Ok(path) => Some(
+                    read_depth(&path, camera, depth_scale)
+                        .map_err(|e| {
+                            FitError::Target(format!("the depth of camera '{}': {e}", camera.name))
+                        })?
+                        .data()
+                        .to_vec(),
+                ),
+                Err(_) => None,
+            };
             Ok(Target {
                 camera: camera.clone(),
                 rgb,
                 alpha,
-                depth: None,
+                depth,
                 normal: None,
             })
         })
