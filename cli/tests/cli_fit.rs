@@ -327,7 +327,9 @@ fn fit_reads_user_images_and_masks() {
             .expect("png");
     }
     let out = dir.join("fitted.ply");
-    let r = json(&[
+    let out2 = dir.join("x.ply");
+    // `fit` on the images, the output path and the options to follow.
+    let base = [
         "fit",
         &g,
         "--template",
@@ -337,12 +339,14 @@ fn fit_reads_user_images_and_masks() {
         "--images",
         s(&images),
         "-o",
-        s(&out),
-        "--iterations",
-        "10",
-        "--alpha-weight",
-        "0.5",
-    ]);
+    ];
+    let r = json(
+        &[
+            &base[..],
+            &[s(&out), "--iterations", "10", "--alpha-weight", "0.5"],
+        ]
+        .concat(),
+    );
     assert_eq!(r["target"], "images", "{r}");
     assert_eq!(r["views"], 8, "{r}");
     assert!(
@@ -362,47 +366,34 @@ fn fit_reads_user_images_and_masks() {
         "--outputs",
         "depth",
     ]);
-    let r = json(&[
-        "fit",
-        &g,
-        "--template",
-        &spot,
-        "--cameras",
-        &train,
-        "--images",
-        s(&images),
-        "--eval-cameras",
-        &train,
-        "--eval-images",
-        s(&images),
-        "-o",
-        s(&out),
-        "--iterations",
-        "10",
-        "--depth-weight",
-        "0.5",
-    ]);
+    let r = json(
+        &[
+            &base[..],
+            &[
+                s(&out),
+                "--eval-cameras",
+                &train,
+                "--eval-images",
+                s(&images),
+            ],
+            &["--iterations", "10", "--depth-weight", "0.5"],
+        ]
+        .concat(),
+    );
     let depth = r["checkpoints"][0]["eval_depth_l1"]
         .as_f64()
         .expect("depth scored");
     assert!(depth.is_finite() && depth > 0.0, "{r}");
+    // A depth map that cannot be read is refused, naming it.
+    let broken = images.join(format!("{}_depth.npy", cams[1].name));
+    std::fs::write(&broken, b"not an npy").expect("write");
+    fails(&[&base[..], &[s(&out2)]].concat(), 1, &dir, &[s(&broken)]);
+    std::fs::remove_file(&broken).expect("rm");
     // A picture of the wrong size is refused, naming the file.
     let bad = images.join(format!("{}.png", cams[0].name));
     image::RgbImage::new(7, 5).save(&bad).expect("png");
-    let out2 = dir.join("x.ply");
     fails(
-        &[
-            "fit",
-            &g,
-            "--template",
-            &spot,
-            "--cameras",
-            &train,
-            "--images",
-            s(&images),
-            "-o",
-            s(&out2),
-        ],
+        &[&base[..], &[s(&out2)]].concat(),
         1,
         &dir,
         &[s(&bad), "7x5"],

@@ -40,17 +40,19 @@ fn square() -> (TriMesh, Camera) {
     (mesh, camera)
 }
 
+/// Mesh targets of `mesh` at its rest positions from `cameras`, on black.
+fn at_rest(
+    mesh: &TriMesh,
+    cameras: &[Camera],
+    color: TargetColor,
+) -> Result<Vec<trisplat_pipeline::fit::Target>, FitError> {
+    mesh_targets(mesh, mesh.positions(), cameras, color, [0.0; 3])
+}
+
 #[test]
 fn mesh_targets_interpolate_vertex_colours() {
     let (mesh, camera) = square();
-    let t = &mesh_targets(
-        &mesh,
-        mesh.positions(),
-        std::slice::from_ref(&camera),
-        TargetColor::Auto,
-        [0.0; 3],
-    )
-    .unwrap()[0];
+    let t = &at_rest(&mesh, std::slice::from_ref(&camera), TargetColor::Auto).unwrap()[0];
     let w = 32;
     for (p, &a) in t.alpha.as_ref().unwrap().iter().enumerate() {
         if a == 0.0 {
@@ -79,14 +81,7 @@ fn mesh_targets_interpolate_vertex_colours() {
         let n = &t.normal.as_ref().unwrap()[3 * p..3 * p + 3];
         assert!((n[2] + 1.0).abs() < 1e-5, "{n:?}");
     }
-    let normal = &mesh_targets(
-        &mesh,
-        mesh.positions(),
-        std::slice::from_ref(&camera),
-        TargetColor::Normal,
-        [0.0; 3],
-    )
-    .unwrap()[0];
+    let normal = &at_rest(&mesh, std::slice::from_ref(&camera), TargetColor::Normal).unwrap()[0];
     let hit = normal
         .alpha
         .as_ref()
@@ -102,14 +97,7 @@ fn mesh_targets_interpolate_vertex_colours() {
 fn fit_modes_and_their_terms() {
     let (mesh, camera) = square();
     let set = init_bound(&mesh, &BindOptions::default()).unwrap();
-    let targets = mesh_targets(
-        &mesh,
-        mesh.positions(),
-        &[camera],
-        TargetColor::Auto,
-        [0.0; 3],
-    )
-    .unwrap();
+    let targets = at_rest(&mesh, &[camera], TargetColor::Auto).unwrap();
     let frames = [trisplat_pipeline::fit::FitFrame {
         frame: 0,
         positions: mesh.positions().to_vec(),
@@ -215,7 +203,7 @@ fn densification_adds_gaussians_without_losing_held_out_psnr() {
     let frame = |cams: &[Camera]| trisplat_pipeline::fit::FitFrame {
         frame: 0,
         positions: mesh.positions().to_vec(),
-        targets: mesh_targets(&mesh, mesh.positions(), cams, TargetColor::Auto, [0.0; 3]).unwrap(),
+        targets: at_rest(&mesh, cams, TargetColor::Auto).unwrap(),
     };
     let train = [frame(&cone_cameras(6, 0.8, 0.0, "train"))];
     let held_out = [frame(&cone_cameras(3, 0.5, 0.5, "eval"))];
@@ -306,14 +294,7 @@ fn sh_schedule_leaves_inactive_bands_untouched_in_the_fit() {
     let frames = [trisplat_pipeline::fit::FitFrame {
         frame: 0,
         positions: mesh.positions().to_vec(),
-        targets: mesh_targets(
-            &mesh,
-            mesh.positions(),
-            &[camera],
-            TargetColor::Auto,
-            [0.0; 3],
-        )
-        .unwrap(),
+        targets: at_rest(&mesh, &[camera], TargetColor::Auto).unwrap(),
     }];
     let options = FitOptions {
         iterations: 150,
@@ -432,15 +413,9 @@ fn mesh_targets_sample_the_base_colour_texture() {
     let mesh = textured_square(&dir.path().join("square.gltf"));
     let (_, camera) = square();
     let render = |color| {
-        mesh_targets(
-            &mesh,
-            mesh.positions(),
-            std::slice::from_ref(&camera),
-            color,
-            [0.0; 3],
-        )
-        .unwrap()
-        .remove(0)
+        at_rest(&mesh, std::slice::from_ref(&camera), color)
+            .unwrap()
+            .remove(0)
     };
     let t = render(TargetColor::Texture);
     assert_eq!(
@@ -483,14 +458,7 @@ fn mesh_targets_sample_the_base_colour_texture() {
     let normal = render(TargetColor::Normal);
     assert_ne!(normal.rgb, t.rgb);
     let (plain, _) = square();
-    let e = mesh_targets(
-        &plain,
-        plain.positions(),
-        std::slice::from_ref(&camera),
-        TargetColor::Texture,
-        [0.0; 3],
-    )
-    .unwrap_err();
+    let e = at_rest(&plain, std::slice::from_ref(&camera), TargetColor::Texture).unwrap_err();
     assert!(matches!(e, FitError::Target(_)) && e.to_string().contains("base-colour texture"));
 }
 
@@ -535,22 +503,8 @@ fn cesium_man(size: u32) -> (TriMesh, Vec<Camera>) {
 #[test]
 fn cesium_man_texture_targets_are_sane() {
     let (mesh, cameras) = cesium_man(48);
-    let textured = mesh_targets(
-        &mesh,
-        mesh.positions(),
-        &cameras,
-        TargetColor::Auto,
-        [0.0; 3],
-    )
-    .unwrap();
-    let normal = mesh_targets(
-        &mesh,
-        mesh.positions(),
-        &cameras,
-        TargetColor::Normal,
-        [0.0; 3],
-    )
-    .unwrap();
+    let textured = at_rest(&mesh, &cameras, TargetColor::Auto).unwrap();
+    let normal = at_rest(&mesh, &cameras, TargetColor::Normal).unwrap();
     let mut hits = 0usize;
     let mut sum = [0.0f64; 3];
     for (t, n) in textured.iter().zip(&normal) {
@@ -617,7 +571,7 @@ fn time_cesium_man_texture_targets() {
     for color in [TargetColor::Texture, TargetColor::Normal] {
         let start = std::time::Instant::now();
         for _ in 0..runs {
-            mesh_targets(&mesh, mesh.positions(), &cameras, color, [0.0; 3]).unwrap();
+            at_rest(&mesh, &cameras, color).unwrap();
         }
         times.push(start.elapsed().as_secs_f64() / f64::from(runs));
     }

@@ -37,6 +37,26 @@ use super::gltf_data::GltfData;
 use crate::TriMesh;
 use crate::mesh::Rgba;
 
+/// `COLOR_0` as RGBA (VEC3 gets alpha 1; normalised integers already scaled by the reader).
+fn read_colors(data: &GltfData, accessor: &gltf::Accessor<'_>) -> Result<Vec<Rgba>, IoError> {
+    let comps = accessor.dimensions().multiplicity();
+    if !matches!(accessor.dimensions(), Dimensions::Vec3 | Dimensions::Vec4) {
+        return Err(IoError::malformed(
+            data.path(),
+            format!("accessor {}", accessor.index()),
+            "COLOR_0 must be VEC3 or VEC4",
+        ));
+    }
+    Ok(data
+        .read(accessor)?
+        .chunks_exact(comps)
+        .map(|c| {
+            let alpha = if comps == 4 { c[3] as f32 } else { 1.0 };
+            [c[0] as f32, c[1] as f32, c[2] as f32, alpha]
+        })
+        .collect())
+}
+
 fn read_vec<const N: usize>(
     data: &GltfData,
     accessor: &gltf::Accessor<'_>,
@@ -157,19 +177,7 @@ fn add_primitive(
     }
     match prim.get(&Semantic::Colors(0)) {
         Some(acc) if acc.count() == n && out.all_colors => {
-            let comps = acc.dimensions().multiplicity();
-            if !matches!(acc.dimensions(), Dimensions::Vec3 | Dimensions::Vec4) {
-                return Err(IoError::malformed(
-                    path,
-                    format!("accessor {}", acc.index()),
-                    "COLOR_0 must be VEC3 or VEC4",
-                ));
-            }
-            for c in data.read(&acc)?.chunks_exact(comps) {
-                let alpha = if comps == 4 { c[3] as f32 } else { 1.0 };
-                out.colors
-                    .push([c[0] as f32, c[1] as f32, c[2] as f32, alpha]);
-            }
+            out.colors.extend(read_colors(data, &acc)?);
         }
         _ => out.all_colors = false,
     }
@@ -271,22 +279,8 @@ fn add_surface(
     }
     let colors: Vec<Rgba> = match prim.get(&Semantic::Colors(0)) {
         Some(acc) if acc.count() == n => {
-            let comps = acc.dimensions().multiplicity();
-            if !matches!(acc.dimensions(), Dimensions::Vec3 | Dimensions::Vec4) {
-                return Err(IoError::malformed(
-                    path,
-                    format!("accessor {}", acc.index()),
-                    "COLOR_0 must be VEC3 or VEC4",
-                ));
-            }
             out.any_colors = true;
-            data.read(&acc)?
-                .chunks_exact(comps)
-                .map(|c| {
-                    let alpha = if comps == 4 { c[3] as f32 } else { 1.0 };
-                    [c[0] as f32, c[1] as f32, c[2] as f32, alpha]
-                })
-                .collect()
+            read_colors(data, &acc)?
         }
         Some(acc) => {
             return Err(IoError::malformed(

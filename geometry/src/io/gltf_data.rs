@@ -150,8 +150,8 @@ impl GltfData {
         }
     }
 
-    /// The bytes of buffer view `view` (an image's), checked against its buffer; the message
-    /// says what is wrong.
+    /// The bytes of buffer view `view` (an accessor's or an image's), checked against its
+    /// buffer; the message says what is wrong.
     pub(crate) fn buffer_view_bytes(&self, view: &gltf::buffer::View<'_>) -> Result<&[u8], String> {
         let buffer = self
             .buffers
@@ -171,31 +171,15 @@ impl GltfData {
             })
     }
 
-    /// The bytes of a buffer view, checked against its buffer.
+    /// The bytes of a buffer view, checked against its buffer ([`Self::buffer_view_bytes`],
+    /// the error naming `accessor`).
     fn view_bytes(
         &self,
         accessor: usize,
         view: &gltf::buffer::View<'_>,
     ) -> Result<&[u8], GltfDataError> {
-        let buffer = self
-            .buffers
-            .get(view.buffer().index())
-            .ok_or_else(|| self.error(accessor, "buffer view refers to a missing buffer"))?;
-        view.offset()
-            .checked_add(view.length())
-            .and_then(|end| buffer.get(view.offset()..end))
-            .ok_or_else(|| {
-                self.error(
-                    accessor,
-                    format!(
-                        "buffer view {} (offset {}, length {}) runs past its buffer of {} bytes",
-                        view.index(),
-                        view.offset(),
-                        view.length(),
-                        buffer.len()
-                    ),
-                )
-            })
+        self.buffer_view_bytes(view)
+            .map_err(|message| self.error(accessor, message))
     }
 
     /// Reads `count` elements of `dims` from `bytes` at `offset` with `stride` (the element
