@@ -199,6 +199,7 @@ class Session:
         fps: Optional[float] = None,
         layout: Literal["bound", "lam"] = "bound",
         tsdf_depth: Literal["median", "expected"] = "median",
+        tsdf_splat_depth: Literal["ray", "mean"] = "ray",
         tsdf_colors: bool = False,
         alpha_keep_clusters: int = 0,
         rebuild_every: int = 0,
@@ -293,6 +294,7 @@ def render(
     far: float = 1e10,
     antialiased: bool = False,
     normal_frame: Literal["world", "camera"] = "world",
+    splat_depth: Literal["mean", "ray"] = "mean",
 ) -> Dict[str, _F32]:
     """Float32 images by name: rgb ``(H, W, 3)``, alpha, depth, median_depth ``(H, W)``,
     normal ``(H, W, 3)``."""

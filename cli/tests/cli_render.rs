@@ -48,6 +48,7 @@ fn renders_every_output_of_every_camera() {
         &["--mode", "perspective"],
         &["--compat-3dgs"],
         &["--antialiased", "--normal-frame", "camera"],
+        &["--ray-depth"],
     ] {
         let out = dir.join(extra.join("_"));
         let mut args = vec![
@@ -71,6 +72,22 @@ fn renders_every_output_of_every_camera() {
         assert!(out.join("front_depth.npy").exists());
         assert!(!out.join("front_rgb.npy").exists(), "only what is asked");
     }
+    // Ray depth tilts each splat's depth over its footprint: the same coverage, other depths.
+    let read = |dir: &std::path::Path, key: &str| {
+        read_npy(&dir.join(format!("front_{key}.npy")))
+            .unwrap()
+            .data
+    };
+    let ray = dir.join("--ray-depth");
+    assert_eq!(read(&out, "alpha"), read(&ray, "alpha"));
+    let (mean_depth, ray_depth) = (read(&out, "depth"), read(&ray, "depth"));
+    assert!(ray_depth.iter().all(|d| d.is_finite()));
+    assert!(
+        mean_depth
+            .iter()
+            .zip(&ray_depth)
+            .any(|(a, b)| (a - b).abs() > 1e-4)
+    );
 }
 
 #[test]

@@ -158,6 +158,42 @@ impl DepthKind {
     }
 }
 
+/// How each Gaussian's depth varies over its footprint in the depth maps TSDF fuses
+/// (`extract --tsdf-splat-depth`, `tsdf --splat-depth`; the renderer's
+/// [`trisplat_splat::render::SplatDepth`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum SplatDepthRule {
+    /// The camera z of the Gaussian's mean over its whole footprint (3DGS): stepped surfaces.
+    Mean,
+    /// The depth of the point of highest density on each pixel's ray (RaDe-GS, GOF): a flat
+    /// Gaussian gives its own plane. The default: on CesiumMan it brings the TSDF's Chamfer
+    /// distance to the deformed template from 5.9 to 3.1 mm.
+    #[default]
+    Ray,
+}
+
+impl SplatDepthRule {
+    /// The rule's name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Mean => "mean",
+            Self::Ray => "ray",
+        }
+    }
+}
+
+impl From<SplatDepthRule> for trisplat_splat::render::SplatDepth {
+    fn from(rule: SplatDepthRule) -> Self {
+        match rule {
+            SplatDepthRule::Mean => Self::Mean,
+            SplatDepthRule::Ray => Self::Ray,
+        }
+    }
+}
+
 /// Default of `--max-views`: most TSDF views per frame (each is a depth image rendered and
 /// fused every frame: 4,096 of 256² are 1 GiB of depth).
 pub const DEFAULT_MAX_VIEWS: usize = 4096;
@@ -282,6 +318,13 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_name = "KIND",
         default_value_t = DepthKind::default()))]
     pub tsdf_depth: DepthKind,
+    /// How each Gaussian's depth varies over its footprint in those depth maps: ray (the
+    /// point of highest density on the pixel's ray, RaDe-GS/GOF; a flat Gaussian gives its
+    /// own plane) or mean (its centre's depth over the whole footprint, as 3DGS renders
+    /// depth).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, value_name = "RULE",
+        default_value_t = SplatDepthRule::default()))]
+    pub tsdf_splat_depth: SplatDepthRule,
     /// TSDF: also render the Gaussians' colours and fuse them into vertex colours (in the
     /// frame PLYs and the glTF's COLOR_0); slower and 2.5x the volume's memory.
     #[cfg_attr(feature = "cli", arg(long))]
@@ -415,6 +458,7 @@ impl Default for ExtractOptions {
             views: DEFAULT_VIEWS,
             resolution: DEFAULT_RESOLUTION,
             tsdf_depth: DepthKind::default(),
+            tsdf_splat_depth: SplatDepthRule::default(),
             tsdf_colors: false,
             alpha: None,
             alpha_keep_clusters: 0,

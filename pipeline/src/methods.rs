@@ -35,7 +35,7 @@ use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS,
-    DepthKind, ExtractOptions, Method,
+    DepthKind, ExtractOptions, Method, SplatDepthRule,
 };
 use crate::error::PipelineError;
 
@@ -210,7 +210,7 @@ pub enum RenderedDepthError {
 }
 
 /// The depth of `kind` of world-space Gaussians seen by `camera` (3DGS splatting, gsplat's
-/// rules), 0 (no surface) where the rendered alpha is below [`RENDERED_ALPHA_MIN`]: the depth
+/// rules, each splat's depth over its footprint by `splat`), 0 (no surface) where the rendered alpha is below [`RENDERED_ALPHA_MIN`]: the depth
 /// maps `trisplat tsdf --gaussians` and the pipeline's tsdf method fuse.
 ///
 /// # Errors
@@ -219,8 +219,9 @@ pub fn rendered_depth(
     world: &GaussianSet,
     camera: &Camera,
     kind: DepthKind,
+    splat: SplatDepthRule,
 ) -> Result<DepthImage, RenderedDepthError> {
-    Ok(rendered_view(world, camera, kind, false)?.0)
+    Ok(rendered_view(world, camera, kind, splat, false)?.0)
 }
 
 /// [`rendered_depth`], and `with_color` the rendered colour where there is depth: the
@@ -233,6 +234,7 @@ pub fn rendered_view(
     world: &GaussianSet,
     camera: &Camera,
     kind: DepthKind,
+    splat: SplatDepthRule,
     with_color: bool,
 ) -> Result<(DepthImage, Option<ColorImage>), RenderedDepthError> {
     let options = RenderOptions {
@@ -243,6 +245,7 @@ pub fn rendered_view(
             median_depth: kind == DepthKind::Median,
             normal: false,
         },
+        splat_depth: splat.into(),
         ..RenderOptions::default()
     };
     let out = render(world, camera, &options).map_err(RenderedDepthError::Render)?;
@@ -292,6 +295,7 @@ pub struct TsdfMesher {
     views: usize,
     resolution: u32,
     depth: DepthKind,
+    splat_depth: SplatDepthRule,
     colors: bool,
 }
 
@@ -327,17 +331,19 @@ impl TsdfMesher {
         let mut colors = Vec::with_capacity(if self.colors { cameras.len() } else { 0 });
         for camera in &cameras {
             let (image, color) =
-                rendered_view(world, camera, self.depth, self.colors).map_err(|e| match e {
-                    RenderedDepthError::Render(source) => PipelineError::Render {
-                        frame,
-                        camera: camera.name.clone(),
-                        cause: source,
+                rendered_view(world, camera, self.depth, self.splat_depth, self.colors).map_err(
+                    |e| match e {
+                        RenderedDepthError::Render(source) => PipelineError::Render {
+                            frame,
+                            camera: camera.name.clone(),
+                            cause: source,
+                        },
+                        RenderedDepthError::Image(source) => PipelineError::Tsdf {
+                            frame,
+                            cause: source,
+                        },
                     },
-                    RenderedDepthError::Image(source) => PipelineError::Tsdf {
-                        frame,
-                        cause: source,
-                    },
-                })?;
+                )?;
             depths.push(image);
             colors.extend(color);
         }
@@ -403,6 +409,7 @@ impl Mesher {
                 views: options.views,
                 resolution: options.resolution,
                 depth: options.tsdf_depth,
+                splat_depth: options.tsdf_splat_depth,
                 colors: options.tsdf_colors,
             }),
             Method::Delaunay => {
@@ -526,7 +533,7 @@ mod tests {
     fn median_depth_is_the_first_surface_expected_depth_a_blend() {
         let (set, camera) = two_walls();
         let centre = |kind| {
-            let d = rendered_depth(&set, &camera, kind).expect("renders");
+            let d = rendered_depth(&set, &camera, kind, SplatDepthRule::Mean).expect("renders");
             d.data()[8 * 16 + 8]
         };
         // Accumulated alpha passes 1/2 at the front wall.

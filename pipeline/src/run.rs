@@ -11,7 +11,9 @@ use trisplat_geometry::io::{
 
 pub use crate::output::frame_file;
 
-use crate::config::{DepthKind, ExtractConfig, GroundTruth, Method, OutputTarget, RunControl};
+use crate::config::{
+    DepthKind, ExtractConfig, GroundTruth, Method, OutputTarget, RunControl, SplatDepthRule,
+};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::input::GaussianSource;
 use crate::journal::{FailedFrame, FrameEntry, JOURNAL, Journal, Previous};
@@ -208,6 +210,10 @@ pub fn run(
                 parameters.insert(
                     "median_depth".to_owned(),
                     f64::from(u8::from(o.tsdf_depth == DepthKind::Median)),
+                );
+                parameters.insert(
+                    "ray_depth".to_owned(),
+                    f64::from(u8::from(o.tsdf_splat_depth == SplatDepthRule::Ray)),
                 );
                 parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf_colors)));
             }

@@ -4,7 +4,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use trisplat::geometry::mesh_render::NormalFrame;
 use trisplat::splat::render::options::{DEFAULT_FAR, DEFAULT_NEAR};
-use trisplat::splat::render::{Outputs, RenderMode, RenderOptions, Rules, render as render_set};
+use trisplat::splat::render::{
+    Outputs, RenderMode, RenderOptions, Rules, SplatDepth, render as render_set,
+};
 
 use crate::arrays::image_out;
 use crate::camera::Camera;
@@ -48,9 +50,12 @@ fn outputs(names: &[String]) -> PyResult<Outputs> {
 ///
 /// ``mode``: ``"3dgs"`` (EWA splatting; ``rules`` ``"gsplat"`` or ``"original"``, the
 /// original 3DGS rasterizer's), ``"2dgs"`` (surfels) or ``"perspective"``. Gaussians nearer
-/// than ``near`` or beyond ``far`` are culled. The images do not depend on the thread count.
+/// than ``near`` or beyond ``far`` are culled. ``splat_depth`` (3DGS mode): ``"mean"`` (each
+/// splat at its mean's depth, as 3DGS) or ``"ray"`` (the point of highest density on the
+/// pixel's ray, RaDe-GS/GOF; a flat Gaussian gives its own plane). The images do not depend on
+/// the thread count.
 #[pyfunction]
-#[pyo3(signature = (gaussians, camera, outputs = vec!["rgb".to_owned(), "alpha".to_owned(), "depth".to_owned(), "normal".to_owned()], mode = "3dgs", rules = "gsplat", background = (0.0, 0.0, 0.0), near = DEFAULT_NEAR, far = DEFAULT_FAR, antialiased = false, normal_frame = "world"))]
+#[pyo3(signature = (gaussians, camera, outputs = vec!["rgb".to_owned(), "alpha".to_owned(), "depth".to_owned(), "normal".to_owned()], mode = "3dgs", rules = "gsplat", background = (0.0, 0.0, 0.0), near = DEFAULT_NEAR, far = DEFAULT_FAR, antialiased = false, normal_frame = "world", splat_depth = "mean"))]
 #[expect(
     clippy::too_many_arguments,
     reason = "the renderer's options as keywords"
@@ -67,6 +72,7 @@ pub fn render<'py>(
     far: f32,
     antialiased: bool,
     normal_frame: &str,
+    splat_depth: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = RenderOptions {
         mode: match mode {
@@ -99,6 +105,15 @@ pub fn render<'py>(
             _ => {
                 return Err(error::value(format!(
                     "normal_frame {normal_frame:?}: expected \"world\" or \"camera\""
+                )));
+            }
+        },
+        splat_depth: match splat_depth {
+            "mean" => SplatDepth::Mean,
+            "ray" => SplatDepth::Ray,
+            _ => {
+                return Err(error::value(format!(
+                    "splat_depth {splat_depth:?}: expected \"mean\" or \"ray\""
                 )));
             }
         },

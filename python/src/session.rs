@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use trisplat::pipeline::avatar::{AvatarFolder, GaussianLayout};
 use trisplat::pipeline::config::{
-    DepthKind, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
+    DepthKind, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, SplatDepthRule,
 };
 use trisplat::pipeline::report::DelaunayFrame;
 use trisplat::pipeline::{FrameResult, Session as RsSession};
@@ -34,7 +34,8 @@ use crate::threads;
 /// folder (``skin.glb``, ``offset.ply``, ``vertex_order.json``: as ``extract --avatar``).
 /// ``gt_sequence``: a folder or pattern of one ground-truth mesh per frame (instead of ``gt``).
 /// The other keywords are ``trisplat extract``'s options of the same names (``layout``:
-/// ``"bound"`` or ``"lam"``; ``tsdf_depth``: ``"median"`` or ``"expected"``; ``tau`` absolute,
+/// ``"bound"`` or ``"lam"``; ``tsdf_depth``: ``"median"`` or ``"expected"``; ``tsdf_splat_depth``: ``"ray"`` or
+/// ``"mean"``; ``tau`` absolute,
 /// instead of ``tau_fraction``); None keeps their scale-derived defaults. ``strict`` refuses a
 /// weights track with channels that drive nothing.
 #[pyclass(module = "trisplat", frozen)]
@@ -120,10 +121,21 @@ fn tsdf_depth(name: &str) -> PyResult<DepthKind> {
         })
 }
 
+fn tsdf_splat_depth(name: &str) -> PyResult<SplatDepthRule> {
+    [SplatDepthRule::Ray, SplatDepthRule::Mean]
+        .into_iter()
+        .find(|d| d.name() == name)
+        .ok_or_else(|| {
+            error::value(format!(
+                "tsdf_splat_depth {name:?}: expected \"ray\" or \"mean\""
+            ))
+        })
+}
+
 #[pymethods]
 impl Session {
     #[new]
-    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false))]
+    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_splat_depth = "ray", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false))]
     #[expect(
         clippy::too_many_arguments,
         reason = "the command's options as keywords"
@@ -151,6 +163,7 @@ impl Session {
         fps: Option<f64>,
         layout: &str,
         tsdf_depth: &str,
+        tsdf_splat_depth: &str,
         tsdf_colors: bool,
         alpha_keep_clusters: usize,
         rebuild_every: usize,
@@ -197,6 +210,7 @@ impl Session {
             fps: fps.unwrap_or(defaults.fps),
             layout,
             tsdf_depth: self::tsdf_depth(tsdf_depth)?,
+            tsdf_splat_depth: self::tsdf_splat_depth(tsdf_splat_depth)?,
             tsdf_colors,
             alpha_keep_clusters,
             rebuild_every,

@@ -124,5 +124,7 @@ def test_session_of_a_lam_avatar_folder():
         trisplat.Session(DATA / "anim" / "RiggedFigure.glb", layout="flat")
     with pytest.raises(ValueError, match="tsdf_depth"):
         trisplat.Session(DATA / "anim" / "RiggedFigure.glb", tsdf_depth="mean")
+    with pytest.raises(ValueError, match="tsdf_splat_depth"):
+        trisplat.Session(DATA / "anim" / "RiggedFigure.glb", tsdf_splat_depth="centre")
     with pytest.raises(ValueError, match="not both"):
         trisplat.Session(DATA / "anim" / "RiggedFigure.glb", gt="template", gt_sequence="x/*.ply")

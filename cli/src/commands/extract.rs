@@ -35,7 +35,8 @@ Methods and their defaults (derived from the template in world space, as its ani
 it, so any scale works; a glTF template is posed with its node transforms and skins, and \
 frames whose bounding radius differs from the template's by more than 10x are refused as a \
 scale mismatch):
-  tsdf      render median depth (3DGS, gsplat rules; --tsdf-depth; alpha < 0.5 = no depth) from --views \
+  tsdf      render median depth (3DGS, gsplat rules; --tsdf-depth; each splat at its ray depth, \
+--tsdf-splat-depth; alpha < 0.5 = no depth) from --views \
 cameras on a sphere around each frame (--resolution px square, 40 deg field of view) and fuse \
 (TSDF, marching cubes, largest piece kept); --voxel defaults to the template's bounding radius / \
 128, truncation 5 voxels.

@@ -1,6 +1,6 @@
 //! `trisplat render GAUSSIANS.ply --cameras CAMS.json -o DIR [--mode 3dgs|2dgs|perspective]
 //! [--outputs rgb,alpha,depth,median_depth,normal] [--background r,g,b] [--compat-3dgs]
-//! [--antialiased]` and `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
+//! [--antialiased] [--ray-depth]` and `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -13,7 +13,7 @@ use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFram
 use trisplat_splat::ply::read_gaussians_local;
 use trisplat_splat::render::image::{file_stem, image_files};
 use trisplat_splat::render::{
-    Outputs, RenderImages, RenderMode, RenderOptions, options::DEFAULT_FAR, render,
+    Outputs, RenderImages, RenderMode, RenderOptions, SplatDepth, options::DEFAULT_FAR, render,
 };
 
 use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
@@ -84,6 +84,11 @@ pub struct RenderArgs {
     /// gsplat's antialiased mode (opacity times the dilation compensation).
     #[arg(long)]
     pub antialiased: bool,
+    /// 3DGS mode: each splat's depth (depth, median_depth) at the point of highest density on
+    /// the pixel's ray (RaDe-GS, GOF; a flat Gaussian gives its own plane) instead of its
+    /// mean's depth over the whole footprint.
+    #[arg(long)]
+    pub ray_depth: bool,
     /// Near plane (camera z); default 0.01 (0.2 with --compat-3dgs or --mode 2dgs, as the
     /// original 3DGS and 2DGS code).
     #[arg(long, value_name = "Z")]
@@ -260,6 +265,9 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
         ModeArg::Perspective => RenderMode::Perspective,
     };
     options.antialiased = args.antialiased;
+    if args.ray_depth {
+        options.splat_depth = SplatDepth::Ray;
+    }
     options.outputs = args.outputs.unwrap_or_default();
     options.background = args.background;
     if let Some(near) = args.near {

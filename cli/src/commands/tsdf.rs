@@ -10,7 +10,7 @@ use trisplat_extract::tsdf::{
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
-use trisplat_pipeline::config::DepthKind;
+use trisplat_pipeline::config::{DepthKind, SplatDepthRule};
 use trisplat_pipeline::methods::rendered_depth;
 use trisplat_splat::ply::read_gaussians;
 
@@ -70,6 +70,11 @@ pub struct TsdfArgs {
     /// reaches 1/2; expected: the alpha-weighted mean depth).
     #[arg(long, value_enum, default_value_t = DepthKind::default(), requires = "gaussians")]
     pub depth_kind: DepthKind,
+    /// With --gaussians: each Gaussian's depth over its footprint (ray: the point of highest
+    /// density on the pixel's ray, RaDe-GS/GOF, so a flat Gaussian gives its own plane; mean:
+    /// its centre's depth everywhere, as 3DGS).
+    #[arg(long, value_enum, default_value_t = SplatDepthRule::default(), requires = "gaussians")]
+    pub splat_depth: SplatDepthRule,
     /// Voxel size, truncations, clusters kept.
     #[command(flatten)]
     pub options: TsdfOptions,
@@ -88,7 +93,7 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
         (_, Some(gaussians)) => {
             refuse_to_overwrite(gaussians, &args.output)?;
             spinner.set_message("rendering depth maps");
-            let depths = render_depths(gaussians, &cameras, args.depth_kind)?;
+            let depths = render_depths(gaussians, &cameras, args.depth_kind, args.splat_depth)?;
             spinner.set_message("fusing");
             fuse(&cameras, &depths, None, &args.options).with_context(|| {
                 format!(
@@ -135,19 +140,20 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     )
 }
 
-/// Depth maps (of `kind`) of world-space Gaussians, zero where alpha is below
+/// Depth maps (of `kind`, splat depth by `splat`) of world-space Gaussians, zero where alpha is below
 /// [`trisplat_pipeline::methods::RENDERED_ALPHA_MIN`]
 /// (the pipeline's tsdf method renders the same maps).
 fn render_depths(
     path: &Path,
     cameras: &[Camera],
     kind: DepthKind,
+    splat: SplatDepthRule,
 ) -> anyhow::Result<Vec<DepthImage>> {
     let set = read_gaussians(path)?;
     cameras
         .iter()
         .map(|camera| {
-            rendered_depth(&set, camera, kind)
+            rendered_depth(&set, camera, kind, splat)
                 .with_context(|| format!("{}: camera '{}'", path.display(), camera.name))
         })
         .collect()

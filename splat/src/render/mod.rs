@@ -32,7 +32,7 @@ pub use grad::{
     Real, backward, backward_into, render_with_grad,
 };
 pub use image::RenderImages;
-pub use options::{Outputs, RenderMode, RenderOptions, Rules};
+pub use options::{Outputs, RenderMode, RenderOptions, Rules, SplatDepth};
 pub use screen::{Sample, ScreenSplats, SplatKernel};
 
 use crate::{GaussianSet, ParameterSpace};

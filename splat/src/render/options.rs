@@ -35,6 +35,23 @@ pub enum Rules {
     Original3dgs,
 }
 
+/// Which depth a 3DGS splat gives the pixels it covers (depth, median depth); 2DGS surfels and
+/// the perspective-aware mode intersect each pixel's ray and ignore it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SplatDepth {
+    /// The camera z of the Gaussian's mean over its whole footprint (3DGS, gsplat): each
+    /// splat is a flat step at its centre's depth.
+    #[default]
+    Mean,
+    /// The depth of the point of highest density on the pixel's ray (RaDe-GS, GOF),
+    /// linearised around the ray through the mean: `z + g · (pixel − projected mean)` with
+    /// `g = −z² (Σ⁻¹t)_xy / ((fx, fy) tᵀΣ⁻¹t)` for the camera-space mean `t` and covariance `Σ`,
+    /// and the offset from `z` clamped to 3 times the largest scale. A flat Gaussian gives
+    /// the depth of its own plane, so rendered surfaces are piecewise planar instead of
+    /// stepped. Expected and median depth only; gradients are not computed for it.
+    Ray,
+}
+
 /// Which images to compute. Only these are computed: a geometry-only render (no `rgb`) skips
 /// the spherical-harmonics evaluation entirely.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -137,6 +154,8 @@ pub struct RenderOptions {
     pub far: f32,
     /// The frame of the normal map.
     pub normal_frame: NormalFrame,
+    /// The depth of a 3DGS splat at each pixel (3DGS mode only).
+    pub splat_depth: SplatDepth,
 }
 
 impl Default for RenderOptions {
@@ -150,6 +169,7 @@ impl Default for RenderOptions {
             near: DEFAULT_NEAR,
             far: DEFAULT_FAR,
             normal_frame: NormalFrame::World,
+            splat_depth: SplatDepth::Mean,
         }
     }
 }

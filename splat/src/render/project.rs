@@ -21,7 +21,7 @@ use glam::{DMat3, DVec3, Vec4};
 use trisplat_geometry::Camera;
 
 use super::composite::ALPHA_THRESHOLD;
-use super::options::{RenderOptions, Rules};
+use super::options::{RenderOptions, Rules, SplatDepth};
 use super::screen::{
     Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible,
 };
@@ -51,6 +51,11 @@ pub struct EwaSplat {
     pub opacity: f32,
     /// Camera z of the mean.
     pub depth: f32,
+    /// Depth change per pixel `(∂z/∂u, ∂z/∂v)` away from the mean ([`SplatDepth::Ray`]; zero
+    /// for [`SplatDepth::Mean`]).
+    pub depth_slope: [f32; 2],
+    /// Largest offset from `depth` the slope may give (3 × the largest scale).
+    pub depth_reach: f32,
     /// Row-span coefficients `(p, q, r)`: on the row at `dy = mean_y − py`, `alpha ≥ 1/255`
     /// only for `dx = mean_x − px` within `−p dy ± sqrt(q dy² + r)`; from
     /// `½ a dx² + b dx dy + ½ c dy² ≤ ln(255 opacity)`: `p = b/a`, `q = (b² − a c)/a²`,
@@ -78,7 +83,7 @@ impl SplatKernel for EwaKernel {
         }
         Some(Sample {
             alpha: s.opacity * exp_f32(-sigma),
-            depth: s.depth,
+            depth: s.depth + depth_offset(s, dx, dy),
         })
     }
 
@@ -94,7 +99,9 @@ impl SplatKernel for EwaKernel {
             let value = s.opacity * exp_f32(-sigma);
             *out = if sigma < 0.0 { 0.0 } else { value };
         }
-        depth.fill(s.depth);
+        for (k, out) in depth.iter_mut().enumerate() {
+            *out = s.depth + depth_offset(s, s.mean[0] - (px0 + k as f32), dy);
+        }
     }
 
     #[inline(always)]
@@ -107,9 +114,13 @@ impl SplatKernel for EwaKernel {
         let cdy2 = c * dy * dy;
         let sigma = 0.5 * (a * dx * dx + Vec4::splat(cdy2)) + b * dx * dy;
         let alpha = s.opacity * exp_neg4(sigma);
+        // `pixel − mean = −d`; with a zero slope (SplatDepth::Mean) this is exactly `depth`.
+        let [gu, gv] = s.depth_slope;
+        let reach = Vec4::splat(s.depth_reach);
+        let offset = (-(gu * dx + Vec4::splat(gv * dy))).clamp(-reach, reach);
         (
             Vec4::select(sigma.cmplt(Vec4::ZERO), Vec4::ZERO, alpha),
-            Vec4::splat(s.depth),
+            Vec4::splat(s.depth) + offset,
         )
     }
 
@@ -141,6 +152,13 @@ impl SplatKernel for EwaKernel {
         let root = root_sq.sqrt();
         Some((center - root - SPAN_MARGIN, center + root + SPAN_MARGIN))
     }
+}
+
+/// The depth offset of splat `s` at `d = mean − pixel` ([`EwaSplat::depth_slope`]): exactly 0
+/// for a zero slope.
+#[inline(always)]
+fn depth_offset(s: &EwaSplat, dx: f32, dy: f32) -> f32 {
+    (-(s.depth_slope[0] * dx + s.depth_slope[1] * dy)).clamp(-s.depth_reach, s.depth_reach)
 }
 
 /// The row-span coefficients of [`EwaSplat::span`] for conic `(a, b, c)` and `sigma_max`.
@@ -217,6 +235,53 @@ pub fn exp_neg4(sigma: Vec4) -> Vec4 {
 fn pow2_neg4(n: Vec4) -> Vec4 {
     let biased = (n + Vec4::splat(127.0 + 8_388_608.0)).to_array();
     Vec4::from_array(biased.map(|v| f32::from_bits((v.to_bits() & 0x007f_ffff) << 23)))
+}
+
+/// Scales below this share of a Gaussian's largest scale count as this share in
+/// [`ray_depth_slope`] (a zero scale would make `Σ` singular).
+const RAY_DEPTH_SCALE_FLOOR: f64 = 1e-6;
+/// Steepest [`SplatDepth::Ray`] slope, in reaches per pixel.
+const MAX_SLOPE_PER_REACH: f64 = 1e3;
+/// Bound of the [`SplatDepth::Ray`] reach and slopes, far inside `f32`'s range.
+const MAX_DEPTH_OFFSET: f64 = 1e30;
+
+/// [`SplatDepth::Ray`]'s `(∂z/∂u, ∂z/∂v)` and reach for a Gaussian with camera-space unit
+/// axes `axes` (columns), scales `scales` and camera-space mean `t`, for focal lengths `f`.
+///
+/// The highest density on the ray `s (x, y, 1)` is at `s* = dᵀAt / dᵀAd` (`A = Σ⁻¹`); at the
+/// mean's ray `d₀ = t / z` it is `z`, and `∂s*/∂(x, y) = −z² (At)_xy / tᵀAt`. `A` is used up to
+/// a positive factor (the ratio does not see it): `A ∝ Σ_k (s_max/s_k)² a_k a_kᵀ`, each scale
+/// floored at [`RAY_DEPTH_SCALE_FLOOR`] × `s_max`, so a zero scale gives its axis's plane.
+fn ray_depth_slope(axes: DMat3, scales: DVec3, t: DVec3, [fx, fy]: [f64; 2]) -> ([f32; 2], f32) {
+    let max_scale = scales.max_element();
+    if !(max_scale > 0.0 && max_scale.is_finite()) {
+        return ([0.0; 2], 0.0);
+    }
+    let floor = RAY_DEPTH_SCALE_FLOOR * max_scale;
+    let mut at = DVec3::ZERO;
+    let mut tat = 0.0;
+    for (axis, scale) in [axes.x_axis, axes.y_axis, axes.z_axis]
+        .into_iter()
+        .zip(scales.to_array())
+    {
+        let weight = (max_scale / scale.max(floor)).powi(2);
+        let along = axis.dot(t);
+        at += axis * (weight * along);
+        tat += weight * along * along;
+    }
+    let g = -t.z * t.z / tat;
+    let slope = [g * at.x / fx, g * at.y / fy];
+    if !(tat > 0.0 && slope[0].is_finite() && slope[1].is_finite()) {
+        return ([0.0; 2], 0.0);
+    }
+    // A grazing Gaussian's slope is steep: bounded so that the products with pixel offsets
+    // stay finite in f32 (the reach clamps the offset long before).
+    let reach = (3.0 * max_scale).min(MAX_DEPTH_OFFSET);
+    let steepest = (reach * MAX_SLOPE_PER_REACH).min(MAX_DEPTH_OFFSET);
+    (
+        slope.map(|v| v.clamp(-steepest, steepest) as f32),
+        reach as f32,
+    )
 }
 
 /// Pixels of rounding margin on each side of an analytic row span.
@@ -412,6 +477,10 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
         [v.width, v.height],
     )?;
     let inv = 1.0 / det;
+    let (slope, reach) = match o.splat_depth {
+        SplatDepth::Mean => ([0.0; 2], 0.0),
+        SplatDepth::Ray => ray_depth_slope(v.w2c * rot, s, t, [v.fx, v.fy]),
+    };
     let color = if o.outputs.rgb {
         crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - v.position)
     } else {
@@ -431,6 +500,8 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
             conic: [(c11 * inv) as f32, (-c01 * inv) as f32, (c00 * inv) as f32],
             opacity: opacity as f32,
             depth: z as f32,
+            depth_slope: slope,
+            depth_reach: reach,
             span: row_span_coefficients([c11 * inv, -c01 * inv, c00 * inv], log_ratio.max(0.0)),
         },
         color,

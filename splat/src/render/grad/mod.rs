@@ -82,6 +82,10 @@ pub enum GradError {
         /// The options' mode.
         backward: RenderMode,
     },
+    /// The forward pass is asked for ray depth ([`super::SplatDepth::Ray`]), which has no
+    /// backward pass.
+    #[error("the backward pass supports the mean's depth only (SplatDepth::Mean), not ray depth")]
+    RayDepth,
     /// The distortion weight is not finite.
     #[error("the distortion weight {0} is not finite")]
     BadDistortionWeight(f64),
@@ -229,6 +233,9 @@ fn check<P: DiffParams + ?Sized>(
 ) -> Result<CompositeRules, GradError> {
     if options.mode == RenderMode::Perspective {
         return Err(GradError::UnsupportedMode(options.mode));
+    }
+    if options.mode == RenderMode::Gaussian3d && options.splat_depth != super::SplatDepth::Mean {
+        return Err(GradError::RayDepth);
     }
     if !params.is_world() {
         return Err(RenderError::LocalParameters.into());
