@@ -210,8 +210,9 @@ pub enum RenderedDepthError {
 }
 
 /// The depth of `kind` of world-space Gaussians seen by `camera` (3DGS splatting, gsplat's
-/// rules, each splat's depth over its footprint by `splat`), 0 (no surface) where the rendered alpha is below [`RENDERED_ALPHA_MIN`]: the depth
-/// maps `trisplat tsdf --gaussians` and the pipeline's tsdf method fuse.
+/// rules, each splat's depth over its footprint by `splat`), 0 (no surface) where the rendered
+/// alpha is below [`RENDERED_ALPHA_MIN`]: the depth maps `trisplat tsdf --gaussians` and the
+/// pipeline's tsdf method fuse.
 ///
 /// # Errors
 /// [`RenderedDepthError`].

@@ -43,26 +43,39 @@ pub struct Session {
     inner: Mutex<RsSession>,
 }
 
-fn method(name: &str) -> PyResult<Method> {
-    Method::ALL
-        .into_iter()
-        .find(|m| m.name() == name)
+/// The choice of `all` whose `name_of` is `name`, or a `ValueError` naming the keyword and
+/// the choices (`"a", "b" or "c"`).
+fn by_name<T: Copy>(
+    keyword: &str,
+    name: &str,
+    all: &[T],
+    name_of: fn(T) -> &'static str,
+) -> PyResult<T> {
+    all.iter()
+        .copied()
+        .find(|&v| name_of(v) == name)
         .ok_or_else(|| {
-            error::value(format!(
-                "method {name:?}: expected \"tsdf\", \"delaunay\" or \"alpha\""
-            ))
+            let quoted: Vec<String> = all.iter().map(|&v| format!("{:?}", name_of(v))).collect();
+            let choices = match quoted.split_last() {
+                Some((last, [])) => last.clone(),
+                Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+                None => String::new(),
+            };
+            error::value(format!("{keyword} {name:?}: expected {choices}"))
         })
 }
 
+fn method(name: &str) -> PyResult<Method> {
+    by_name("method", name, &Method::ALL, Method::name)
+}
+
 fn mode(name: &str) -> PyResult<Mode> {
-    [Mode::Binding, Mode::Jacobian, Mode::Lbs]
-        .into_iter()
-        .find(|m| m.name() == name)
-        .ok_or_else(|| {
-            error::value(format!(
-                "mode {name:?}: expected \"binding\", \"jacobian\" or \"lbs\""
-            ))
-        })
+    by_name(
+        "mode",
+        name,
+        &[Mode::Binding, Mode::Jacobian, Mode::Lbs],
+        Mode::name,
+    )
 }
 
 impl Session {
@@ -104,32 +117,30 @@ fn frame_dict<'py>(py: Python<'py>, result: FrameResult) -> PyResult<Bound<'py, 
 }
 
 fn layout(name: &str) -> PyResult<GaussianLayout> {
-    [GaussianLayout::Bound, GaussianLayout::Lam]
-        .into_iter()
-        .find(|l| l.name() == name)
-        .ok_or_else(|| error::value(format!("layout {name:?}: expected \"bound\" or \"lam\"")))
+    by_name(
+        "layout",
+        name,
+        &[GaussianLayout::Bound, GaussianLayout::Lam],
+        GaussianLayout::name,
+    )
 }
 
 fn tsdf_depth(name: &str) -> PyResult<DepthKind> {
-    [DepthKind::Median, DepthKind::Expected]
-        .into_iter()
-        .find(|d| d.name() == name)
-        .ok_or_else(|| {
-            error::value(format!(
-                "tsdf_depth {name:?}: expected \"median\" or \"expected\""
-            ))
-        })
+    by_name(
+        "tsdf_depth",
+        name,
+        &[DepthKind::Median, DepthKind::Expected],
+        DepthKind::name,
+    )
 }
 
 fn tsdf_splat_depth(name: &str) -> PyResult<SplatDepthRule> {
-    [SplatDepthRule::Ray, SplatDepthRule::Mean]
-        .into_iter()
-        .find(|d| d.name() == name)
-        .ok_or_else(|| {
-            error::value(format!(
-                "tsdf_splat_depth {name:?}: expected \"ray\" or \"mean\""
-            ))
-        })
+    by_name(
+        "tsdf_splat_depth",
+        name,
+        &[SplatDepthRule::Ray, SplatDepthRule::Mean],
+        SplatDepthRule::name,
+    )
 }
 
 #[pymethods]

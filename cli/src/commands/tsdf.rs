@@ -140,9 +140,9 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     )
 }
 
-/// Depth maps (of `kind`, splat depth by `splat`) of world-space Gaussians, zero where alpha is below
-/// [`trisplat_pipeline::methods::RENDERED_ALPHA_MIN`]
-/// (the pipeline's tsdf method renders the same maps).
+/// Depth maps (of `kind`, each splat's depth by `splat`) of world-space Gaussians, zero where
+/// alpha is below [`trisplat_pipeline::methods::RENDERED_ALPHA_MIN`] (the pipeline's tsdf
+/// method renders the same maps).
 fn render_depths(
     path: &Path,
     cameras: &[Camera],
