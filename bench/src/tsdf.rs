@@ -66,6 +66,11 @@ pub struct TsdfBenchArgs {
     /// Voxels across the object's largest extent, comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_ACROSS)]
     across: Vec<u32>,
+    /// More voxels-across values run by trisplat alone (no Open3D run), so that the table at
+    /// equal error can pick, for each Open3D row, trisplat's fastest setting at or below its
+    /// Chamfer distance.
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    ours_only: Vec<u32>,
     /// A folder with cameras.json and <img_name>_depth.npy files instead of the rendered Spot.
     #[arg(long, requires = "gt")]
     scene: Option<PathBuf>,
@@ -220,8 +225,12 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
         rayon::current_num_threads()
     );
     let cameras_file = dir.join("cameras.json");
+    let mut sizes: Vec<(u32, bool)> = args.across.iter().map(|&a| (a, true)).collect();
+    sizes.extend(args.ours_only.iter().map(|&a| (a, false)));
+    sizes.sort_unstable();
+    sizes.dedup_by_key(|(a, _)| *a);
     let mut rows = Vec::new();
-    for &across in &args.across {
+    for (across, with_open3d) in sizes {
         let voxel = extent / f64::from(across.max(1));
         let trunc = TRUNC_VOXELS * voxel;
         let out = tmp.path().join("ours.ply");
@@ -246,7 +255,7 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
         let fused = fuse(&cameras, &depths, None, &options)?;
         let ours_in_process = start.elapsed().as_secs_f64();
         let ours_chamfer = chamfer(&fused.mesh, &gt)?;
-        let theirs = match python {
+        let theirs = match python.filter(|_| with_open3d) {
             Some(py) => Some(open3d(
                 py,
                 args.repeats,
@@ -271,6 +280,9 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
         rows.push(row);
     }
     println!("\n{}", table(&rows));
+    if rows.iter().any(|r| r.theirs.is_some()) {
+        println!("At equal or lower Chamfer distance:\n\n{}", equal_error_table(&rows));
+    }
     if let Some(svg) = &args.svg {
         std::fs::write(svg, plot(&rows, &label))
             .with_context(|| format!("{}: cannot write", svg.display()))?;
@@ -369,6 +381,38 @@ fn table(rows: &[Row]) -> String {
             s,
             "| {} | {:.3e} | {:.2} | {:.2} | {tw} | {ti} | {ratio} | {:.4e} | {tc} |",
             r.across, r.voxel, r.ours_whole, r.ours_in_process, r.ours_chamfer
+        );
+    }
+    s
+}
+
+/// For each row with Open3D's side: trisplat's fastest row (whole process) whose Chamfer
+/// distance is at most Open3D's, and the speed-up between the two, as a Markdown table.
+fn equal_error_table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| Open3D voxels across | Open3D whole s | Open3D Chamfer | trisplat voxels across | \
+         trisplat whole s | trisplat Chamfer | speed-up (whole) |\n\
+         |---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in rows {
+        let Some(t) = &r.theirs else { continue };
+        let fastest = rows
+            .iter()
+            .filter(|o| o.ours_chamfer <= t.chamfer)
+            .min_by(|a, b| a.ours_whole.total_cmp(&b.ours_whole));
+        let (across, whole, chamfer, ratio) = match fastest {
+            Some(o) => (
+                o.across.to_string(),
+                format!("{:.2}", o.ours_whole),
+                format!("{:.4e}", o.ours_chamfer),
+                format!("{:.2}x", t.whole / o.ours_whole),
+            ),
+            None => ("none as close".into(), "-".into(), "-".into(), "-".into()),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {:.4e} | {across} | {whole} | {chamfer} | {ratio} |",
+            r.across, t.whole, t.chamfer
         );
     }
     s
