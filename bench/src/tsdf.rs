@@ -491,14 +491,24 @@ fn plot(rows: &[Row], label: &str) -> String {
         bx1 - bx0,
         by1 - by0
     );
+    // A grid line per size; a label only where it clears the previous one.
+    let mut last_label = f64::NEG_INFINITY;
     for &x in &xs {
-        let _ = writeln!(
+        let _ = write!(
             s,
-            "<line x1=\"{0:.1}\" y1=\"{by1}\" x2=\"{0:.1}\" y2=\"{by0}\" stroke=\"#ddd\"/>\
-             <text x=\"{0:.1}\" y=\"{1}\" text-anchor=\"middle\">{x}</text>",
-            px(x),
-            by1 + 16.0
+            "<line x1=\"{0:.1}\" y1=\"{by1}\" x2=\"{0:.1}\" y2=\"{by0}\" stroke=\"#ddd\"/>",
+            px(x)
         );
+        if px(x) - last_label >= 30.0 {
+            last_label = px(x);
+            let _ = write!(
+                s,
+                "<text x=\"{0:.1}\" y=\"{1}\" text-anchor=\"middle\">{x}</text>",
+                px(x),
+                by1 + 16.0
+            );
+        }
+        s.push('\n');
     }
     let mut tick = 10f64.powf(y0.log10().floor());
     while tick <= y1 {
