@@ -43,12 +43,12 @@ impl DepthImage {
                 found: format!("{} values", data.len()),
             });
         }
+        // Branch-free, so the loop vectorises: a depth map is read for every view.
         let mut invalid = 0;
         for d in &mut data {
-            if !(d.is_finite() && *d >= 0.0) {
-                *d = 0.0;
-                invalid += 1;
-            }
+            let bad = !(d.is_finite() && *d >= 0.0);
+            invalid += usize::from(bad);
+            *d = if bad { 0.0 } else { *d };
         }
         Ok(Self {
             width,

@@ -78,21 +78,28 @@ pub fn parse_npy(path: &Path, bytes: &[u8]) -> Result<NpyArray, IoError> {
             ),
         ));
     }
-    let data = body[..count * size]
-        .chunks_exact(size)
-        .map(|c| match (double, big) {
-            (false, false) => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
-            (false, true) => f32::from_be_bytes([c[0], c[1], c[2], c[3]]),
-            (true, b) => {
-                let a: [u8; 8] = [c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]];
-                (if b {
-                    f64::from_be_bytes(a)
-                } else {
-                    f64::from_le_bytes(a)
-                }) as f32
-            }
-        })
-        .collect();
+    // One loop per encoding (a branch per value would keep the loops from vectorising).
+    let body = &body[..count * size];
+    let four = |c: &[u8]| [c[0], c[1], c[2], c[3]];
+    let eight = |c: &[u8]| [c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]];
+    let data = match (double, big) {
+        (false, false) => body
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(four(c)))
+            .collect(),
+        (false, true) => body
+            .chunks_exact(4)
+            .map(|c| f32::from_be_bytes(four(c)))
+            .collect(),
+        (true, false) => body
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(eight(c)) as f32)
+            .collect(),
+        (true, true) => body
+            .chunks_exact(8)
+            .map(|c| f64::from_be_bytes(eight(c)) as f32)
+            .collect(),
+    };
     Ok(NpyArray { shape, data })
 }
 
