@@ -281,7 +281,10 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
     }
     println!("\n{}", table(&rows));
     if rows.iter().any(|r| r.theirs.is_some()) {
-        println!("At equal or lower Chamfer distance:\n\n{}", equal_error_table(&rows));
+        println!(
+            "At equal or lower Chamfer distance:\n\n{}",
+            equal_error_table(&rows)
+        );
     }
     if let Some(svg) = &args.svg {
         std::fs::write(svg, plot(&rows, &label))
