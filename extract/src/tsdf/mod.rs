@@ -99,14 +99,14 @@ fn frames_of<'a>(
 }
 
 /// Memory for the per-view tables of one batch of [`TsdfVolume::integrate_streamed`] (the
-/// images, their depth, ray and tile tables: about 25 bytes per pixel, 45 with colour): 60
-/// views of 512² make two batches.
+/// images, their depth and tile tables: about 9 bytes per pixel, 21 with colour): 60 views of
+/// 512² make one batch, read once for both passes.
 pub const STREAM_BUDGET_BYTES: usize = 256 << 20;
 
 /// Views per batch of [`TsdfVolume::integrate_streamed`]: as many of the largest camera's
 /// size as fit in [`STREAM_BUDGET_BYTES`], at least one.
 fn views_per_batch(cameras: &[Camera], with_color: bool) -> usize {
-    let per_pixel = if with_color { 45 } else { 25 };
+    let per_pixel = if with_color { 21 } else { 9 };
     let largest = cameras
         .iter()
         .map(|c| c.width as usize * c.height as usize)
@@ -261,10 +261,8 @@ struct Prepared<'a> {
     height: usize,
     /// Depth with invalid values and those beyond `depth_trunc` set to 0.
     depth: Vec<f32>,
-    /// Per pixel: its depth (as `depth`) and its ray-length factor
-    /// `‖((j + ½ − cx)/fx, (i + ½ − cy)/fy, 1)‖`, side by side so that a voxel reads one pair.
-    samples: Vec<[f64; 2]>,
-    /// ((j + ½ − cx)/fx)² per column and ((i + ½ − cy)/fy)² per row.
+    /// ((j + ½ − cx)/fx)² per column and ((i + ½ − cy)/fy)² per row: a pixel's ray-length
+    /// factor is `sqrt(1 + col_sq[j] + row_sq[i])`.
     col_sq: Vec<f64>,
     row_sq: Vec<f64>,
     /// Largest depth per TILE x TILE tile (0 = no valid pixel).
@@ -278,9 +276,8 @@ struct Prepared<'a> {
 }
 
 impl<'a> Prepared<'a> {
-    /// The tables of `frame`; the per-pixel (depth, ray factor) pairs only `for_integration`
-    /// (allocation needs the depths and tiles alone).
-    fn new(frame: &Frame<'a>, depth_trunc: f64, for_integration: bool) -> Result<Self, TsdfError> {
+    /// The tables of `frame`.
+    fn new(frame: &Frame<'a>, depth_trunc: f64) -> Result<Self, TsdfError> {
         let cam = frame.camera;
         let (width, height) = (cam.width as usize, cam.height as usize);
         if (frame.depth.width(), frame.depth.height()) != (cam.width, cam.height) {
@@ -311,19 +308,6 @@ impl<'a> Prepared<'a> {
         let row_sq: Vec<f64> = (0..height)
             .map(|i| ((i as f64 + 0.5 - cam.cy) / cam.fy).powi(2))
             .collect();
-        let samples = if !for_integration {
-            Vec::new()
-        } else {
-            depth
-                .chunks_exact(width)
-                .zip(&row_sq)
-                .flat_map(|(row, &y2)| {
-                    row.iter()
-                        .zip(&col_sq)
-                        .map(move |(&d, &x2)| [f64::from(d), (1.0 + x2 + y2).sqrt()])
-                })
-                .collect()
-        };
         let tiles_x = width.div_ceil(TILE);
         let tiles_y = height.div_ceil(TILE);
         let mut tile_max = vec![0.0f32; tiles_x * tiles_y];
@@ -351,7 +335,6 @@ impl<'a> Prepared<'a> {
             width,
             height,
             depth,
-            samples,
             col_sq,
             row_sq,
             tile_max,
@@ -551,7 +534,7 @@ impl TsdfVolume {
     /// [`TsdfError::OutOfRange`] for points too far from the origin,
     /// [`TsdfError::TooManyBlocks`] past the block cap.
     pub fn allocate(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        let prepared = self.prepare(frames, false)?;
+        let prepared = self.prepare(frames)?;
         self.allocate_prepared(&prepared)
     }
 
@@ -595,7 +578,7 @@ impl TsdfVolume {
     /// [`TsdfError::ImageSize`] for an image of the wrong size, [`TsdfError::NoColor`] when
     /// the volume has colour and a frame has none.
     pub fn integrate_allocated(&mut self, frames: &[Frame<'_>]) -> Result<(), TsdfError> {
-        let prepared = self.prepare(frames, true)?;
+        let prepared = self.prepare(frames)?;
         self.integrate_prepared(&prepared);
         Ok(())
     }
@@ -651,7 +634,8 @@ impl TsdfVolume {
     /// [`TsdfVolume::integrate`] with views produced on demand, a batch at a time, so that
     /// memory does not grow with the number of views: `load(i)` gives view `i`'s depth image
     /// (and colour image for a coloured volume), read or made when needed, twice per view
-    /// (allocation, then integration), views of a batch in parallel. Batches hold as many
+    /// (allocation, then integration) unless all views fit in one batch (then once), views of
+    /// a batch in parallel. Batches hold as many
     /// views as fit in [`STREAM_BUDGET_BYTES`] of per-view tables (at least one). The result
     /// is [`TsdfVolume::integrate`]'s on all the views at once. Returns (seconds reading and
     /// allocating, seconds reading and integrating).
@@ -689,10 +673,20 @@ impl TsdfVolume {
             .map(|start| start..(start + batch).min(cameras.len()))
             .collect();
         let start = std::time::Instant::now();
+        if let [all] = batches.as_slice() {
+            // Every view fits at once: read each one once for both passes.
+            let images = load_batch(all.clone())?;
+            let prepared = self.prepare(&frames_of(&cameras[all.clone()], &images))?;
+            self.allocate_prepared(&prepared)?;
+            let allocate = start.elapsed().as_secs_f64();
+            let start = std::time::Instant::now();
+            self.integrate_prepared(&prepared);
+            return Ok((allocate, start.elapsed().as_secs_f64()));
+        }
         let mut keys = Vec::new();
         for range in &batches {
             let images = load_batch(range.clone())?;
-            let prepared = self.prepare(&frames_of(&cameras[range.clone()], &images), false)?;
+            let prepared = self.prepare(&frames_of(&cameras[range.clone()], &images))?;
             keys.extend(self.blocks_near(&prepared)?);
             keys.par_sort_unstable_by_key(|k| (k.z, k.y, k.x));
             keys.dedup();
@@ -702,7 +696,7 @@ impl TsdfVolume {
         let start = std::time::Instant::now();
         for range in &batches {
             let images = load_batch(range.clone())?;
-            let prepared = self.prepare(&frames_of(&cameras[range.clone()], &images), true)?;
+            let prepared = self.prepare(&frames_of(&cameras[range.clone()], &images))?;
             self.integrate_prepared(&prepared);
         }
         Ok((allocate, start.elapsed().as_secs_f64()))
@@ -715,7 +709,7 @@ impl TsdfVolume {
         frames: &[Frame<'_>],
     ) -> Result<(f64, f64), TsdfError> {
         let start = std::time::Instant::now();
-        let prepared = self.prepare(frames, true)?;
+        let prepared = self.prepare(frames)?;
         self.allocate_prepared(&prepared)?;
         let allocate = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
@@ -731,13 +725,8 @@ impl TsdfVolume {
         marching_cubes(&self.grid)
     }
 
-    /// The per-frame data of `frames` (checked sizes, camera maths, depth and tile tables, and
-    /// `for_integration` the ray tables).
-    fn prepare<'a>(
-        &self,
-        frames: &[Frame<'a>],
-        for_integration: bool,
-    ) -> Result<Vec<Prepared<'a>>, TsdfError> {
+    /// The per-frame data of `frames` (checked sizes, camera maths, depth and tile tables).
+    fn prepare<'a>(&self, frames: &[Frame<'a>]) -> Result<Vec<Prepared<'a>>, TsdfError> {
         let with_color = self.grid.has_color();
         let prepared: Vec<Result<Prepared<'a>, TsdfError>> = frames
             .par_iter()
@@ -747,7 +736,7 @@ impl TsdfVolume {
                         camera: f.camera.name.clone(),
                     });
                 }
-                Prepared::new(f, self.params.depth_trunc, for_integration)
+                Prepared::new(f, self.params.depth_trunc)
             })
             .collect();
         prepared.into_iter().collect()
@@ -1113,7 +1102,8 @@ fn integrate_row(
         f.width as f64 - PIXEL_MARGIN,
         f.height as f64 - PIXEL_MARGIN,
     );
-    let mut pixel = [0u32; ROW];
+    let mut col = [0u32; ROW];
+    let mut row = [0u32; ROW];
     let mut inside = [false; ROW];
     let mut z = [0.0f64; ROW];
     for k in 0..ROW {
@@ -1124,16 +1114,23 @@ fn integrate_row(
         let v = f.fy * qy * inv_z + f.cy;
         let ok = (qz > 0.0) & (u >= PIXEL_MARGIN) & (u < u_end) & (v >= PIXEL_MARGIN) & (v < v_end);
         let (j, i) = if ok { (u as u32, v as u32) } else { (0, 0) };
-        pixel[k] = i * f.width as u32 + j;
+        col[k] = j;
+        row[k] = i;
         inside[k] = ok;
         z[k] = qz;
     }
     if !inside.iter().any(|&b| b) {
         return;
     }
+    // The pixel's depth and its ray-length factor, from the per-column and per-row tables
+    // (small enough to stay in cache) rather than a per-pixel table.
     let mut sample = [[0.0f64; 2]; ROW];
     for k in 0..ROW {
-        sample[k] = f.samples[pixel[k] as usize];
+        let (j, i) = (col[k] as usize, row[k] as usize);
+        sample[k] = [
+            f64::from(f.depth[i * f.width + j]),
+            (1.0 + f.col_sq[j] + f.row_sq[i]).sqrt(),
+        ];
     }
     let inv_trunc = 1.0 / trunc;
     for k in 0..ROW {

@@ -386,7 +386,7 @@ fn dense_and_hashed_allocation_agree() {
         })
         .collect();
     let volume = TsdfVolume::new(params(), false).unwrap();
-    let prepared = volume.prepare(&frames, false).unwrap();
+    let prepared = volume.prepare(&frames).unwrap();
     let origin = volume.grid().origin();
     let dense = frame_blocks(&prepared, params(), origin, 1 << 20, DENSE_MARK_CELLS).unwrap();
     let hashed = frame_blocks(&prepared, params(), origin, 1 << 20, 0).unwrap();
@@ -426,9 +426,10 @@ fn views_streamed_in_batches_give_the_volume_of_all_at_once() {
                 batch,
             )
             .unwrap();
-        // Each view read twice (allocation, integration); the same blocks, in the same
-        // order, with the same values.
-        assert_eq!(loads.into_inner(), 2 * cams.len());
+        // Each view read twice (allocation, integration), once when they all fit in one
+        // batch; the same blocks, in the same order, with the same values.
+        let reads = if batch >= cams.len() { 1 } else { 2 };
+        assert_eq!(loads.into_inner(), reads * cams.len(), "batch {batch}");
         assert_eq!(streamed.grid().keys(), all.grid().keys(), "batch {batch}");
         assert_eq!(streamed.grid().value, all.grid().value, "batch {batch}");
         assert_eq!(streamed.grid().weight, all.grid().weight, "batch {batch}");
