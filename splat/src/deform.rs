@@ -986,6 +986,35 @@ mod tests {
         assert_eq!(a.rotations(), b.rotations());
     }
 
+    /// A 2DGS surfel deformed by a Jacobian `J` (covariance axes `J R diag(s0, s1, 0)`): the
+    /// normal of the factorisation (`u_2 = u_0 × u_1`) is the rest normal moved by `J⁻ᵀ`
+    /// ([`crate::frames::transform_normal`]), for mirroring `J` too.
+    #[test]
+    fn a_surfel_normal_moves_by_the_inverse_transpose() {
+        let mut rng = Rng::new(21);
+        for case in 0..500 {
+            let j = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5))
+                + DMat3::IDENTITY * if case % 2 == 0 { 1.0 } else { -1.0 };
+            let q = DQuat::from_xyzw(
+                rng.uniform_f64() - 0.5,
+                rng.uniform_f64() - 0.5,
+                rng.uniform_f64() - 0.5,
+                rng.uniform_f64() - 0.5,
+            )
+            .normalize();
+            let r = DMat3::from_quat(q);
+            let (s0, s1) = (0.1 + rng.uniform_f64(), 0.1 + rng.uniform_f64());
+            let l = j * DMat3::from_cols(r.x_axis * s0, r.y_axis * s1, DVec3::ZERO);
+            let (u, sig) = rotation_and_scales(l);
+            assert!(sig.z.abs() < 1e-12 * sig.x, "{case}: still flat");
+            let Some(moved) = crate::frames::transform_normal(j, r.z_axis) else {
+                continue;
+            };
+            let cos = u.z_axis.dot(moved).abs();
+            assert!((1.0 - cos) < 1e-12, "{case}: normal off by {}", 1.0 - cos);
+        }
+    }
+
     #[test]
     fn jacobi_matches_nalgebra_svd_and_keeps_tiny_scales() {
         let mut rng = Rng::new(9);
