@@ -61,11 +61,7 @@ fn mesh_targets_interpolate_vertex_colours() {
         // World x of the hit from the pixel: the colour is linear in x across the square.
         let (i, j) = (p / w, p % w);
         let d = f64::from(t.depth.as_ref().unwrap()[p]);
-        let ray = DVec3::new(
-            (j as f64 + 0.5 - camera.cx) / camera.fx,
-            (i as f64 + 0.5 - camera.cy) / camera.fy,
-            1.0,
-        );
+        let ray = camera.unproject(j as f64 + 0.5, i as f64 + 0.5);
         let x = (camera.position() + camera.rotation() * ray * d).x;
         let s = (x + 1.0) / 2.0;
         assert!(
@@ -432,11 +428,7 @@ fn mesh_targets_sample_the_base_colour_texture() {
         hits += 1;
         let (i, j) = (p / w, p % w);
         let d = f64::from(t.depth.as_ref().unwrap()[p]);
-        let ray = DVec3::new(
-            (j as f64 + 0.5 - camera.cx) / camera.fx,
-            (i as f64 + 0.5 - camera.cy) / camera.fy,
-            1.0,
-        );
+        let ray = camera.unproject(j as f64 + 0.5, i as f64 + 0.5);
         let x = camera.position() + camera.rotation() * ray * d;
         let (u, v) = ((x.x + 1.0) / 2.0, (x.y + 1.0) / 2.0);
         // Bilinear between texel centres of a ramp is the ramp: (4u - 1/2) / 3, clamped to

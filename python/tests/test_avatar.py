@@ -63,6 +63,12 @@ def test_render_matches_gsplat(camera):
     covered = ref["alpha"] > 0.5
     rel = np.abs(out["depth"][covered] - ref["depth"][covered]) / ref["depth"][covered]
     assert rel.max() <= 1e-4
+    # Ray depth keeps the coverage and tilts each splat's depth; an unknown rule is refused.
+    ray = trisplat.render(scene, cam, outputs=["alpha", "depth"], splat_depth="ray")
+    np.testing.assert_array_equal(ray["alpha"], out["alpha"])
+    assert np.isfinite(ray["depth"]).all() and np.abs(ray["depth"] - out["depth"]).max() > 1e-4
+    with pytest.raises(ValueError, match="splat_depth"):
+        trisplat.render(scene, cam, splat_depth="centre")
 
 
 def test_render_refuses_local_gaussians():

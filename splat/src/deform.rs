@@ -993,15 +993,9 @@ mod tests {
     fn a_surfel_normal_moves_by_the_inverse_transpose() {
         let mut rng = Rng::new(21);
         for case in 0..500 {
-            let j = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5))
+            let j = crate::test_util::random_matrix(&mut rng)
                 + DMat3::IDENTITY * if case % 2 == 0 { 1.0 } else { -1.0 };
-            let q = DQuat::from_xyzw(
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-            )
-            .normalize();
+            let q = crate::test_util::random_rotation(&mut rng);
             let r = DMat3::from_quat(q);
             let (s0, s1) = (0.1 + rng.uniform_f64(), 0.1 + rng.uniform_f64());
             let l = j * DMat3::from_cols(r.x_axis * s0, r.y_axis * s1, DVec3::ZERO);
@@ -1021,7 +1015,7 @@ mod tests {
         let mut worst_ours = [0.0f64; 3];
         let mut worst_theirs = [0.0f64; 3];
         for case in 0..3000 {
-            let a = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5));
+            let a = crate::test_util::random_matrix(&mut rng);
             // Column scales spanning LAM's range (exp(-30)..1), and exact zeros.
             let s = DVec3::new(
                 (rng.uniform_f64() * -30.0).exp(),
@@ -1108,7 +1102,7 @@ mod tests {
     fn rotation_and_scales_reconstructs() {
         let mut rng = Rng::new(5);
         for _ in 0..1000 {
-            let l = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5));
+            let l = crate::test_util::random_matrix(&mut rng);
             let (u, s) = rotation_and_scales(l);
             assert!((u.determinant() - 1.0).abs() < 1e-12);
             assert!(s.x >= s.y && s.y >= s.z && s.z >= 0.0);

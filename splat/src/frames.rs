@@ -389,13 +389,7 @@ mod tests {
         let o = FrameOptions::default();
         for _ in 0..500 {
             let v = random_triangle(&mut rng);
-            let q = DQuat::from_xyzw(
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-            )
-            .normalize();
+            let q = crate::test_util::random_rotation(&mut rng);
             let t = d(3.0, -1.0, 0.5);
             let moved = v.map(|p| q * p * 2.0 + t);
             for conv in [Convention::GaussianAvatars, Convention::SurfHead] {

@@ -415,15 +415,9 @@ mod tests {
     fn polar_rotation_of_rotation_times_spd() {
         let mut rng = Rng::new(4);
         for _ in 0..500 {
-            let q = DQuat::from_xyzw(
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-                rng.uniform_f64() - 0.5,
-            )
-            .normalize();
+            let q = crate::test_util::random_rotation(&mut rng);
             let r = DMat3::from_quat(q);
-            let b = DMat3::from_cols_array(&[0; 9].map(|_: i32| rng.uniform_f64() - 0.5));
+            let b = crate::test_util::random_matrix(&mut rng);
             // H = BᵀB + I/2 is symmetric positive definite.
             let h = b.transpose() * b + DMat3::IDENTITY * 0.5;
             let got = polar_rotation(r * h * 3.0).unwrap();

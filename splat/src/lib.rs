@@ -22,6 +22,8 @@ pub mod ply;
 pub mod render;
 pub mod sh;
 pub mod spz;
+#[cfg(test)]
+mod test_util;
 pub mod wasserstein;
 
 pub use gaussians::{

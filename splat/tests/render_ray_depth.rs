@@ -49,11 +49,9 @@ fn camera() -> Camera {
     Camera::look_at("c", DVec3::ZERO, DVec3::Z, DVec3::NEG_Y, (SIZE, SIZE), 40.0).expect("camera")
 }
 
-/// The camera-space direction `(x, y, 1)` of pixel `(col, row)`'s centre, in world space.
+/// The world-space direction of pixel `(col, row)`'s centre whose camera z is 1.
 fn ray(camera: &Camera, col: u32, row: u32) -> DVec3 {
-    let x = (f64::from(col) + 0.5 - camera.cx) / camera.fx;
-    let y = (f64::from(row) + 0.5 - camera.cy) / camera.fy;
-    camera.world_to_camera_rotation().transpose() * DVec3::new(x, y, 1.0)
+    camera.rotation() * camera.unproject(f64::from(col) + 0.5, f64::from(row) + 0.5)
 }
 
 /// Largest |rendered − plane| over the pixels whose alpha is at least 1/2, for a flat Gaussian
