@@ -205,9 +205,16 @@ class Session:
         rebuild_every: int = 0,
         tau: Optional[float] = None,
         strict: bool = False,
+        tsdf_alpha_cut: Optional[float] = None,
+        min_contribution: Optional[float] = None,
+        floater_std_ratio: Optional[float] = None,
+        floater_neighbors: Optional[int] = None,
     ) -> "Session": ...
     @property
     def unused_channels(self) -> List[str]: ...
+    @property
+    def gaussians_used(self) -> Dict[str, Any]:
+        """``total``, ``kept``, ``hidden``, ``floaters`` and the rule, as in report.json."""
     @property
     def frames(self) -> List[int]: ...
     @property

@@ -17,6 +17,7 @@ pub mod mesh;
 pub mod mesh_render;
 pub mod mesh_stats;
 pub mod metrics;
+pub mod outliers;
 pub mod points;
 pub mod rng;
 pub mod sampling;

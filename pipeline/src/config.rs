@@ -337,6 +337,29 @@ pub struct ExtractOptions {
     /// largest, as tsdf keeps its largest (0: keep every piece; the report counts them).
     #[cfg_attr(feature = "cli", arg(long, value_name = "K", default_value_t = 0))]
     pub alpha_keep_clusters: usize,
+    /// TSDF: pixels whose rendered alpha is below A carry no depth (0 < A <= 1; 2DGS and GOF
+    /// cut at 1/2).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "A",
+        default_value_t = crate::methods::RENDERED_ALPHA_MIN))]
+    pub tsdf_alpha_cut: f32,
+    /// Every method: leave out the Gaussians whose largest blending weight (alpha x
+    /// transmittance) at any pixel of the tsdf rig's views of the rest pose is below W: they
+    /// change no pixel by that much (the default is one 8-bit step; 0 keeps them all;
+    /// docs/conventions.md §6).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "W",
+        default_value_t = crate::visibility::DEFAULT_MIN_CONTRIBUTION))]
+    pub min_contribution: f32,
+    /// Every method: leave out floating Gaussians, Open3D's statistical outliers among the
+    /// rest-pose means of the others: mean distance to the K nearest (K = --floater-neighbors)
+    /// above the mean of those distances plus R standard deviations. Off unless given: on a
+    /// bound avatar it also takes the sparse parts of the surface (docs/conventions.md §6).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "R"))]
+    pub floater_std_ratio: Option<f64>,
+    /// Neighbours K of the floater rule.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "K",
+        default_value_t = crate::visibility::DEFAULT_FLOATER_NEIGHBORS,
+        value_parser = parse_positive, requires = "floater_std_ratio"))]
+    pub floater_neighbors: usize,
     /// Delaunay: rebuild from scratch every N frames (0: never; 1: every frame).
     #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = 0))]
     pub rebuild_every: usize,
@@ -430,6 +453,16 @@ impl std::fmt::Display for OutputTarget {
 }
 
 impl ExtractOptions {
+    /// Which Gaussians the meshers use ([`crate::visibility`]).
+    #[must_use]
+    pub fn visibility_rule(&self) -> crate::visibility::VisibilityRule {
+        crate::visibility::VisibilityRule {
+            min_contribution: self.min_contribution,
+            floater_neighbors: self.floater_neighbors,
+            floater_std_ratio: self.floater_std_ratio,
+        }
+    }
+
     /// The report's F-score threshold: the fraction of each frame's ground-truth diagonal,
     /// or the absolute `tau` when no fraction is set.
     #[must_use]
@@ -462,6 +495,10 @@ impl Default for ExtractOptions {
             tsdf_colors: false,
             alpha: None,
             alpha_keep_clusters: 0,
+            tsdf_alpha_cut: crate::methods::RENDERED_ALPHA_MIN,
+            min_contribution: crate::visibility::DEFAULT_MIN_CONTRIBUTION,
+            floater_std_ratio: None,
+            floater_neighbors: crate::visibility::DEFAULT_FLOATER_NEIGHBORS,
             rebuild_every: 0,
             no_auto_rebuild: false,
             hop_threshold: DEFAULT_HOP_THRESHOLD,

@@ -158,6 +158,14 @@ pub enum PipelineError {
         /// What the deformer found.
         cause: DeformError,
     },
+    /// Which Gaussians render could not be decided.
+    #[error("{path}: deciding which Gaussians render at the rest pose: {cause}")]
+    Visibility {
+        /// The Gaussian file.
+        path: PathBuf,
+        /// What failed.
+        cause: crate::visibility::VisibilityError,
+    },
     /// A LAM avatar folder or one of its files does not fit LAM's layout.
     #[error("{path}: {problem}")]
     Avatar {

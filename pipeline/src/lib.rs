@@ -80,6 +80,7 @@ pub mod report;
 pub mod run;
 pub mod session;
 pub mod thumbnail;
+pub mod visibility;
 
 pub use config::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl,

@@ -1,11 +1,11 @@
 //! The three meshers, each turning one deformed frame into a mesh, and the scale-derived
-//! defaults of their parameters.
+//! defaults of their parameters. Each sees only the Gaussians [`crate::visibility`] keeps.
 //!
 //! - **tsdf**: a sphere rig of `views` cameras (geometry's `sphere_rig`, 40° field of view)
 //!   around the bounding sphere of the frame (deformed template and Gaussian means), expected
 //!   or median depth ([`DepthKind`]) rendered from the deformed Gaussians (3DGS, gsplat
-//!   rules) and masked where the
-//!   rendered alpha is below [`RENDERED_ALPHA_MIN`], fused with the extract crate's TSDF at
+//!   rules) and masked where the rendered alpha is below `tsdf_alpha_cut` (default
+//!   [`RENDERED_ALPHA_MIN`]), fused with the extract crate's TSDF at
 //!   `voxel` (default: [`default_voxel`], the Gaussians' mean spacing within template radius
 //!   / 128 ..= / 32), truncation 5 voxels, depth truncation twice the rig's scene radius,
 //!   largest connected piece kept.
@@ -39,8 +39,8 @@ use crate::config::{
 };
 use crate::error::PipelineError;
 
-/// Pixels whose rendered alpha is below this carry no depth (as `trisplat tsdf --gaussians`
-/// and 2DGS).
+/// The default [`DepthRules::alpha_cut`]: pixels whose rendered alpha is below this carry no
+/// depth (as 2DGS and GOF).
 pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
 /// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
@@ -209,20 +209,40 @@ pub enum RenderedDepthError {
     Image(TsdfError),
 }
 
-/// The depth of `kind` of world-space Gaussians seen by `camera` (3DGS splatting, gsplat's
-/// rules, each splat's depth over its footprint by `splat`), 0 (no surface) where the rendered
-/// alpha is below [`RENDERED_ALPHA_MIN`]: the depth maps `trisplat tsdf --gaussians` and the
-/// pipeline's tsdf method fuse.
+/// How [`rendered_depth`] turns a render into a depth map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthRules {
+    /// Which depth of the render.
+    pub kind: DepthKind,
+    /// Each splat's depth over its footprint.
+    pub splat: SplatDepthRule,
+    /// Pixels whose rendered alpha is below this carry no depth (0 < cut <= 1).
+    pub alpha_cut: f32,
+}
+
+impl Default for DepthRules {
+    fn default() -> Self {
+        Self {
+            kind: DepthKind::default(),
+            splat: SplatDepthRule::default(),
+            alpha_cut: RENDERED_ALPHA_MIN,
+        }
+    }
+}
+
+/// The depth of `rules.kind` of world-space Gaussians seen by `camera` (3DGS splatting,
+/// gsplat's rules, each splat's depth over its footprint by `rules.splat`), 0 (no surface)
+/// where the rendered alpha is below `rules.alpha_cut`: the depth maps `trisplat tsdf
+/// --gaussians` and the pipeline's tsdf method fuse.
 ///
 /// # Errors
 /// [`RenderedDepthError`].
 pub fn rendered_depth(
     world: &GaussianSet,
     camera: &Camera,
-    kind: DepthKind,
-    splat: SplatDepthRule,
+    rules: &DepthRules,
 ) -> Result<DepthImage, RenderedDepthError> {
-    Ok(rendered_view(world, camera, kind, splat, false)?.0)
+    Ok(rendered_view(world, camera, rules, false)?.0)
 }
 
 /// [`rendered_depth`], and `with_color` the rendered colour where there is depth: the
@@ -234,10 +254,10 @@ pub fn rendered_depth(
 pub fn rendered_view(
     world: &GaussianSet,
     camera: &Camera,
-    kind: DepthKind,
-    splat: SplatDepthRule,
+    rules: &DepthRules,
     with_color: bool,
 ) -> Result<(DepthImage, Option<ColorImage>), RenderedDepthError> {
+    let (kind, cut) = (rules.kind, rules.alpha_cut);
     let options = RenderOptions {
         outputs: Outputs {
             rgb: with_color,
@@ -246,7 +266,7 @@ pub fn rendered_view(
             median_depth: kind == DepthKind::Median,
             normal: false,
         },
-        splat_depth: splat.into(),
+        splat_depth: rules.splat.into(),
         ..RenderOptions::default()
     };
     let out = render(world, camera, &options).map_err(RenderedDepthError::Render)?;
@@ -259,7 +279,7 @@ pub fn rendered_view(
         return Err(RenderedDepthError::Render(RenderError::LocalParameters));
     };
     for (d, a) in depth.iter_mut().zip(&alpha) {
-        if *a < RENDERED_ALPHA_MIN {
+        if *a < cut {
             *d = 0.0;
         }
     }
@@ -270,7 +290,7 @@ pub fn rendered_view(
                 .chunks_exact(3)
                 .zip(&alpha)
                 .map(|(c, &a)| {
-                    if a >= RENDERED_ALPHA_MIN {
+                    if a >= cut {
                         [0, 1, 2].map(|k| (c[k] / a).clamp(0.0, 1.0))
                     } else {
                         [0.0; 3]
@@ -295,8 +315,7 @@ pub struct TsdfMesher {
     voxel: f64,
     views: usize,
     resolution: u32,
-    depth: DepthKind,
-    splat_depth: SplatDepthRule,
+    depth: DepthRules,
     colors: bool,
 }
 
@@ -332,19 +351,17 @@ impl TsdfMesher {
         let mut colors = Vec::with_capacity(if self.colors { cameras.len() } else { 0 });
         for camera in &cameras {
             let (image, color) =
-                rendered_view(world, camera, self.depth, self.splat_depth, self.colors).map_err(
-                    |e| match e {
-                        RenderedDepthError::Render(source) => PipelineError::Render {
-                            frame,
-                            camera: camera.name.clone(),
-                            cause: source,
-                        },
-                        RenderedDepthError::Image(source) => PipelineError::Tsdf {
-                            frame,
-                            cause: source,
-                        },
+                rendered_view(world, camera, &self.depth, self.colors).map_err(|e| match e {
+                    RenderedDepthError::Render(source) => PipelineError::Render {
+                        frame,
+                        camera: camera.name.clone(),
+                        cause: source,
                     },
-                )?;
+                    RenderedDepthError::Image(source) => PipelineError::Tsdf {
+                        frame,
+                        cause: source,
+                    },
+                })?;
             depths.push(image);
             colors.extend(color);
         }
@@ -409,8 +426,11 @@ impl Mesher {
                 voxel: resolved.voxel,
                 views: options.views,
                 resolution: options.resolution,
-                depth: options.tsdf_depth,
-                splat_depth: options.tsdf_splat_depth,
+                depth: DepthRules {
+                    kind: options.tsdf_depth,
+                    splat: options.tsdf_splat_depth,
+                    alpha_cut: options.tsdf_alpha_cut,
+                },
                 colors: options.tsdf_colors,
             }),
             Method::Delaunay => {
@@ -534,7 +554,12 @@ mod tests {
     fn median_depth_is_the_first_surface_expected_depth_a_blend() {
         let (set, camera) = two_walls();
         let centre = |kind| {
-            let d = rendered_depth(&set, &camera, kind, SplatDepthRule::Mean).expect("renders");
+            let rules = DepthRules {
+                kind,
+                splat: SplatDepthRule::Mean,
+                ..DepthRules::default()
+            };
+            let d = rendered_depth(&set, &camera, &rules).expect("renders");
             d.data()[8 * 16 + 8]
         };
         // Accumulated alpha passes 1/2 at the front wall.

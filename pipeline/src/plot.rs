@@ -639,6 +639,7 @@ mod tests {
                 voxel: 0.01,
                 alpha: 0.6,
             },
+            gaussians_used: None,
             serial_methods: false,
             methods: BTreeMap::from([
                 (

@@ -35,6 +35,7 @@ use trisplat_geometry::{PointCloud, TriMesh};
 use crate::config::Method;
 use crate::methods::Resolved;
 use crate::run::{PLOT_PNG, PLOT_SVG, REPORT_HTML};
+use crate::visibility::GaussiansUsed;
 
 /// Seed of the prediction's surface samples (the ground truth uses `splitmix64` of it), as
 /// `trisplat eval`'s default.
@@ -702,6 +703,10 @@ pub struct Report {
     pub tau_fraction: Option<f64>,
     /// Scale-derived parameters.
     pub resolved: Resolved,
+    /// Which Gaussians the meshers used ([`crate::visibility`]; absent in reports of older
+    /// versions, which used them all).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gaussians_used: Option<GaussiansUsed>,
     /// Whether the methods of a frame ran one after another (`--serial-methods`: each
     /// method's ms is its time alone) rather than side by side (the default: each method's ms
     /// includes waiting for the cores the others held).
@@ -785,6 +790,20 @@ impl Report {
             "template radius {:.6}, mean Gaussian spacing {:.6}",
             self.resolved.template_radius, self.resolved.mean_spacing
         ));
+        if let Some(u) = &self.gaussians_used {
+            let floaters = match u.floater_std_ratio {
+                Some(r) => format!(
+                    "{} floaters (mean distance to the {} nearest above the mean + {r} std)",
+                    u.floaters, u.floater_neighbors
+                ),
+                None => "floaters kept".to_owned(),
+            };
+            v.push(format!(
+                "Gaussians meshed: {} of {}; left out {} hidden (largest weight in the rest \
+                 pose's views below {:.4}), {floaters}",
+                u.kept, u.total, u.hidden, u.min_contribution
+            ));
+        }
         v.push(format!(
             "timing: {}",
             if self.serial_methods {
@@ -1338,6 +1357,7 @@ mod tests {
                 voxel: 0.01,
                 alpha: 0.6,
             },
+            gaussians_used: None,
             serial_methods: false,
             methods: BTreeMap::from([
                 ("delaunay".to_owned(), method(Method::Delaunay, Some(d))),

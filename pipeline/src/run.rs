@@ -216,6 +216,7 @@ pub fn run(
                     f64::from(u8::from(o.tsdf_splat_depth == SplatDepthRule::Ray)),
                 );
                 parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf_colors)));
+                parameters.insert("alpha_cut".to_owned(), f64::from(o.tsdf_alpha_cut));
             }
             Method::Delaunay => {
                 parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);
@@ -281,6 +282,7 @@ pub fn run(
         tau: o.tau_fraction.is_none().then_some(o.tau),
         tau_fraction: o.tau_fraction,
         resolved,
+        gaussians_used: Some(session.visibility().used),
         serial_methods: control.serial_methods,
         methods: method_reports,
         thumbnails: None,

@@ -35,7 +35,9 @@ use trisplat_splat::deform::{Collapsed, Deformer, WorldGeometry};
 use trisplat_splat::frames::Convention;
 
 use crate::avatar::{GaussianLayout, bind_lam};
-use crate::config::{ExtractConfig, GroundTruth, Method, Mode};
+use crate::config::{
+    DEFAULT_RESOLUTION, DEFAULT_VIEWS, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
+};
 use crate::deform::{Engine, EngineInputs};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::input::{
@@ -45,6 +47,7 @@ use crate::input::{
 use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
 use crate::plan::{Plan, Stage};
 use crate::report::{FrameMetrics, GtSamples, measure_with};
+use crate::visibility::{Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
@@ -116,6 +119,10 @@ pub struct Session {
     engine: Engine,
     rest_means: Vec<Vec3>,
     resolved: Resolved,
+    /// The Gaussians the meshers use.
+    visibility: Visibility,
+    /// The kept Gaussians' means of the current frame (when some are left out).
+    kept_means: Vec<Vec3>,
     meshers: Vec<(Method, Mesher)>,
     gt: Option<GroundTruth>,
     static_gt: Option<GtSamples>,
@@ -307,12 +314,27 @@ impl Session {
                 cause,
             })?;
         let resolved = Resolved::new(o, template, &rest_means)?;
+        let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
+        let visibility = if Method::ALL.iter().any(|&m| plan.runs(Stage::Mesh(m))) {
+            decide_visibility(
+                render_set.as_ref(),
+                &set,
+                template,
+                o,
+                &gaussians_path,
+                &config.template,
+            )?
+        } else {
+            Visibility::all(set.len())
+        };
+        let mut kept_rest_means = Vec::new();
+        visibility.gather(&rest_means, &mut kept_rest_means);
         let mut meshers = Vec::new();
         for m in Method::ALL {
             if plan.runs(Stage::Mesh(m)) {
                 meshers.push((
                     m,
-                    Mesher::new(m, o, &resolved, template, &rest_means, frames.start)
+                    Mesher::new(m, o, &resolved, template, &kept_rest_means, frames.start)
                         .map_err(|e| e.on_vertices_of(&config.template.display().to_string()))?,
                 ));
             }
@@ -337,7 +359,6 @@ impl Session {
             }
             _ => Vec::new(),
         };
-        let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
 
         input_files.push(config.template.clone());
         input_files.extend(config.gaussians.clone());
@@ -357,6 +378,8 @@ impl Session {
             engine,
             rest_means,
             resolved,
+            visibility,
+            kept_means: Vec::new(),
             meshers,
             gt: config.gt.clone(),
             static_gt,
@@ -434,6 +457,12 @@ impl Session {
     #[must_use]
     pub fn rest_means(&self) -> &[Vec3] {
         &self.rest_means
+    }
+
+    /// Which Gaussians the meshers use, decided once on the rest pose ([`crate::visibility`]).
+    #[must_use]
+    pub fn visibility(&self) -> &Visibility {
+        &self.visibility
     }
 
     /// The scale-derived parameters.
@@ -681,11 +710,22 @@ impl Session {
             }
             _ => None,
         };
+        let kept_world = match (&world, self.visibility.kept()) {
+            (Some(world), Some(kept)) => Some(world.select(kept)),
+            _ => None,
+        };
+        let means = if self.visibility.kept().is_some() {
+            self.visibility
+                .gather(&self.scratch.means, &mut self.kept_means);
+            &self.kept_means
+        } else {
+            &self.scratch.means
+        };
         let input = FrameInput {
             frame,
             positions: &positions,
-            means: &self.scratch.means,
-            world: world.as_ref(),
+            means,
+            world: kept_world.as_ref().or(world.as_ref()),
         };
         let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
         let (samples, tau, origin) = (self.samples, self.tau, self.origin);
@@ -851,6 +891,36 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             expected: "a positive number of frames per second",
         });
     }
+    if !(o.tsdf_alpha_cut > 0.0 && o.tsdf_alpha_cut <= 1.0) {
+        return Err(PipelineError::BadOption {
+            name: "tsdf-alpha-cut",
+            value: f64::from(o.tsdf_alpha_cut),
+            expected: "a rendered alpha in (0, 1]",
+        });
+    }
+    if !(o.min_contribution >= 0.0 && o.min_contribution < 1.0) {
+        return Err(PipelineError::BadOption {
+            name: "min-contribution",
+            value: f64::from(o.min_contribution),
+            expected: "a blending weight in [0, 1) (0 keeps every Gaussian)",
+        });
+    }
+    if let Some(r) = o.floater_std_ratio
+        && !(r.is_finite() && r >= 0.0)
+    {
+        return Err(PipelineError::BadOption {
+            name: "floater-std-ratio",
+            value: r,
+            expected: "a finite number of standard deviations >= 0",
+        });
+    }
+    if o.floater_neighbors == 0 {
+        return Err(PipelineError::BadOption {
+            name: "floater-neighbors",
+            value: 0.0,
+            expected: "at least one neighbour",
+        });
+    }
     if o.error_colors && config.gt.is_none() {
         return Err(PipelineError::BadCombination {
             problem: "--error-colors colours the meshes by their distance to the ground truth: \
@@ -888,6 +958,47 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
         });
     }
     Ok(())
+}
+
+/// Which Gaussians of `set` the meshers use ([`crate::visibility`]), rendered at the rest pose
+/// of `template` from `render_set` (the set's geometry) when there is one, by the tsdf rig with
+/// at least the default views and resolution (a coarse rig would miss small Gaussians between
+/// its pixel centres).
+fn decide_visibility(
+    render_set: Option<&GaussianSet>,
+    set: &GaussianSet,
+    template: &TriMesh,
+    o: &ExtractOptions,
+    gaussians_path: &Path,
+    template_path: &Path,
+) -> Result<Visibility, PipelineError> {
+    let rule = o.visibility_rule();
+    if rule.min_contribution == 0.0 && rule.floater_std_ratio.is_none() {
+        return Ok(Visibility::all(set.len()));
+    }
+    let geometry;
+    let render_set = match render_set {
+        Some(s) => s,
+        None => {
+            geometry = geometry_only(set);
+            &geometry
+        }
+    };
+    let rest = Deformer::new(template, deform_mode(o.mode))
+        .deform(render_set, template.positions())
+        .map_err(|cause| PipelineError::Gaussians {
+            path: gaussians_path.to_path_buf(),
+            template: template_path.to_path_buf(),
+            cause,
+        })?;
+    let views = o.views.max(DEFAULT_VIEWS);
+    let resolution = o.resolution.max(DEFAULT_RESOLUTION);
+    decide(&rest, template.positions(), views, resolution, &rule).map_err(|cause| {
+        PipelineError::Visibility {
+            path: gaussians_path.to_path_buf(),
+            cause,
+        }
+    })
 }
 
 /// `set` with only the SH degree-0 coefficients and no extra properties: the geometry and

@@ -117,6 +117,7 @@ pub fn render<'py>(
                 )));
             }
         },
+        contribution: false,
     };
     let set = gaussians.to_rust(py)?;
     let camera = &camera.inner;

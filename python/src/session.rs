@@ -36,7 +36,8 @@ use crate::threads;
 /// The other keywords are ``trisplat extract``'s options of the same names (``layout``:
 /// ``"bound"`` or ``"lam"``; ``tsdf_depth``: ``"median"`` or ``"expected"``; ``tsdf_splat_depth``: ``"ray"`` or
 /// ``"mean"``; ``tau`` absolute,
-/// instead of ``tau_fraction``); None keeps their scale-derived defaults. ``strict`` refuses a
+/// instead of ``tau_fraction``; ``floater_std_ratio`` None: no floater rule); None keeps their
+/// scale-derived defaults. ``strict`` refuses a
 /// weights track with channels that drive nothing.
 #[pyclass(module = "trisplat", frozen)]
 pub struct Session {
@@ -146,7 +147,7 @@ fn tsdf_splat_depth(name: &str) -> PyResult<SplatDepthRule> {
 #[pymethods]
 impl Session {
     #[new]
-    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_splat_depth = "ray", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false))]
+    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_splat_depth = "ray", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false, tsdf_alpha_cut = None, min_contribution = None, floater_std_ratio = None, floater_neighbors = None))]
     #[expect(
         clippy::too_many_arguments,
         reason = "the command's options as keywords"
@@ -180,6 +181,10 @@ impl Session {
         rebuild_every: usize,
         tau: Option<f64>,
         strict: bool,
+        tsdf_alpha_cut: Option<f32>,
+        min_contribution: Option<f32>,
+        floater_std_ratio: Option<f64>,
+        floater_neighbors: Option<usize>,
     ) -> PyResult<Self> {
         if gt.is_some() && gt_sequence.is_some() {
             return Err(error::value("give gt or gt_sequence, not both"));
@@ -226,6 +231,10 @@ impl Session {
             alpha_keep_clusters,
             rebuild_every,
             strict,
+            tsdf_alpha_cut: tsdf_alpha_cut.unwrap_or(defaults.tsdf_alpha_cut),
+            min_contribution: min_contribution.unwrap_or(defaults.min_contribution),
+            floater_std_ratio,
+            floater_neighbors: floater_neighbors.unwrap_or(defaults.floater_neighbors),
             tau: tau.unwrap_or(defaults.tau),
             mode: self::mode(mode)?,
             per_triangle: per_triangle.unwrap_or(defaults.per_triangle),
@@ -268,6 +277,16 @@ impl Session {
     #[getter]
     fn unused_channels(&self) -> PyResult<Vec<String>> {
         Ok(self.lock()?.unused_channels().to_vec())
+    }
+
+    /// Which Gaussians the meshers use (decided once on the rest pose, docs/conventions.md
+    /// §6): a dict of ``total``, ``kept``, ``hidden``, ``floaters`` and the rule
+    /// (``min_contribution``, ``floater_std_ratio``, ``floater_neighbors``), as
+    /// ``gaussians_used`` in report.json.
+    #[getter]
+    fn gaussians_used<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let used = self.lock()?.visibility().used;
+        json_to_py(py, &to_json(&used)?)
     }
 
     /// The animation frame indices the session runs, in order.

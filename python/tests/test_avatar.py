@@ -124,6 +124,12 @@ def test_session_of_a_lam_avatar_folder():
         assert m["metrics"]["tau"] == 0.002 and m["metrics"]["tau_fraction"] is None, name
     assert result["methods"]["alpha"]["metrics"]["structure"]["components"] == 1
     assert isinstance(session.unused_channels, list)
+    used = session.gaussians_used  # the mouth's and eyes' inner Gaussians render nothing
+    assert used["hidden"] > 0 and used["floaters"] == 0 and used["floater_std_ratio"] is None
+    assert used["kept"] + used["hidden"] == used["total"] == len(session.gaussians)
+    every = trisplat.Session(lam, animation=str(lam / "expression.json"), methods=["alpha"],
+                             min_contribution=0.0, floater_std_ratio=1.0, tsdf_alpha_cut=0.25)
+    assert every.gaussians_used["hidden"] == 0 and every.gaussians_used["floaters"] > 0
     with pytest.raises(ValueError, match="brings its own"):
         trisplat.Session(lam, gaussians=lam / "offset.ply")
     with pytest.raises(ValueError, match="layout"):

@@ -11,7 +11,7 @@ use trisplat_extract::tsdf::{
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_pipeline::config::{DepthKind, SplatDepthRule};
-use trisplat_pipeline::methods::rendered_depth;
+use trisplat_pipeline::methods::{DepthRules, RENDERED_ALPHA_MIN, rendered_depth};
 use trisplat_splat::ply::read_gaussians;
 
 use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
@@ -38,7 +38,7 @@ Depth maps without any valid pixel give an empty mesh.
 With --gaussians G.ply instead of --depth, the depth maps are rendered from the (world-space) \
 Gaussians first: 3DGS splatting with gsplat's rules, median depth (where the accumulated alpha \
 reaches 1/2; --depth-kind expected: the alpha-weighted mean depth), set to 0 where the rendered \
-alpha is below 0.5.")]
+alpha is below --alpha-cut (0.5).")]
 pub struct TsdfArgs {
     /// Cameras: a 3DGS cameras.json or a NeRF transforms.json (with w and h).
     #[arg(long)]
@@ -75,6 +75,10 @@ pub struct TsdfArgs {
     /// its centre's depth everywhere, as 3DGS).
     #[arg(long, value_enum, default_value_t = SplatDepthRule::default(), requires = "gaussians")]
     pub splat_depth: SplatDepthRule,
+    /// With --gaussians: pixels whose rendered alpha is below A carry no depth (0 < A <= 1).
+    #[arg(long, value_name = "A", default_value_t = RENDERED_ALPHA_MIN, requires = "gaussians",
+        value_parser = parse_alpha_cut)]
+    pub alpha_cut: f32,
     /// Voxel size, truncations, clusters kept.
     #[command(flatten)]
     pub options: TsdfOptions,
@@ -93,7 +97,12 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
         (_, Some(gaussians)) => {
             refuse_to_overwrite(gaussians, &args.output)?;
             spinner.set_message("rendering depth maps");
-            let depths = render_depths(gaussians, &cameras, args.depth_kind, args.splat_depth)?;
+            let rules = DepthRules {
+                kind: args.depth_kind,
+                splat: args.splat_depth,
+                alpha_cut: args.alpha_cut,
+            };
+            let depths = render_depths(gaussians, &cameras, &rules)?;
             spinner.set_message("fusing");
             fuse(&cameras, &depths, None, &args.options).with_context(|| {
                 format!(
@@ -140,20 +149,26 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
     )
 }
 
-/// Depth maps (of `kind`, each splat's depth by `splat`) of world-space Gaussians, zero where
-/// alpha is below [`trisplat_pipeline::methods::RENDERED_ALPHA_MIN`] (the pipeline's tsdf
-/// method renders the same maps).
+/// `--alpha-cut`: a rendered alpha in (0, 1].
+fn parse_alpha_cut(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(a) if a > 0.0 && a <= 1.0 => Ok(a),
+        _ => Err(format!("expected a rendered alpha in (0, 1], got '{s}'")),
+    }
+}
+
+/// Depth maps of world-space Gaussians by `rules` (the pipeline's tsdf method renders the same
+/// maps).
 fn render_depths(
     path: &Path,
     cameras: &[Camera],
-    kind: DepthKind,
-    splat: SplatDepthRule,
+    rules: &DepthRules,
 ) -> anyhow::Result<Vec<DepthImage>> {
     let set = read_gaussians(path)?;
     cameras
         .iter()
         .map(|camera| {
-            rendered_depth(&set, camera, kind, splat)
+            rendered_depth(&set, camera, rules)
                 .with_context(|| format!("{}: camera '{}'", path.display(), camera.name))
         })
         .collect()

@@ -6,6 +6,8 @@
 //! gsplat's per-pixel loop, so the result is the same, and it does not depend on the thread
 //! count. Tile rows run in parallel. Per-pixel sums are `f32`, like gsplat's kernel.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use glam::Vec4;
 use rayon::prelude::*;
 
@@ -142,12 +144,33 @@ fn hi(v: f32, start: u32, n: usize) -> usize {
 pub fn rasterize<K: SplatKernel>(
     screen: &ScreenSplats,
     kernel: &K,
-    (width, height): (u32, u32),
+    size: (u32, u32),
     rules: &CompositeRules,
     outputs: Outputs,
     background: [f32; 3],
     stats: &mut RenderStats,
 ) -> RenderImages {
+    rasterize_with_contribution(
+        screen, kernel, size, rules, outputs, background, false, stats,
+    )
+    .0
+}
+
+/// [`rasterize`], and with `contribution` each screen splat's largest blending weight
+/// `w = α·T` at any pixel of the image (indexed like `screen`; 0 where it was skipped or
+/// hidden everywhere).
+#[must_use]
+#[allow(clippy::too_many_arguments)]
+pub fn rasterize_with_contribution<K: SplatKernel>(
+    screen: &ScreenSplats,
+    kernel: &K,
+    (width, height): (u32, u32),
+    rules: &CompositeRules,
+    outputs: Outputs,
+    background: [f32; 3],
+    contribution: bool,
+    stats: &mut RenderStats,
+) -> (RenderImages, Option<Vec<f32>>) {
     let start = std::time::Instant::now();
     // One global depth sort; the per-splat data the tile loop reads is gathered into that
     // order so each tile walks memory forwards.
@@ -219,8 +242,16 @@ pub fn rasterize<K: SplatKernel>(
             normal,
         })
         .collect();
+    // Largest weight per depth-order position, as the bits of a non-negative f32 (which order
+    // like the floats), raised by every tile the splat touches.
+    let largest: Vec<AtomicU32> = if contribution {
+        (0..screen.len()).map(|_| AtomicU32::new(0)).collect()
+    } else {
+        Vec::new()
+    };
     let ctx = TileContext {
         splats: &sorted,
+        largest: contribution.then_some(largest.as_slice()),
         kernel,
         kernel_index,
         rules,
@@ -245,7 +276,14 @@ pub fn rasterize<K: SplatKernel>(
             }
         });
     stats.composite_s = start.elapsed().as_secs_f64();
-    images
+    let contribution = contribution.then(|| {
+        let mut by_screen = vec![0.0f32; screen.len()];
+        for (&i, w) in order.iter().zip(&largest) {
+            by_screen[i as usize] = f32::from_bits(w.load(Ordering::Relaxed));
+        }
+        by_screen
+    });
+    (images, contribution)
 }
 
 /// What the tile loop reads of one splat besides the kernel's data, in one 32-byte record (one
@@ -273,6 +311,8 @@ struct SortedSplats {
 
 struct TileContext<'a, K> {
     splats: &'a SortedSplats,
+    /// Each depth-order position's largest weight so far (f32 bits), when asked for.
+    largest: Option<&'a [AtomicU32]>,
     kernel: &'a K,
     /// Kernel index of each depth-order position, unless the kernel was reordered.
     kernel_index: Option<&'a [u32]>,
@@ -336,7 +376,8 @@ const LOOKAHEAD: usize = 16;
 
 /// Composites one splat over the `CHUNK` pixels of a row starting at tile index `p0`, given the
 /// kernel's `alpha` (0 where it does not contribute) and `depth` per pixel. Branch-free so it
-/// vectorises. Returns which pixels stopped (bit `k` for pixel `p0 + k`).
+/// vectorises. Returns which pixels stopped (bit `k` for pixel `p0 + k`) and the splat's
+/// blending weight `α·T` at each pixel (0 where it was not accepted).
 #[inline(always)]
 fn composite_chunk<const EXTRA: bool>(
     s: &mut TileState,
@@ -345,10 +386,10 @@ fn composite_chunk<const EXTRA: bool>(
     depth: Vec4,
     g: RowSplat,
     r: RowRules,
-) -> u32 {
+) -> (u32, Vec4) {
     let range = p0..p0 + CHUNK;
     if range.end > TILE_PIXELS {
-        return 0;
+        return (0, Vec4::ZERO);
     }
     let t = Vec4::from_slice(&s.transmittance[range.clone()]);
     let alive = Vec4::from_slice(&s.alive[range.clone()]);
@@ -379,7 +420,7 @@ fn composite_chunk<const EXTRA: bool>(
             (Vec4::from_slice(acc) + w * g.normal[c]).write_to_slice(acc);
         }
     }
-    stop.bitmask()
+    (stop.bitmask(), w)
 }
 
 impl<K: SplatKernel> TileContext<'_, K> {
@@ -461,6 +502,7 @@ impl<K: SplatKernel> TileContext<'_, K> {
             } else {
                 (0, tw, 0, th)
             };
+            let mut largest = Vec4::ZERO;
             let splat = RowSplat {
                 color: packed.color,
                 normal: if o.normal {
@@ -493,14 +535,21 @@ impl<K: SplatKernel> TileContext<'_, K> {
                     let lx = gx0 + j * CHUNK;
                     let px0 = (x_start as usize + lx) as f32 + off;
                     let (alpha, depth) = self.kernel.sample4(kg, py, px0);
-                    let mask = if extra {
+                    let (mask, w) = if extra {
                         composite_chunk::<true>(s, row + lx, alpha, depth, splat, row_rules)
                     } else {
                         composite_chunk::<false>(s, row + lx, alpha, depth, splat, row_rules)
                     };
                     stopped |= mask << lx;
+                    largest = largest.max(w);
                 }
                 remaining = remaining.saturating_sub(stopped.count_ones() as usize);
+            }
+            if let Some(slots) = self.largest {
+                let w = largest.max_element();
+                if w > 0.0 {
+                    slots[g].fetch_max(w.to_bits(), Ordering::Relaxed);
+                }
             }
         }
         // Write the tile into the band.

@@ -26,7 +26,9 @@ use std::time::Instant;
 
 use trisplat_geometry::Camera;
 
-pub use composite::{CompositeRules, MedianRule, RenderStats, rasterize};
+pub use composite::{
+    CompositeRules, MedianRule, RenderStats, rasterize, rasterize_with_contribution,
+};
 pub use grad::{
     BackwardStats, DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads,
     Real, backward, backward_into, render_with_grad,
@@ -77,6 +79,9 @@ pub struct RenderOutput {
     pub images: RenderImages,
     /// Stage timings and counts.
     pub stats: RenderStats,
+    /// With [`RenderOptions::contribution`]: per Gaussian of the set, the largest blending
+    /// weight `w = α·T` it received at any pixel (0 when culled or hidden everywhere).
+    pub contribution: Option<Vec<f32>>,
 }
 
 /// Checks what every mode needs: world-space Gaussians, valid clip planes and background, an
@@ -130,11 +135,20 @@ pub fn render(
                 Rules::Gsplat => CompositeRules::GSPLAT,
                 Rules::Original3dgs => CompositeRules::ORIGINAL_3DGS,
             };
-            Ok(finish(&screen, &kernel, start, size, &rules, options))
+            Ok(finish(
+                set.len(),
+                &screen,
+                &kernel,
+                start,
+                size,
+                &rules,
+                options,
+            ))
         }
         RenderMode::Surfel2d => {
             let (screen, kernel) = surfel::project_surfels(set, camera, options);
             Ok(finish(
+                set.len(),
                 &screen,
                 &kernel,
                 start,
@@ -146,6 +160,7 @@ pub fn render(
         RenderMode::Perspective => {
             let (screen, kernel) = perspective::project_perspective(set, camera, options);
             Ok(finish(
+                set.len(),
                 &screen,
                 &kernel,
                 start,
@@ -157,8 +172,10 @@ pub fn render(
     }
 }
 
-/// The shared sort and composite stages after a mode's projection (started at `start`).
+/// The shared sort and composite stages after a mode's projection (started at `start`) of a
+/// set of `n` Gaussians.
 fn finish<K: SplatKernel>(
+    n: usize,
     screen: &ScreenSplats,
     kernel: &K,
     start: Instant,
@@ -170,14 +187,26 @@ fn finish<K: SplatKernel>(
         project_s: start.elapsed().as_secs_f64(),
         ..RenderStats::default()
     };
-    let images = rasterize(
+    let (images, by_screen) = rasterize_with_contribution(
         screen,
         kernel,
         size,
         rules,
         options.outputs,
         options.background,
+        options.contribution,
         &mut stats,
     );
-    RenderOutput { images, stats }
+    let contribution = by_screen.map(|by_screen| {
+        let mut by_set = vec![0.0; n];
+        for (&id, w) in screen.ids.iter().zip(by_screen) {
+            by_set[id as usize] = w;
+        }
+        by_set
+    });
+    RenderOutput {
+        images,
+        stats,
+        contribution,
+    }
 }

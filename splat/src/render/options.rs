@@ -156,6 +156,10 @@ pub struct RenderOptions {
     pub normal_frame: NormalFrame,
     /// The depth of a 3DGS splat at each pixel (3DGS mode only).
     pub splat_depth: SplatDepth,
+    /// Also return each Gaussian's largest blending weight `α·T` over the image
+    /// ([`super::RenderOutput::contribution`]): what it adds to any pixel, for leaving out
+    /// Gaussians that render nothing.
+    pub contribution: bool,
 }
 
 impl Default for RenderOptions {
@@ -170,6 +174,7 @@ impl Default for RenderOptions {
             far: DEFAULT_FAR,
             normal_frame: NormalFrame::World,
             splat_depth: SplatDepth::Mean,
+            contribution: false,
         }
     }
 }
