@@ -126,8 +126,12 @@ pub fn render(
     options: &RenderOptions,
 ) -> Result<RenderOutput, RenderError> {
     check_inputs(set, camera, options)?;
-    let size = (camera.width, camera.height);
-    let start = Instant::now();
+    let run = Run {
+        n: set.len(),
+        start: Instant::now(),
+        size: (camera.width, camera.height),
+        options,
+    };
     match options.mode {
         RenderMode::Gaussian3d => {
             let (screen, kernel) = project::project_ewa(set, camera, options);
@@ -135,54 +139,48 @@ pub fn render(
                 Rules::Gsplat => CompositeRules::GSPLAT,
                 Rules::Original3dgs => CompositeRules::ORIGINAL_3DGS,
             };
-            Ok(finish(
-                set.len(),
-                &screen,
-                &kernel,
-                start,
-                size,
-                &rules,
-                options,
-            ))
+            Ok(finish(&screen, &kernel, &rules, &run))
         }
         RenderMode::Surfel2d => {
             let (screen, kernel) = surfel::project_surfels(set, camera, options);
-            Ok(finish(
-                set.len(),
-                &screen,
-                &kernel,
-                start,
-                size,
-                &surfel::SURFEL_RULES,
-                options,
-            ))
+            Ok(finish(&screen, &kernel, &surfel::SURFEL_RULES, &run))
         }
         RenderMode::Perspective => {
             let (screen, kernel) = perspective::project_perspective(set, camera, options);
             Ok(finish(
-                set.len(),
                 &screen,
                 &kernel,
-                start,
-                size,
                 &perspective::PERSPECTIVE_RULES,
-                options,
+                &run,
             ))
         }
     }
 }
 
-/// The shared sort and composite stages after a mode's projection (started at `start`) of a
-/// set of `n` Gaussians.
-fn finish<K: SplatKernel>(
+/// One call of [`render`], as its shared stages see it.
+struct Run<'a> {
+    /// Gaussians in the set.
     n: usize,
+    /// When the projection started.
+    start: Instant,
+    /// Image width and height.
+    size: (u32, u32),
+    options: &'a RenderOptions,
+}
+
+/// The shared sort and composite stages after a mode's projection.
+fn finish<K: SplatKernel>(
     screen: &ScreenSplats,
     kernel: &K,
-    start: Instant,
-    size: (u32, u32),
     rules: &CompositeRules,
-    options: &RenderOptions,
+    run: &Run<'_>,
 ) -> RenderOutput {
+    let Run {
+        n,
+        start,
+        size,
+        options,
+    } = *run;
     let mut stats = RenderStats {
         project_s: start.elapsed().as_secs_f64(),
         ..RenderStats::default()
