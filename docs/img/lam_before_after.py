@@ -20,9 +20,9 @@ METHODS = ["tsdf", "delaunay", "alpha"]
 VIEWS = [2, 1]  # of an 8-view orbit at 10° elevation: the front, a three-quarter view
 CROP = (40, 10, 280, 310)
 RUNS = [
-    ("before", "before: every Gaussian, tsdf at mean depth",
+    ("before", "before: every Gaussian, mean depth",
      ["--min-contribution", "0", "--tsdf-splat-depth", "mean"]),
-    ("after", "after: hidden left out, tsdf at ray depth", []),
+    ("after", "after: the defaults", []),
 ]
 
 
@@ -61,7 +61,7 @@ def main():
     for r, (name, title, _) in enumerate(RUNS):
         y0 = label + r * (ch + label)
         used = reports[name]["gaussians_used"]
-        line = f"{title} ({used['kept']:,} of {used['total']:,} Gaussians) —"
+        line = f"{title} (delaunay, alpha: {used['kept']:,} of {used['total']:,} Gaussians) —"
         for m in METHODS:
             mean = reports[name]["methods"][m]["mean"]
             pieces = round(mean["components"])

@@ -342,14 +342,15 @@ pub struct ExtractOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "A",
         default_value_t = crate::methods::RENDERED_ALPHA_MIN))]
     pub tsdf_alpha_cut: f32,
-    /// Every method: leave out the Gaussians whose largest blending weight (alpha x
+    /// Delaunay and alpha: leave out the Gaussians whose largest blending weight (alpha x
     /// transmittance) at any pixel of the tsdf rig's views of the rest pose is below W: they
-    /// change no pixel by that much (the default is one 8-bit step; 0 keeps them all;
+    /// change no pixel by that much, such as those inside the mouth (the default is one 8-bit
+    /// step; 0 keeps them all; tsdf renders every Gaussian in each frame anyway;
     /// docs/conventions.md §6).
     #[cfg_attr(feature = "cli", arg(long, value_name = "W",
         default_value_t = crate::visibility::DEFAULT_MIN_CONTRIBUTION))]
     pub min_contribution: f32,
-    /// Every method: leave out floating Gaussians, Open3D's statistical outliers among the
+    /// Delaunay and alpha: leave out floating Gaussians, Open3D's statistical outliers among the
     /// rest-pose means of the others: mean distance to the K nearest (K = --floater-neighbors)
     /// above the mean of those distances plus R standard deviations. Off unless given: on a
     /// bound avatar it also takes the sparse parts of the surface (docs/conventions.md §6).
@@ -453,7 +454,7 @@ impl std::fmt::Display for OutputTarget {
 }
 
 impl ExtractOptions {
-    /// Which Gaussians the meshers use ([`crate::visibility`]).
+    /// Which Gaussians the point methods (delaunay, alpha) use ([`crate::visibility`]).
     #[must_use]
     pub fn visibility_rule(&self) -> crate::visibility::VisibilityRule {
         crate::visibility::VisibilityRule {

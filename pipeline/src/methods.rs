@@ -1,10 +1,11 @@
 //! The three meshers, each turning one deformed frame into a mesh, and the scale-derived
-//! defaults of their parameters. Each sees only the Gaussians [`crate::visibility`] keeps.
+//! defaults of their parameters. Delaunay and alpha see only the means of the Gaussians
+//! [`crate::visibility`] keeps; tsdf renders every Gaussian of the frame.
 //!
 //! - **tsdf**: a sphere rig of `views` cameras (geometry's `sphere_rig`, 40° field of view)
-//!   around the bounding sphere of the frame (deformed template and Gaussian means), expected
-//!   or median depth ([`DepthKind`]) rendered from the deformed Gaussians (3DGS, gsplat
-//!   rules) and masked where the rendered alpha is below `tsdf_alpha_cut` (default
+//!   around the bounding sphere of the frame (deformed template and every Gaussian's mean),
+//!   expected or median depth ([`DepthKind`]) rendered from the deformed Gaussians (3DGS,
+//!   gsplat rules) and masked where the rendered alpha is below `tsdf_alpha_cut` (default
 //!   [`RENDERED_ALPHA_MIN`]), fused with the extract crate's TSDF at
 //!   `voxel` (default: [`default_voxel`], the Gaussians' mean spacing within template radius
 //!   / 128 ..= / 32), truncation 5 voxels, depth truncation twice the rig's scene radius,
@@ -54,7 +55,7 @@ pub struct FrameInput<'a> {
     pub frame: usize,
     /// Deformed template vertices.
     pub positions: &'a [DVec3],
-    /// Deformed Gaussian means.
+    /// Deformed means of the Gaussians the point methods use ([`crate::visibility`]).
     pub means: &'a [Vec3],
     /// The whole deformed (world-space) Gaussian set; present when the tsdf method runs.
     pub world: Option<&'a GaussianSet>,
@@ -328,7 +329,7 @@ impl TsdfMesher {
                 what: "the tsdf method was given no deformed Gaussian set",
             });
         };
-        let Some((center, radius)) = bounding_sphere(input.positions, input.means) else {
+        let Some((center, radius)) = bounding_sphere(input.positions, world.means()) else {
             return Ok(MethodOutput {
                 mesh: TriMesh::default(),
                 ms: start.elapsed().as_secs_f64() * 1e3,

@@ -703,8 +703,8 @@ pub struct Report {
     pub tau_fraction: Option<f64>,
     /// Scale-derived parameters.
     pub resolved: Resolved,
-    /// Which Gaussians the meshers used ([`crate::visibility`]; absent in reports of older
-    /// versions, which used them all).
+    /// Which Gaussians the point methods (delaunay, alpha) meshed ([`crate::visibility`]);
+    /// absent when neither ran and in reports of older versions, which used them all.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gaussians_used: Option<GaussiansUsed>,
     /// Whether the methods of a frame ran one after another (`--serial-methods`: each
@@ -799,7 +799,7 @@ impl Report {
                 None => "floaters kept".to_owned(),
             };
             v.push(format!(
-                "Gaussians meshed: {} of {}; left out {} hidden (largest weight in the rest \
+                "Gaussians meshed by delaunay and alpha: {} of {}; left out {} hidden (largest weight in the rest \
                  pose's views below {:.4}), {floaters}",
                 u.kept, u.total, u.hidden, u.min_contribution
             ));

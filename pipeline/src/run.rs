@@ -282,7 +282,11 @@ pub fn run(
         tau: o.tau_fraction.is_none().then_some(o.tau),
         tau_fraction: o.tau_fraction,
         resolved,
-        gaussians_used: Some(session.visibility().used),
+        gaussians_used: config
+            .methods
+            .iter()
+            .any(|m| matches!(m, Method::Delaunay | Method::Alpha))
+            .then(|| session.visibility().used),
         serial_methods: control.serial_methods,
         methods: method_reports,
         thumbnails: None,

@@ -119,7 +119,7 @@ pub struct Session {
     engine: Engine,
     rest_means: Vec<Vec3>,
     resolved: Resolved,
-    /// The Gaussians the meshers use.
+    /// The Gaussians the point methods (delaunay, alpha) use.
     visibility: Visibility,
     /// The kept Gaussians' means of the current frame (when some are left out).
     kept_means: Vec<Vec3>,
@@ -315,7 +315,10 @@ impl Session {
             })?;
         let resolved = Resolved::new(o, template, &rest_means)?;
         let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
-        let visibility = if Method::ALL.iter().any(|&m| plan.runs(Stage::Mesh(m))) {
+        let visibility = if [Method::Delaunay, Method::Alpha]
+            .iter()
+            .any(|&m| plan.runs(Stage::Mesh(m)))
+        {
             decide_visibility(
                 render_set.as_ref(),
                 &set,
@@ -459,7 +462,8 @@ impl Session {
         &self.rest_means
     }
 
-    /// Which Gaussians the meshers use, decided once on the rest pose ([`crate::visibility`]).
+    /// Which Gaussians the point methods (delaunay, alpha) use, decided once on the rest pose
+    /// ([`crate::visibility`]).
     #[must_use]
     pub fn visibility(&self) -> &Visibility {
         &self.visibility
@@ -710,10 +714,8 @@ impl Session {
             }
             _ => None,
         };
-        let kept_world = match (&world, self.visibility.kept()) {
-            (Some(world), Some(kept)) => Some(world.select(kept)),
-            _ => None,
-        };
+        // The point methods mesh the kept means; the tsdf renders every Gaussian, so what a
+        // frame exposes (an opening mouth) is in its depth maps.
         let means = if self.visibility.kept().is_some() {
             self.visibility
                 .gather(&self.scratch.means, &mut self.kept_means);
@@ -725,7 +727,7 @@ impl Session {
             frame,
             positions: &positions,
             means,
-            world: kept_world.as_ref().or(world.as_ref()),
+            world: world.as_ref(),
         };
         let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
         let (samples, tau, origin) = (self.samples, self.tau, self.origin);
@@ -960,7 +962,7 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
     Ok(())
 }
 
-/// Which Gaussians of `set` the meshers use ([`crate::visibility`]), rendered at the rest pose
+/// Which Gaussians of `set` the point methods use ([`crate::visibility`]), rendered at the rest pose
 /// of `template` from `render_set` (the set's geometry) when there is one, by the tsdf rig with
 /// at least the default views and resolution (a coarse rig would miss small Gaussians between
 /// its pixel centres).

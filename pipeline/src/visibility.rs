@@ -1,8 +1,11 @@
-//! Which Gaussians the meshers use: the ones that render (docs/conventions.md §6, "Which
-//! Gaussians extraction uses").
+//! Which Gaussians the point methods (delaunay, alpha) mesh: the ones that render
+//! (docs/conventions.md §6, "Which Gaussians extraction uses"). The tsdf method needs no such
+//! rule: it renders every Gaussian of each frame, so its depth maps hold what that frame
+//! shows (a mouth that opens shows its inside) and nothing that renders nothing.
 //!
 //! Decided once per run, on the rest pose, and applied to every frame (the same Gaussians in
-//! every frame, so the incremental Delaunay mesher keeps one point set):
+//! every frame, so the incremental Delaunay mesher keeps one point set). A Gaussian hidden at
+//! rest stays out when a frame exposes it (`min_contribution = 0` keeps it):
 //!
 //! 1. **hidden**: the rest-pose Gaussians are rendered (3DGS, gsplat's rules) from the tsdf
 //!    method's rig: `views` cameras of `resolution`² pixels on a Fibonacci sphere around the
@@ -18,9 +21,9 @@
 //!    its `neighbors` nearest means (itself included) exceeds the mean of those distances
 //!    plus `std_ratio` standard deviations is left out. Off by default: the rule knows
 //!    density, not surfaces, so on a bound avatar it also takes the sparse parts of the skin
-//!    (CesiumMan at 3 standard deviations: 502 of 18,688 Gaussians, the TSDF's Chamfer
-//!    distance 3.1 → 89 mm; LAM: 219 of 20,018, hair strands among them, every method's
-//!    Chamfer distance worse).
+//!    (CesiumMan at 3 standard deviations: 502 of 18,688 Gaussians, alpha's Chamfer distance
+//!    3.4 → 7.8 mm; LAM: 219 of 20,018, hair strands among them, both point methods' Chamfer
+//!    distances worse).
 //!
 //! `min_contribution = 0` without a floater rule keeps every Gaussian.
 
@@ -39,7 +42,7 @@ pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
 /// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
 pub const DEFAULT_FLOATER_NEIGHBORS: usize = 20;
 
-/// The rule deciding which Gaussians the meshers use (see the module documentation).
+/// The rule deciding which Gaussians the point methods use (see the module documentation).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VisibilityRule {
     /// Gaussians whose largest blending weight over the rig's views is below this are hidden
@@ -70,8 +73,8 @@ impl VisibilityRule {
     };
 }
 
-/// How many Gaussians the meshers use, why the others are left out, and the rule (in the
-/// report).
+/// How many Gaussians the point methods use, why the others are left out, and the rule (in
+/// the report).
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GaussiansUsed {
     /// The rule's contribution threshold (0: no Gaussian hidden).
@@ -82,7 +85,7 @@ pub struct GaussiansUsed {
     pub floater_neighbors: usize,
     /// Gaussians in the set.
     pub total: usize,
-    /// Gaussians the meshers use.
+    /// Gaussians the point methods use.
     pub kept: usize,
     /// Left out as hidden (below the contribution threshold in every view).
     pub hidden: usize,
@@ -90,7 +93,7 @@ pub struct GaussiansUsed {
     pub floaters: usize,
 }
 
-/// Which Gaussians the meshers use.
+/// Which Gaussians the point methods use.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Visibility {
     /// The counts.
@@ -159,7 +162,7 @@ pub enum VisibilityError {
 }
 
 /// Decides which of the rest-pose Gaussians `rest` (world space, the rest template at
-/// `rest_positions`) the meshers use, with the tsdf rig of `views` cameras of `resolution`²
+/// `rest_positions`) the point methods use, with the tsdf rig of `views` cameras of `resolution`²
 /// pixels (see the module documentation).
 ///
 /// # Errors

@@ -1,6 +1,7 @@
 //! Which Gaussians the meshers use (`--min-contribution`, `--floater-std-ratio`,
 //! `--tsdf-alpha-cut`): on the LAM fixture, the Gaussians that render nothing from outside
-//! (inside the mouth and eyes) are left out of every method, and the options are checked.
+//! (inside the mouth and eyes) are left out of delaunay and alpha, tsdf renders them all, and
+//! the options are checked.
 
 use std::path::PathBuf;
 
@@ -31,7 +32,7 @@ fn config(methods: Vec<Method>, options: ExtractOptions) -> ExtractConfig {
 }
 
 #[test]
-fn hidden_gaussians_are_left_out_of_every_method() {
+fn hidden_gaussians_are_left_out_of_the_point_methods() {
     let mut session = Session::open(&config(
         vec![Method::Alpha, Method::Delaunay],
         ExtractOptions::default(),
@@ -90,6 +91,33 @@ fn zero_keeps_every_gaussian_and_the_floater_rule_is_opt_in() {
     let used = session.visibility().used;
     assert!(used.floaters > 0, "{used:?}");
     assert_eq!(used.kept + used.hidden + used.floaters, used.total);
+}
+
+#[test]
+fn the_tsdf_renders_every_gaussian() {
+    let mesh = |min_contribution: f32, floater_std_ratio: Option<f64>| {
+        let mut session = Session::open(&config(
+            vec![Method::Tsdf, Method::Alpha],
+            ExtractOptions {
+                min_contribution,
+                floater_std_ratio,
+                views: 8,
+                resolution: 96,
+                ..ExtractOptions::default()
+            },
+        ))
+        .expect("open");
+        let hidden = session.visibility().used.hidden;
+        let result = session.frame(1).expect("frame 1");
+        (hidden, result.methods[0].output.mesh.clone())
+    };
+    let ((hidden, with_rule), (_, without)) = (mesh(1.0 / 255.0, None), mesh(0.0, None));
+    assert!(hidden > 0);
+    assert_eq!(with_rule.positions(), without.positions());
+    assert_eq!(with_rule.triangles(), without.triangles());
+    // Floaters lie outside the others: leaving them out of the points moves no camera.
+    let (_, floaters_out) = mesh(1.0 / 255.0, Some(1.0));
+    assert_eq!(floaters_out.positions(), without.positions());
 }
 
 #[test]
