@@ -214,7 +214,7 @@ class Session:
     def unused_channels(self) -> List[str]: ...
     @property
     def gaussians_used(self) -> Dict[str, Any]:
-        """``total``, ``kept``, ``hidden``, ``floaters`` and the rule, as in report.json."""
+        """``total``, ``kept``, ``hidden``, ``floaters``, ``poses`` and the rule, as in report.json."""
     @property
     def frames(self) -> List[int]: ...
     @property

@@ -343,10 +343,10 @@ pub struct ExtractOptions {
         default_value_t = crate::methods::RENDERED_ALPHA_MIN))]
     pub tsdf_alpha_cut: f32,
     /// Delaunay and alpha: leave out the Gaussians whose largest blending weight (alpha x
-    /// transmittance) at any pixel of the tsdf rig's views of the rest pose is below W: they
-    /// change no pixel by that much, such as those inside the mouth (the default is one 8-bit
-    /// step; 0 keeps them all; tsdf renders every Gaussian in each frame anyway;
-    /// docs/conventions.md §6).
+    /// transmittance) at any pixel of the tsdf rig's views of the rest pose and of 4 frames
+    /// spread over the run is below W: they change no pixel by that much, such as those
+    /// inside the closed mouth (the default is one 8-bit step; 0 keeps them all; tsdf renders
+    /// every Gaussian in each frame anyway; docs/conventions.md §6).
     #[cfg_attr(feature = "cli", arg(long, value_name = "W",
         default_value_t = crate::visibility::DEFAULT_MIN_CONTRIBUTION))]
     pub min_contribution: f32,

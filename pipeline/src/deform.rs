@@ -102,6 +102,15 @@ pub struct EngineInputs<'a> {
 }
 
 impl Engine {
+    /// Forgets the frames deformed so far: the next frame deformed starts as the first of a
+    /// run (after frames deformed out of order for another purpose, such as sampling poses).
+    pub fn restart(&mut self) {
+        if let Self::Frames(e) = self {
+            e.hold = FrameHold::new();
+            e.last = None;
+        }
+    }
+
     /// The engine of `inputs.mode` for `set` on the welded template; `lbs` checks the stored
     /// template against the animation's skinned rest pose and skins each welded vertex with
     /// its first copy.

@@ -799,9 +799,9 @@ impl Report {
                 None => "floaters kept".to_owned(),
             };
             v.push(format!(
-                "Gaussians meshed by delaunay and alpha: {} of {}; left out {} hidden (largest weight in the rest \
-                 pose's views below {:.4}), {floaters}",
-                u.kept, u.total, u.hidden, u.min_contribution
+                "Gaussians meshed by delaunay and alpha: {} of {}; left out {} hidden (largest weight \
+                 in the views of {} poses below {:.4}), {floaters}",
+                u.kept, u.total, u.hidden, u.poses, u.min_contribution
             ));
         }
         v.push(format!(

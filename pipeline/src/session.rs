@@ -47,7 +47,7 @@ use crate::input::{
 use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
 use crate::plan::{Plan, Stage};
 use crate::report::{FrameMetrics, GtSamples, measure_with};
-use crate::visibility::{Visibility, decide};
+use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
@@ -315,33 +315,6 @@ impl Session {
             })?;
         let resolved = Resolved::new(o, template, &rest_means)?;
         let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
-        let visibility = if [Method::Delaunay, Method::Alpha]
-            .iter()
-            .any(|&m| plan.runs(Stage::Mesh(m)))
-        {
-            decide_visibility(
-                render_set.as_ref(),
-                &set,
-                template,
-                o,
-                &gaussians_path,
-                &config.template,
-            )?
-        } else {
-            Visibility::all(set.len())
-        };
-        let mut kept_rest_means = Vec::new();
-        visibility.gather(&rest_means, &mut kept_rest_means);
-        let mut meshers = Vec::new();
-        for m in Method::ALL {
-            if plan.runs(Stage::Mesh(m)) {
-                meshers.push((
-                    m,
-                    Mesher::new(m, o, &resolved, template, &kept_rest_means, frames.start)
-                        .map_err(|e| e.on_vertices_of(&config.template.display().to_string()))?,
-                ));
-            }
-        }
         let gaussian_gt_triangles = match (&config.gt, plan.runs(Stage::Metrics)) {
             (Some(GroundTruth::Gaussians), true) => {
                 if !matches!(source, GaussianSource::Lam(_)) {
@@ -366,7 +339,7 @@ impl Session {
         input_files.push(config.template.clone());
         input_files.extend(config.gaussians.clone());
         input_files.extend(options.targets.clone());
-        Ok(Self {
+        let mut session = Self {
             plan,
             template_path: config.template.clone(),
             label,
@@ -381,9 +354,9 @@ impl Session {
             engine,
             rest_means,
             resolved,
-            visibility,
+            visibility: Visibility::all(0),
             kept_means: Vec::new(),
-            meshers,
+            meshers: Vec::new(),
             gt: config.gt.clone(),
             static_gt,
             gt_files,
@@ -396,6 +369,86 @@ impl Session {
             scratch: WorldGeometry::default(),
             executed,
             serial_methods: false,
+        };
+        session.visibility = session.decide_visibility(o, &gaussians_path)?;
+        let mut kept_rest_means = Vec::new();
+        session
+            .visibility
+            .gather(&session.rest_means, &mut kept_rest_means);
+        for m in Method::ALL {
+            if session.plan.runs(Stage::Mesh(m)) {
+                let mesher = Mesher::new(
+                    m,
+                    o,
+                    &session.resolved,
+                    session.template(),
+                    &kept_rest_means,
+                    session.frames.start,
+                )
+                .map_err(|e| e.on_vertices_of(&config.template.display().to_string()))?;
+                session.meshers.push((m, mesher));
+            }
+        }
+        Ok(session)
+    }
+
+    /// Which Gaussians the point methods use ([`crate::visibility`]): the Gaussians' geometry
+    /// rendered at the rest pose and at up to [`VISIBILITY_FRAMES`] frames spread over the run,
+    /// by the tsdf rig with at least the default views and resolution (a coarse rig would miss
+    /// small Gaussians between its pixel centres). A sampled frame that cannot be deformed is
+    /// skipped (the run reports it when it gets there).
+    fn decide_visibility(
+        &mut self,
+        o: &ExtractOptions,
+        gaussians_path: &Path,
+    ) -> Result<Visibility, PipelineError> {
+        let rule = o.visibility_rule();
+        let point_methods = [Method::Delaunay, Method::Alpha]
+            .iter()
+            .any(|&m| self.plan.runs(Stage::Mesh(m)));
+        if !point_methods || (rule.min_contribution == 0.0 && rule.floater_std_ratio.is_none()) {
+            return Ok(Visibility::all(self.set.len()));
+        }
+        let geometry = self
+            .render_set
+            .clone()
+            .unwrap_or_else(|| geometry_only(&self.set));
+        let template = self.template();
+        let rest_positions = template.positions().to_vec();
+        let rest = Deformer::new(template, deform_mode(o.mode))
+            .deform(&geometry, &rest_positions)
+            .map_err(|cause| PipelineError::Gaussians {
+                path: gaussians_path.to_path_buf(),
+                template: self.template_path.clone(),
+                cause,
+            })?;
+        let mut posed = Vec::new();
+        for frame in sample_frames(self.frames.clone(), VISIBILITY_FRAMES) {
+            let Ok(positions) = self.positions(frame) else {
+                continue;
+            };
+            if self.ready_engine(frame, &positions).is_err() {
+                continue;
+            }
+            if let Ok((world, _)) =
+                self.engine
+                    .deform(&self.animation, &geometry, &positions, frame, &self.label)
+            {
+                posed.push((world, positions));
+            }
+        }
+        // The run's first frame starts the degenerate-triangle hold as if nothing came before.
+        self.engine.restart();
+        let mut poses = vec![Pose {
+            set: &rest,
+            positions: &rest_positions,
+        }];
+        poses.extend(posed.iter().map(|(set, positions)| Pose { set, positions }));
+        let views = o.views.max(DEFAULT_VIEWS);
+        let resolution = o.resolution.max(DEFAULT_RESOLUTION);
+        decide(&poses, views, resolution, &rule).map_err(|cause| PipelineError::Visibility {
+            path: gaussians_path.to_path_buf(),
+            cause,
         })
     }
 
@@ -462,8 +515,8 @@ impl Session {
         &self.rest_means
     }
 
-    /// Which Gaussians the point methods (delaunay, alpha) use, decided once on the rest pose
-    /// ([`crate::visibility`]).
+    /// Which Gaussians the point methods (delaunay, alpha) use, decided once when the session
+    /// opened, from the rest pose and frames sampled over the run ([`crate::visibility`]).
     #[must_use]
     pub fn visibility(&self) -> &Visibility {
         &self.visibility
@@ -962,45 +1015,16 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
     Ok(())
 }
 
-/// Which Gaussians of `set` the point methods use ([`crate::visibility`]), rendered at the rest pose
-/// of `template` from `render_set` (the set's geometry) when there is one, by the tsdf rig with
-/// at least the default views and resolution (a coarse rig would miss small Gaussians between
-/// its pixel centres).
-fn decide_visibility(
-    render_set: Option<&GaussianSet>,
-    set: &GaussianSet,
-    template: &TriMesh,
-    o: &ExtractOptions,
-    gaussians_path: &Path,
-    template_path: &Path,
-) -> Result<Visibility, PipelineError> {
-    let rule = o.visibility_rule();
-    if rule.min_contribution == 0.0 && rule.floater_std_ratio.is_none() {
-        return Ok(Visibility::all(set.len()));
+/// Up to `count` frames of `frames`, evenly spaced from its first to its last (all of them
+/// when it has no more).
+fn sample_frames(frames: Range<usize>, count: usize) -> Vec<usize> {
+    let n = frames.len();
+    if n <= count {
+        return frames.collect();
     }
-    let geometry;
-    let render_set = match render_set {
-        Some(s) => s,
-        None => {
-            geometry = geometry_only(set);
-            &geometry
-        }
-    };
-    let rest = Deformer::new(template, deform_mode(o.mode))
-        .deform(render_set, template.positions())
-        .map_err(|cause| PipelineError::Gaussians {
-            path: gaussians_path.to_path_buf(),
-            template: template_path.to_path_buf(),
-            cause,
-        })?;
-    let views = o.views.max(DEFAULT_VIEWS);
-    let resolution = o.resolution.max(DEFAULT_RESOLUTION);
-    decide(&rest, template.positions(), views, resolution, &rule).map_err(|cause| {
-        PipelineError::Visibility {
-            path: gaussians_path.to_path_buf(),
-            cause,
-        }
-    })
+    (0..count)
+        .map(|i| frames.start + i * (n - 1) / (count - 1).max(1))
+        .collect()
 }
 
 /// `set` with only the SH degree-0 coefficients and no extra properties: the geometry and

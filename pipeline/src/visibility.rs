@@ -3,18 +3,19 @@
 //! rule: it renders every Gaussian of each frame, so its depth maps hold what that frame
 //! shows (a mouth that opens shows its inside) and nothing that renders nothing.
 //!
-//! Decided once per run, on the rest pose, and applied to every frame (the same Gaussians in
-//! every frame, so the incremental Delaunay mesher keeps one point set). A Gaussian hidden at
-//! rest stays out when a frame exposes it (`min_contribution = 0` keeps it):
+//! Decided once per run and applied to every frame (the same Gaussians in every frame, so the
+//! incremental Delaunay mesher keeps one point set), from the rest pose and frames sampled
+//! over the run ([`VISIBILITY_FRAMES`] of them), so that what one of them exposes (the
+//! inside of an opening mouth) is kept:
 //!
-//! 1. **hidden**: the rest-pose Gaussians are rendered (3DGS, gsplat's rules) from the tsdf
+//! 1. **hidden**: the Gaussians of each pose are rendered (3DGS, gsplat's rules) from the tsdf
 //!    method's rig: `views` cameras of `resolution`² pixels on a Fibonacci sphere around the
-//!    bounding sphere of the rest template and means (the session uses at least 24 views of
-//!    256²). A Gaussian whose largest blending
-//!    weight `w = α·T` at any pixel of any view is below `min_contribution` is left out: it
-//!    changes no pixel of any view by that much. The default, 1/255, is one step of an 8-bit
-//!    image. Interior Gaussians (inside the mouth, behind the eyes, under the skin) and nearly
-//!    transparent ones fall here.
+//!    bounding sphere of the pose's template and means (the session uses at least 24 views of
+//!    256²). A Gaussian whose largest blending weight `w = α·T` at any pixel of any view of
+//!    any pose is below `min_contribution` is left out: it changes no pixel of those views by
+//!    that much. The default, 1/255, is one step of an 8-bit image. Interior Gaussians (inside
+//!    the closed mouth, behind the eyes, under the skin) and nearly transparent ones fall
+//!    here.
 //! 2. **floaters** (only when `floater_std_ratio` is given): among the others, Open3D's
 //!    statistical outlier rule on the rest-pose means (`remove_statistical_outlier(neighbors,
 //!    std_ratio)`, geometry's [`statistical_outliers`]): a Gaussian whose mean distance to
@@ -39,6 +40,9 @@ use crate::methods::bounding_sphere;
 
 /// Default [`VisibilityRule::min_contribution`]: one step of an 8-bit image.
 pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
+/// Frames of a run, besides the rest pose, that [`decide`] renders (evenly spaced over the
+/// run; every frame of a shorter run).
+pub const VISIBILITY_FRAMES: usize = 4;
 /// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
 pub const DEFAULT_FLOATER_NEIGHBORS: usize = 20;
 
@@ -91,6 +95,9 @@ pub struct GaussiansUsed {
     pub hidden: usize,
     /// Left out as floaters (statistical outliers among the rest).
     pub floaters: usize,
+    /// Poses rendered to decide: the rest pose and sampled frames of the run (0: not decided).
+    #[serde(default)]
+    pub poses: usize,
 }
 
 /// Which Gaussians the point methods use.
@@ -161,24 +168,41 @@ pub enum VisibilityError {
     Floaters(#[from] trisplat_geometry::outliers::OutlierError),
 }
 
-/// Decides which of the rest-pose Gaussians `rest` (world space, the rest template at
-/// `rest_positions`) the point methods use, with the tsdf rig of `views` cameras of `resolution`²
-/// pixels (see the module documentation).
+/// One pose of the Gaussians for [`decide`]: the world-space set and the template's positions
+/// in that pose.
+#[derive(Clone, Copy, Debug)]
+pub struct Pose<'a> {
+    /// The Gaussians, world space.
+    pub set: &'a GaussianSet,
+    /// The template's vertices (only the rig's bounding sphere uses them).
+    pub positions: &'a [DVec3],
+}
+
+/// Decides which Gaussians the point methods use from `poses` (the same Gaussians in each;
+/// the first is the rest pose), each rendered from the tsdf rig of `views` cameras of
+/// `resolution`² pixels around it: a Gaussian is hidden when its largest weight in every
+/// view of every pose is below the threshold, and the floater rule runs on the first pose's
+/// means (see the module documentation).
 ///
 /// # Errors
 /// [`VisibilityError`]: only for inputs the session has not checked (an unplaceable rig).
 pub fn decide(
-    rest: &GaussianSet,
-    rest_positions: &[DVec3],
+    poses: &[Pose<'_>],
     views: usize,
     resolution: u32,
     rule: &VisibilityRule,
 ) -> Result<Visibility, VisibilityError> {
-    let n = rest.len();
+    let Some(first) = poses.first() else {
+        return Ok(Visibility::all(0));
+    };
+    let n = first.set.len();
     let mut keep = vec![true; n];
     let mut hidden = 0;
     if rule.min_contribution > 0.0 && n > 0 {
-        let largest = largest_weights(rest, rest_positions, views, resolution)?;
+        let mut largest = vec![0.0f32; n];
+        for pose in poses.iter().filter(|p| p.set.len() == n) {
+            raise_largest_weights(pose, views, resolution, &mut largest)?;
+        }
         for (k, w) in keep.iter_mut().zip(&largest) {
             if *w < rule.min_contribution {
                 *k = false;
@@ -189,7 +213,7 @@ pub fn decide(
     let mut floaters = 0;
     if let Some(std_ratio) = rule.floater_std_ratio {
         let candidates: Vec<usize> = (0..n).filter(|&i| keep[i]).collect();
-        let means: Vec<Vec3> = candidates.iter().map(|&i| rest.means()[i]).collect();
+        let means: Vec<Vec3> = candidates.iter().map(|&i| first.set.means()[i]).collect();
         let outliers = statistical_outliers(&means, rule.floater_neighbors, std_ratio)?;
         for (&i, &out) in candidates.iter().zip(&outliers) {
             if out {
@@ -206,22 +230,22 @@ pub fn decide(
         kept: n - hidden - floaters,
         hidden,
         floaters,
+        poses: poses.len(),
     };
     let kept = (used.kept < n).then(|| (0..n).filter(|&i| keep[i]).collect());
     Ok(Visibility { used, kept })
 }
 
-/// Each Gaussian's largest blending weight over the rig's views (views rendered in parallel
-/// two at a time would double the peak memory for nothing: each render is parallel inside).
-fn largest_weights(
-    rest: &GaussianSet,
-    rest_positions: &[DVec3],
+/// Raises `largest` to each Gaussian's largest blending weight over the rig's views of `pose`
+/// (the views one after another: each render is parallel inside).
+fn raise_largest_weights(
+    pose: &Pose<'_>,
     views: usize,
     resolution: u32,
-) -> Result<Vec<f32>, VisibilityError> {
-    let mut largest = vec![0.0f32; rest.len()];
-    let Some((center, radius)) = bounding_sphere(rest_positions, rest.means()) else {
-        return Ok(largest);
+    largest: &mut [f32],
+) -> Result<(), VisibilityError> {
+    let Some((center, radius)) = bounding_sphere(pose.positions, pose.set.means()) else {
+        return Ok(());
     };
     let cameras = sphere_rig(
         center,
@@ -239,7 +263,7 @@ fn largest_weights(
         ..RenderOptions::default()
     };
     for camera in &cameras {
-        let out = render(rest, camera, &options).map_err(|cause| VisibilityError::Render {
+        let out = render(pose.set, camera, &options).map_err(|cause| VisibilityError::Render {
             camera: camera.name.clone(),
             cause,
         })?;
@@ -250,7 +274,7 @@ fn largest_weights(
                 .for_each(|(l, &w)| *l = l.max(w));
         }
     }
-    Ok(largest)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -300,6 +324,25 @@ mod tests {
         .expect("valid set")
     }
 
+    fn pose<'a>(set: &'a GaussianSet, positions: &'a [DVec3]) -> Pose<'a> {
+        Pose { set, positions }
+    }
+
+    #[test]
+    fn what_one_pose_shows_is_kept() {
+        let rest = shell_with_core_and_floater(1000);
+        let mut parts = rest.clone().into_parts();
+        // In the second pose the core has come out of the shell.
+        parts.means[1000] = Vec3::new(0.0, 0.0, 1.5);
+        let out = GaussianSet::try_new(parts).expect("valid");
+        let rule = VisibilityRule::default();
+        let only_rest = decide(&[pose(&rest, &[])], 24, 128, &rule).expect("decides");
+        assert_eq!(only_rest.used.hidden, 1);
+        let both = decide(&[pose(&rest, &[]), pose(&out, &[])], 24, 128, &rule).expect("decides");
+        assert_eq!((both.used.hidden, both.used.poses), (0, 2));
+        assert!(both.kept().is_none());
+    }
+
     #[test]
     fn the_core_is_hidden_and_the_floater_is_left_out() {
         let set = shell_with_core_and_floater(2000);
@@ -308,7 +351,7 @@ mod tests {
             floater_std_ratio: Some(3.0),
             ..VisibilityRule::default()
         };
-        let v = decide(&set, &positions, 24, 128, &rule).expect("decides");
+        let v = decide(&[pose(&set, &positions)], 24, 128, &rule).expect("decides");
         let kept = v.kept().expect("some left out");
         assert!(!kept.contains(&2000), "the core is kept");
         assert!(!kept.contains(&2001), "the floater is kept");
@@ -324,7 +367,7 @@ mod tests {
     #[test]
     fn keep_all_keeps_all() {
         let set = shell_with_core_and_floater(500);
-        let v = decide(&set, &[], 24, 64, &VisibilityRule::KEEP_ALL).expect("decides");
+        let v = decide(&[pose(&set, &[])], 24, 64, &VisibilityRule::KEEP_ALL).expect("decides");
         assert_eq!(v.kept(), None);
         assert_eq!((v.used.kept, v.used.total), (502, 502));
         let mut means = Vec::new();
@@ -338,7 +381,7 @@ mod tests {
         // Opacity 1/1000: no pixel moves by 1/255.
         parts.opacity_logits[7] = logit(1e-3);
         let set = GaussianSet::try_new(parts).expect("valid");
-        let v = decide(&set, &[], 24, 64, &VisibilityRule::default()).expect("decides");
+        let v = decide(&[pose(&set, &[])], 24, 64, &VisibilityRule::default()).expect("decides");
         let kept = v.kept().expect("some hidden");
         assert!(!kept.contains(&7) && !kept.contains(&500));
         assert_eq!(v.used.hidden, 2);
@@ -347,7 +390,7 @@ mod tests {
     #[test]
     fn an_empty_set() {
         let set = shell_with_core_and_floater(10).select(&[]);
-        let v = decide(&set, &[], 24, 64, &VisibilityRule::default()).expect("decides");
+        let v = decide(&[pose(&set, &[])], 24, 64, &VisibilityRule::default()).expect("decides");
         assert_eq!((v.used.total, v.used.kept), (0, 0));
     }
 }

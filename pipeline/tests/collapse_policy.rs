@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use trisplat_pipeline::{ExtractConfig, ExtractOptions, Mode, Session};
+use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Mode, Session};
 use trisplat_splat::GaussianSet;
 
 /// Two triangles sharing the edge 1-2; vertex 0 belongs to triangle 0 only.
@@ -99,6 +99,16 @@ fn a_collapsed_triangle_keeps_its_last_valid_frame_wherever_the_run_starts() {
                 Session::open(&config(dir.path(), &format!("{start}..6"), mode)).expect("open");
             let part = worlds(&mut shard, start..6);
             assert_eq!(&part[..], &all[start..], "{mode:?} from frame {start}");
+        }
+        // A session that renders sampled frames when it opens (to decide which Gaussians
+        // the point methods use) deforms every frame of its run as one that did not.
+        for (start, frames) in [(0, "0..6"), (2, "2..6")] {
+            let mut c = config(dir.path(), frames, mode);
+            c.methods = vec![Method::Alpha];
+            let mut sampled = Session::open(&c).expect("open");
+            assert_eq!(sampled.visibility().used.poses, 5, "{mode:?} {frames}");
+            let part = worlds(&mut sampled, start..6);
+            assert_eq!(&part[..], &all[start..], "{mode:?} {frames} after sampling");
         }
         // Frames deformed out of order look the history up again.
         let mut jumping = Session::open(&config(dir.path(), "0..6", mode)).expect("open");

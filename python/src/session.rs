@@ -279,10 +279,10 @@ impl Session {
         Ok(self.lock()?.unused_channels().to_vec())
     }
 
-    /// Which Gaussians the meshers use (decided once on the rest pose, docs/conventions.md
-    /// §6): a dict of ``total``, ``kept``, ``hidden``, ``floaters`` and the rule
-    /// (``min_contribution``, ``floater_std_ratio``, ``floater_neighbors``), as
-    /// ``gaussians_used`` in report.json.
+    /// Which Gaussians delaunay and alpha mesh (decided when the session opened, from the
+    /// rest pose and frames sampled over the run, docs/conventions.md §6): a dict of ``total``,
+    /// ``kept``, ``hidden``, ``floaters``, ``poses`` and the rule (``min_contribution``,
+    /// ``floater_std_ratio``, ``floater_neighbors``), as ``gaussians_used`` in report.json.
     #[getter]
     fn gaussians_used<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let used = self.lock()?.visibility().used;
