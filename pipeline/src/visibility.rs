@@ -40,8 +40,8 @@ use crate::methods::bounding_sphere;
 
 /// Default [`VisibilityRule::min_contribution`]: one step of an 8-bit image.
 pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
-/// Frames of a run, besides the rest pose, that [`decide`] renders (evenly spaced over the
-/// run; every frame of a shorter run).
+/// Frames of a run, besides the rest pose, whose poses the session gives [`decide`] (evenly
+/// spaced over the run; every frame of a shorter run).
 pub const VISIBILITY_FRAMES: usize = 4;
 /// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
 pub const DEFAULT_FLOATER_NEIGHBORS: usize = 20;
@@ -136,15 +136,6 @@ impl Visibility {
         match &self.kept {
             Some(kept) => out.extend(kept.iter().filter_map(|&i| values.get(i).copied())),
             None => out.extend_from_slice(values),
-        }
-    }
-
-    /// The kept Gaussians of `set` (`set` itself, cloned, when every one is kept).
-    #[must_use]
-    pub fn select(&self, set: &GaussianSet) -> GaussianSet {
-        match &self.kept {
-            Some(kept) => set.select(kept),
-            None => set.clone(),
         }
     }
 }
@@ -361,7 +352,6 @@ mod tests {
         let mut means = Vec::new();
         v.gather(set.means(), &mut means);
         assert_eq!(means.len(), 2000);
-        assert_eq!(v.select(&set).len(), 2000);
     }
 
     #[test]
