@@ -103,6 +103,40 @@ fn fuse_rendered_gaussians() {
     ]);
     let mesh = read_mesh(&fused).expect("fused mesh");
     assert!(mesh.positions().iter().all(|p| p.is_finite()));
+
+    // `--alpha-cut`: a stricter cut keeps fewer pixels' depth, so another mesh; values outside
+    // (0, 1] are refused before anything is written.
+    let strict = dir.join("strict.ply");
+    let tsdf = |cut: &str, out: &std::path::Path| {
+        run(&[
+            "tsdf",
+            "--cameras",
+            s(&cams),
+            "--gaussians",
+            s(&gaussians),
+            "--alpha-cut",
+            cut,
+            "-o",
+            s(out),
+        ])
+    };
+    assert!(tsdf("0.95", &strict).status.success());
+    let strict_mesh = read_mesh(&strict).expect("strict mesh");
+    assert_ne!(strict_mesh.positions(), mesh.positions());
+    for bad in ["0", "1.5", "nan", "inf"] {
+        let refused = dir.join(format!("refused_{bad}.ply"));
+        let out = tsdf(bad, &refused);
+        assert_eq!(out.status.code(), Some(2), "--alpha-cut {bad}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("alpha"),
+            "--alpha-cut {bad}"
+        );
+        assert!(
+            !refused.exists(),
+            "--alpha-cut {bad} wrote {}",
+            refused.display()
+        );
+    }
 }
 
 #[test]

@@ -406,12 +406,15 @@ impl Session {
         let point_methods = [Method::Delaunay, Method::Alpha]
             .iter()
             .any(|&m| self.plan.runs(Stage::Mesh(m)));
-        if !point_methods || (rule.min_contribution == 0.0 && rule.floater_std_ratio.is_none()) {
+        if !point_methods || rule.keeps_all() {
             return Ok(Visibility::all(self.set.len()));
         }
+        // Moved out of the session while its frames are deformed, and back at the end (an
+        // error ends the opening session anyway).
+        let kept_render_set = self.render_set.is_some();
         let geometry = self
             .render_set
-            .clone()
+            .take()
             .unwrap_or_else(|| geometry_only(&self.set));
         let template = self.template();
         let rest_positions = template.positions().to_vec();
@@ -446,7 +449,11 @@ impl Session {
         poses.extend(posed.iter().map(|(set, positions)| Pose { set, positions }));
         let views = o.views.max(DEFAULT_VIEWS);
         let resolution = o.resolution.max(DEFAULT_RESOLUTION);
-        decide(&poses, views, resolution, &rule).map_err(|cause| PipelineError::Visibility {
+        let decided = decide(&poses, views, resolution, &rule);
+        if kept_render_set {
+            self.render_set = Some(geometry);
+        }
+        decided.map_err(|cause| PipelineError::Visibility {
             path: gaussians_path.to_path_buf(),
             cause,
         })

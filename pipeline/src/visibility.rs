@@ -69,12 +69,11 @@ impl Default for VisibilityRule {
 }
 
 impl VisibilityRule {
-    /// Every Gaussian kept.
-    pub const KEEP_ALL: Self = Self {
-        min_contribution: 0.0,
-        floater_neighbors: DEFAULT_FLOATER_NEIGHBORS,
-        floater_std_ratio: None,
-    };
+    /// Whether the rule leaves every Gaussian in (no threshold, no floater rule).
+    #[must_use]
+    pub fn keeps_all(&self) -> bool {
+        self.min_contribution <= 0.0 && self.floater_std_ratio.is_none()
+    }
 }
 
 /// How many Gaussians the point methods use, why the others are left out, and the rule (in
@@ -357,7 +356,12 @@ mod tests {
     #[test]
     fn keep_all_keeps_all() {
         let set = shell_with_core_and_floater(500);
-        let v = decide(&[pose(&set, &[])], 24, 64, &VisibilityRule::KEEP_ALL).expect("decides");
+        let keep_all = VisibilityRule {
+            min_contribution: 0.0,
+            ..VisibilityRule::default()
+        };
+        assert!(keep_all.keeps_all());
+        let v = decide(&[pose(&set, &[])], 24, 64, &keep_all).expect("decides");
         assert_eq!(v.kept(), None);
         assert_eq!((v.used.kept, v.used.total), (502, 502));
         let mut means = Vec::new();

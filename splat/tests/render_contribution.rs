@@ -3,10 +3,11 @@
 //! times the transmittance left by the Gaussians sorted before it); hidden, culled and lone
 //! Gaussians.
 
-use glam::{DVec3, Quat, Vec3};
-use trisplat_geometry::Camera;
+mod common;
+use common::{camera, world_set};
+
+use glam::{Quat, Vec3};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::gaussians::{GaussianParts, ParameterSpace, ScaleDims, logit};
 use trisplat_splat::render::{Outputs, RenderMode, RenderOptions, render};
 
 const SIZE: u32 = 64;
@@ -24,28 +25,6 @@ fn options(mode: RenderMode, contribution: bool) -> RenderOptions {
         contribution,
         ..RenderOptions::default()
     }
-}
-
-fn set(means: &[Vec3], rotations: &[Quat], log_scales: &[Vec3], opacities: &[f32]) -> GaussianSet {
-    let n = means.len();
-    GaussianSet::try_new(GaussianParts {
-        means: means.to_vec(),
-        log_scales: log_scales.to_vec(),
-        scale_dims: ScaleDims::Three,
-        rotations: rotations.iter().map(|q| [q.w, q.x, q.y, q.z]).collect(),
-        opacity_logits: opacities.iter().map(|&o| logit(o)).collect(),
-        sh_degree: 0,
-        sh: vec![0.0; 3 * n],
-        binding: None,
-        space: ParameterSpace::World,
-        extras: Vec::new(),
-        property_order: None,
-    })
-    .expect("valid set")
-}
-
-fn camera() -> Camera {
-    Camera::look_at("c", DVec3::ZERO, DVec3::Z, DVec3::NEG_Y, (SIZE, SIZE), 40.0).expect("camera")
 }
 
 /// A deterministic value in [0, 1).
@@ -86,11 +65,11 @@ fn random_scene(seed: u64) -> GaussianSet {
         ));
         opacities.push(0.05 + 0.45 * unit(&mut state));
     }
-    set(&means, &rotations, &scales, &opacities)
+    world_set(&means, &rotations, &scales, &opacities)
 }
 
 fn alpha_of(set: &GaussianSet, mode: RenderMode) -> Vec<f32> {
-    render(set, &camera(), &options(mode, false))
+    render(set, &camera(SIZE), &options(mode, false))
         .expect("renders")
         .images
         .alpha
@@ -102,7 +81,7 @@ fn largest_weight_equals_own_alpha_times_the_transmittance_in_front() {
     for mode in [RenderMode::Gaussian3d, RenderMode::Perspective] {
         for seed in [1, 2, 3] {
             let scene = random_scene(seed);
-            let out = render(&scene, &camera(), &options(mode, true)).expect("renders");
+            let out = render(&scene, &camera(SIZE), &options(mode, true)).expect("renders");
             let got = out.contribution.expect("contribution asked for");
             assert_eq!(got.len(), scene.len());
             // Means are at increasing depth by index: the ones before i are in front of it.
@@ -138,7 +117,7 @@ fn largest_weight_equals_own_alpha_times_the_transmittance_in_front() {
 fn hidden_culled_and_lone_gaussians() {
     let flat = Vec3::new(0.5f32.ln(), 0.5f32.ln(), 1e-3f32.ln());
     let small = Vec3::splat(0.05f32.ln());
-    let scene = set(
+    let scene = world_set(
         &[
             // An opaque wall filling the view.
             Vec3::new(0.0, 0.0, 2.0),
@@ -151,7 +130,12 @@ fn hidden_culled_and_lone_gaussians() {
         &[flat, small, small],
         &[0.999, 0.9, 0.9],
     );
-    let out = render(&scene, &camera(), &options(RenderMode::Gaussian3d, true)).expect("renders");
+    let out = render(
+        &scene,
+        &camera(SIZE),
+        &options(RenderMode::Gaussian3d, true),
+    )
+    .expect("renders");
     let w = out.contribution.expect("contribution");
     // The wall's alpha is clamped at gsplat's 0.999.
     assert!(w[0] > 0.99 && w[0] <= 0.999, "the wall's weight {}", w[0]);
@@ -159,13 +143,14 @@ fn hidden_culled_and_lone_gaussians() {
     assert!(w[1] < 1e-2 && w[1] > 0.0, "behind the wall: {}", w[1]);
     assert_eq!(w[2], 0.0, "culled");
 
-    let lone = set(
+    let lone = world_set(
         &[Vec3::new(0.0, 0.0, 2.0)],
         &[Quat::IDENTITY],
         &[small],
         &[0.3],
     );
-    let out = render(&lone, &camera(), &options(RenderMode::Gaussian3d, true)).expect("renders");
+    let out =
+        render(&lone, &camera(SIZE), &options(RenderMode::Gaussian3d, true)).expect("renders");
     let peak = out
         .images
         .alpha
@@ -175,6 +160,11 @@ fn hidden_culled_and_lone_gaussians() {
         .fold(0.0f32, f32::max);
     assert_eq!(out.contribution.expect("contribution"), vec![peak]);
 
-    let none = render(&lone, &camera(), &options(RenderMode::Gaussian3d, false)).expect("renders");
+    let none = render(
+        &lone,
+        &camera(SIZE),
+        &options(RenderMode::Gaussian3d, false),
+    )
+    .expect("renders");
     assert!(none.contribution.is_none(), "only computed when asked for");
 }

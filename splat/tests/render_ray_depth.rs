@@ -2,10 +2,12 @@
 //! GOF), against the exact intersection of the ray with a flat Gaussian's plane; the mean's
 //! depth left as it was; finite on degenerate and grazing Gaussians; no backward pass.
 
+mod common;
+use common::world_set;
+
 use glam::{DVec3, Quat, Vec3};
 use trisplat_geometry::Camera;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::gaussians::{GaussianParts, ParameterSpace, ScaleDims};
 use trisplat_splat::render::{
     GradError, Outputs, RenderOptions, SplatDepth, render, render_with_grad,
 };
@@ -28,25 +30,11 @@ fn options(splat_depth: SplatDepth) -> RenderOptions {
 
 /// Gaussians at `means` with rotations `rotations` and log-scales `log_scales`, opacity 0.99.
 fn set(means: &[Vec3], rotations: &[Quat], log_scales: &[Vec3]) -> GaussianSet {
-    let n = means.len();
-    GaussianSet::try_new(GaussianParts {
-        means: means.to_vec(),
-        log_scales: log_scales.to_vec(),
-        scale_dims: ScaleDims::Three,
-        rotations: rotations.iter().map(|q| [q.w, q.x, q.y, q.z]).collect(),
-        opacity_logits: vec![(0.99f32 / 0.01).ln(); n],
-        sh_degree: 0,
-        sh: vec![0.0; 3 * n],
-        binding: None,
-        space: ParameterSpace::World,
-        extras: Vec::new(),
-        property_order: None,
-    })
-    .expect("valid set")
+    world_set(means, rotations, log_scales, &vec![0.99; means.len()])
 }
 
 fn camera() -> Camera {
-    Camera::look_at("c", DVec3::ZERO, DVec3::Z, DVec3::NEG_Y, (SIZE, SIZE), 40.0).expect("camera")
+    common::camera(SIZE)
 }
 
 /// The world-space direction of pixel `(col, row)`'s centre whose camera z is 1.
