@@ -266,13 +266,12 @@ pub fn rasterize_with_contribution<K: SplatKernel>(
         .for_each(|(ty, mut band)| {
             let mut state = TileState::default();
             for tx in 0..bins.tiles_x {
-                ctx.composite_tile(
-                    bins.tile(tx, ty as u32),
-                    tx,
-                    ty as u32,
-                    &mut band,
-                    &mut state,
-                );
+                let (entries, ty) = (bins.tile(tx, ty as u32), ty as u32);
+                if contribution {
+                    ctx.composite_tile::<true>(entries, tx, ty, &mut band, &mut state);
+                } else {
+                    ctx.composite_tile::<false>(entries, tx, ty, &mut band, &mut state);
+                }
             }
         });
     stats.composite_s = start.elapsed().as_secs_f64();
@@ -424,7 +423,9 @@ fn composite_chunk<const EXTRA: bool>(
 }
 
 impl<K: SplatKernel> TileContext<'_, K> {
-    fn composite_tile(
+    /// Composites one tile; with `TRACK`, raises each splat's largest weight in
+    /// `self.largest` (a separate instance, so the plain render does no tracking at all).
+    fn composite_tile<const TRACK: bool>(
         &self,
         entries: &[u32],
         tx: u32,
@@ -541,11 +542,13 @@ impl<K: SplatKernel> TileContext<'_, K> {
                         composite_chunk::<false>(s, row + lx, alpha, depth, splat, row_rules)
                     };
                     stopped |= mask << lx;
-                    largest = largest.max(w);
+                    if TRACK {
+                        largest = largest.max(w);
+                    }
                 }
                 remaining = remaining.saturating_sub(stopped.count_ones() as usize);
             }
-            if let Some(slots) = self.largest {
+            if TRACK && let Some(slots) = self.largest {
                 let w = largest.max_element();
                 if w > 0.0 {
                     slots[g].fetch_max(w.to_bits(), Ordering::Relaxed);
