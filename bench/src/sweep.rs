@@ -23,6 +23,7 @@
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use trisplat_pipeline::config::{self as extract_config, MetricOptions};
 
 use anyhow::bail;
 use glam::{DVec3, Vec3};
@@ -137,7 +138,7 @@ impl Prepared {
             let means = means.to_vec();
             let mesh =
                 TriMesh::new_unchecked(positions.clone(), session.template().triangles().to_vec());
-            let Some(gt) = GtSamples::new(mesh, config.options.samples) else {
+            let Some(gt) = GtSamples::new(mesh, config.options.metrics.samples) else {
                 bail!("{}: frame {f} has no area", case.name);
             };
             frames.push(Frame {
@@ -154,7 +155,7 @@ impl Prepared {
             template: session.template().clone(),
             set: session.gaussians().clone(),
             rest_means: session.rest_means().to_vec(),
-            mode: deform_mode(config.options.mode),
+            mode: deform_mode(config.options.animation.mode),
             resolved: *session.resolved(),
             options: config.options,
             frames,
@@ -176,13 +177,18 @@ impl Prepared {
         measured: bool,
     ) -> anyhow::Result<FrameRecord> {
         let metrics = if measured {
-            measure(mesh, &frame.gt, self.options.samples, self.options.tau)?
+            measure(
+                mesh,
+                &frame.gt,
+                self.options.metrics.samples,
+                self.options.metrics.tau,
+            )?
         } else {
             None
         };
         Ok(FrameRecord {
             frame: frame.index,
-            time: frame.index as f64 / self.options.fps,
+            time: frame.index as f64 / self.options.animation.fps,
             ms,
             render_ms: None,
             vertices: mesh.vertex_count(),
@@ -273,7 +279,10 @@ fn run_delaunay(
     // The pipeline's own mesher for the setting it can express.
     let mut pipeline = if hop_threshold == 0.0 && rebuild_every == 0 {
         let o = ExtractOptions {
-            rebuild_every,
+            delaunay: extract_config::DelaunayOptions {
+                rebuild_every,
+                ..p.options.clone().delaunay
+            },
             ..p.options.clone()
         };
         Some(Mesher::new(
@@ -336,7 +345,10 @@ fn load() -> String {
 fn sweep(case: &Case, args: &SweepArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let options = ExtractOptions {
-        samples: args.samples,
+        metrics: MetricOptions {
+            samples: args.samples,
+            ..Default::default()
+        },
         ..ExtractOptions::default()
     };
     println!();
@@ -354,16 +366,16 @@ fn sweep(case: &Case, args: &SweepArgs) -> anyhow::Result<()> {
         p.template.vertex_count(),
         p.template.triangle_count(),
         p.set.len(),
-        p.options.per_triangle,
-        p.options.fps,
+        p.options.bind.per_triangle,
+        p.options.animation.fps,
         p.frame_range(1),
         p.frame_range(args.measure_every),
         p.frame_range(args.alpha_every),
         p.frame_range(args.tsdf_every),
-        p.options.views,
-        p.options.resolution,
-        p.options.samples,
-        p.options.tau,
+        p.options.tsdf.views,
+        p.options.tsdf.resolution,
+        p.options.metrics.samples,
+        p.options.metrics.tau,
         load()
     );
     let mut rows = Vec::new();

@@ -43,29 +43,6 @@ pub const LAM_GAUSSIANS: &str = "offset.ply";
 /// The vertex order file of a LAM avatar folder.
 pub const LAM_VERTEX_ORDER: &str = "vertex_order.json";
 
-/// How a Gaussian file relates to its template.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
-pub enum GaussianLayout {
-    /// Bound to triangles (`binding_0`), local parameters (GaussianAvatars, `trisplat bind`).
-    #[default]
-    Bound,
-    /// LAM's per-vertex layout: one row per template vertex, positions are offsets from
-    /// the vertex, colours are RGB; bound here to the triangles around each vertex.
-    Lam,
-}
-
-impl GaussianLayout {
-    /// The name used on the command line.
-    #[must_use]
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Bound => "bound",
-            Self::Lam => "lam",
-        }
-    }
-}
-
 /// The files of a LAM avatar folder.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct AvatarFolder {

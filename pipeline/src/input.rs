@@ -92,10 +92,10 @@ pub fn animation_label(config: &ExtractConfig) -> String {
         .animation
         .clone()
         .unwrap_or_else(|| config.template.display().to_string());
-    match &config.options.clip_from {
+    match &config.options.animation.clip_from {
         Some(source) => format!(
             "{own} + clip {} of {} (by joint name)",
-            config.options.clip.as_deref().unwrap_or("0"),
+            config.options.animation.clip.as_deref().unwrap_or("0"),
             source.display()
         ),
         None => own,
@@ -255,7 +255,7 @@ pub fn open_template_and_animation(
     targets: Option<&Path>,
 ) -> Result<(TriMesh, Animation, Vec<PathBuf>), PipelineError> {
     let o = &config.options;
-    if let Some(source) = &o.clip_from {
+    if let Some(source) = &o.animation.clip_from {
         return open_retargeted(config, source, targets);
     }
     if let Some(spec) = &config.animation {
@@ -263,8 +263,8 @@ pub fn open_template_and_animation(
         let (animation, files) = AnimationSource {
             spec,
             template: &config.template,
-            clip: o.clip.as_deref(),
-            fps: o.fps,
+            clip: o.animation.clip.as_deref(),
+            fps: o.animation.fps,
             targets,
         }
         .open()?;
@@ -277,11 +277,15 @@ pub fn open_template_and_animation(
         });
     }
     if is_gltf(&config.template) {
-        let g = open_gltf(&config.template, o.clip.as_deref(), o.fps)?;
+        let g = open_gltf(
+            &config.template,
+            o.animation.clip.as_deref(),
+            o.animation.fps,
+        )?;
         let stored = g.rest().clone();
         return Ok((stored, Animation::Gltf(Box::new(g)), Vec::new()));
     }
-    if let Some(clip) = &o.clip {
+    if let Some(clip) = &o.animation.clip {
         return Err(PipelineError::BadAnimation {
             path: config.template.clone(),
             problem: format!("--clip {clip} needs a glTF template or animation"),
@@ -322,11 +326,15 @@ fn open_retargeted(
         return Err(bad(dir, "--targets is for an OBJ/PLY template"));
     }
     let clip = Clip::Index(0);
-    let clip = o.clip.as_deref().map_or(clip, |c| clip_of(Some(c)));
+    let clip = o
+        .animation
+        .clip
+        .as_deref()
+        .map_or(clip, |c| clip_of(Some(c)));
     let motion = GltfTemplate::open(source, &clip)?;
     let template = GltfTemplate::open(&config.template, &Clip::None)?
         .retarget(&motion)?
-        .with_fps(o.fps);
+        .with_fps(o.animation.fps);
     let stored = template.rest().clone();
     let mut files = vec![source.to_path_buf()];
     let animation = match config.animation.as_deref().map(Path::new) {

@@ -219,6 +219,7 @@ fn line(l: &Line) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::MetricOptions;
     use crate::config::{ExtractOptions, Method};
 
     fn config(tau: f64) -> ExtractConfig {
@@ -231,7 +232,10 @@ mod tests {
             frames: None,
             gt: None,
             options: ExtractOptions {
-                tau,
+                metrics: MetricOptions {
+                    tau,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         }
@@ -283,7 +287,7 @@ mod tests {
         // Another configuration, another version, not a journal.
         assert!(problem(Journal::resume(dir.path(), &config(0.01))).contains("other inputs"));
         let mut relative = c.clone();
-        relative.options.tau_fraction = Some(0.01);
+        relative.options.metrics.tau_fraction = Some(0.01);
         assert!(problem(Journal::resume(dir.path(), &relative)).contains("other inputs"));
         let other_version = rewritten.replacen(env!("CARGO_PKG_VERSION"), "0.0.0-other", 1);
         std::fs::write(&path, other_version).expect("write");

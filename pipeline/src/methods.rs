@@ -36,13 +36,9 @@ use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS,
-    DepthKind, ExtractOptions, Method, SplatDepthRule,
+    DepthKind, ExtractOptions, Method, RENDERED_ALPHA_MIN, SplatDepthRule,
 };
 use crate::error::PipelineError;
-
-/// The default [`DepthRules::alpha_cut`]: pixels whose rendered alpha is below this carry no
-/// depth (as 2DGS and GOF).
-pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
 /// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
 /// point still gets a rig).
@@ -164,7 +160,7 @@ impl Resolved {
         };
         let voxel = check(
             "voxel",
-            options.voxel,
+            options.tsdf.voxel,
             default_voxel(template_radius, spacing),
         )?;
         // A voxel so fine that the template alone spans more than `--max-voxels` is refused
@@ -183,7 +179,11 @@ impl Resolved {
             template_radius,
             mean_spacing: spacing,
             voxel,
-            alpha: check("alpha", options.alpha, DEFAULT_ALPHA_SPACINGS * spacing)?,
+            alpha: check(
+                "alpha",
+                options.alpha.alpha,
+                DEFAULT_ALPHA_SPACINGS * spacing,
+            )?,
         })
     }
 }
@@ -425,20 +425,20 @@ impl Mesher {
         Ok(match method {
             Method::Tsdf => Self::Tsdf(TsdfMesher {
                 voxel: resolved.voxel,
-                views: options.views,
-                resolution: options.resolution,
+                views: options.tsdf.views,
+                resolution: options.tsdf.resolution,
                 depth: DepthRules {
-                    kind: options.tsdf_depth,
-                    splat: options.tsdf_splat_depth,
-                    alpha_cut: options.tsdf_alpha_cut,
+                    kind: options.tsdf.depth,
+                    splat: options.tsdf.splat_depth,
+                    alpha_cut: options.tsdf.alpha_cut,
                 },
-                colors: options.tsdf_colors,
+                colors: options.tsdf.colors,
             }),
             Method::Delaunay => {
                 let d_options = DelaunayOptions {
-                    rebuild_every: options.rebuild_every,
-                    auto_rebuild: !options.no_auto_rebuild,
-                    hop_threshold: options.hop_threshold,
+                    rebuild_every: options.delaunay.rebuild_every,
+                    auto_rebuild: !options.delaunay.no_auto_rebuild,
+                    hop_threshold: options.delaunay.hop_threshold,
                     ..DelaunayOptions::default()
                 };
                 let d =
@@ -452,7 +452,7 @@ impl Mesher {
             }
             Method::Alpha => Self::Alpha {
                 alpha: resolved.alpha,
-                keep_clusters: options.alpha_keep_clusters,
+                keep_clusters: options.alpha.keep_clusters,
             },
         })
     }

@@ -3,7 +3,7 @@
 
 use std::fmt;
 
-use crate::avatar::GaussianLayout;
+use crate::config::GaussianLayout;
 
 use crate::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig,
@@ -80,11 +80,11 @@ impl Plan {
                 "template {t}; no --animation: its own glTF clip if it has one, else one frame"
             ),
         };
-        let animate = match &o.clip_from {
+        let animate = match &o.animation.clip_from {
             Some(source) => format!(
                 "{animate}; clip {} of {} played on the template's joints by name (looped under \
                  a weights track)",
-                o.clip.as_deref().unwrap_or("0"),
+                o.animation.clip.as_deref().unwrap_or("0"),
                 source.display()
             ),
             None => animate,
@@ -96,7 +96,7 @@ impl Plan {
         push(Stage::Animate, true, animate);
 
         match &config.gaussians {
-            Some(g) if o.layout == GaussianLayout::Lam => push(
+            Some(g) if o.bind.layout == GaussianLayout::Lam => push(
                 Stage::Bind,
                 true,
                 format!(
@@ -104,7 +104,7 @@ impl Plan {
                      Gaussian from template vertex i (colour as RGB); each is bound here to the \
                      triangle around its vertex nearest to it ({} convention)",
                     g.display(),
-                    if o.mode == Mode::Jacobian {
+                    if o.animation.mode == Mode::Jacobian {
                         "surfhead"
                     } else {
                         "gaussianavatars"
@@ -126,8 +126,8 @@ impl Plan {
                 true,
                 format!(
                     "no --gaussians: {} per triangle ({} convention), opaque flat discs",
-                    o.per_triangle,
-                    if o.mode == Mode::Jacobian {
+                    o.bind.per_triangle,
+                    if o.animation.mode == Mode::Jacobian {
                         "surfhead"
                     } else {
                         "gaussianavatars"
@@ -140,7 +140,7 @@ impl Plan {
         push(
             Stage::Deform,
             true,
-            format!("mode {}, frames {frames}", o.mode.name()),
+            format!("mode {}, frames {frames}", o.animation.mode.name()),
         );
 
         if methods.contains(&Method::Tsdf) {
@@ -149,7 +149,7 @@ impl Plan {
                 true,
                 format!(
                     "tsdf needs depth maps: {} views of {}x{} px per frame (expected depth, alpha >= 0.5)",
-                    o.views, o.resolution, o.resolution
+                    o.tsdf.views, o.tsdf.resolution, o.tsdf.resolution
                 ),
             );
         } else {
@@ -166,36 +166,38 @@ impl Plan {
                 continue;
             }
             let why = match m {
-                Method::Tsdf => match o.voxel {
+                Method::Tsdf => match o.tsdf.voxel {
                     Some(v) => format!("voxel {v}, trunc 5 voxels"),
                     None => format!(
                         "voxel = Gaussian spacing within template radius / {DEFAULT_VOXELS_PER_RADIUS} ..= / {COARSEST_VOXELS_PER_RADIUS}, trunc 5 voxels"
                     ),
                 },
                 Method::Delaunay => {
-                    let rebuild = match o.rebuild_every {
-                        0 if o.no_auto_rebuild => "incremental: only charts that Gaussians hop \
+                    let rebuild = match o.delaunay.rebuild_every {
+                        0 if o.delaunay.no_auto_rebuild => {
+                            "incremental: only charts that Gaussians hop \
                                                    into or out of are redone, whatever it costs"
-                            .to_owned(),
+                                .to_owned()
+                        }
                         0 => "incremental: only charts that Gaussians hop into or out of are \
                               redone; rebuilt from scratch while updates cost more"
                             .to_owned(),
                         1 => "--rebuild-every 1: triangulated from scratch every frame".to_owned(),
                         n => format!("incremental, rebuilt from scratch every {n} frames"),
                     };
-                    let hop = if o.hop_threshold == 0.0 {
+                    let hop = if o.delaunay.hop_threshold == 0.0 {
                         "hop threshold 0: every frame equals a from-scratch triangulation"
                             .to_owned()
                     } else {
                         format!(
                             "hop threshold {} x mean template edge: fewer charts redone, frames \
                              may differ from a from-scratch triangulation",
-                            o.hop_threshold
+                            o.delaunay.hop_threshold
                         )
                     };
                     format!("{rebuild}; {hop}")
                 }
-                Method::Alpha => match o.alpha {
+                Method::Alpha => match o.alpha.alpha {
                     Some(a) => format!("alpha {a} on the deformed means"),
                     None => format!(
                         "alpha = {DEFAULT_ALPHA_SPACINGS} x mean Gaussian spacing, on the deformed means"
@@ -234,12 +236,12 @@ impl Plan {
                         "against {against}: {} samples per mesh, exact distances to the \
                          triangles, F-score at {}; structure (components, holes, area ratio) \
                          and the self-consistency check of each mesh",
-                        o.samples,
-                        match o.tau_fraction {
+                        o.metrics.samples,
+                        match o.metrics.tau_fraction {
                             Some(f) => format!(
                                 "tau = {f} x each frame's ground-truth bounding-box diagonal"
                             ),
-                            None => format!("tau {} (absolute)", o.tau),
+                            None => format!("tau {} (absolute)", o.metrics.tau),
                         }
                     ),
                 );
@@ -248,7 +250,10 @@ impl Plan {
 
         let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
         let out = config.output.display();
-        let (meshes, glb) = (o.writes(OutputTarget::Meshes), o.writes(OutputTarget::Glb));
+        let (meshes, glb) = (
+            o.outputs.writes(OutputTarget::Meshes),
+            o.outputs.writes(OutputTarget::Glb),
+        );
         push(
             Stage::Write,
             meshes || glb,
@@ -274,7 +279,7 @@ impl Plan {
         } else {
             "ms per frame (no --gt: no error to plot)"
         };
-        let report = o.writes(OutputTarget::Report);
+        let report = o.outputs.writes(OutputTarget::Report);
         push(
             Stage::Report,
             report,
@@ -399,7 +404,7 @@ mod tests {
                 .to_string()
                 .contains("hop threshold 0: every frame equals")
         );
-        c.options.hop_threshold = 0.25;
+        c.options.delaunay.hop_threshold = 0.25;
         let text = Plan::new(&c).to_string();
         assert!(
             text.contains("hop threshold 0.25 x mean template edge"),
@@ -410,7 +415,7 @@ mod tests {
     #[test]
     fn rebuild_every_one_is_from_scratch() {
         let mut c = config(&[Method::Delaunay], false, None);
-        c.options.rebuild_every = 1;
+        c.options.delaunay.rebuild_every = 1;
         assert!(
             Plan::new(&c)
                 .to_string()

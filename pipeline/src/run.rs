@@ -116,15 +116,16 @@ pub fn run(
     }
     progress(Progress::Started { frames: total });
     // The frame files: asked for, or the glTF is assembled from them.
-    let frame_files_wanted = o.writes(OutputTarget::Meshes) || o.writes(OutputTarget::Glb);
+    let frame_files_wanted =
+        o.outputs.writes(OutputTarget::Meshes) || o.outputs.writes(OutputTarget::Glb);
     // report.html shows the meshes of the middle frame.
     let thumbnail_frame = frames.start + frames.len().saturating_sub(1) / 2;
     let extras = |f: usize| FrameExtras {
         write_files: frame_files_wanted,
-        error_colors: o.error_colors,
-        thumbnails: o.writes(OutputTarget::Report) && f == thumbnail_frame,
-        threshold: o.threshold(),
-        view_axes: o.view_axes,
+        error_colors: o.outputs.error_colors,
+        thumbnails: o.outputs.writes(OutputTarget::Report) && f == thumbnail_frame,
+        threshold: o.metrics.threshold(),
+        view_axes: o.outputs.view_axes,
     };
     let mut done_frames = previous.done;
     let mut failed: Vec<FailedFrame> = Vec::new();
@@ -205,30 +206,30 @@ pub fn run(
         match m {
             Method::Tsdf => {
                 parameters.insert("voxel".to_owned(), resolved.voxel);
-                parameters.insert("views".to_owned(), o.views as f64);
-                parameters.insert("resolution".to_owned(), f64::from(o.resolution));
+                parameters.insert("views".to_owned(), o.tsdf.views as f64);
+                parameters.insert("resolution".to_owned(), f64::from(o.tsdf.resolution));
                 parameters.insert(
                     "median_depth".to_owned(),
-                    f64::from(u8::from(o.tsdf_depth == DepthKind::Median)),
+                    f64::from(u8::from(o.tsdf.depth == DepthKind::Median)),
                 );
                 parameters.insert(
                     "ray_depth".to_owned(),
-                    f64::from(u8::from(o.tsdf_splat_depth == SplatDepthRule::Ray)),
+                    f64::from(u8::from(o.tsdf.splat_depth == SplatDepthRule::Ray)),
                 );
-                parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf_colors)));
-                parameters.insert("alpha_cut".to_owned(), f64::from(o.tsdf_alpha_cut));
+                parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf.colors)));
+                parameters.insert("alpha_cut".to_owned(), f64::from(o.tsdf.alpha_cut));
             }
             Method::Delaunay => {
-                parameters.insert("rebuild_every".to_owned(), o.rebuild_every as f64);
+                parameters.insert("rebuild_every".to_owned(), o.delaunay.rebuild_every as f64);
                 parameters.insert(
                     "auto_rebuild".to_owned(),
-                    f64::from(u8::from(!o.no_auto_rebuild)),
+                    f64::from(u8::from(!o.delaunay.no_auto_rebuild)),
                 );
-                parameters.insert("hop_threshold".to_owned(), o.hop_threshold);
+                parameters.insert("hop_threshold".to_owned(), o.delaunay.hop_threshold);
             }
             Method::Alpha => {
                 parameters.insert("alpha".to_owned(), resolved.alpha);
-                parameters.insert("keep_clusters".to_owned(), o.alpha_keep_clusters as f64);
+                parameters.insert("keep_clusters".to_owned(), o.alpha.keep_clusters as f64);
             }
         }
         let mean = Summary::of(&frames_of);
@@ -270,7 +271,7 @@ pub fn run(
             }
         },
         gaussian_count: session.gaussians().len(),
-        mode: o.mode.name().to_owned(),
+        mode: o.animation.mode.name().to_owned(),
         frames: entries.iter().map(|e| e.frame).collect(),
         frame_times,
         deform_ms,
@@ -278,9 +279,9 @@ pub fn run(
         failed_frames: failed,
         unused_channels: session.unused_channels().to_vec(),
         ground_truth: config.gt.as_ref().map(GroundTruth::label),
-        samples: o.samples,
-        tau: o.tau_fraction.is_none().then_some(o.tau),
-        tau_fraction: o.tau_fraction,
+        samples: o.metrics.samples,
+        tau: o.metrics.tau_fraction.is_none().then_some(o.metrics.tau),
+        tau_fraction: o.metrics.tau_fraction,
         resolved,
         gaussians_used: config
             .methods
@@ -291,11 +292,11 @@ pub fn run(
         methods: method_reports,
         thumbnails: None,
     };
-    if o.writes(OutputTarget::Report) {
+    if o.outputs.writes(OutputTarget::Report) {
         report.thumbnails = thumbnails_of(out, thumbnail_frame, &report);
     }
-    write_outputs(out, &mut report, &frame_files, &o.targets)?;
-    if o.writes(OutputTarget::Glb) && !o.writes(OutputTarget::Meshes) {
+    write_outputs(out, &mut report, &frame_files, &o.outputs.targets)?;
+    if o.outputs.writes(OutputTarget::Glb) && !o.outputs.writes(OutputTarget::Meshes) {
         // Written only to assemble the glTF.
         for file in frame_files.values().flatten() {
             let _ = std::fs::remove_file(file);

@@ -34,7 +34,8 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{Collapsed, Deformer, WorldGeometry};
 use trisplat_splat::frames::Convention;
 
-use crate::avatar::{GaussianLayout, bind_lam};
+use crate::avatar::bind_lam;
+use crate::config::GaussianLayout;
 use crate::config::{
     DEFAULT_RESOLUTION, DEFAULT_VIEWS, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
 };
@@ -199,7 +200,7 @@ impl Session {
             .into_iter()
             .map(str::to_owned)
             .collect();
-        if o.strict && !unused_channels.is_empty() {
+        if o.animation.strict && !unused_channels.is_empty() {
             return Err(PipelineError::BadAnimation {
                 path: PathBuf::from(&label),
                 problem: format!(
@@ -230,7 +231,7 @@ impl Session {
             (Some(GroundTruth::Mesh(path)), true) => {
                 input_files.push(path.clone());
                 let mesh = read_mesh(path)?;
-                Some(GtSamples::new(mesh, o.samples).ok_or_else(|| {
+                Some(GtSamples::new(mesh, o.metrics.samples).ok_or_else(|| {
                     PipelineError::EmptyGroundTruth {
                         gt: path.display().to_string(),
                         frame: frames.start,
@@ -266,11 +267,16 @@ impl Session {
         let gaussians_path = config.gaussians.clone().unwrap_or_default();
         let (set, source) = if config.gaussians.is_none() {
             executed.push(Stage::Bind);
-            let set = bind_here(template, &config.template, o.mode, o.per_triangle)?;
-            (set, GaussianSource::Bound(o.per_triangle))
-        } else if o.layout == GaussianLayout::Lam {
+            let set = bind_here(
+                template,
+                &config.template,
+                o.animation.mode,
+                o.bind.per_triangle,
+            )?;
+            (set, GaussianSource::Bound(o.bind.per_triangle))
+        } else if o.bind.layout == GaussianLayout::Lam {
             executed.push(Stage::Bind);
-            let convention = if o.mode == Mode::Jacobian {
+            let convention = if o.animation.mode == Mode::Jacobian {
                 Convention::SurfHead
             } else {
                 Convention::GaussianAvatars
@@ -290,7 +296,7 @@ impl Session {
         };
         let engine = Engine::build(
             &EngineInputs {
-                mode: o.mode,
+                mode: o.animation.mode,
                 stored: &stored,
                 welded: &welded,
                 origin,
@@ -306,7 +312,7 @@ impl Session {
         // Local parameters are in the rest triangles' frames in every mode (`lbs` bakes its
         // rest pose in binding mode), so the rest means come from the template itself, not
         // from a frame of the animation.
-        let rest_means = Deformer::new(template, deform_mode(o.mode))
+        let rest_means = Deformer::new(template, deform_mode(o.animation.mode))
             .means(&set, template.positions())
             .map_err(|cause| PipelineError::Gaussians {
                 path: gaussians_path.clone(),
@@ -361,9 +367,9 @@ impl Session {
             static_gt,
             gt_files,
             gaussian_gt_triangles,
-            samples: o.samples,
-            tau: o.threshold(),
-            fps: o.fps,
+            samples: o.metrics.samples,
+            tau: o.metrics.threshold(),
+            fps: o.animation.fps,
             input_files,
             unused_channels,
             scratch: WorldGeometry::default(),
@@ -402,7 +408,7 @@ impl Session {
         o: &ExtractOptions,
         gaussians_path: &Path,
     ) -> Result<Visibility, PipelineError> {
-        let rule = o.visibility_rule();
+        let rule = o.visibility;
         let point_methods = [Method::Delaunay, Method::Alpha]
             .iter()
             .any(|&m| self.plan.runs(Stage::Mesh(m)));
@@ -418,7 +424,7 @@ impl Session {
             .unwrap_or_else(|| geometry_only(&self.set));
         let template = self.template();
         let rest_positions = template.positions().to_vec();
-        let rest = Deformer::new(template, deform_mode(o.mode))
+        let rest = Deformer::new(template, deform_mode(o.animation.mode))
             .deform(&geometry, &rest_positions)
             .map_err(|cause| PipelineError::Gaussians {
                 path: gaussians_path.to_path_buf(),
@@ -447,8 +453,8 @@ impl Session {
             positions: &rest_positions,
         }];
         poses.extend(posed.iter().map(|(set, positions)| Pose { set, positions }));
-        let views = o.views.max(DEFAULT_VIEWS);
-        let resolution = o.resolution.max(DEFAULT_RESOLUTION);
+        let views = o.tsdf.views.max(DEFAULT_VIEWS);
+        let resolution = o.tsdf.resolution.max(DEFAULT_RESOLUTION);
         let decided = decide(&poses, views, resolution, &rule);
         if kept_render_set {
             self.render_set = Some(geometry);
@@ -923,14 +929,14 @@ fn source_words(source: &GaussianSource) -> String {
 /// Checks the options a session uses before any file is read.
 fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
     let o = &config.options;
-    if !(o.tau.is_finite() && o.tau > 0.0) {
+    if !(o.metrics.tau.is_finite() && o.metrics.tau > 0.0) {
         return Err(PipelineError::BadOption {
             name: "tau",
-            value: o.tau,
+            value: o.metrics.tau,
             expected: "a finite positive distance",
         });
     }
-    if let Some(f) = o.tau_fraction
+    if let Some(f) = o.metrics.tau_fraction
         && !(f.is_finite() && f > 0.0)
     {
         return Err(PipelineError::BadOption {
@@ -939,35 +945,35 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             expected: "a finite positive fraction of the ground truth's bounding-box diagonal",
         });
     }
-    if !(o.hop_threshold.is_finite() && o.hop_threshold >= 0.0) {
+    if !(o.delaunay.hop_threshold.is_finite() && o.delaunay.hop_threshold >= 0.0) {
         return Err(PipelineError::BadOption {
             name: "hop-threshold",
-            value: o.hop_threshold,
+            value: o.delaunay.hop_threshold,
             expected: "a finite number >= 0 (multiples of the mean template edge)",
         });
     }
-    if !(o.fps.is_finite() && o.fps > 0.0) {
+    if !(o.animation.fps.is_finite() && o.animation.fps > 0.0) {
         return Err(PipelineError::BadOption {
             name: "fps",
-            value: o.fps,
+            value: o.animation.fps,
             expected: "a positive number of frames per second",
         });
     }
-    if !(o.tsdf_alpha_cut > 0.0 && o.tsdf_alpha_cut <= 1.0) {
+    if !(o.tsdf.alpha_cut > 0.0 && o.tsdf.alpha_cut <= 1.0) {
         return Err(PipelineError::BadOption {
             name: "tsdf-alpha-cut",
-            value: f64::from(o.tsdf_alpha_cut),
+            value: f64::from(o.tsdf.alpha_cut),
             expected: "a rendered alpha in (0, 1]",
         });
     }
-    if !(o.min_contribution >= 0.0 && o.min_contribution < 1.0) {
+    if !(o.visibility.min_contribution >= 0.0 && o.visibility.min_contribution < 1.0) {
         return Err(PipelineError::BadOption {
             name: "min-contribution",
-            value: f64::from(o.min_contribution),
+            value: f64::from(o.visibility.min_contribution),
             expected: "a blending weight in [0, 1) (0 keeps every Gaussian)",
         });
     }
-    if let Some(r) = o.floater_std_ratio
+    if let Some(r) = o.visibility.floater_std_ratio
         && !(r.is_finite() && r >= 0.0)
     {
         return Err(PipelineError::BadOption {
@@ -976,44 +982,44 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
             expected: "a finite number of standard deviations >= 0",
         });
     }
-    if o.floater_neighbors == 0 {
+    if o.visibility.floater_neighbors == 0 {
         return Err(PipelineError::BadOption {
             name: "floater-neighbors",
             value: 0.0,
             expected: "at least one neighbour",
         });
     }
-    if o.error_colors && config.gt.is_none() {
+    if o.outputs.error_colors && config.gt.is_none() {
         return Err(PipelineError::BadCombination {
             problem: "--error-colors colours the meshes by their distance to the ground truth: \
                       give --gt or --gt-sequence",
         });
     }
-    if o.error_colors && o.tsdf_colors {
+    if o.outputs.error_colors && o.tsdf.colors {
         return Err(PipelineError::BadCombination {
             problem: "--error-colors and --tsdf-colors both colour the vertices: choose one",
         });
     }
-    if o.samples == 0 {
+    if o.metrics.samples == 0 {
         return Err(PipelineError::BadOption {
             name: "samples",
             value: 0.0,
             expected: "at least one sample",
         });
     }
-    if o.samples > o.limits.max_samples {
+    if o.metrics.samples > o.limits.max_samples {
         return Err(PipelineError::OverLimit {
             name: "samples",
-            value: o.samples as f64,
+            value: o.metrics.samples as f64,
             limit: o.limits.max_samples as f64,
             what: "samples per mesh",
             option: "max-samples",
         });
     }
-    if o.views > o.limits.max_views {
+    if o.tsdf.views > o.limits.max_views {
         return Err(PipelineError::OverLimit {
             name: "views",
-            value: o.views as f64,
+            value: o.tsdf.views as f64,
             limit: o.limits.max_views as f64,
             what: "views per frame",
             option: "max-views",

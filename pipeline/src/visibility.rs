@@ -35,46 +35,12 @@ use trisplat_geometry::outliers::statistical_outliers;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
 
-use crate::config::DEFAULT_FOV_DEG;
+use crate::config::{DEFAULT_FOV_DEG, VisibilityRule};
 use crate::methods::bounding_sphere;
 
-/// Default [`VisibilityRule::min_contribution`]: one step of an 8-bit image.
-pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
 /// Frames of a run, besides the rest pose, whose poses the session gives [`decide`] (evenly
 /// spaced over the run; every frame of a shorter run).
 pub const VISIBILITY_FRAMES: usize = 4;
-/// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
-pub const DEFAULT_FLOATER_NEIGHBORS: usize = 20;
-
-/// The rule deciding which Gaussians the point methods use (see the module documentation).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct VisibilityRule {
-    /// Gaussians whose largest blending weight over the rig's views is below this are hidden
-    /// (0: none is).
-    pub min_contribution: f32,
-    /// Neighbours of the floater rule.
-    pub floater_neighbors: usize,
-    /// Standard deviations of the floater rule (`None`: no Gaussian is a floater).
-    pub floater_std_ratio: Option<f64>,
-}
-
-impl Default for VisibilityRule {
-    fn default() -> Self {
-        Self {
-            min_contribution: DEFAULT_MIN_CONTRIBUTION,
-            floater_neighbors: DEFAULT_FLOATER_NEIGHBORS,
-            floater_std_ratio: None,
-        }
-    }
-}
-
-impl VisibilityRule {
-    /// Whether the rule leaves every Gaussian in (no threshold, no floater rule).
-    #[must_use]
-    pub fn keeps_all(&self) -> bool {
-        self.min_contribution <= 0.0 && self.floater_std_ratio.is_none()
-    }
-}
 
 /// How many Gaussians the point methods use, why the others are left out, and the rule (in
 /// the report).

@@ -4,6 +4,7 @@
 //! gives.
 
 use std::path::Path;
+use trisplat_pipeline::config::{AnimationOptions, BindOptions};
 
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Mode, Session};
 use trisplat_splat::GaussianSet;
@@ -52,8 +53,14 @@ fn config(dir: &Path, frames: &str, mode: Mode) -> ExtractConfig {
         frames: Some(frames.to_owned()),
         gt: None,
         options: ExtractOptions {
-            mode,
-            per_triangle: 3,
+            animation: AnimationOptions {
+                mode,
+                ..Default::default()
+            },
+            bind: BindOptions {
+                per_triangle: 3,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     }

@@ -7,6 +7,7 @@
 use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::metrics::Tau;
+use trisplat_pipeline::config::{MetricOptions, TsdfOptions};
 use trisplat_pipeline::report::{FrameMetrics, GtSamples, measure_with};
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method, Session};
 
@@ -131,9 +132,15 @@ fn extract_meshes(dir: &std::path::Path) -> (DVec3, Frames) {
         frames: None,
         gt: Some(GroundTruth::Template),
         options: ExtractOptions {
-            views: 8,
-            resolution: 96,
-            samples: 3000,
+            tsdf: TsdfOptions {
+                views: 8,
+                resolution: 96,
+                ..Default::default()
+            },
+            metrics: MetricOptions {
+                samples: 3000,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     };

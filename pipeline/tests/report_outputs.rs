@@ -5,6 +5,7 @@
 //! asked (`--error-colors`); also without a ground truth, after `--resume` and after `merge`.
 
 use std::path::{Path, PathBuf};
+use trisplat_pipeline::config::{MetricOptions, OutputOptions, TsdfOptions};
 
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::read_mesh;
@@ -32,10 +33,19 @@ fn config(
         frames: Some(frames.to_owned()),
         gt,
         options: ExtractOptions {
-            views: 6,
-            resolution: 64,
-            samples: 2000,
-            error_colors,
+            tsdf: TsdfOptions {
+                views: 6,
+                resolution: 64,
+                ..Default::default()
+            },
+            metrics: MetricOptions {
+                samples: 2000,
+                ..Default::default()
+            },
+            outputs: OutputOptions {
+                error_colors,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     }

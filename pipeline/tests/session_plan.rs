@@ -3,6 +3,7 @@
 //! and Gaussian source; and skipped stages cost nothing (no mesher, no rendering).
 
 use std::path::PathBuf;
+use trisplat_pipeline::config::{MetricOptions, TsdfOptions};
 
 use trisplat_pipeline::input::bind_here;
 use trisplat_pipeline::{
@@ -29,9 +30,15 @@ fn config(
         frames: Some("0..2".to_owned()),
         gt,
         options: ExtractOptions {
-            views: 4,
-            resolution: 48,
-            samples: 500,
+            tsdf: TsdfOptions {
+                views: 4,
+                resolution: 48,
+                ..Default::default()
+            },
+            metrics: MetricOptions {
+                samples: 500,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     }
@@ -126,11 +133,11 @@ fn options_nothing_takes_are_refused_before_anything_runs() {
     // `--clip` with an OBJ template and no animation: there is no clip to pick.
     let mut config = config(&[Method::Delaunay], None, None);
     config.template = trisplat_fixtures::path("spot_triangulated.obj");
-    config.options.clip = Some("walk".to_owned());
+    config.options.animation.clip = Some("walk".to_owned());
     let err = Session::open(&config).expect_err("clip without a glTF");
     assert!(err.to_string().contains("--clip walk"), "{err}");
     // `--targets` without a weights animation.
-    config.options.clip = None;
+    config.options.animation.clip = None;
     let options = trisplat_pipeline::SessionOptions {
         targets: Some(PathBuf::from("targets")),
         ..trisplat_pipeline::SessionOptions::default()
@@ -145,13 +152,13 @@ fn options_nothing_takes_are_refused_before_anything_runs() {
     };
     let err = Session::open_with(&config, &options).expect_err("adaptive scale in jacobian");
     assert!(err.to_string().contains("--adaptive-scale"), "{err}");
-    config.options.mode = Mode::Binding;
+    config.options.animation.mode = Mode::Binding;
     assert!(Session::open_with(&config, &options).is_ok());
 }
 
 fn config_for_jacobian() -> ExtractConfig {
     let mut c = config(&[Method::Delaunay], None, None);
-    c.options.mode = Mode::Jacobian;
+    c.options.animation.mode = Mode::Jacobian;
     c
 }
 
@@ -161,7 +168,7 @@ fn rest_means_come_from_the_rest_template_in_every_mode() {
     // whatever frame the run starts at (lbs included: its engine poses frames, not the rest).
     for mode in [Mode::Binding, Mode::Jacobian, Mode::Lbs] {
         let mut config = config(&[Method::Delaunay], None, None);
-        config.options.mode = mode;
+        config.options.animation.mode = mode;
         config.frames = Some("5..6".to_owned());
         let session = Session::open(&config).expect("open");
         let deform_mode = trisplat_pipeline::input::deform_mode(mode);

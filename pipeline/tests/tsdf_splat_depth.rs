@@ -3,6 +3,7 @@
 //! surface closer to the deformed template than the mean's depth (each disc a flat step).
 
 use std::path::PathBuf;
+use trisplat_pipeline::config::TsdfOptions;
 
 use trisplat_pipeline::config::SplatDepthRule;
 use trisplat_pipeline::report::FrameMetrics;
@@ -19,7 +20,10 @@ fn frame_zero(splat_depth: SplatDepthRule) -> FrameMetrics {
         frames: Some("0..1".to_owned()),
         gt: Some(GroundTruth::Template),
         options: ExtractOptions {
-            tsdf_splat_depth: splat_depth,
+            tsdf: TsdfOptions {
+                splat_depth,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     };
@@ -51,7 +55,7 @@ fn ray_depth_fuses_flat_discs_closer_to_the_surface_than_the_means_depth() {
 #[test]
 fn ray_depth_is_the_default() {
     assert_eq!(
-        ExtractOptions::default().tsdf_splat_depth,
+        ExtractOptions::default().tsdf.splat_depth,
         SplatDepthRule::Ray
     );
 }

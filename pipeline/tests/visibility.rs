@@ -4,9 +4,11 @@
 //! the options are checked.
 
 use std::path::PathBuf;
+use trisplat_pipeline::config::{BindOptions, TsdfOptions, VisibilityRule};
 
 use glam::Vec3;
-use trisplat_pipeline::avatar::{AvatarFolder, GaussianLayout};
+use trisplat_pipeline::avatar::AvatarFolder;
+use trisplat_pipeline::config::GaussianLayout;
 use trisplat_pipeline::error::PipelineError;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 
@@ -25,7 +27,10 @@ fn config(methods: Vec<Method>, options: ExtractOptions) -> ExtractConfig {
         frames: Some("0..2".to_owned()),
         gt: None,
         options: ExtractOptions {
-            layout: GaussianLayout::Lam,
+            bind: BindOptions {
+                layout: GaussianLayout::Lam,
+                ..options.bind
+            },
             ..options
         },
     }
@@ -71,7 +76,10 @@ fn zero_keeps_every_gaussian_and_the_floater_rule_is_opt_in() {
     let session = Session::open(&config(
         vec![Method::Alpha],
         ExtractOptions {
-            min_contribution: 0.0,
+            visibility: VisibilityRule {
+                min_contribution: 0.0,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     ))
@@ -83,7 +91,10 @@ fn zero_keeps_every_gaussian_and_the_floater_rule_is_opt_in() {
     let session = Session::open(&config(
         vec![Method::Alpha],
         ExtractOptions {
-            floater_std_ratio: Some(1.0),
+            visibility: VisibilityRule {
+                floater_std_ratio: Some(1.0),
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     ))
@@ -99,10 +110,16 @@ fn the_tsdf_renders_every_gaussian() {
         let mut session = Session::open(&config(
             vec![Method::Tsdf, Method::Alpha],
             ExtractOptions {
-                min_contribution,
-                floater_std_ratio,
-                views: 8,
-                resolution: 96,
+                tsdf: TsdfOptions {
+                    views: 8,
+                    resolution: 96,
+                    ..Default::default()
+                },
+                visibility: VisibilityRule {
+                    min_contribution,
+                    floater_std_ratio,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ))
@@ -126,9 +143,12 @@ fn the_alpha_cut_decides_which_pixels_carry_depth() {
         let mut session = Session::open(&config(
             vec![Method::Tsdf],
             ExtractOptions {
-                tsdf_alpha_cut: cut,
-                views: 8,
-                resolution: 96,
+                tsdf: TsdfOptions {
+                    alpha_cut: cut,
+                    views: 8,
+                    resolution: 96,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ))
@@ -149,50 +169,71 @@ fn bad_values_are_refused_naming_the_option() {
         (
             "tsdf-alpha-cut",
             ExtractOptions {
-                tsdf_alpha_cut: 0.0,
+                tsdf: TsdfOptions {
+                    alpha_cut: 0.0,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),
         (
             "tsdf-alpha-cut",
             ExtractOptions {
-                tsdf_alpha_cut: 1.5,
+                tsdf: TsdfOptions {
+                    alpha_cut: 1.5,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),
         (
             "tsdf-alpha-cut",
             ExtractOptions {
-                tsdf_alpha_cut: f32::NAN,
+                tsdf: TsdfOptions {
+                    alpha_cut: f32::NAN,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),
         (
             "min-contribution",
             ExtractOptions {
-                min_contribution: 1.0,
+                visibility: VisibilityRule {
+                    min_contribution: 1.0,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),
         (
             "min-contribution",
             ExtractOptions {
-                min_contribution: -0.1,
+                visibility: VisibilityRule {
+                    min_contribution: -0.1,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),
         (
             "floater-std-ratio",
             ExtractOptions {
-                floater_std_ratio: Some(f64::INFINITY),
+                visibility: VisibilityRule {
+                    floater_std_ratio: Some(f64::INFINITY),
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),
         (
             "floater-neighbors",
             ExtractOptions {
-                floater_std_ratio: Some(2.0),
-                floater_neighbors: 0,
+                visibility: VisibilityRule {
+                    floater_std_ratio: Some(2.0),
+                    floater_neighbors: 0,
+                    ..Default::default()
+                },
                 ..ExtractOptions::default()
             },
         ),

@@ -5,6 +5,7 @@
 //! different scales are refused.
 
 use std::path::{Path, PathBuf};
+use trisplat_pipeline::config::MetricOptions;
 
 use glam::{DVec3, Vec3};
 use trisplat_geometry::TriMesh;
@@ -127,7 +128,10 @@ fn config(template: PathBuf, animation: Option<String>, output: PathBuf) -> Extr
         frames: None,
         gt: Some(GroundTruth::Template),
         options: ExtractOptions {
-            samples: 2000,
+            metrics: MetricOptions {
+                samples: 2000,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     }

@@ -3,10 +3,15 @@
 
 use std::path::PathBuf;
 use std::sync::Mutex;
+use trisplat::pipeline::config::{
+    AlphaOptions, AnimationOptions, BindOptions, DelaunayOptions, MetricOptions, TsdfOptions,
+    VisibilityRule,
+};
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use trisplat::pipeline::avatar::{AvatarFolder, GaussianLayout};
+use trisplat::pipeline::avatar::AvatarFolder;
+use trisplat::pipeline::config::GaussianLayout;
 use trisplat::pipeline::config::{
     DepthKind, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, SplatDepthRule,
 };
@@ -221,33 +226,55 @@ impl Session {
             (template, gaussians)
         };
         let options = ExtractOptions {
-            clip,
-            clip_from,
-            fps: fps.unwrap_or(defaults.fps),
-            layout,
-            tsdf_depth: self::tsdf_depth(tsdf_depth)?,
-            tsdf_splat_depth: self::tsdf_splat_depth(tsdf_splat_depth)?,
-            tsdf_colors,
-            alpha_keep_clusters,
-            rebuild_every,
-            strict,
-            tsdf_alpha_cut: tsdf_alpha_cut.unwrap_or(defaults.tsdf_alpha_cut),
-            min_contribution: min_contribution.unwrap_or(defaults.min_contribution),
-            floater_std_ratio,
-            floater_neighbors: floater_neighbors.unwrap_or(defaults.floater_neighbors),
-            tau: tau.unwrap_or(defaults.tau),
-            mode: self::mode(mode)?,
-            per_triangle: per_triangle.unwrap_or(defaults.per_triangle),
-            voxel,
-            views: views.unwrap_or(defaults.views),
-            resolution: resolution.unwrap_or(defaults.resolution),
-            alpha,
-            hop_threshold: hop_threshold.unwrap_or(defaults.hop_threshold),
-            samples: samples.unwrap_or(defaults.samples),
-            tau_fraction: if tau.is_some() {
-                None
-            } else {
-                tau_fraction.or(defaults.tau_fraction)
+            animation: AnimationOptions {
+                clip,
+                clip_from,
+                fps: fps.unwrap_or(defaults.animation.fps),
+                strict,
+                mode: self::mode(mode)?,
+                ..defaults.animation
+            },
+            bind: BindOptions {
+                layout,
+                per_triangle: per_triangle.unwrap_or(defaults.bind.per_triangle),
+                ..defaults.bind
+            },
+            tsdf: TsdfOptions {
+                depth: self::tsdf_depth(tsdf_depth)?,
+                splat_depth: self::tsdf_splat_depth(tsdf_splat_depth)?,
+                colors: tsdf_colors,
+                alpha_cut: tsdf_alpha_cut.unwrap_or(defaults.tsdf.alpha_cut),
+                voxel,
+                views: views.unwrap_or(defaults.tsdf.views),
+                resolution: resolution.unwrap_or(defaults.tsdf.resolution),
+                ..defaults.tsdf
+            },
+            alpha: AlphaOptions {
+                keep_clusters: alpha_keep_clusters,
+                alpha,
+                ..defaults.alpha
+            },
+            visibility: VisibilityRule {
+                min_contribution: min_contribution.unwrap_or(defaults.visibility.min_contribution),
+                floater_std_ratio,
+                floater_neighbors: floater_neighbors
+                    .unwrap_or(defaults.visibility.floater_neighbors),
+                ..defaults.visibility
+            },
+            delaunay: DelaunayOptions {
+                rebuild_every,
+                hop_threshold: hop_threshold.unwrap_or(defaults.delaunay.hop_threshold),
+                ..defaults.delaunay
+            },
+            metrics: MetricOptions {
+                tau: tau.unwrap_or(defaults.metrics.tau),
+                samples: samples.unwrap_or(defaults.metrics.samples),
+                tau_fraction: if tau.is_some() {
+                    None
+                } else {
+                    tau_fraction.or(defaults.metrics.tau_fraction)
+                },
+                ..defaults.metrics
             },
             ..defaults
         };

@@ -3,6 +3,7 @@
 //! [--targets DIR] [--adaptive-scale] [--format ply|spz|glb|gltf]`.
 
 use std::path::PathBuf;
+use trisplat_pipeline::config::AnimationOptions;
 
 use super::Context;
 use super::extract::avatar_files;
@@ -107,11 +108,14 @@ pub struct DeformArgs {
 /// Unreadable or mismatched inputs (named), a failed write (files of this run removed).
 pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
     let mut options = ExtractOptions {
-        mode: args.mode,
-        clip: args.clip.clone(),
-        clip_from: args.clip_from.clone(),
-        fps: args.fps,
-        strict: args.strict,
+        animation: AnimationOptions {
+            mode: args.mode,
+            clip: args.clip.clone(),
+            clip_from: args.clip_from.clone(),
+            fps: args.fps,
+            strict: args.strict,
+            ..Default::default()
+        },
         ..ExtractOptions::default()
     };
     let (template, gaussians) = match (&args.avatar, &args.template) {

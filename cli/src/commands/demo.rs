@@ -1,6 +1,7 @@
 //! `trisplat demo [-o DIR]`: the main job on the bundled avatar fixture.
 
 use std::path::{Path, PathBuf};
+use trisplat_pipeline::config::AnimationOptions;
 
 use anyhow::Context as _;
 use trisplat_geometry::io::{IoError, write_atomically};
@@ -71,7 +72,10 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
         frames: None,
         gt: Some(GroundTruth::Template),
         options: ExtractOptions {
-            fps: DEMO_FPS,
+            animation: AnimationOptions {
+                fps: DEMO_FPS,
+                ..Default::default()
+            },
             ..ExtractOptions::default()
         },
     };
@@ -91,7 +95,7 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
     print_summary(
         &report,
         &config.output,
-        &config.options.targets,
+        &config.options.outputs.targets,
         true,
         ("demo", ctx),
     )?;

@@ -10,7 +10,8 @@ use trisplat_pipeline::{
 };
 
 use trisplat_geometry::metrics::Relation;
-use trisplat_pipeline::avatar::{AvatarFolder, GaussianLayout};
+use trisplat_pipeline::avatar::AvatarFolder;
+use trisplat_pipeline::config::GaussianLayout;
 
 use super::Context;
 use crate::progress::MethodPace;
@@ -145,7 +146,7 @@ impl ExtractArgs {
     /// The run's configuration; an avatar folder (`--avatar DIR`, or `--template DIR` when it
     /// holds one) stands for its template and per-vertex Gaussians.
     fn config(self) -> anyhow::Result<ExtractConfig> {
-        if self.options.error_colors && self.gt.is_none() && self.gt_sequence.is_none() {
+        if self.options.outputs.error_colors && self.gt.is_none() && self.gt_sequence.is_none() {
             return Err(super::UsageError(
                 "--error-colors colours the meshes by their distance to the ground truth: give \
                  --gt or --gt-sequence"
@@ -198,7 +199,7 @@ pub(crate) fn avatar_files(
             avatar.gaussians.display()
         );
     }
-    options.layout = GaussianLayout::Lam;
+    options.bind.layout = GaussianLayout::Lam;
     Ok((avatar.template, Some(avatar.gaussians)))
 }
 
@@ -228,7 +229,7 @@ pub fn run(args: ExtractArgs, ctx: &Context) -> anyhow::Result<()> {
     print_summary(
         &report,
         &config.output,
-        &config.options.targets,
+        &config.options.outputs.targets,
         true,
         ("extract", ctx),
     )?;

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use trisplat_pipeline::config::AnimationOptions;
 
 use anyhow::{Context as _, bail};
 use trisplat_extract::tsdf::DEFAULT_DEPTH_SCALE;
@@ -312,8 +313,11 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
                 frames: args.frames.clone(),
                 gt: None,
                 options: ExtractOptions {
-                    clip: args.clip.clone(),
-                    fps: args.fps,
+                    animation: AnimationOptions {
+                        clip: args.clip.clone(),
+                        fps: args.fps,
+                        ..Default::default()
+                    },
                     ..ExtractOptions::default()
                 },
             };

@@ -10,8 +10,8 @@ use trisplat_extract::tsdf::{
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
-use trisplat_pipeline::config::{DepthKind, SplatDepthRule};
-use trisplat_pipeline::methods::{DepthRules, RENDERED_ALPHA_MIN, rendered_depth};
+use trisplat_pipeline::config::{DepthKind, RENDERED_ALPHA_MIN, SplatDepthRule};
+use trisplat_pipeline::methods::{DepthRules, rendered_depth};
 use trisplat_splat::ply::read_gaussians;
 
 use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};

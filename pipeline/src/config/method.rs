@@ -1,0 +1,41 @@
+//! The extraction methods, by name.
+
+use std::fmt;
+
+/// An extraction method.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Render depth maps of the deformed Gaussians from a camera rig and fuse them (TSDF +
+    /// marching cubes).
+    Tsdf,
+    /// Incremental Delaunay of the bound Gaussians: per-chart triangulations in the canonical
+    /// domain, lifted each frame.
+    Delaunay,
+    /// Alpha shape of the deformed Gaussian means.
+    Alpha,
+}
+
+impl Method {
+    /// Every method, in report order.
+    pub const ALL: [Self; 3] = [Self::Tsdf, Self::Delaunay, Self::Alpha];
+
+    /// The method's name on the command line and in output file names.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tsdf => "tsdf",
+            Self::Delaunay => "delaunay",
+            Self::Alpha => "alpha",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}

@@ -1,0 +1,115 @@
+//! Options of the point methods (delaunay, alpha) and of the rule that decides which
+//! Gaussians they mesh, with their defaults.
+
+use trisplat_extract::incremental_delaunay::DEFAULT_HOP_THRESHOLD;
+
+/// Default alpha of the alpha-shape method, in multiples of the mean spacing of the Gaussians
+/// (mean distance from each rest-pose mean to its nearest other mean). 6, not 3: with the
+/// pipeline's self-bound Gaussians (4 per triangle) 3 spacings leaves holes on real templates,
+/// while 6 lowers Chamfer L1 against the deformed template at the same cost (docs/benchmarks.md,
+/// "Main job (`sweep`)": CesiumMan 6.6e-3 -> 3.4e-3, F-score 0.55 -> 0.72; the LAM head
+/// 8.7e-3 -> 1.4e-3, F-score 0.43 -> 0.75; the time is the tetrahedralisation's either way).
+pub const DEFAULT_ALPHA_SPACINGS: f64 = 6.0;
+/// Default [`VisibilityRule::min_contribution`]: one step of an 8-bit image.
+pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
+/// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
+pub const DEFAULT_FLOATER_NEIGHBORS: usize = 20;
+
+/// The rule deciding which Gaussians the point methods use (module `visibility` applies it;
+/// docs/conventions.md §6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct VisibilityRule {
+    /// Delaunay and alpha: leave out the Gaussians whose largest blending weight (alpha x
+    /// transmittance) at any pixel of the tsdf rig's views of the rest pose and of 4 frames
+    /// spread over the run is below W: they change no pixel by that much, such as those
+    /// inside the closed mouth (the default is one 8-bit step; 0 keeps them all; tsdf renders
+    /// every Gaussian in each frame anyway; docs/conventions.md §6).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "W",
+        default_value_t = DEFAULT_MIN_CONTRIBUTION))]
+    pub min_contribution: f32,
+    /// Delaunay and alpha: leave out floating Gaussians, Open3D's statistical outliers among the
+    /// rest-pose means of the others: mean distance to the K nearest (K = --floater-neighbors)
+    /// above the mean of those distances plus R standard deviations. Off unless given: on a
+    /// bound avatar it also takes the sparse parts of the surface (docs/conventions.md §6).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "R"))]
+    pub floater_std_ratio: Option<f64>,
+    /// Neighbours K of the floater rule.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "K",
+        default_value_t = DEFAULT_FLOATER_NEIGHBORS,
+        value_parser = super::arg::parse_positive, requires = "floater_std_ratio"))]
+    pub floater_neighbors: usize,
+}
+
+impl Default for VisibilityRule {
+    fn default() -> Self {
+        Self {
+            min_contribution: DEFAULT_MIN_CONTRIBUTION,
+            floater_std_ratio: None,
+            floater_neighbors: DEFAULT_FLOATER_NEIGHBORS,
+        }
+    }
+}
+
+impl VisibilityRule {
+    /// Whether the rule leaves every Gaussian in (no threshold, no floater rule).
+    #[must_use]
+    pub fn keeps_all(&self) -> bool {
+        self.min_contribution <= 0.0 && self.floater_std_ratio.is_none()
+    }
+}
+
+/// The delaunay method's incremental updates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct DelaunayOptions {
+    /// Delaunay: rebuild from scratch every N frames (0: never; 1: every frame).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N", default_value_t = 0))]
+    pub rebuild_every: usize,
+    /// Delaunay: keep updating incrementally even when updates cost more than rebuilds (by
+    /// default an update dearer than a rebuild is followed by rebuilds from scratch and the
+    /// update path probed again later; docs/conventions.md §6).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub no_auto_rebuild: bool,
+    /// Delaunay hop threshold T, relative to the mean template edge: a Gaussian moves to
+    /// another triangle's chart only when that triangle is nearer than its own by more than
+    /// T x the mean edge. 0: every frame equals a from-scratch triangulation; T > 0 redoes
+    /// fewer charts per frame (faster: CesiumMan's charts redone 4.1% -> 0.3% per frame at
+    /// 0.1), but a frame may then differ from a from-scratch triangulation (Gaussians stay in
+    /// charts they drifted out of by less than T edges) until the next rebuild.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "T",
+        default_value_t = DEFAULT_HOP_THRESHOLD))]
+    pub hop_threshold: f64,
+}
+
+impl Default for DelaunayOptions {
+    fn default() -> Self {
+        Self {
+            rebuild_every: 0,
+            no_auto_rebuild: false,
+            hop_threshold: DEFAULT_HOP_THRESHOLD,
+        }
+    }
+}
+
+/// The alpha method's radius and the pieces it keeps.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct AlphaOptions {
+    /// Alpha-shape radius in scene units [default: 6 x the mean nearest-neighbour spacing of
+    /// the rest-pose Gaussian means].
+    #[cfg_attr(feature = "cli", arg(long, value_name = "A"))]
+    pub alpha: Option<f64>,
+    /// Alpha: keep the edge-connected pieces at least as large (in triangles) as the K-th
+    /// largest, as tsdf keeps its largest (0: keep every piece; the report counts them).
+    #[cfg_attr(
+        feature = "cli",
+        arg(
+            id = "alpha_keep_clusters",
+            long = "alpha-keep-clusters",
+            value_name = "K",
+            default_value_t = 0
+        )
+    )]
+    pub keep_clusters: usize,
+}
