@@ -31,8 +31,10 @@ use trisplat_extract::incremental_delaunay::{DelaunayOptions, IncrementalDelauna
 use trisplat_geometry::TriMesh;
 use trisplat_pipeline::config::DEFAULT_SAMPLES;
 use trisplat_pipeline::input::deform_mode;
-use trisplat_pipeline::methods::{FrameInput, Mesher, Resolved};
-use trisplat_pipeline::report::{FrameRecord, GtSamples, Summary, is_watertight, measure};
+use trisplat_pipeline::methods::{FrameInput, Mesher};
+use trisplat_pipeline::metrics::{GtSamples, is_watertight, measure};
+use trisplat_pipeline::records::{FrameRecord, Resolved};
+use trisplat_pipeline::report::Summary;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 use trisplat_splat::GaussianSet;
 use trisplat_splat::deform::{DeformMode, Deformer};

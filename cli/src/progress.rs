@@ -3,6 +3,7 @@
 use std::io::IsTerminal;
 
 use indicatif::ProgressBar;
+use trisplat_pipeline::Event;
 
 /// Factory for progress spinners that respects `--quiet` and non-terminal stderr.
 #[derive(Clone, Copy, Debug)]
@@ -77,6 +78,75 @@ impl MethodPace {
             })
             .collect::<Vec<_>>()
             .join(" · ")
+    }
+}
+
+/// The progress of a main-job run on stderr, drawn from its events: a spinner while the
+/// inputs are read, then a bar over the frames whose message is each method's pace
+/// ([`MethodPace`]), notices printed above it.
+#[derive(Debug)]
+pub struct RunProgress {
+    /// The command's name, before each message.
+    command: &'static str,
+    factory: Progress,
+    spinner: ProgressBar,
+    bar: Option<ProgressBar>,
+    pace: MethodPace,
+}
+
+impl RunProgress {
+    /// A spinner `<command>: reading inputs` until the run starts.
+    #[must_use]
+    pub fn new(factory: Progress, command: &'static str) -> Self {
+        Self {
+            command,
+            factory,
+            spinner: factory.spinner(&format!("{command}: reading inputs")),
+            bar: None,
+            pace: MethodPace::default(),
+        }
+    }
+
+    /// Shows what `event` tells.
+    pub fn show(&mut self, event: &Event) {
+        match event {
+            Event::Started { frames, .. } => {
+                self.spinner.finish_and_clear();
+                let message = format!("{}: meshing frames", self.command);
+                self.bar = Some(self.factory.bar(*frames as u64, &message));
+            }
+            Event::MethodDone { method, record } => self.pace.add(method.name(), record.ms),
+            Event::FrameDone { done, total, .. } | Event::FrameFailed { done, total, .. } => {
+                if let Some(b) = &self.bar {
+                    b.set_position(*done as u64);
+                    b.set_message(format!(
+                        "{}: {}",
+                        self.command,
+                        self.pace.message(total.saturating_sub(*done))
+                    ));
+                }
+            }
+            Event::Finishing => {
+                if let Some(b) = &self.bar {
+                    b.set_message(format!("{}: writing sequences and report", self.command));
+                }
+            }
+            Event::Notice(message) => {
+                let say = || eprintln!("warning: {message}");
+                match &self.bar {
+                    Some(b) => b.suspend(say),
+                    None => self.spinner.suspend(say),
+                }
+            }
+        }
+    }
+
+    /// Clears the spinner and the bar.
+    pub fn finish(self) {
+        self.spinner.finish_and_clear();
+        if let Some(b) = self.bar {
+            b.finish_and_clear();
+        }
     }
 }
 

@@ -14,7 +14,7 @@ use trisplat_splat::deform::DeformError;
 use trisplat_splat::lbs::LbsError;
 use trisplat_splat::render::RenderError;
 
-use crate::Method;
+use crate::config::Method;
 
 // Every variant prints its cause in its own message, so none is a `#[source]` (the wrapped
 // errors are fields named `cause`, which thiserror does not chain): the CLI's `{:#}` cause

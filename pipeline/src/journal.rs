@@ -21,38 +21,10 @@ use trisplat_geometry::io::{IoError, write_atomically};
 
 use crate::config::ExtractConfig;
 use crate::error::PipelineError;
-use crate::report::{DelaunayFrame, FrameRecord};
+use crate::records::{FailedFrame, FrameEntry};
 
 /// File name of the journal in the output folder.
 pub const JOURNAL: &str = "journal.jsonl";
-
-/// One frame done: what the report needs of it.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct FrameEntry {
-    /// Animation frame index.
-    pub frame: usize,
-    /// Its time in seconds.
-    pub time: f64,
-    /// Milliseconds spent deforming the Gaussians.
-    pub deform_ms: f64,
-    /// Template triangles degenerate in this frame (docs/numerics.md, "The
-    /// degenerate-triangle policy"); 0 in journals written before it was recorded.
-    #[serde(default)]
-    pub collapsed_triangles: usize,
-    /// Each method's record, by method name.
-    pub methods: BTreeMap<String, FrameRecord>,
-    /// The incremental Delaunay statistics (with the delaunay method).
-    pub delaunay: Option<DelaunayFrame>,
-}
-
-/// A frame that failed, and why.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct FailedFrame {
-    /// Animation frame index.
-    pub frame: usize,
-    /// The error, as printed.
-    pub error: String,
-}
 
 #[derive(serde::Serialize, serde::Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]

@@ -64,29 +64,30 @@ pub mod config;
 pub mod deform;
 pub mod error;
 pub mod eval;
+pub mod event;
 pub mod fit;
-pub mod html;
 pub mod input;
 pub mod journal;
 pub mod lock;
 pub mod memory;
 pub mod merge;
 pub mod methods;
+pub mod metrics;
 pub mod output;
 pub mod plan;
-pub mod plot;
+pub mod records;
 pub mod refine;
 pub mod report;
 pub mod run;
 pub mod session;
-pub mod thumbnail;
 pub mod visibility;
 
 pub use config::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl,
 };
 pub use error::PipelineError;
+pub use event::Event;
 pub use plan::{Plan, Stage, StagePlan};
 pub use report::Report;
-pub use run::{Progress, run};
+pub use run::run;
 pub use session::{FrameResult, MethodFrame, Session, SessionOptions};

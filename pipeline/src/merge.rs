@@ -22,9 +22,10 @@ use trisplat_geometry::io::IoError;
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
 use crate::lock::FolderLock;
-use crate::report::{DelaunayStats, MethodReport, Report, Summary, Thumbnails};
-use crate::run::{FrameFilesByMethod, REPORT_JSON, frame_file, refuse_used_output, write_outputs};
-use crate::thumbnail::THUMBNAIL_DIR;
+use crate::output::{FrameFilesByMethod, frame_file, refuse_used_output, write_outputs};
+use crate::report::{
+    DelaunayStats, MethodReport, REPORT_JSON, Report, Summary, THUMBNAIL_DIR, Thumbnails,
+};
 
 /// Merges the finished shard runs in `shards` into `out` (see the module docs); returns the
 /// merged report. `force`: start over in an output folder that holds a run.

@@ -20,6 +20,7 @@
 //!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
 //!   means), optionally only its largest edge-connected pieces (`alpha_keep_clusters`).
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
@@ -39,6 +40,7 @@ use crate::config::{
     DepthKind, ExtractOptions, Method, RENDERED_ALPHA_MIN, SplatDepthRule,
 };
 use crate::error::PipelineError;
+use crate::records::Resolved;
 
 /// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
 /// point still gets a rig).
@@ -108,17 +110,45 @@ pub fn mean_spacing(points: &[Vec3]) -> Option<f64> {
     Some(sum / points.len().max(1) as f64)
 }
 
-/// Scale-derived parameters of the methods, resolved once for the run.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Resolved {
-    /// Bounding radius of the rest template (about its box centre).
-    pub template_radius: f64,
-    /// Mean nearest-neighbour spacing of the rest-pose Gaussian means.
-    pub mean_spacing: f64,
-    /// TSDF voxel.
-    pub voxel: f64,
-    /// Alpha-shape radius.
-    pub alpha: f64,
+/// Method `method`'s parameters as the report records them (`voxel`, `views`, `alpha`, ...;
+/// flags as 0 or 1).
+#[must_use]
+pub fn parameters(
+    method: Method,
+    o: &ExtractOptions,
+    resolved: &Resolved,
+) -> BTreeMap<String, f64> {
+    let mut parameters = BTreeMap::new();
+    match method {
+        Method::Tsdf => {
+            parameters.insert("voxel".to_owned(), resolved.voxel);
+            parameters.insert("views".to_owned(), o.tsdf.views as f64);
+            parameters.insert("resolution".to_owned(), f64::from(o.tsdf.resolution));
+            parameters.insert(
+                "median_depth".to_owned(),
+                f64::from(u8::from(o.tsdf.depth == DepthKind::Median)),
+            );
+            parameters.insert(
+                "ray_depth".to_owned(),
+                f64::from(u8::from(o.tsdf.splat_depth == SplatDepthRule::Ray)),
+            );
+            parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf.colors)));
+            parameters.insert("alpha_cut".to_owned(), f64::from(o.tsdf.alpha_cut));
+        }
+        Method::Delaunay => {
+            parameters.insert("rebuild_every".to_owned(), o.delaunay.rebuild_every as f64);
+            parameters.insert(
+                "auto_rebuild".to_owned(),
+                f64::from(u8::from(!o.delaunay.no_auto_rebuild)),
+            );
+            parameters.insert("hop_threshold".to_owned(), o.delaunay.hop_threshold);
+        }
+        Method::Alpha => {
+            parameters.insert("alpha".to_owned(), resolved.alpha);
+            parameters.insert("keep_clusters".to_owned(), o.alpha.keep_clusters as f64);
+        }
+    }
+    parameters
 }
 
 impl Resolved {

@@ -1,9 +1,20 @@
-//! Output files: never over an input, and removed again when a run fails (docs/conventions.md §10).
+//! The output folder of a run: the frame files' names, never an output over an input, files
+//! removed again when a run fails (docs/conventions.md §10), a folder that holds another run
+//! refused or cleared, and the animated glTFs and report files written at the end.
 
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use crate::error::PipelineError;
+use rayon::prelude::*;
+use trisplat_geometry::io::{FrameFiles, GLB_PART_LIMIT, SequenceLayout, write_sequence_parts};
+
+use crate::config::{ExtractConfig, Method, OutputTarget};
+use crate::error::{PipelineError, first_error_in_order};
+use crate::journal::JOURNAL;
+use crate::report::{
+    GT_THUMBNAIL, PLOT_PNG, PLOT_SVG, REPORT_HTML, REPORT_JSON, REPORT_MD, Report, THUMBNAIL_DIR,
+    Thumbnails, html, plot, thumbnail_file,
+};
 
 /// Name of frame `frame`'s file in an output folder (`frame_000042.ply`).
 #[must_use]
@@ -56,4 +67,213 @@ impl Created {
             let _ = std::fs::remove_file(p);
         }
     }
+}
+
+/// The per-frame mesh files of each method, in frame order: the animated glTF is assembled
+/// from them at the end, one frame at a time (no frame's mesh stays in memory).
+pub type FrameFilesByMethod = BTreeMap<Method, Vec<PathBuf>>;
+
+/// The frame files in `out` of every frame `report` lists, per method.
+#[must_use]
+pub fn frame_files(out: &Path, report: &Report) -> FrameFilesByMethod {
+    report
+        .methods
+        .values()
+        .map(|m| {
+            let dir = out.join(&m.ply_dir);
+            let files = m.frames.iter().map(|r| dir.join(frame_file(r.frame)));
+            (m.method, files.collect())
+        })
+        .collect()
+}
+
+/// Removes `files` (best effort): frame files written only to assemble the glTF.
+pub fn remove_frame_files(files: &FrameFilesByMethod) {
+    for file in files.values().flatten() {
+        let _ = std::fs::remove_file(file);
+    }
+}
+
+/// The thumbnails of frame `frame` in `out` (written by this run or the one it resumes), as
+/// the report lists them; `None` when there are none.
+pub fn thumbnails_of(out: &Path, frame: usize, report: &Report) -> Option<Thumbnails> {
+    let exists = |name: &str| out.join(thumbnail_file(name, frame)).is_file();
+    let methods: BTreeMap<String, String> = report
+        .ordered()
+        .iter()
+        .map(|m| m.method.name())
+        .filter(|name| exists(name))
+        .map(|name| (name.to_owned(), thumbnail_file(name, frame)))
+        .collect();
+    let ground_truth = exists(GT_THUMBNAIL).then(|| thumbnail_file(GT_THUMBNAIL, frame));
+    if methods.is_empty() && ground_truth.is_none() {
+        return None;
+    }
+    // The colour scale: twice the frame's threshold, as its metrics recorded it.
+    let scale = report
+        .methods
+        .values()
+        .flat_map(|m| m.frames.iter())
+        .find(|r| r.frame == frame && r.metrics.is_some())
+        .and_then(|r| r.metrics.map(|x| 2.0 * x.tau));
+    Some(Thumbnails {
+        frame,
+        scale,
+        ground_truth,
+        methods,
+    })
+}
+
+/// Refuses an output folder that holds a previous run (its journal or report), unless `force`:
+/// then that run's outputs are removed first.
+pub fn refuse_used_output(out: &Path, force: bool) -> Result<(), PipelineError> {
+    let marks = [JOURNAL, REPORT_JSON];
+    if let Some(found) = marks.iter().find(|m| out.join(m).exists())
+        && !force
+    {
+        return Err(PipelineError::UsedOutput {
+            path: out.to_path_buf(),
+            found: (*found).to_owned(),
+        });
+    }
+    if force {
+        remove_previous_outputs(out);
+        remove_stale_temporaries(out);
+    }
+    Ok(())
+}
+
+/// Removes the temporary files (`.trisplat-*.tmp`) a run killed in the middle of an atomic
+/// write left in `out` and its method folders (best effort).
+pub fn remove_stale_temporaries(out: &Path) {
+    let folders = [out.to_path_buf(), out.join(THUMBNAIL_DIR)]
+        .into_iter()
+        .chain([Method::Tsdf, Method::Delaunay, Method::Alpha].map(|m| out.join(m.name())));
+    for dir in folders {
+        let Ok(listing) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in listing.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with(".trisplat-") && name.ends_with(".tmp") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+}
+
+/// Removes what a previous run wrote into `out`: journal, reports, plot, every method's frame
+/// files and sequences (best effort; files that cannot be removed are overwritten later).
+fn remove_previous_outputs(out: &Path) {
+    for name in [
+        JOURNAL,
+        REPORT_JSON,
+        REPORT_MD,
+        REPORT_HTML,
+        PLOT_SVG,
+        PLOT_PNG,
+    ] {
+        let _ = std::fs::remove_file(out.join(name));
+    }
+    if let Ok(listing) = std::fs::read_dir(out.join(THUMBNAIL_DIR)) {
+        for e in listing.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.ends_with(".png") && name.contains("_frame_") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+    for m in [Method::Tsdf, Method::Delaunay, Method::Alpha] {
+        let dir = out.join(m.name());
+        if let Ok(listing) = std::fs::read_dir(&dir) {
+            for e in listing.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with("frame_") && name.ends_with(".ply") {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+        let _ = std::fs::remove_file(out.join(format!("{}.glb", m.name())));
+        if let Ok(listing) = std::fs::read_dir(out) {
+            let prefix = format!("{}_part", m.name());
+            for e in listing.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with(&prefix) && name.ends_with(".glb") {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+    }
+}
+
+/// Refuses outputs that would replace an input, then creates the method folders.
+pub fn check_outputs(
+    config: &ExtractConfig,
+    methods: &[Method],
+    frames: std::ops::Range<usize>,
+    input_files: &[PathBuf],
+) -> Result<(), PipelineError> {
+    let inputs = Inputs::new(input_files);
+    let out = &config.output;
+    for m in methods {
+        let dir = out.join(m.name());
+        for f in frames.clone() {
+            inputs.check(&dir.join(frame_file(f)))?;
+        }
+        inputs.check(&out.join(format!("{}.glb", m.name())))?;
+    }
+    for name in [REPORT_JSON, REPORT_MD, REPORT_HTML, PLOT_SVG, PLOT_PNG] {
+        inputs.check(&out.join(name))?;
+    }
+    for m in methods {
+        let dir = out.join(m.name());
+        std::fs::create_dir_all(&dir).map_err(|source| PipelineError::OutputDir {
+            path: dir,
+            cause: source,
+        })?;
+    }
+    Ok(())
+}
+
+/// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
+/// report), the report files (JSON, Markdown, HTML) and the plot (SVG, PNG).
+pub fn write_outputs(
+    out: &Path,
+    report: &mut Report,
+    frame_files: &FrameFilesByMethod,
+    targets: &[OutputTarget],
+) -> Result<(), PipelineError> {
+    if targets.contains(&OutputTarget::Glb) {
+        // One method per task: reading the frame files back is most of the work.
+        let written: Vec<(Method, Vec<PathBuf>)> =
+            first_error_in_order(frame_files.par_iter().map(|(m, files)| {
+                let glb = out.join(format!("{}.glb", m.name()));
+                write_sequence_parts(
+                    &glb,
+                    &FrameFiles(files),
+                    &report.frame_times,
+                    SequenceLayout::Auto,
+                    GLB_PART_LIMIT,
+                )
+                .map(|parts| (*m, parts))
+            }))?;
+        for (m, parts) in written {
+            if parts.len() > 1
+                && let Some(r) = report.methods.get_mut(m.name())
+            {
+                r.glb_parts = parts
+                    .iter()
+                    .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect();
+            }
+        }
+    }
+    if targets.contains(&OutputTarget::Report) {
+        report.write_json(&out.join(REPORT_JSON))?;
+        report.write_markdown(&out.join(REPORT_MD))?;
+        let svg = plot::write_svg(&out.join(PLOT_SVG), report)?;
+        plot::write_png(&out.join(PLOT_PNG), report)?;
+        html::write_html(&out.join(REPORT_HTML), report, &svg)?;
+    }
+    Ok(())
 }

@@ -45,9 +45,10 @@ use crate::input::{
     Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
     check_topology, deform_mode, open_template_and_animation, parse_frames, read_bound,
 };
-use crate::methods::{FrameInput, Mesher, MethodOutput, Resolved};
+use crate::methods::{FrameInput, Mesher, MethodOutput, parameters};
+use crate::metrics::{GtSamples, is_watertight, measure_with};
 use crate::plan::{Plan, Stage};
-use crate::report::{FrameMetrics, GtSamples, measure_with};
+use crate::records::{FrameMetrics, FrameRecord, Resolved, RunFacts};
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
@@ -82,6 +83,25 @@ pub struct MethodFrame {
     pub output: MethodOutput,
     /// Metrics against the ground truth (when the plan measures and the mesh has area).
     pub metrics: Option<FrameMetrics>,
+}
+
+impl MethodFrame {
+    /// This method's record of animation frame `frame` at `time` seconds: its timings, the
+    /// size of its mesh, whether that is watertight, and its metrics (what the journal, the
+    /// run's events and the report hold).
+    #[must_use]
+    pub fn record(&self, frame: usize, time: f64) -> FrameRecord {
+        FrameRecord {
+            frame,
+            time,
+            ms: self.output.ms,
+            render_ms: self.output.render_ms,
+            vertices: self.output.mesh.vertex_count(),
+            faces: self.output.mesh.triangle_count(),
+            watertight: is_watertight(&self.output.mesh),
+            metrics: self.metrics,
+        }
+    }
 }
 
 /// Everything one frame produced.
@@ -463,6 +483,49 @@ impl Session {
             path: gaussians_path.to_path_buf(),
             cause,
         })
+    }
+
+    /// What this run is, as its report says it (the facts of [`crate::event::Event::Started`]):
+    /// the inputs, the options of `config` that decide the scores, and each method's
+    /// parameters.
+    #[must_use]
+    pub fn facts(&self, config: &ExtractConfig) -> RunFacts {
+        let o = &config.options;
+        let methods = config.methods();
+        RunFacts {
+            template: config.template.display().to_string(),
+            template_vertices: self.welded.stored_vertices,
+            welded_vertices: self.template().vertex_count(),
+            animation: self.label.clone(),
+            unused_channels: self.unused_channels.clone(),
+            gaussians: match &self.source {
+                GaussianSource::File(p) => p.display().to_string(),
+                GaussianSource::Bound(n) => format!("bound here: {n} per triangle"),
+                GaussianSource::Lam(p) => {
+                    format!(
+                        "{} (LAM per-vertex, bound here around its vertices)",
+                        p.display()
+                    )
+                }
+            },
+            gaussian_count: self.set.len(),
+            mode: o.animation.mode.name().to_owned(),
+            ground_truth: config.gt.as_ref().map(GroundTruth::label),
+            samples: o.metrics.samples,
+            tau: o.metrics.tau_fraction.is_none().then_some(o.metrics.tau),
+            tau_fraction: o.metrics.tau_fraction,
+            resolved: self.resolved,
+            gaussians_used: methods
+                .iter()
+                .any(|m| matches!(m, Method::Delaunay | Method::Alpha))
+                .then_some(self.visibility.used),
+            serial_methods: self.serial_methods,
+            parameters: methods
+                .iter()
+                .map(|&m| (m, parameters(m, o, &self.resolved)))
+                .collect(),
+            charts: self.template().triangle_count(),
+        }
     }
 
     /// Runs the methods of each frame one after another (`serial`) or side by side (the

@@ -37,33 +37,11 @@ use trisplat_splat::render::{Outputs, RenderOptions, render};
 
 use crate::config::{DEFAULT_FOV_DEG, VisibilityRule};
 use crate::methods::bounding_sphere;
+use crate::records::GaussiansUsed;
 
 /// Frames of a run, besides the rest pose, whose poses the session gives [`decide`] (evenly
 /// spaced over the run; every frame of a shorter run).
 pub const VISIBILITY_FRAMES: usize = 4;
-
-/// How many Gaussians the point methods use, why the others are left out, and the rule (in
-/// the report).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct GaussiansUsed {
-    /// The rule's contribution threshold (0: no Gaussian hidden).
-    pub min_contribution: f32,
-    /// The floater rule's standard deviations (`None`: no floater rule).
-    pub floater_std_ratio: Option<f64>,
-    /// The floater rule's neighbours.
-    pub floater_neighbors: usize,
-    /// Gaussians in the set.
-    pub total: usize,
-    /// Gaussians the point methods use.
-    pub kept: usize,
-    /// Left out as hidden (below the contribution threshold in every view).
-    pub hidden: usize,
-    /// Left out as floaters (statistical outliers among the rest).
-    pub floaters: usize,
-    /// Poses rendered to decide: the rest pose and sampled frames of the run (0: not decided).
-    #[serde(default)]
-    pub poses: usize,
-}
 
 /// Which Gaussians the point methods use.
 #[derive(Clone, Debug, PartialEq)]

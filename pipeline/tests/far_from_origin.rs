@@ -8,7 +8,8 @@ use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::metrics::Tau;
 use trisplat_pipeline::config::{MetricOptions, TsdfOptions};
-use trisplat_pipeline::report::{FrameMetrics, GtSamples, measure_with};
+use trisplat_pipeline::metrics::{GtSamples, measure_with};
+use trisplat_pipeline::records::FrameMetrics;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method, Session};
 
 const SAMPLES: usize = 4000;

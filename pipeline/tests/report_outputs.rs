@@ -10,8 +10,8 @@ use trisplat_pipeline::config::{MetricOptions, OutputOptions, TsdfOptions};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::read_mesh;
 use trisplat_pipeline::merge::merge;
-use trisplat_pipeline::report::GtSamples;
-use trisplat_pipeline::thumbnail::{THUMBNAIL_HEIGHT, viridis};
+use trisplat_pipeline::metrics::GtSamples;
+use trisplat_pipeline::report::thumbnail::{THUMBNAIL_HEIGHT, viridis};
 use trisplat_pipeline::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, Report, RunControl, Session, run,
 };
@@ -136,7 +136,7 @@ fn check_html(out: &Path, report: &Report) -> String {
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
     for row in &report.summary_table().rows {
         for cell in row {
-            let text = trisplat_pipeline::html::escape(&cell.text);
+            let text = trisplat_pipeline::report::html::escape(&cell.text);
             assert!(
                 html.contains(&format!(">{text}<")),
                 "{} not in the page",

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use trisplat_pipeline::config::TsdfOptions;
 
 use trisplat_pipeline::config::SplatDepthRule;
-use trisplat_pipeline::report::FrameMetrics;
+use trisplat_pipeline::records::FrameMetrics;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method, Session};
 
 /// Frame 0 of CesiumMan's walk, fused with `splat_depth` and scored against its template.

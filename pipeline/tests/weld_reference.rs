@@ -6,7 +6,7 @@
 use trisplat_geometry::cleanup::weld_vertices;
 use trisplat_geometry::io::read_mesh;
 use trisplat_pipeline::input::WeldedTemplate;
-use trisplat_pipeline::report::is_watertight;
+use trisplat_pipeline::metrics::is_watertight;
 
 #[test]
 fn weld_matches_trimesh_on_gltf_fixtures() {

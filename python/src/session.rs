@@ -15,7 +15,7 @@ use trisplat::pipeline::config::GaussianLayout;
 use trisplat::pipeline::config::{
     DepthKind, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, SplatDepthRule,
 };
-use trisplat::pipeline::report::DelaunayFrame;
+use trisplat::pipeline::records::DelaunayFrame;
 use trisplat::pipeline::{FrameResult, Session as RsSession};
 
 use crate::arrays::rows_out;
@@ -94,7 +94,9 @@ impl Session {
     }
 }
 
-/// A frame's result as a dict (see ``Session.frame``).
+/// A frame's result as a dict (see ``Session.frame``): per method its record, as the run's
+/// events and report.json carry it (`MethodFrame::record`), with its mesh and what the
+/// incremental update did.
 fn frame_dict<'py>(py: Python<'py>, result: FrameResult) -> PyResult<Bound<'py, PyDict>> {
     let dict = PyDict::new(py);
     dict.set_item("frame", result.frame)?;
@@ -102,19 +104,13 @@ fn frame_dict<'py>(py: Python<'py>, result: FrameResult) -> PyResult<Bound<'py, 
     dict.set_item("deform_ms", result.deform_ms)?;
     let methods = PyDict::new(py);
     for m in result.methods {
-        let entry = PyDict::new(py);
-        entry.set_item("ms", m.output.ms)?;
-        entry.set_item("render_ms", m.output.render_ms)?;
+        let record = m.record(result.frame, result.time);
+        let entry = json_to_py(py, &to_json(&record)?)?.cast_into::<PyDict>()?;
         let delaunay = match &m.output.delaunay {
             Some(stats) => json_to_py(py, &to_json(&DelaunayFrame::new(result.frame, stats))?)?,
             None => py.None().into_bound(py),
         };
         entry.set_item("delaunay", delaunay)?;
-        let metrics = match &m.metrics {
-            Some(metrics) => json_to_py(py, &to_json(metrics)?)?,
-            None => py.None().into_bound(py),
-        };
-        entry.set_item("metrics", metrics)?;
         entry.set_item("mesh", Mesh::from_rust(py, m.output.mesh))?;
         methods.set_item(m.method.name(), entry)?;
     }
@@ -232,12 +228,10 @@ impl Session {
                 fps: fps.unwrap_or(defaults.animation.fps),
                 strict,
                 mode: self::mode(mode)?,
-                ..defaults.animation
             },
             bind: BindOptions {
                 layout,
                 per_triangle: per_triangle.unwrap_or(defaults.bind.per_triangle),
-                ..defaults.bind
             },
             tsdf: TsdfOptions {
                 depth: self::tsdf_depth(tsdf_depth)?,
@@ -247,19 +241,16 @@ impl Session {
                 voxel,
                 views: views.unwrap_or(defaults.tsdf.views),
                 resolution: resolution.unwrap_or(defaults.tsdf.resolution),
-                ..defaults.tsdf
             },
             alpha: AlphaOptions {
                 keep_clusters: alpha_keep_clusters,
                 alpha,
-                ..defaults.alpha
             },
             visibility: VisibilityRule {
                 min_contribution: min_contribution.unwrap_or(defaults.visibility.min_contribution),
                 floater_std_ratio,
                 floater_neighbors: floater_neighbors
                     .unwrap_or(defaults.visibility.floater_neighbors),
-                ..defaults.visibility
             },
             delaunay: DelaunayOptions {
                 rebuild_every,
@@ -274,7 +265,6 @@ impl Session {
                 } else {
                     tau_fraction.or(defaults.metrics.tau_fraction)
                 },
-                ..defaults.metrics
             },
             ..defaults
         };
@@ -362,10 +352,11 @@ impl Session {
     }
 
     /// Deforms and meshes animation frame ``frame`` and returns a dict: ``frame``, ``time``
-    /// (seconds), ``deform_ms``, and ``methods``: per method name a dict with ``mesh`` (a
-    /// ``Mesh``), ``ms`` (the method's own time), ``render_ms`` (tsdf), ``delaunay`` (what the
-    /// incremental update did, as in report.json) and ``metrics`` (against ``gt``, as in
-    /// report.json; None without ``gt``).
+    /// (seconds), ``deform_ms``, and ``methods``: per method name its frame record as in
+    /// report.json (``ms``, the method's own time; ``render_ms``, tsdf; ``vertices``,
+    /// ``faces``, ``watertight``; ``metrics`` against ``gt``, None without ``gt``) with
+    /// ``mesh`` (a ``Mesh``) and ``delaunay`` (what the incremental update did, as in
+    /// report.json).
     fn frame<'py>(&self, py: Python<'py>, frame: usize) -> PyResult<Bound<'py, PyDict>> {
         let result = threads::detach(py, || {
             self.lock()?.frame(frame).map_err(|e| error::library(&e))

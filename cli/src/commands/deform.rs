@@ -114,7 +114,6 @@ pub fn run(args: DeformArgs, ctx: &Context) -> anyhow::Result<()> {
             clip_from: args.clip_from.clone(),
             fps: args.fps,
             strict: args.strict,
-            ..Default::default()
         },
         ..ExtractOptions::default()
     };

@@ -5,8 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, GroundTruth, Method, OutputTarget, Plan, Progress, Report,
-    RunControl,
+    ExtractConfig, ExtractOptions, GroundTruth, Method, OutputTarget, Plan, Report, RunControl,
 };
 
 use trisplat_geometry::metrics::Relation;
@@ -14,7 +13,7 @@ use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::config::GaussianLayout;
 
 use super::Context;
-use crate::progress::MethodPace;
+use crate::progress::RunProgress;
 
 /// Arguments of `trisplat extract`.
 #[derive(Debug, clap::Args)]
@@ -253,7 +252,7 @@ pub fn fail_on_failed_frames(report: &Report) -> anyhow::Result<()> {
     }
 }
 
-/// Runs the pipeline with a progress bar on stderr.
+/// Runs the pipeline with a progress bar on stderr ([`RunProgress`] reading its events).
 ///
 /// # Errors
 /// As [`trisplat_pipeline::run`].
@@ -262,47 +261,9 @@ pub fn run_with_progress(
     control: RunControl,
     ctx: &Context,
 ) -> anyhow::Result<Report> {
-    let spinner = ctx.progress.spinner("extract: reading inputs");
-    let mut bar = None;
-    let mut pace = MethodPace::default();
-    let result = trisplat_pipeline::run(config, control, &mut |p| match p {
-        Progress::Started { frames } => {
-            spinner.finish_and_clear();
-            bar = Some(ctx.progress.bar(frames as u64, "extract: meshing frames"));
-        }
-        Progress::Frame {
-            done,
-            total,
-            method_ms,
-        } => {
-            for (m, ms) in method_ms {
-                pace.add(m.name(), ms);
-            }
-            if let Some(b) = &bar {
-                b.set_position(done as u64);
-                b.set_message(format!(
-                    "extract: {}",
-                    pace.message(total.saturating_sub(done))
-                ));
-            }
-        }
-        Progress::Finishing => {
-            if let Some(b) = &bar {
-                b.set_message("extract: writing sequences and report");
-            }
-        }
-        Progress::Notice(message) => {
-            let say = || eprintln!("warning: {message}");
-            match &bar {
-                Some(b) => b.suspend(say),
-                None => spinner.suspend(say),
-            }
-        }
-    });
-    spinner.finish_and_clear();
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
+    let mut progress = RunProgress::new(ctx.progress, "extract");
+    let result = trisplat_pipeline::run(config, control, &mut |event| progress.show(event));
+    progress.finish();
     Ok(result?)
 }
 

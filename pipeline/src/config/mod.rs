@@ -15,6 +15,7 @@
 
 use std::path::PathBuf;
 
+#[cfg(feature = "cli")]
 mod arg;
 mod input;
 mod method;

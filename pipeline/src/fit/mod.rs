@@ -34,13 +34,12 @@
 use std::time::Instant;
 
 use glam::DVec3;
+use trisplat_geometry::TriMesh;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::{Rng, splitmix64};
-use trisplat_geometry::{Camera, TriMesh};
-use trisplat_splat::densify::DensifyError;
 use trisplat_splat::fit::adam::{Adam, LearningRates};
 use trisplat_splat::fit::bound::{
-    BoundError, BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,
+    BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,
 };
 use trisplat_splat::fit::density::{
     DensityStats, RESET_OPACITY, camera_extent, densify_and_prune, reset_opacity,
@@ -48,90 +47,21 @@ use trisplat_splat::fit::density::{
 use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, DepthNormal, Ssim, l1, masked_l1, psnr};
 use trisplat_splat::fit::sh_schedule::{active_degree, expand_sh_grads, truncate_sh};
 use trisplat_splat::render::{
-    GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward_into,
+    GaussianGrads, GaussianParams, ImageGrads, RenderMode, RenderOptions, backward_into,
     render_with_grad,
 };
 use trisplat_splat::{GaussianSet, ScaleDims};
 
-use crate::refine::{RefineError, RefineOptions, refine};
+use crate::refine::{RefineOptions, refine};
 
+mod inputs;
 mod score;
 mod targets;
 
+pub use inputs::{FitError, FitFrame, Target};
 use score::evaluate;
 pub use targets::{TargetColor, mesh_targets, read_image_targets};
 pub use trisplat_splat::fit::density::DensifyOptions;
-
-/// Why a fit cannot run.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum FitError {
-    /// An option out of range, or options that need what is not there yet.
-    #[error("{0}")]
-    BadOption(String),
-    /// The Gaussians cannot be fitted as bound parameters.
-    #[error("the Gaussians: {0}")]
-    Bound(#[from] BoundError),
-    /// A target does not fit its camera or cannot be read.
-    #[error("{0}")]
-    Target(String),
-    /// The renderer or its backward pass refused.
-    #[error("iteration {iteration}, view '{view}': {source}")]
-    Render {
-        /// Iteration.
-        iteration: usize,
-        /// Camera name.
-        view: String,
-        /// Cause.
-        source: GradError,
-    },
-    /// A densification step failed.
-    #[error("densify after iteration {iteration}: {source}")]
-    Densify {
-        /// Iteration.
-        iteration: usize,
-        /// Cause.
-        source: DensifyError,
-    },
-    /// A refine round failed.
-    #[error("refine after iteration {iteration}: {source}")]
-    Refine {
-        /// Iteration.
-        iteration: usize,
-        /// Cause.
-        source: RefineError,
-    },
-    /// The parameters left the finite numbers (learning rates too high).
-    #[error("iteration {0}: the parameters are no longer finite (lower the learning rates)")]
-    NonFinite(usize),
-}
-
-/// One target view: a camera and its images (row-major; rgb `[H, W, 3]`, normals `[H, W, 3]`
-/// in the camera frame, OpenCV axes).
-#[derive(Clone, Debug)]
-pub struct Target {
-    /// The camera.
-    pub camera: Camera,
-    /// rgb in 0..1 (the background where nothing is seen).
-    pub rgb: Vec<f32>,
-    /// Mask / alpha in 0..1.
-    pub alpha: Option<Vec<f32>>,
-    /// z-depth, 0 where nothing is seen.
-    pub depth: Option<Vec<f32>>,
-    /// Unit normals facing the camera, camera frame.
-    pub normal: Option<Vec<f32>>,
-}
-
-/// One animation frame to fit: the template's positions and the frame's target views.
-#[derive(Clone, Debug)]
-pub struct FitFrame {
-    /// Animation frame index (for reports).
-    pub frame: usize,
-    /// The template's vertex positions at that frame.
-    pub positions: Vec<DVec3>,
-    /// Its views.
-    pub targets: Vec<Target>,
-}
 
 /// Options of [`fit`].
 #[derive(Clone, Debug)]

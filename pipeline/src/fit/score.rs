@@ -7,7 +7,7 @@ use trisplat_splat::fit::bound::{BoundParams, TriangleFrames, to_world};
 use trisplat_splat::fit::loss::{Ssim, psnr};
 use trisplat_splat::render::{GaussianParams, RenderMode, RenderOptions, render_with_grad};
 
-use super::{FitFrame, Target};
+use super::inputs::{FitFrame, Target};
 
 /// Means over the held-out views (`None` where no view gives the value).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

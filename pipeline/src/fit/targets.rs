@@ -18,7 +18,7 @@ use trisplat_geometry::mesh::Rgba;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::{Camera, TriMesh};
 
-use super::{FitError, Target};
+use super::inputs::{FitError, Target};
 
 /// How a mesh target is coloured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

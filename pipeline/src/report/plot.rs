@@ -20,8 +20,8 @@ use plotters::style::FontStyle;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::metrics::Relation;
 
+use super::model::Report;
 use crate::config::Method;
-use crate::report::Report;
 
 /// Plot width in pixels (the PNG's; the SVG's view box).
 pub const WIDTH: u32 = 960;
@@ -39,7 +39,7 @@ const FAMILY: &str = "sans-serif";
 /// DejaVu Sans, cut to Latin-1 and a few symbols (licence and recipe in
 /// `pipeline/assets/DejaVuSans-LICENSE.txt`): lays out the text of both files and draws the
 /// PNG's.
-static FONT: &[u8] = include_bytes!("../assets/DejaVuSans-subset.ttf");
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans-subset.ttf");
 
 /// Registers [`FONT`] as plotters' sans-serif, once; false if the font does not parse.
 fn font_ready() -> bool {
@@ -562,8 +562,9 @@ mod tests {
     /// A report of two methods with one measured frame each; delaunay's scores are
     /// self-consistency when `own`; without metrics when not `measured`.
     pub(crate) fn report(own: bool, measured: bool) -> Report {
-        use crate::methods::Resolved;
-        use crate::report::{FrameMetrics, FrameRecord, MethodReport, Summary};
+        use crate::records::{FrameMetrics, FrameRecord, Resolved};
+        use crate::report::{MethodReport, Summary};
+
         use std::collections::BTreeMap;
         let method = |m: Method, c: f64, relation: Relation| {
             let frames: Vec<FrameRecord> = (0..3)

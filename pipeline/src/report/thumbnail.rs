@@ -3,7 +3,7 @@
 //!
 //! A thumbnail is one mesh seen by one camera, ray cast through a BVH of its triangles
 //! ([`TriangleBvh::cast_ray`], 2x2 rays per pixel averaged): a point that is hit takes the
-//! viridis colour of its distance to the ground truth's surface (exact, [`GtSamples::distance`])
+//! viridis colour of its distance to the ground truth's surface (exact: the metrics' `GtSamples::distance`)
 //! from 0 up to `scale` (farther points take the top colour), or light grey without a ground
 //! truth, shaded by the angle between its triangle's normal and the ray (a light at the
 //! camera), so that the shape reads as well as the error. The background is white.
@@ -27,10 +27,6 @@ use trisplat_geometry::spatial::{SpatialError, TriangleBvh};
 use trisplat_geometry::{Camera, Rgba, TriMesh};
 use trisplat_splat::axes::Axes;
 
-use crate::report::GtSamples;
-
-/// Folder of the thumbnails in the output folder.
-pub const THUMBNAIL_DIR: &str = "thumbnails";
 /// Height of a thumbnail in pixels.
 pub const THUMBNAIL_HEIGHT: u32 = 360;
 /// The camera's direction from the model, degrees about the model's up axis from its front
@@ -42,13 +38,6 @@ pub const ELEVATION_DEG: f64 = 12.0;
 const SUPERSAMPLE: u32 = 2;
 /// Colour of a mesh without a ground truth to measure against.
 const GREY: [f64; 3] = [0.82, 0.82, 0.82];
-
-/// The file of `name`'s thumbnail of animation frame `frame`, relative to the output folder
-/// (`thumbnails/tsdf_frame_000003.png`; `name` is a method's or `ground_truth`).
-#[must_use]
-pub fn thumbnail_file(name: &str, frame: usize) -> String {
-    format!("{THUMBNAIL_DIR}/{name}_frame_{frame:06}.png")
-}
 
 /// The viridis colour of `t` (clamped to 0..=1; NaN gives the top colour): dark purple at 0,
 /// through blue and green, yellow at 1.
@@ -129,18 +118,33 @@ pub fn frame_camera(points: &[DVec3], axes: Axes) -> Option<(Camera, DVec3)> {
     Some((camera, centre))
 }
 
+/// The distance of a world-space point to the ground truth's surface (`None` when it cannot
+/// be measured): the metrics' `GtSamples::distance`, as the caller supplies it.
+pub type DistanceTo<'a> = &'a (dyn Fn(DVec3) -> Option<f64> + Sync);
+
 /// How a thumbnail colours the surface.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy)]
 pub enum Colouring<'a> {
     /// Light grey (no ground truth, or the ground truth itself).
     Grey,
-    /// By the distance to `gt` through [`viridis`] from 0 to `scale`.
+    /// By the distance to the ground truth through [`viridis`] from 0 to `scale`.
     Distance {
-        /// The ground truth.
-        gt: &'a GtSamples,
+        /// The distance of a point to the ground truth.
+        distance: DistanceTo<'a>,
         /// The distance at the top of the colour map.
         scale: f64,
     },
+}
+
+impl std::fmt::Debug for Colouring<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Grey => f.write_str("Grey"),
+            Self::Distance { scale, .. } => {
+                f.debug_struct("Distance").field("scale", scale).finish()
+            }
+        }
+    }
 }
 
 /// An 8-bit RGB picture, row-major.
@@ -246,9 +250,9 @@ fn shade(
     let light = 0.3 + 0.7 * normal.dot(dir).abs();
     let base = match colouring {
         Colouring::Grey => GREY,
-        Colouring::Distance { gt, scale } => {
+        Colouring::Distance { distance, scale } => {
             let point = a * hit.barycentric[0] + b * hit.barycentric[1] + c * hit.barycentric[2];
-            let d = gt.distance(point + origin).unwrap_or(f64::NAN);
+            let d = distance(point + origin).unwrap_or(f64::NAN);
             viridis(d / scale).map(|x| f64::from(x) / 255.0)
         }
     };
@@ -258,6 +262,7 @@ fn shade(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::metrics::GtSamples;
 
     fn tetra(scale: f64, shift: DVec3) -> TriMesh {
         let p: Vec<DVec3> = [DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z]
@@ -340,7 +345,7 @@ mod tests {
             &camera,
             origin,
             Colouring::Distance {
-                gt: &gt,
+                distance: &|p| gt.distance(p),
                 scale: 0.1,
             },
         )
@@ -351,7 +356,7 @@ mod tests {
             &camera,
             origin,
             Colouring::Distance {
-                gt: &gt,
+                distance: &|p| gt.distance(p),
                 scale: 0.1,
             },
         )

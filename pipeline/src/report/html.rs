@@ -14,11 +14,12 @@ use std::path::Path;
 
 use trisplat_geometry::io::{IoError, write_atomically};
 
+use super::files::{PLOT_PNG, PLOT_SVG, REPORT_JSON, REPORT_MD};
+use super::model::{Report, Thumbnails};
+use super::plot;
+use super::table::{Cell, Table};
+use super::thumbnail::viridis;
 use crate::config::Method;
-use crate::plot;
-use crate::report::{Cell, Report, Table};
-use crate::run::{PLOT_PNG, PLOT_SVG, REPORT_JSON, REPORT_MD};
-use crate::thumbnail::viridis;
 
 /// Per-frame rows shown per method; the rest are in report.json and report.md.
 pub const MAX_FRAME_ROWS: usize = 100;
@@ -422,14 +423,14 @@ pub fn html(report: &Report, svg: &str) -> String {
 }
 
 /// The thumbnails section.
-fn thumbnails_html(report: &Report, t: &crate::report::Thumbnails) -> String {
+fn thumbnails_html(report: &Report, t: &Thumbnails) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
         "<h2 id=\"thumbnails\">The meshes of frame {}</h2>",
         t.frame
     );
-    let frame_metrics = |m: &crate::report::MethodReport| {
+    let frame_metrics = |m: &super::model::MethodReport| {
         m.frames
             .iter()
             .find(|r| r.frame == t.frame)

@@ -1,0 +1,223 @@
+//! The records of a run: what each frame and method produced, as the journal stores them,
+//! the run's events carry them and the report reads them. Plain data (serialised as in
+//! report.json and journal.jsonl); a leaf of the crate.
+
+use std::collections::BTreeMap;
+
+use trisplat_extract::incremental_delaunay::FrameStats;
+use trisplat_geometry::mesh_stats::MeshStats;
+use trisplat_geometry::metrics::Relation;
+
+use crate::config::Method;
+
+/// The metrics of one method on one frame (docs/conventions.md §8).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameMetrics {
+    /// (accuracy + completeness) / 2.
+    pub chamfer_l1: f64,
+    /// (mean d(p,G)^2 + mean d(g,P)^2) / 2.
+    pub chamfer_l2: f64,
+    /// Mean |n . n'| both ways (`None` when a side has no normals).
+    pub normal_consistency: Option<f64>,
+    /// Mean angle between the normals both ways, degrees (`None` when a side has none).
+    #[serde(default)]
+    pub normal_angle_deg: Option<f64>,
+    /// Mean distance from the prediction to the ground truth.
+    pub accuracy: f64,
+    /// Mean distance from the ground truth to the prediction.
+    pub completeness: f64,
+    /// Precision at `tau`.
+    pub precision: f64,
+    /// Recall at `tau`.
+    pub recall: f64,
+    /// F-score at `tau`.
+    pub fscore: f64,
+    /// The F-score threshold (absolute, scene units): `tau_fraction` x `gt_diagonal` when
+    /// relative.
+    pub tau: f64,
+    /// The threshold as a fraction of the ground truth's bounding-box diagonal; `None` when
+    /// it was given absolutely.
+    #[serde(default)]
+    pub tau_fraction: Option<f64>,
+    /// Diagonal of the ground truth's bounding box.
+    #[serde(default)]
+    pub gt_diagonal: f64,
+    /// Surface area of the ground truth.
+    #[serde(default)]
+    pub gt_area: f64,
+    /// The prediction's area over the ground truth's (`None` when the latter is 0).
+    #[serde(default)]
+    pub area_ratio: Option<f64>,
+    /// Fraction of the ground truth's vertices that are (bit for bit) vertices of the mesh.
+    #[serde(default)]
+    pub shared_vertex_fraction: Option<f64>,
+    /// What the scores measure: `accuracy`, or `self-consistency` when the mesh contains
+    /// the ground truth's vertices.
+    #[serde(default)]
+    pub relation: Relation,
+    /// The structure of the mesh: area, components, holes, watertightness.
+    #[serde(default)]
+    pub structure: Option<MeshStats>,
+}
+
+/// One method on one frame.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameRecord {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Its time in seconds.
+    pub time: f64,
+    /// Wall time of the method, milliseconds.
+    pub ms: f64,
+    /// Of which rendering (tsdf only).
+    pub render_ms: Option<f64>,
+    /// Mesh vertices.
+    pub vertices: usize,
+    /// Mesh triangles.
+    pub faces: usize,
+    /// Every edge shared by exactly two triangles.
+    pub watertight: bool,
+    /// Against the ground truth (`None` without --gt or for an empty mesh).
+    pub metrics: Option<FrameMetrics>,
+}
+
+/// What the incremental Delaunay update did on one frame (its `FrameStats`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DelaunayFrame {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Whether every chart was triangulated from scratch (the first frame, and every
+    /// `--rebuild-every` frames).
+    pub rebuilt: bool,
+    /// Gaussians that changed chart (0 on a rebuild, which reassigns them all).
+    pub hopped: usize,
+    /// Charts (template triangles) triangulated again.
+    pub charts_redone: usize,
+    /// Gaussians whose full nearest-triangle search ran (the others were settled by their
+    /// motion certificate).
+    pub searches: usize,
+    /// Gaussians that are not vertices of the mesh (duplicates, degenerate charts).
+    pub unmeshed: usize,
+    /// Wall time of the update alone, milliseconds (the frame's `ms` adds the mesh assembly).
+    pub update_ms: f64,
+}
+
+impl DelaunayFrame {
+    /// The record of frame `frame` from the mesher's statistics.
+    #[must_use]
+    pub fn new(frame: usize, stats: &FrameStats) -> Self {
+        Self {
+            frame,
+            rebuilt: stats.rebuilt,
+            hopped: stats.hopped,
+            charts_redone: stats.charts_redone,
+            searches: stats.searches,
+            unmeshed: stats.unmeshed,
+            update_ms: stats.millis,
+        }
+    }
+}
+
+/// One frame done: what the report needs of it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameEntry {
+    /// Animation frame index.
+    pub frame: usize,
+    /// Its time in seconds.
+    pub time: f64,
+    /// Milliseconds spent deforming the Gaussians.
+    pub deform_ms: f64,
+    /// Template triangles degenerate in this frame (docs/numerics.md, "The
+    /// degenerate-triangle policy"); 0 in journals written before it was recorded.
+    #[serde(default)]
+    pub collapsed_triangles: usize,
+    /// Each method's record, by method name.
+    pub methods: BTreeMap<String, FrameRecord>,
+    /// The incremental Delaunay statistics (with the delaunay method).
+    pub delaunay: Option<DelaunayFrame>,
+}
+
+/// A frame that failed, and why.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FailedFrame {
+    /// Animation frame index.
+    pub frame: usize,
+    /// The error, as printed.
+    pub error: String,
+}
+
+/// Scale-derived parameters of the methods, resolved once for the run.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Resolved {
+    /// Bounding radius of the rest template (about its box centre).
+    pub template_radius: f64,
+    /// Mean nearest-neighbour spacing of the rest-pose Gaussian means.
+    pub mean_spacing: f64,
+    /// TSDF voxel.
+    pub voxel: f64,
+    /// Alpha-shape radius.
+    pub alpha: f64,
+}
+
+/// How many Gaussians the point methods use, why the others are left out, and the rule (in
+/// the report).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GaussiansUsed {
+    /// The rule's contribution threshold (0: no Gaussian hidden).
+    pub min_contribution: f32,
+    /// The floater rule's standard deviations (`None`: no floater rule).
+    pub floater_std_ratio: Option<f64>,
+    /// The floater rule's neighbours.
+    pub floater_neighbors: usize,
+    /// Gaussians in the set.
+    pub total: usize,
+    /// Gaussians the point methods use.
+    pub kept: usize,
+    /// Left out as hidden (below the contribution threshold in every view).
+    pub hidden: usize,
+    /// Left out as floaters (statistical outliers among the rest).
+    pub floaters: usize,
+    /// Poses rendered to decide: the rest pose and sampled frames of the run (0: not decided).
+    #[serde(default)]
+    pub poses: usize,
+}
+
+/// What a run is, told once when its inputs are read ([`crate::event::Event::Started`]): what
+/// the report says of it besides its frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunFacts {
+    /// Template file.
+    pub template: String,
+    /// Vertices of the template as stored.
+    pub template_vertices: usize,
+    /// Vertices of the template after welding its seams.
+    pub welded_vertices: usize,
+    /// Animation source (the template itself when it carries its clip).
+    pub animation: String,
+    /// Channels of a weights track that match no morph target and move nothing.
+    pub unused_channels: Vec<String>,
+    /// Gaussian file, or `bound here: N per triangle`.
+    pub gaussians: String,
+    /// Number of Gaussians.
+    pub gaussian_count: usize,
+    /// Deform mode.
+    pub mode: String,
+    /// `template`, the ground-truth file, or `None`.
+    pub ground_truth: Option<String>,
+    /// Samples per mesh for the metrics.
+    pub samples: usize,
+    /// Absolute F-score threshold when one was asked for; `None` when relative.
+    pub tau: Option<f64>,
+    /// F-score threshold as a fraction of each frame's ground-truth diagonal.
+    pub tau_fraction: Option<f64>,
+    /// Scale-derived parameters.
+    pub resolved: Resolved,
+    /// Which Gaussians the point methods meshed (when one of them runs).
+    pub gaussians_used: Option<GaussiansUsed>,
+    /// Whether the methods of a frame run one after another.
+    pub serial_methods: bool,
+    /// Each method's parameters, for the record (e.g. `voxel`, `alpha`, `views`).
+    pub parameters: BTreeMap<Method, BTreeMap<String, f64>>,
+    /// Template triangles: the incremental Delaunay's charts.
+    pub charts: usize,
+}
