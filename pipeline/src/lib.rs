@@ -6,7 +6,8 @@
 //! A run does only the stages its arguments need; [`Plan`] lists them with the reason each
 //! runs or is skipped (`--explain` prints it). One [`Session`] per run reads the inputs once
 //! and asks the same plan before every stage, then meshes frame by frame ([`Session::frame`]);
-//! [`run()`] writes what each frame returns:
+//! [`run()`] writes what each frame returns and tells what happens as [`Event`]s, which the
+//! report ([`report::ReportBuilder`]), the command line's progress and any other caller read:
 //!
 //! 1. **animate**: read the template T and open the animation A: a glTF clip (`--clip`,
 //!    sampled at `--fps`), a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
@@ -25,7 +26,8 @@
 //!    [`config::BIND_NORMAL_SCALE`] of their in-plane size: opaque surface discs, since
 //!    untrained GaussianAvatars-style blobs (opacity 0.1, isotropic) render no surface.
 //! 3. **deform**: every frame, `binding`, `jacobian` or `lbs` (as `trisplat deform`).
-//! 4. **render** (only for `tsdf`): expected depth from a sphere rig around each frame.
+//! 4. **render** (only for `tsdf`): median depth (`--tsdf-depth`; the depth where the
+//!    accumulated alpha reaches ½) of every Gaussian of the frame from a sphere rig around it.
 //! 5. **mesh**: `tsdf`, `delaunay` and/or `alpha` (module [`methods`] for their defaults).
 //! 6. **metrics** (only with a ground truth): docs/conventions.md §8 in surface mode against each frame's
 //!    deformed template (`--gt template`) or one static mesh (`--gt FILE`).
@@ -53,41 +55,51 @@
 //! Each method's milliseconds per frame cover its own work only: rendering plus fusion for
 //! tsdf, the update plus mesh assembly for delaunay, the tetrahedralisation and boundary for
 //! alpha. Reading the frame, deforming (reported once as `deform_ms`), metrics and file
-//! writes are not included. Methods run one after the other, each using every thread.
+//! writes are not included. The methods of a frame run side by side, so each method's time
+//! includes waiting for the cores the others hold; `--serial-methods` runs them one after
+//! the other, each timed alone (the meshes are the same either way).
 //!
 //! # Errors
 //! One [`PipelineError`] naming the file, frame, method or option at fault; files the run
 //! created are removed again. Outputs are written atomically and never over an input.
 
+// Modules whose items callers address by path (options and their defaults, the stages'
+// building blocks, the report's model); the rest are private, their public items re-exported
+// below.
 pub mod avatar;
 pub mod config;
-pub mod deform;
-pub mod error;
 pub mod eval;
-pub mod event;
 pub mod fit;
 pub mod input;
-pub mod journal;
-pub mod lock;
-pub mod memory;
-pub mod merge;
 pub mod methods;
 pub mod metrics;
 pub mod output;
-pub mod plan;
 pub mod records;
 pub mod refine;
 pub mod report;
-pub mod run;
-pub mod session;
-pub mod visibility;
+
+mod deform;
+mod error;
+mod event;
+mod journal;
+mod lock;
+mod memory;
+mod merge;
+mod plan;
+mod run;
+mod session;
+mod visibility;
 
 pub use config::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl,
 };
 pub use error::PipelineError;
 pub use event::Event;
+pub use journal::JOURNAL;
+pub use lock::FolderLock;
+pub use merge::merge;
 pub use plan::{Plan, Stage, StagePlan};
 pub use report::Report;
 pub use run::run;
 pub use session::{FrameResult, MethodFrame, Session, SessionOptions};
+pub use visibility::{Visibility, VisibilityError};

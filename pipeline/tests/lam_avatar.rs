@@ -8,10 +8,10 @@ use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{
     AnimatedTemplate, Clip, GltfMorphAnimation, GltfTemplate, WeightsTrack,
 };
+use trisplat_pipeline::PipelineError;
 use trisplat_pipeline::avatar::{
     AvatarFolder, LAM_VERTEX_ORDER, bind_lam, read_lam_gaussians, silhouette_iou,
 };
-use trisplat_pipeline::error::PipelineError;
 use trisplat_pipeline::input::read_template;
 use trisplat_splat::deform::{DeformMode, Deformer};
 use trisplat_splat::frames::Convention;

@@ -9,7 +9,7 @@ use trisplat_pipeline::config::{MetricOptions, OutputOptions, TsdfOptions};
 
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::read_mesh;
-use trisplat_pipeline::merge::merge;
+use trisplat_pipeline::merge;
 use trisplat_pipeline::metrics::GtSamples;
 use trisplat_pipeline::report::thumbnail::{THUMBNAIL_HEIGHT, viridis};
 use trisplat_pipeline::{

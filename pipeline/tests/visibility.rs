@@ -7,9 +7,9 @@ use std::path::PathBuf;
 use trisplat_pipeline::config::{BindOptions, TsdfOptions, VisibilityRule};
 
 use glam::Vec3;
+use trisplat_pipeline::PipelineError;
 use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::config::GaussianLayout;
-use trisplat_pipeline::error::PipelineError;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 
 fn config(methods: Vec<Method>, options: ExtractOptions) -> ExtractConfig {

@@ -18,7 +18,7 @@ use trisplat_pipeline::fit::{
 };
 use trisplat_pipeline::input::{read_bound, read_template};
 use trisplat_pipeline::refine::{PruneCriteria, RefineOptions};
-use trisplat_pipeline::session::{Session, SessionOptions};
+use trisplat_pipeline::{Session, SessionOptions};
 use trisplat_splat::fit::adam::LearningRates;
 use trisplat_splat::fit::density::{self, DensifyOptions};
 use trisplat_splat::fit::loss::DEFAULT_LAMBDA_DSSIM;

@@ -44,7 +44,7 @@ pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
     let spinner = ctx
         .progress
         .spinner("merge: linking frames, writing sequences and report");
-    let result = trisplat_pipeline::merge::merge(&args.shards, &args.output, args.force);
+    let result = trisplat_pipeline::merge(&args.shards, &args.output, args.force);
     spinner.finish_and_clear();
     let report = result?;
     // No journal: the shards keep theirs.
