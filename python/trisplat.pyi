@@ -226,8 +226,9 @@ class Session:
     def world(self, frame: int) -> Gaussians:
         """The world-space Gaussians of animation frame ``frame``."""
     def frame(self, frame: int) -> Dict[str, Any]:
-        """``frame``, ``time``, ``deform_ms`` and ``methods``: per method ``mesh`` (Mesh),
-        ``ms``, ``render_ms``, ``delaunay`` and ``metrics`` (dicts as in report.json, or None)."""
+        """``frame``, ``time``, ``deform_ms`` and ``methods``: per method its frame record as in
+        report.json (``ms``, ``render_ms``, ``vertices``, ``faces``, ``watertight``,
+        ``metrics``) with ``mesh`` (Mesh) and ``delaunay`` (a dict as in report.json, or None)."""
 
 def read_mesh(path: _PathLike) -> Mesh:
     """Reads a PLY, OBJ or glTF/GLB mesh (by extension)."""

@@ -101,6 +101,11 @@ def test_session_frame_by_frame():
         for name, m in result["methods"].items():
             assert m["mesh"].triangle_count > 0, name
             assert 0 < m["metrics"]["fscore"] <= 1
+            # The method's frame record, as the run's events and report.json carry it.
+            assert m["frame"] == f and m["time"] == result["time"], name
+            assert m["faces"] == m["mesh"].triangle_count, name
+            assert m["vertices"] == m["mesh"].vertex_count, name
+            assert m["ms"] > 0 and isinstance(m["watertight"], bool), name
         assert result["methods"]["delaunay"]["delaunay"]["frame"] == f
         np.testing.assert_array_equal(session.positions(f).shape, (session.template.vertex_count, 3))
     with pytest.raises(trisplat.TrisplatError):
