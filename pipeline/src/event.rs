@@ -2,8 +2,11 @@
 //! progress, any caller of [`crate::run()`]), as brush's process messages. The run drives the
 //! frames and emits; it neither draws progress nor assembles the report itself.
 
+use std::collections::BTreeMap;
+
 use crate::config::Method;
-use crate::records::{FailedFrame, FrameEntry, FrameRecord, RunFacts};
+use crate::records::{FailedFrame, FrameEntry, FrameRecord};
+use crate::report::Report;
 
 /// One thing a run tells, in the order it happens: notices, `Started`, then per frame in frame
 /// order its methods' results and either `FrameDone` or `FrameFailed`, then `Finishing`.
@@ -16,8 +19,13 @@ pub enum Event {
     Started {
         /// Frames to go through (those a resumed run already did included).
         frames: usize,
-        /// What the report says of the run.
-        facts: Box<RunFacts>,
+        /// The report as the run starts: what the run is (inputs, options, scale-derived
+        /// parameters, the Gaussians used), no frame or method yet.
+        report: Box<Report>,
+        /// Each method's parameters, for the record (e.g. `voxel`, `alpha`, `views`).
+        parameters: BTreeMap<Method, BTreeMap<String, f64>>,
+        /// Template triangles: the incremental Delaunay's charts.
+        charts: usize,
     },
     /// One method's mesh of one frame is written (not told for frames a resumed run did).
     MethodDone {

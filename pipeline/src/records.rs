@@ -8,8 +8,6 @@ use trisplat_extract::incremental_delaunay::FrameStats;
 use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::Relation;
 
-use crate::config::Method;
-
 /// The metrics of one method on one frame (docs/conventions.md §8).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameMetrics {
@@ -180,44 +178,4 @@ pub struct GaussiansUsed {
     /// Poses rendered to decide: the rest pose and sampled frames of the run (0: not decided).
     #[serde(default)]
     pub poses: usize,
-}
-
-/// What a run is, told once when its inputs are read ([`crate::event::Event::Started`]): what
-/// the report says of it besides its frames.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RunFacts {
-    /// Template file.
-    pub template: String,
-    /// Vertices of the template as stored.
-    pub template_vertices: usize,
-    /// Vertices of the template after welding its seams.
-    pub welded_vertices: usize,
-    /// Animation source (the template itself when it carries its clip).
-    pub animation: String,
-    /// Channels of a weights track that match no morph target and move nothing.
-    pub unused_channels: Vec<String>,
-    /// Gaussian file, or `bound here: N per triangle`.
-    pub gaussians: String,
-    /// Number of Gaussians.
-    pub gaussian_count: usize,
-    /// Deform mode.
-    pub mode: String,
-    /// `template`, the ground-truth file, or `None`.
-    pub ground_truth: Option<String>,
-    /// Samples per mesh for the metrics.
-    pub samples: usize,
-    /// Absolute F-score threshold when one was asked for; `None` when relative.
-    pub tau: Option<f64>,
-    /// F-score threshold as a fraction of each frame's ground-truth diagonal.
-    pub tau_fraction: Option<f64>,
-    /// Scale-derived parameters.
-    pub resolved: Resolved,
-    /// Which Gaussians the point methods meshed (when one of them runs).
-    pub gaussians_used: Option<GaussiansUsed>,
-    /// Whether the methods of a frame run one after another.
-    pub serial_methods: bool,
-    /// Each method's parameters, for the record (e.g. `voxel`, `alpha`, `views`).
-    pub parameters: BTreeMap<Method, BTreeMap<String, f64>>,
-    /// Template triangles: the incremental Delaunay's charts.
-    pub charts: usize,
 }

@@ -78,10 +78,7 @@ pub fn run(
             previous.done.keys().filter(|f| frames.contains(f)).count()
         )));
     }
-    emit(Event::Started {
-        frames: total,
-        facts: Box::new(session.facts(config)),
-    });
+    emit(session.started(config, total));
     // The frame files: asked for, or the glTF is assembled from them.
     let frame_files_wanted =
         o.outputs.writes(OutputTarget::Meshes) || o.outputs.writes(OutputTarget::Glb);

@@ -21,6 +21,7 @@
 //! meshes and ground truths of [`Session::frame`]) is in world coordinates again, moved back
 //! in `f64`.
 
+use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -41,6 +42,7 @@ use crate::config::{
 };
 use crate::deform::{Engine, EngineInputs};
 use crate::error::{PipelineError, first_error_in_order};
+use crate::event::Event;
 use crate::input::{
     Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
     check_topology, deform_mode, open_template_and_animation, parse_frames, read_bound,
@@ -48,7 +50,8 @@ use crate::input::{
 use crate::methods::{FrameInput, Mesher, MethodOutput, parameters};
 use crate::metrics::{GtSamples, is_watertight, measure_with};
 use crate::plan::{Plan, Stage};
-use crate::records::{FrameMetrics, FrameRecord, Resolved, RunFacts};
+use crate::records::{FrameMetrics, FrameRecord, Resolved};
+use crate::report::Report;
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
@@ -485,14 +488,15 @@ impl Session {
         })
     }
 
-    /// What this run is, as its report says it (the facts of [`crate::event::Event::Started`]):
-    /// the inputs, the options of `config` that decide the scores, and each method's
-    /// parameters.
+    /// What this run is, as [`crate::Event::Started`] tells it: the report without frames or
+    /// methods (the inputs, the options of `config` that decide the scores, the scale-derived
+    /// parameters), each method's parameters, and the template's triangles.
     #[must_use]
-    pub fn facts(&self, config: &ExtractConfig) -> RunFacts {
+    pub fn started(&self, config: &ExtractConfig, frames: usize) -> Event {
         let o = &config.options;
         let methods = config.methods();
-        RunFacts {
+        let report = Report {
+            version: env!("CARGO_PKG_VERSION").to_owned(),
             template: config.template.display().to_string(),
             template_vertices: self.welded.stored_vertices,
             welded_vertices: self.template().vertex_count(),
@@ -510,6 +514,11 @@ impl Session {
             },
             gaussian_count: self.set.len(),
             mode: o.animation.mode.name().to_owned(),
+            frames: Vec::new(),
+            frame_times: Vec::new(),
+            deform_ms: Vec::new(),
+            collapsed_triangles: Vec::new(),
+            failed_frames: Vec::new(),
             ground_truth: config.gt.as_ref().map(GroundTruth::label),
             samples: o.metrics.samples,
             tau: o.metrics.tau_fraction.is_none().then_some(o.metrics.tau),
@@ -520,6 +529,12 @@ impl Session {
                 .any(|m| matches!(m, Method::Delaunay | Method::Alpha))
                 .then_some(self.visibility.used),
             serial_methods: self.serial_methods,
+            methods: BTreeMap::new(),
+            thumbnails: None,
+        };
+        Event::Started {
+            frames,
+            report: Box::new(report),
             parameters: methods
                 .iter()
                 .map(|&m| (m, parameters(m, o, &self.resolved)))

@@ -518,7 +518,7 @@ pub fn write_png(path: &std::path::Path, report: &Report) -> Result<(), IoError>
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
