@@ -8,7 +8,7 @@ use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, GroundTruth, Method, RunControl};
 
 use super::Context;
-use super::extract::{fail_on_failed_frames, print_summary, run_with_progress};
+use super::extract::run_and_summarise;
 
 /// File name of the bundled avatar, written into the output folder: Khronos' CesiumMan
 /// (CC BY 4.0, © Cesium), a skinned walk cycle.
@@ -91,15 +91,7 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
         force: true,
         ..RunControl::default()
     };
-    let report = run_with_progress(&config, control, ctx)?;
-    print_summary(
-        &report,
-        &config.output,
-        &config.options.outputs.targets,
-        true,
-        ("demo", ctx),
-    )?;
-    fail_on_failed_frames(&report)
+    run_and_summarise(&config, control, ("demo", ctx))
 }
 
 /// Writes the embedded avatar and its licence into `dir` (created if missing); returns the

@@ -224,13 +224,26 @@ pub fn run(args: ExtractArgs, ctx: &Context) -> anyhow::Result<()> {
             .collect();
         return ctx.emit("extract", serde_json::json!({ "plan": stages }));
     }
-    let report = run_with_progress(&config, control, ctx)?;
+    run_and_summarise(&config, control, ("extract", ctx))
+}
+
+/// Runs the pipeline with a progress bar, prints the summary of `command` ([`print_summary`])
+/// and fails when frames failed ([`fail_on_failed_frames`]).
+///
+/// # Errors
+/// As [`trisplat_pipeline::run`], and failed frames.
+pub fn run_and_summarise(
+    config: &ExtractConfig,
+    control: RunControl,
+    (command, ctx): (&str, &Context),
+) -> anyhow::Result<()> {
+    let report = run_with_progress(config, control, ctx)?;
     print_summary(
         &report,
         &config.output,
         &config.options.outputs.targets,
         true,
-        ("extract", ctx),
+        (command, ctx),
     )?;
     fail_on_failed_frames(&report)
 }
@@ -256,7 +269,7 @@ pub fn fail_on_failed_frames(report: &Report) -> anyhow::Result<()> {
 ///
 /// # Errors
 /// As [`trisplat_pipeline::run`].
-pub fn run_with_progress(
+fn run_with_progress(
     config: &ExtractConfig,
     control: RunControl,
     ctx: &Context,
