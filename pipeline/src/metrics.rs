@@ -217,13 +217,14 @@ pub fn is_watertight(mesh: &TriMesh) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use glam::Vec3;
     use trisplat_geometry::metrics::DEFAULT_TAUS;
 
     use super::*;
 
-    fn tetra(scale: f32) -> TriMesh {
+    /// A tetrahedron with three edges of length `scale` along the axes, outward faces.
+    pub(crate) fn tetra(scale: f32) -> TriMesh {
         let p = vec![
             Vec3::ZERO,
             Vec3::X * scale,

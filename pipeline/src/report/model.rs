@@ -321,22 +321,10 @@ impl Report {
 
 #[cfg(test)]
 mod tests {
-    use glam::Vec3;
-    use trisplat_geometry::TriMesh;
-
     use super::*;
+    use crate::metrics::tests::tetra;
     use crate::report::table::significant;
     use trisplat_extract::incremental_delaunay::FrameStats;
-
-    fn tetra(scale: f32) -> TriMesh {
-        let p = vec![
-            Vec3::ZERO,
-            Vec3::X * scale,
-            Vec3::Y * scale,
-            Vec3::Z * scale,
-        ];
-        TriMesh::new(p, vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
-    }
 
     fn record(frame: usize, ms: f64, metrics: Option<FrameMetrics>) -> FrameRecord {
         FrameRecord {
