@@ -9,7 +9,8 @@ use std::path::Path;
 use glam::{DMat3, DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 
-use crate::io::{IoError, write_atomically};
+use crate::io::atomic::write_atomically;
+use crate::io::error::IoError;
 
 /// Largest deviation from orthonormality accepted in a camera rotation read from a file
 /// (max |RᵀR − I| entry). Real files store rotations as decimal text with ~1e-7 rounding.

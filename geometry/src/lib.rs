@@ -11,6 +11,7 @@ pub mod animation;
 pub mod base_color;
 pub mod camera;
 pub mod cleanup;
+mod color;
 pub mod ids;
 pub mod io;
 pub mod mesh;
@@ -29,7 +30,8 @@ pub mod topology;
 pub mod validation;
 
 pub use camera::Camera;
+pub use color::Rgba;
 pub use ids::{TriId, VertexId};
-pub use mesh::{Aabb, MeshError, Rgba, TriMesh};
+pub use mesh::{Aabb, MeshError, TriMesh};
 pub use points::PointCloud;
 pub use validation::MeshReport;

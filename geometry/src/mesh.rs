@@ -11,11 +11,7 @@ use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::base_color::BaseColor;
-
-use crate::validation::MeshReport;
-
-/// Per-vertex RGBA colour in linear `[0, 1]` floats.
-pub type Rgba = [f32; 4];
+use crate::color::Rgba;
 
 /// Axis-aligned bounding box, in f64 (it bounds f32 point sets exactly too).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -460,13 +456,6 @@ impl TriMesh {
                 a.dot(b.cross(c)) / 6.0
             })
             .sum()
-    }
-
-    /// Full validation: non-finite positions, out-of-range or repeated indices, zero-area
-    /// triangles, non-manifold edges. See [`MeshReport`].
-    #[must_use]
-    pub fn report(&self) -> MeshReport {
-        MeshReport::of_raw(&self.positions, &self.triangles)
     }
 }
 

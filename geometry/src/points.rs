@@ -2,7 +2,8 @@
 
 use glam::Vec3;
 
-use crate::mesh::{Aabb, MeshError, Rgba};
+use crate::color::Rgba;
+use crate::mesh::{Aabb, MeshError};
 
 /// A point cloud: positions with optional normals and colours (one per point).
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -45,7 +45,7 @@ use glam::{DVec3, Vec3};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
-use crate::TriId;
+use crate::ids::TriId;
 use crate::mesh::TriMesh;
 use crate::points::PointCloud;
 use crate::rng::Rng;

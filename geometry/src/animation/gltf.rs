@@ -27,10 +27,11 @@ use std::path::{Path, PathBuf};
 use glam::{DMat4, DQuat, DVec3};
 use rayon::prelude::*;
 
+use super::error::AnimationError;
 use super::sampler::{Interpolation, Sampler};
-use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS};
-use crate::TriMesh;
+use super::template::{AnimatedTemplate, DEFAULT_FPS};
 use crate::io::gltf_data::GltfData;
+use crate::mesh::TriMesh;
 
 /// Slack (in frames) when counting the frames of a clip, so that a clip end that falls on a
 /// frame boundary (2.0 s at 30 fps) is not lost to rounding.

@@ -7,9 +7,10 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS};
-use crate::TriMesh;
-use crate::io::read_mesh;
+use super::error::AnimationError;
+use super::template::{AnimatedTemplate, DEFAULT_FPS};
+use crate::io::files::read_mesh;
+use crate::mesh::TriMesh;
 
 /// A sequence of mesh files with the topology of the first one.
 ///
