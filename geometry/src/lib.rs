@@ -29,7 +29,7 @@ pub mod texture;
 pub mod topology;
 pub mod validation;
 
-pub use camera::Camera;
+pub use camera::{Camera, bounding_sphere};
 pub use color::Rgba;
 pub use ids::{TriId, VertexId};
 pub use mesh::{Aabb, MeshError, TriMesh};

@@ -128,6 +128,26 @@ pub enum MeshError {
     },
 }
 
+impl MeshError {
+    /// `Ok` when an attribute of `len` entries has one per vertex, else
+    /// [`MeshError::AttributeLength`] (meshes and point clouds alike).
+    pub(crate) fn check_attribute_len(
+        attribute: &'static str,
+        len: usize,
+        vertex_count: usize,
+    ) -> Result<(), Self> {
+        if len == vertex_count {
+            Ok(())
+        } else {
+            Err(Self::AttributeLength {
+                attribute,
+                len,
+                vertex_count,
+            })
+        }
+    }
+}
+
 /// An indexed triangle mesh.
 ///
 /// Invariants (checked by [`TriMesh::try_new`]): every triangle index is `< vertex_count`, every
@@ -254,15 +274,7 @@ impl TriMesh {
     }
 
     fn check_len(&self, attribute: &'static str, len: usize) -> Result<(), MeshError> {
-        if len == self.positions.len() {
-            Ok(())
-        } else {
-            Err(MeshError::AttributeLength {
-                attribute,
-                len,
-                vertex_count: self.positions.len(),
-            })
-        }
+        MeshError::check_attribute_len(attribute, len, self.positions.len())
     }
 
     /// Vertex positions (f64).
@@ -328,13 +340,7 @@ impl TriMesh {
     /// when a position is not finite.
     pub fn set_positions<P: Into<DVec3>>(&mut self, positions: Vec<P>) -> Result<(), MeshError> {
         let positions: Vec<DVec3> = positions.into_iter().map(Into::into).collect();
-        if positions.len() != self.positions.len() {
-            return Err(MeshError::AttributeLength {
-                attribute: "positions",
-                len: positions.len(),
-                vertex_count: self.positions.len(),
-            });
-        }
+        self.check_len("positions", positions.len())?;
         if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
             return Err(MeshError::NonFinitePosition { vertex });
         }

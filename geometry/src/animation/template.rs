@@ -9,6 +9,16 @@ use crate::mesh::TriMesh;
 /// Frame rate used when a source has no timing of its own (the LAM/ARKit tracks are 30 fps).
 pub const DEFAULT_FPS: f64 = 30.0;
 
+/// `fps` when it is a usable frame rate (finite and > 0), else `current`: the rule of every
+/// `with_fps`.
+pub(crate) fn frame_rate_or(fps: f64, current: f64) -> f64 {
+    if fps.is_finite() && fps > 0.0 {
+        fps
+    } else {
+        current
+    }
+}
+
 /// A triangle mesh whose vertices move over a sequence of frames with fixed topology.
 pub trait AnimatedTemplate: Send + Sync {
     /// Number of frames.

@@ -1,7 +1,7 @@
 //! The coordinates the indexes accept: finite and at most [`MAX_COORDINATE`] in magnitude,
 //! checked in parallel naming the first bad point.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::error::SpatialError;
@@ -12,27 +12,33 @@ pub const MAX_COORDINATE: f32 = 1e18;
 
 /// Checks finiteness and [`MAX_COORDINATE`] for every point, naming the first bad one.
 pub(crate) fn check_points(points: &[Vec3]) -> Result<(), SpatialError> {
-    let bad = points
-        .par_iter()
-        .with_min_len(4096)
-        .position_first(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE);
-    match bad {
-        None => Ok(()),
-        Some(index) if points[index].is_finite() => Err(SpatialError::TooLarge { index }),
-        Some(index) => Err(SpatialError::NonFinite { index }),
-    }
+    first_bad(
+        points,
+        |p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE,
+        |p| p.is_finite(),
+    )
 }
 
 /// [`check_points`] for f64 points (mesh vertices).
-pub(crate) fn check_dpoints(points: &[glam::DVec3]) -> Result<(), SpatialError> {
+pub(crate) fn check_dpoints(points: &[DVec3]) -> Result<(), SpatialError> {
     let limit = f64::from(MAX_COORDINATE);
-    let bad = points
-        .par_iter()
-        .with_min_len(4096)
-        .position_first(|p| !p.is_finite() || p.abs().max_element() > limit);
-    match bad {
+    first_bad(
+        points,
+        |p| !p.is_finite() || p.abs().max_element() > limit,
+        |p| p.is_finite(),
+    )
+}
+
+/// The first point that is `bad`, searched in parallel, as [`SpatialError::TooLarge`] when it
+/// is `finite`, else [`SpatialError::NonFinite`].
+fn first_bad<P: Sync>(
+    points: &[P],
+    bad: impl Fn(&P) -> bool + Sync + Send,
+    finite: impl Fn(&P) -> bool,
+) -> Result<(), SpatialError> {
+    match points.par_iter().with_min_len(4096).position_first(bad) {
         None => Ok(()),
-        Some(index) if points[index].is_finite() => Err(SpatialError::TooLarge { index }),
+        Some(index) if finite(&points[index]) => Err(SpatialError::TooLarge { index }),
         Some(index) => Err(SpatialError::NonFinite { index }),
     }
 }

@@ -12,7 +12,7 @@ use super::model::{
     world_matrices,
 };
 use crate::animation::error::AnimationError;
-use crate::animation::template::AnimatedTemplate;
+use crate::animation::template::{AnimatedTemplate, frame_rate_or};
 use crate::mesh::TriMesh;
 
 impl GltfTemplate {
@@ -20,10 +20,17 @@ impl GltfTemplate {
     /// other values keep the current rate).
     #[must_use]
     pub fn with_fps(mut self, fps: f64) -> Self {
-        if fps.is_finite() && fps > 0.0 {
-            self.fps = fps;
-        }
+        self.fps = frame_rate_or(fps, self.fps);
         self
+    }
+
+    /// The time of `frame`, or [`AnimationError::FrameOutOfRange`] past the last frame.
+    pub(super) fn checked_frame_time(&self, frame: usize) -> Result<f64, AnimationError> {
+        self.frame_time(frame)
+            .ok_or(AnimationError::FrameOutOfRange {
+                frame,
+                count: self.frame_count(),
+            })
     }
 
     /// The file this template was read from.
@@ -367,12 +374,7 @@ impl AnimatedTemplate for GltfTemplate {
     }
 
     fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
-        let t = self
-            .frame_time(frame)
-            .ok_or(AnimationError::FrameOutOfRange {
-                frame,
-                count: self.frame_count(),
-            })?;
+        let t = self.checked_frame_time(frame)?;
         self.evaluate_pose(Some(t), None, None)
     }
 }

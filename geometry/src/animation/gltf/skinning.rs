@@ -5,7 +5,6 @@ use glam::{DMat4, DVec3};
 
 use super::model::GltfTemplate;
 use crate::animation::error::AnimationError;
-use crate::animation::template::AnimatedTemplate;
 
 /// Linear-blend-skinning data of a [`GltfTemplate`] in its vertex order: every vertex's
 /// influences on a *palette* of matrices ([`GltfTemplate::palette_at`]), as compressed rows.
@@ -113,7 +112,7 @@ impl GltfTemplate {
     }
 
     /// The skinning palette (see [`VertexSkinning`]) with the clip at time `t` (seconds), or of
-    /// the stored scene for `None` (the pose of [`AnimatedTemplate::rest`]).
+    /// the stored scene for `None` (the pose of [`AnimatedTemplate::rest`](crate::animation::AnimatedTemplate::rest)).
     ///
     /// # Errors
     /// [`AnimationError::BadTime`] when `t` is not finite.
@@ -139,17 +138,12 @@ impl GltfTemplate {
         Ok(palette)
     }
 
-    /// The palette of `frame` (at [`AnimatedTemplate::frame_time`]).
+    /// The palette of `frame` (at [`AnimatedTemplate::frame_time`](crate::animation::AnimatedTemplate::frame_time)).
     ///
     /// # Errors
     /// [`AnimationError::FrameOutOfRange`] past the last frame.
     pub fn frame_palette(&self, frame: usize) -> Result<Vec<DMat4>, AnimationError> {
-        let t = self
-            .frame_time(frame)
-            .ok_or(AnimationError::FrameOutOfRange {
-                frame,
-                count: self.frame_count(),
-            })?;
+        let t = self.checked_frame_time(frame)?;
         self.palette_at(Some(t))
     }
 }
