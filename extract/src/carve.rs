@@ -542,7 +542,7 @@ fn carve_box(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use trisplat_geometry::camera::sphere_rig;
+    use trisplat_geometry::sphere_rig;
 
     /// Analytic silhouettes of a ball (centre `c`, radius `r`): a pixel is inside when the
     /// ray through its centre meets the ball.
@@ -603,7 +603,7 @@ mod tests {
         }
         let mesh = hull.mesh();
         assert!(mesh.triangle_count() > 1000);
-        let stats = trisplat_geometry::mesh_stats::MeshStats::of(&mesh);
+        let stats = trisplat_geometry::MeshStats::of(&mesh);
         assert!(stats.watertight, "{stats:?}");
     }
 

@@ -3,35 +3,62 @@
 //! with trimesh/Open3D definitions, smoothing and sampling.
 //!
 //! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
+//!
+//! # Layout of the API
+//! The types every caller meets (meshes, point clouds, cameras and rigs, base colours and
+//! textures, the mesh renderer, mesh statistics, outlier removal) are re-exported here at the
+//! root; the modules that define them are private. Families of functions and constants that
+//! are addressed through their module stay public namespaces:
+//!
+//! - [`io`]: file formats (PLY, OBJ, glTF/GLB, NPY) and frame sequences;
+//! - [`animation`]: animated templates (glTF clips, mesh sequences, blendshapes);
+//! - [`spatial`]: the k-d tree and the triangle BVH;
+//! - [`metrics`]: Chamfer, F-score and normal metrics;
+//! - [`sampling`], [`smoothing`]: surface sampling and mesh smoothing with their defaults;
+//! - [`topology`], [`cleanup`], [`subdivide`]: mesh connectivity and its repairs;
+//! - [`rng`]: the deterministic random streams.
+//!
+//! Inside the crate, code imports from the module that defines an item, never through these
+//! re-exports, so that no file imports back from one that imports it.
 
 /// The vector types of the API (positions are `glam::DVec3`, bulk data `glam::Vec3`).
 pub use glam;
 
 pub mod animation;
-pub mod base_color;
-pub mod camera;
+mod base_color;
+mod camera;
 pub mod cleanup;
 mod color;
-pub mod ids;
+mod ids;
 pub mod io;
-pub mod mesh;
-pub mod mesh_render;
-pub mod mesh_stats;
+mod mesh;
+mod mesh_render;
+mod mesh_stats;
 pub mod metrics;
-pub mod outliers;
-pub mod points;
+mod outliers;
+mod points;
 pub mod rng;
 pub mod sampling;
 pub mod smoothing;
 pub mod spatial;
 pub mod subdivide;
-pub mod texture;
+mod texture;
 pub mod topology;
-pub mod validation;
+mod validation;
 
-pub use camera::{Camera, bounding_sphere};
+pub use base_color::{BaseColor, BaseColorError, Material, MaterialTexture};
+pub use camera::{
+    Camera, CameraError, ROTATION_TOLERANCE, bounding_sphere, orbit_rig, parse_cameras_json,
+    parse_transforms_json, read_cameras_json, read_transforms_json, sphere_rig, write_cameras_json,
+};
 pub use color::Rgba;
 pub use ids::{TriId, VertexId};
-pub use mesh::{Aabb, MeshError, TriMesh};
+pub use mesh::{Aabb, LOCAL_ORIGIN_REACH, MeshError, TriMesh};
+pub use mesh_render::{
+    MeshMaps, MeshRenderOptions, MeshRenderer, NO_TRIANGLE, NormalFrame, NormalSource,
+};
+pub use mesh_stats::MeshStats;
+pub use outliers::{OutlierError, statistical_outliers};
 pub use points::PointCloud;
+pub use texture::{Filter, Sampler, Texture, TextureError, Wrap, linear_to_srgb, srgb_to_linear};
 pub use validation::MeshReport;

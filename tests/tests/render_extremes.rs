@@ -2,8 +2,8 @@
 //! Gaussians, the original-3DGS switch, geometry-only renders and thread-count independence.
 
 use trisplat_geometry::Camera;
+use trisplat_geometry::NormalFrame;
 use trisplat_geometry::TriId;
-use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_splat::glam::{DVec3, Vec3};
 use trisplat_splat::render::options::DEFAULT_NEAR;
 use trisplat_splat::render::{Outputs, RenderError, RenderMode, RenderOptions, render};
@@ -309,7 +309,7 @@ fn images_do_not_depend_on_the_thread_count() {
     let set =
         trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
             .unwrap();
-    let cams = trisplat_geometry::camera::read_cameras_json(&trisplat_fixtures::path(
+    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
         "render/random_cameras.json",
     ))
     .unwrap();
