@@ -43,21 +43,17 @@ fn triple<'a>(e: &'a PlyElement, names: [&str; 3]) -> Option<[&'a ScalarColumn; 
     ])
 }
 
-fn zip3(c: [&ScalarColumn; 3]) -> Vec<Vec3> {
-    let [x, y, z] = c.map(ScalarColumn::to_f32);
+/// Three columns read as one type (`to_f32`, `to_f64`) and zipped into vectors.
+fn zip3<T: Copy, V>(
+    c: [&ScalarColumn; 3],
+    read: impl Fn(&ScalarColumn) -> Vec<T>,
+    vector: impl Fn(T, T, T) -> V,
+) -> Vec<V> {
+    let [x, y, z] = c.map(read);
     x.iter()
         .zip(&y)
         .zip(&z)
-        .map(|((&x, &y), &z)| Vec3::new(x, y, z))
-        .collect()
-}
-
-fn zip3_f64(c: [&ScalarColumn; 3]) -> Vec<DVec3> {
-    let [x, y, z] = c.map(ScalarColumn::to_f64);
-    x.iter()
-        .zip(&y)
-        .zip(&z)
-        .map(|((&x, &y), &z)| DVec3::new(x, y, z))
+        .map(|((&x, &y), &z)| vector(x, y, z))
         .collect()
 }
 
@@ -72,7 +68,7 @@ fn decode_vertices(path: &Path, doc: &PlyDocument) -> Result<VertexData, IoError
             "needs scalar properties `x`, `y` and `z`",
         )
     })?;
-    let positions = zip3_f64(xyz);
+    let positions = zip3(xyz, ScalarColumn::to_f64, DVec3::new);
     if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
         let p = positions[i];
         return Err(IoError::malformed(
@@ -84,7 +80,7 @@ fn decode_vertices(path: &Path, doc: &PlyDocument) -> Result<VertexData, IoError
     let mut used = vec!["x", "y", "z"];
     let normals = triple(v, ["nx", "ny", "nz"]).map(|c| {
         used.extend(["nx", "ny", "nz"]);
-        zip3(c)
+        zip3(c, ScalarColumn::to_f32, Vec3::new)
     });
     if let Some(n) = &normals
         && let Some(i) = n.iter().position(|p| !p.is_finite())
