@@ -603,7 +603,7 @@ mod tests {
         }
         let mesh = hull.mesh();
         assert!(mesh.triangle_count() > 1000);
-        let stats = trisplat_geometry::MeshStats::of(&mesh);
+        let stats = trisplat_geometry::mesh_stats::MeshStats::of(&mesh);
         assert!(stats.watertight, "{stats:?}");
     }
 

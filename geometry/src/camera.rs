@@ -1,8 +1,5 @@
 //! Pinhole cameras with OpenCV axes (x right, y down, z forward), the 3DGS `cameras.json` and
 //! NeRF `transforms.json` formats, and camera rigs around an object.
-//!
-//! Pixel (row i, column j) is sampled at (j + 0.5, i + 0.5); a camera-space point (x, y, z)
-//! projects to u = fx x / z + cx, v = fy y / z + cy (gsplat's convention, docs/conventions.md §2).
 
 use std::path::Path;
 
@@ -16,7 +13,10 @@ use crate::io::error::IoError;
 /// (max |RᵀR − I| entry). Real files store rotations as decimal text with ~1e-7 rounding.
 pub const ROTATION_TOLERANCE: f64 = 1e-4;
 
-/// A pinhole camera.
+/// A pinhole camera, with OpenCV axes (x right, y down, z forward).
+///
+/// Pixel (row i, column j) is sampled at (j + 0.5, i + 0.5); a camera-space point (x, y, z)
+/// projects to u = fx x / z + cx, v = fy y / z + cy (gsplat's convention, docs/conventions.md §2).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
     /// Numeric id (3DGS `id`).

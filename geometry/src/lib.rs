@@ -5,17 +5,19 @@
 //! This crate knows nothing of Gaussians; see `trisplat-splat` for those.
 //!
 //! # Layout of the API
-//! The types every caller meets (meshes, point clouds, cameras and rigs, base colours and
-//! textures, the mesh renderer, mesh statistics, outlier removal) are re-exported here at the
-//! root; the modules that define them are private. Families of functions and constants that
-//! are addressed through their module stay public namespaces:
+//! The core types (meshes and their errors and reports, point clouds, colours, typed ids,
+//! cameras with their file formats and rigs) are re-exported here at the root; the modules
+//! that define them are private. The rest are public namespaces, addressed through their
+//! module, each documented there:
 //!
 //! - [`io`]: file formats (PLY, OBJ, glTF/GLB, NPY) and frame sequences;
 //! - [`animation`]: animated templates (glTF clips, mesh sequences, blendshapes);
 //! - [`spatial`]: the k-d tree and the triangle BVH;
-//! - [`metrics`]: Chamfer, F-score and normal metrics;
+//! - [`metrics`]: Chamfer, F-score and normal metrics; [`mesh_stats`]: mesh structure;
 //! - [`sampling`], [`smoothing`]: surface sampling and mesh smoothing with their defaults;
-//! - [`topology`], [`cleanup`], [`subdivide`]: mesh connectivity and its repairs;
+//! - [`topology`], [`cleanup`], [`subdivide`], [`outliers`]: connectivity and repairs;
+//! - [`base_color`], [`texture`]: glTF base colours and their textures;
+//! - [`mesh_render`]: depth, normal and mask maps of a mesh by ray casting;
 //! - [`rng`]: the deterministic random streams.
 //!
 //! Inside the crate, code imports from the module that defines an item, never through these
@@ -25,28 +27,27 @@
 pub use glam;
 
 pub mod animation;
-mod base_color;
+pub mod base_color;
 mod camera;
 pub mod cleanup;
 mod color;
 mod ids;
 pub mod io;
 mod mesh;
-mod mesh_render;
-mod mesh_stats;
+pub mod mesh_render;
+pub mod mesh_stats;
 pub mod metrics;
-mod outliers;
+pub mod outliers;
 mod points;
 pub mod rng;
 pub mod sampling;
 pub mod smoothing;
 pub mod spatial;
 pub mod subdivide;
-mod texture;
+pub mod texture;
 pub mod topology;
 mod validation;
 
-pub use base_color::{BaseColor, BaseColorError, Material, MaterialTexture};
 pub use camera::{
     Camera, CameraError, ROTATION_TOLERANCE, bounding_sphere, orbit_rig, parse_cameras_json,
     parse_transforms_json, read_cameras_json, read_transforms_json, sphere_rig, write_cameras_json,
@@ -54,11 +55,5 @@ pub use camera::{
 pub use color::Rgba;
 pub use ids::{TriId, VertexId};
 pub use mesh::{Aabb, LOCAL_ORIGIN_REACH, MeshError, TriMesh};
-pub use mesh_render::{
-    MeshMaps, MeshRenderOptions, MeshRenderer, NO_TRIANGLE, NormalFrame, NormalSource,
-};
-pub use mesh_stats::MeshStats;
-pub use outliers::{OutlierError, statistical_outliers};
 pub use points::PointCloud;
-pub use texture::{Filter, Sampler, Texture, TextureError, Wrap, linear_to_srgb, srgb_to_linear};
 pub use validation::MeshReport;

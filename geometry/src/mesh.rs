@@ -1,9 +1,4 @@
 //! The indexed triangle mesh: f64 positions, u32 triangles, optional per-vertex attributes.
-//!
-//! Positions are f64 from the file to every derived quantity (triangle frames, deformation
-//! gradients, areas): a mesh is small next to the Gaussians and point clouds (f32), and f32
-//! storage of its vertices, amplified by sliver triangles, was the largest error in deformed
-//! covariances (docs/numerics.md).
 
 use std::sync::Arc;
 
@@ -149,6 +144,11 @@ impl MeshError {
 }
 
 /// An indexed triangle mesh.
+///
+/// Positions are f64 from the file to every derived quantity (triangle frames, deformation
+/// gradients, areas): a mesh is small next to the Gaussians and point clouds (f32), and f32
+/// storage of its vertices, amplified by sliver triangles, was the largest error in deformed
+/// covariances (docs/numerics.md).
 ///
 /// Invariants (checked by [`TriMesh::try_new`]): every triangle index is `< vertex_count`, every
 /// position is finite, optional attributes have one entry per vertex and the optional base

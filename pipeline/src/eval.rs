@@ -12,8 +12,8 @@
 use std::path::Path;
 
 use glam::DVec3;
-use trisplat_geometry::MeshStats;
 use trisplat_geometry::io::{self, Format, IoError, ply};
+use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::{
     self, DEFAULT_TAU_FRACTIONS, Metrics, MetricsError, MetricsOptions, Relation, Shape, Side, Tau,
 };

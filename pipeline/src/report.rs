@@ -21,8 +21,8 @@ use std::path::Path;
 use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_extract::incremental_delaunay::FrameStats;
-use trisplat_geometry::MeshStats;
 use trisplat_geometry::io::{IoError, write_atomically};
+use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::{
     MetricsError, MetricsOptions, Relation, Shape, Tau, evaluate, shared_vertex_fraction,
 };

@@ -30,8 +30,8 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
+use trisplat_geometry::outliers::statistical_outliers;
 use trisplat_geometry::sphere_rig;
-use trisplat_geometry::statistical_outliers;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
 
@@ -155,7 +155,7 @@ pub enum VisibilityError {
     },
     /// The floater rule refused its input.
     #[error("floaters: {0}")]
-    Floaters(#[from] trisplat_geometry::OutlierError),
+    Floaters(#[from] trisplat_geometry::outliers::OutlierError),
 }
 
 /// One pose of the Gaussians for [`decide`]: the world-space set and the template's positions

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use glam::{DVec3, Vec2, Vec3};
 use numpy::{AllowTypeChange, PyArray2, PyArrayLike2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use trisplat::geometry::MeshStats;
 use trisplat::geometry::io::{self, WriteOptions};
+use trisplat::geometry::mesh_stats::MeshStats;
 use trisplat::geometry::{PointCloud as RsPointCloud, TriMesh};
 
 use crate::arrays::{CloneBound, rows_in, rows_out};

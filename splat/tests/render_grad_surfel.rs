@@ -10,7 +10,7 @@
 
 use glam::DVec3;
 use trisplat_geometry::Camera;
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::Rng;
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward,

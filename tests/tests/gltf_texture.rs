@@ -11,7 +11,7 @@ use trisplat_geometry::cleanup::weld_vertices;
 use trisplat_geometry::glam::Vec2;
 use trisplat_geometry::io::gltf::{glb_from_parts, gltf_text_from_parts};
 use trisplat_geometry::io::{IoError, read_gltf_base_color, read_mesh};
-use trisplat_geometry::{Filter, Wrap};
+use trisplat_geometry::texture::{Filter, Wrap};
 
 /// Texel (i, j): red i / 3, green j / 3 (exact in 8 bits: 85 × i), blue 0.2, alpha 1.
 fn png_4x4() -> Vec<u8> {

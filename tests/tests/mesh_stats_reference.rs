@@ -15,8 +15,8 @@
 
 use glam::DVec3;
 use serde_json::Value;
-use trisplat_geometry::MeshStats;
 use trisplat_geometry::TriMesh;
+use trisplat_geometry::mesh_stats::MeshStats;
 
 /// Relative tolerance of areas and area fractions.
 const AREA_REL: f64 = 1e-9;

@@ -1,4 +1,4 @@
-//! `geometry::statistical_outliers` against Open3D 0.20.0's
+//! `geometry::outliers::statistical_outliers` against Open3D 0.20.0's
 //! `PointCloud.remove_statistical_outlier(nb_neighbors, std_ratio)`
 //! (`tests/reference/ref_outliers.py` → `fixtures/data/reference/outliers/`): a noisy sphere
 //! with floaters at three (nb_neighbors, std_ratio) pairs, a cloud with coincident points, a
@@ -18,8 +18,8 @@ use std::collections::BTreeSet;
 use glam::Vec3;
 use serde_json::Value;
 use trisplat_geometry::io::read_npy;
+use trisplat_geometry::outliers::statistical_outliers;
 use trisplat_geometry::spatial::distance_f64;
-use trisplat_geometry::statistical_outliers;
 
 /// A point within this distance of the threshold, relative to it, may differ from Open3D.
 const THRESHOLD_REL: f64 = 1e-9;

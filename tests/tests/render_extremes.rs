@@ -2,8 +2,8 @@
 //! Gaussians, the original-3DGS switch, geometry-only renders and thread-count independence.
 
 use trisplat_geometry::Camera;
-use trisplat_geometry::NormalFrame;
 use trisplat_geometry::TriId;
+use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_splat::glam::{DVec3, Vec3};
 use trisplat_splat::render::options::DEFAULT_NEAR;
 use trisplat_splat::render::{Outputs, RenderError, RenderMode, RenderOptions, render};

@@ -10,7 +10,7 @@
 //! quantity are `max |ours − torch| / max |torch|` over its values.
 
 use serde_json::Value;
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::read_cameras_json;
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradRender, ImageGrads, Real, RenderMode, RenderOptions,

@@ -14,7 +14,7 @@
 use serde_json::Value;
 use trisplat_geometry::glam::Vec2;
 use trisplat_geometry::io::read_gltf_base_color;
-use trisplat_geometry::{Filter, Wrap};
+use trisplat_geometry::texture::{Filter, Wrap};
 
 /// Largest difference allowed between our texel values and Pillow's, per channel in 0..1.
 const MAX_DECODE_DIFF: f32 = 3.5 / 255.0;

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use trisplat_geometry::MeshStats;
+use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::{Relation, SELF_CONSISTENCY_MIN_SHARED};
 use trisplat_pipeline::eval::{self, EvalError, EvalInput, EvalOptions, EvalReport};
 

@@ -9,7 +9,7 @@ use anyhow::{Context as _, bail};
 use trisplat_geometry::Camera;
 use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::read_mesh;
-use trisplat_geometry::{MeshRenderOptions, MeshRenderer, NormalFrame};
+use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame};
 use trisplat_splat::ply::read_gaussians_local;
 use trisplat_splat::render::image::{file_stem, image_files};
 use trisplat_splat::render::{

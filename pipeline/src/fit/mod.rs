@@ -34,7 +34,7 @@
 use std::time::Instant;
 
 use glam::DVec3;
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::{Rng, splitmix64};
 use trisplat_geometry::{Camera, TriMesh};
 use trisplat_splat::densify::DensifyError;

@@ -2,7 +2,7 @@
 //! user images ([`read_image_targets`]).
 //!
 //! A mesh target's rgb at a hit (docs/conventions.md §5 "Fitting") is, per [`TargetColor`]:
-//! the template's base colour ([`trisplat_geometry::BaseColor`]: material factor × base-colour
+//! the template's base colour ([`trisplat_geometry::base_color`]: material factor × base-colour
 //! texture × `COLOR_0`, in the texture's own encoding, sRGB for glTF; uv interpolated from the
 //! hit triangle's corners), its vertex colours interpolated, or the world normal as colour
 //! `(n + 1) / 2`; the barycentric weights are those of the hit point projected onto the hit
@@ -13,10 +13,10 @@ use std::path::Path;
 use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_extract::tsdf::{find_image, read_depth};
-use trisplat_geometry::BaseColor;
 use trisplat_geometry::Rgba;
+use trisplat_geometry::base_color::BaseColor;
+use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::{Camera, TriMesh};
-use trisplat_geometry::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 
 use super::{FitError, Target};
 

@@ -1,6 +1,6 @@
 //! [`RenderOptions`]: what to render and by which rules.
 
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 
 /// gsplat's near plane (camera z below which Gaussians are culled).
 pub const DEFAULT_NEAR: f32 = 0.01;

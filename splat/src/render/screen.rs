@@ -18,7 +18,7 @@
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::options::Outputs;
 

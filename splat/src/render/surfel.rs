@@ -33,7 +33,7 @@
 
 use glam::{DMat3, DVec2, DVec3};
 use trisplat_geometry::Camera;
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::composite::{
     ALPHA_THRESHOLD, CompositeRules, MedianRule, ORIGINAL_MAX_ALPHA, STOP_TRANSMITTANCE,

@@ -21,9 +21,9 @@
 //! Morphed position `p = base + Σ wₜ Δₜ`, with weights from the clip's weight track of the
 //! node, else `node.weights`, else `mesh.weights`, else zero.
 //!
-//! One job a file: [`model`] holds the scene a template keeps (nodes, meshes, skins, the
-//! clip), [`read`] builds it from a file, [`clip`] reads and checks the animation, [`evaluate`]
-//! samples the clip and poses the scene, and [`skinning`] exposes the skinning palette.
+//! One job a file: `model` holds the scene a template keeps (nodes, meshes, skins, the clip),
+//! `read` builds it from a file, `clip` reads and checks the animation, `evaluate` samples the
+//! clip and poses the scene, and `skinning` exposes the skinning palette.
 
 mod clip;
 mod evaluate;

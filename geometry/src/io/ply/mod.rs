@@ -1,5 +1,6 @@
 //! Stanford PLY: a general reader and writer (ascii, binary little- and big-endian) and the
-//! mapping between PLY elements and [`TriMesh`] / [`PointCloud`].
+//! mapping between PLY elements and [`TriMesh`](crate::TriMesh) /
+//! [`PointCloud`](crate::PointCloud).
 //!
 //! The reader is hand-written rather than built on `ply-rs-bw` so that every failure names the
 //! element and row at fault and so that no allocation is ever sized from a header count alone:
@@ -23,9 +24,9 @@
 //! (so faces map one to one; after fan triangulation they are dropped), and whole other
 //! elements verbatim. Comments and `obj_info` lines are kept too.
 //!
-//! One job a file: [`model`] holds the document types (typed columns, elements, extras),
-//! [`header`] parses the header and its limits, [`read`] decodes the body, [`write`] encodes
-//! documents and borrowed columns, and [`convert`] maps documents to and from meshes and points.
+//! One job a file: `model` holds the document types (typed columns, elements, extras),
+//! `header` parses the header and its limits, `read` decodes the body, `write` encodes
+//! documents and borrowed columns, and `convert` maps documents to and from meshes and points.
 
 mod convert;
 mod header;

@@ -517,7 +517,7 @@ impl PlyDocument {
     }
 }
 
-/// What a PLY file held besides the mesh or point data: written back by [`write_ply_mesh`].
+/// What a PLY file held besides the mesh or point data: written back by [`write_ply_mesh`](super::write_ply_mesh).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PlyExtras {
     /// Comments of the source file.

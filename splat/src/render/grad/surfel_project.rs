@@ -9,7 +9,7 @@
 //! `max(·, 0)` where it clamps. The third log-scale is not used by a surfel: its gradient is 0.
 
 use glam::{DMat3, DVec2, DVec3};
-use trisplat_geometry::NormalFrame;
+use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::params::DiffParams;
 use super::project::{
