@@ -444,21 +444,12 @@ pub fn mesh_to_ply(mesh: &TriMesh, extras: &PlyExtras) -> PlyDocument {
             face_props.push(p.clone());
         }
     }
-    let mut elements = vec![
-        vertex,
-        PlyElement {
-            name: "face".into(),
-            count: tris.len(),
-            properties: face_props,
-        },
-    ];
-    elements.extend(extras.other_elements.iter().cloned());
-    PlyDocument {
-        encoding: PlyEncoding::default(),
-        comments: extras.comments.clone(),
-        obj_info: extras.obj_info.clone(),
-        elements,
-    }
+    let face = PlyElement {
+        name: "face".into(),
+        count: tris.len(),
+        properties: face_props,
+    };
+    document_with_extras(vec![vertex, face], extras)
 }
 
 /// The PLY document for a point cloud: one `vertex` element (see [`mesh_to_ply`]).
@@ -483,13 +474,19 @@ pub fn points_to_ply_at(points: &PointCloud, origin: DVec3, extras: &PlyExtras) 
                 .collect::<Vec<_>>(),
         )
     };
-    let mut elements = vec![vertex_element(
+    let vertex = vertex_element(
         positions,
         points.normals(),
         None,
         points.colors(),
         &extras.vertex_properties,
-    )];
+    );
+    document_with_extras(vec![vertex], extras)
+}
+
+/// A document (default encoding) of `elements` followed by the other elements of `extras`,
+/// with its comments and `obj_info` lines.
+fn document_with_extras(mut elements: Vec<PlyElement>, extras: &PlyExtras) -> PlyDocument {
     elements.extend(extras.other_elements.iter().cloned());
     PlyDocument {
         encoding: PlyEncoding::default(),
