@@ -44,6 +44,8 @@ pub mod sampling;
 pub mod smoothing;
 pub mod spatial;
 pub mod subdivide;
+#[cfg(test)]
+mod test_meshes;
 pub mod texture;
 pub mod topology;
 mod validation;
