@@ -36,12 +36,12 @@ use std::time::Instant;
 use anyhow::{Context as _, bail};
 use glam::DVec3;
 use trisplat_extract::tsdf::{DepthImage, Fused, TsdfOptions, fuse, read_depth_dir, scene_radius};
-use trisplat_geometry::camera::{read_cameras_json, sphere_rig, write_cameras_json};
 use trisplat_geometry::io::{read_mesh, write_npy};
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer};
 use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::{Camera, TriMesh};
+use trisplat_geometry::{read_cameras_json, sphere_rig, write_cameras_json};
 
 use crate::harness::python_script;
 

@@ -4,9 +4,9 @@
 mod common;
 use common::{fresh_dir, run, run_ok, s};
 
-use trisplat_geometry::camera::read_cameras_json;
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
+use trisplat_geometry::read_cameras_json;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::topology::boundary_edges;
 

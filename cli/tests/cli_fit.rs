@@ -311,7 +311,7 @@ fn fit_densifies_with_its_flags_and_reports_each_step() {
 fn fit_reads_user_images_and_masks() {
     let dir = fresh_dir("fit_images");
     let (spot, g, train, _) = setup(&dir);
-    let cams = trisplat_geometry::camera::read_cameras_json(Path::new(&train)).expect("cameras");
+    let cams = trisplat_geometry::read_cameras_json(Path::new(&train)).expect("cameras");
     let images = dir.join("images");
     std::fs::create_dir_all(&images).expect("mkdir");
     for c in &cams {

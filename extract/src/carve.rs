@@ -542,7 +542,7 @@ fn carve_box(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use trisplat_geometry::camera::sphere_rig;
+    use trisplat_geometry::sphere_rig;
 
     /// Analytic silhouettes of a ball (centre `c`, radius `r`): a pixel is inside when the
     /// ray through its centre meets the ball.

@@ -19,7 +19,7 @@ use std::sync::Arc;
 
 use glam::Vec2;
 
-use crate::mesh::Rgba;
+use crate::color::Rgba;
 use crate::texture::{Sampler, Texture, linear_to_srgb, srgb_to_linear};
 
 /// A material's base-colour texture: the decoded image and how it is sampled.

@@ -1,21 +1,22 @@
 //! Pinhole cameras with OpenCV axes (x right, y down, z forward), the 3DGS `cameras.json` and
 //! NeRF `transforms.json` formats, and camera rigs around an object.
-//!
-//! Pixel (row i, column j) is sampled at (j + 0.5, i + 0.5); a camera-space point (x, y, z)
-//! projects to u = fx x / z + cx, v = fy y / z + cy (gsplat's convention, docs/conventions.md §2).
 
 use std::path::Path;
 
-use glam::{DMat3, DVec2, DVec3};
+use glam::{DMat3, DVec2, DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::io::{IoError, write_atomically};
+use crate::io::atomic::write_atomically;
+use crate::io::error::IoError;
 
 /// Largest deviation from orthonormality accepted in a camera rotation read from a file
 /// (max |RᵀR − I| entry). Real files store rotations as decimal text with ~1e-7 rounding.
 pub const ROTATION_TOLERANCE: f64 = 1e-4;
 
-/// A pinhole camera.
+/// A pinhole camera, with OpenCV axes (x right, y down, z forward).
+///
+/// Pixel (row i, column j) is sampled at (j + 0.5, i + 0.5); a camera-space point (x, y, z)
+/// projects to u = fx x / z + cx, v = fy y / z + cy (gsplat's convention, docs/conventions.md §2).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
     /// Numeric id (3DGS `id`).
@@ -477,6 +478,38 @@ pub fn parse_transforms_json(
         .collect()
 }
 
+/// Smallest bounding radius [`bounding_sphere`] gives, relative to the coordinates' magnitude
+/// (a single point still gets a rig).
+const MIN_RADIUS_REL: f64 = f32::EPSILON as f64;
+
+/// Centre and radius of the bounding sphere (about the box centre) of mesh `vertices` and
+/// `points` together (either may be empty): the ball a [`sphere_rig`] or [`orbit_rig`] frames.
+/// `None` when there is no point or a coordinate is infinite; the radius is at least
+/// `f32::EPSILON` times the centre's distance from the origin (at least 1), so a single point
+/// still gets a rig.
+#[must_use]
+pub fn bounding_sphere(vertices: &[DVec3], points: &[Vec3]) -> Option<(DVec3, f64)> {
+    let all = || {
+        vertices
+            .iter()
+            .copied()
+            .chain(points.iter().map(|p| p.as_dvec3()))
+    };
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for p in all() {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return None;
+    }
+    let center = (lo + hi) * 0.5;
+    let radius = all().map(|p| (p - center).length()).fold(0.0, f64::max);
+    let floor = MIN_RADIUS_REL * center.length().max(1.0);
+    Some((center, radius.max(floor)))
+}
+
 /// Cameras spread evenly over a sphere around `center` (a Fibonacci lattice), all looking at
 /// `center`, far enough that a ball of `radius` fits in the vertical field of view with a 10%
 /// margin. World up is +y. Names are `view_000`, `view_001`, ...
@@ -559,6 +592,23 @@ fn rig(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bounding_sphere_of_a_box() {
+        let pts = [Vec3::new(-1.0, 0.0, 0.0), Vec3::new(1.0, 2.0, 0.0)];
+        let (c, r) = bounding_sphere(&[], &pts).expect("finite");
+        assert_eq!(c, DVec3::new(0.0, 1.0, 0.0));
+        assert!((r - 2f64.sqrt()).abs() < 1e-12);
+        assert!(bounding_sphere(&[], &[]).is_none());
+        // One point: a tiny positive radius.
+        let (_, r) = bounding_sphere(&[DVec3::ONE], &[]).expect("finite");
+        assert!(r > 0.0);
+        // Vertices and points together; a non-finite coordinate gives none.
+        let (c, r) = bounding_sphere(&[DVec3::new(0.0, 0.0, 4.0)], &pts).expect("finite");
+        assert_eq!(c, DVec3::new(0.0, 1.0, 2.0));
+        assert_eq!(r, (1.0f64 + 1.0 + 4.0).sqrt());
+        assert!(bounding_sphere(&[DVec3::new(f64::INFINITY, 0.0, 0.0)], &pts).is_none());
+    }
 
     fn cam() -> Camera {
         Camera::look_at(

@@ -7,7 +7,7 @@ use std::collections::{HashMap, HashSet};
 
 use glam::DVec3;
 
-use crate::TriMesh;
+use crate::mesh::TriMesh;
 use crate::topology::TriangleClusters;
 
 /// Keeps only the triangles for which `keep(t)` is true (vertices are untouched).

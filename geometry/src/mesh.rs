@@ -1,9 +1,4 @@
 //! The indexed triangle mesh: f64 positions, u32 triangles, optional per-vertex attributes.
-//!
-//! Positions are f64 from the file to every derived quantity (triangle frames, deformation
-//! gradients, areas): a mesh is small next to the Gaussians and point clouds (f32), and f32
-//! storage of its vertices, amplified by sliver triangles, was the largest error in deformed
-//! covariances (docs/numerics.md).
 
 use std::sync::Arc;
 
@@ -11,11 +6,7 @@ use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::base_color::BaseColor;
-
-use crate::validation::MeshReport;
-
-/// Per-vertex RGBA colour in linear `[0, 1]` floats.
-pub type Rgba = [f32; 4];
+use crate::color::Rgba;
 
 /// Axis-aligned bounding box, in f64 (it bounds f32 point sets exactly too).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -132,7 +123,32 @@ pub enum MeshError {
     },
 }
 
+impl MeshError {
+    /// `Ok` when an attribute of `len` entries has one per vertex, else
+    /// [`MeshError::AttributeLength`] (meshes and point clouds alike).
+    pub(crate) fn check_attribute_len(
+        attribute: &'static str,
+        len: usize,
+        vertex_count: usize,
+    ) -> Result<(), Self> {
+        if len == vertex_count {
+            Ok(())
+        } else {
+            Err(Self::AttributeLength {
+                attribute,
+                len,
+                vertex_count,
+            })
+        }
+    }
+}
+
 /// An indexed triangle mesh.
+///
+/// Positions are f64 from the file to every derived quantity (triangle frames, deformation
+/// gradients, areas): a mesh is small next to the Gaussians and point clouds (f32), and f32
+/// storage of its vertices, amplified by sliver triangles, was the largest error in deformed
+/// covariances (docs/numerics.md).
 ///
 /// Invariants (checked by [`TriMesh::try_new`]): every triangle index is `< vertex_count`, every
 /// position is finite, optional attributes have one entry per vertex and the optional base
@@ -258,15 +274,7 @@ impl TriMesh {
     }
 
     fn check_len(&self, attribute: &'static str, len: usize) -> Result<(), MeshError> {
-        if len == self.positions.len() {
-            Ok(())
-        } else {
-            Err(MeshError::AttributeLength {
-                attribute,
-                len,
-                vertex_count: self.positions.len(),
-            })
-        }
+        MeshError::check_attribute_len(attribute, len, self.positions.len())
     }
 
     /// Vertex positions (f64).
@@ -332,13 +340,7 @@ impl TriMesh {
     /// when a position is not finite.
     pub fn set_positions<P: Into<DVec3>>(&mut self, positions: Vec<P>) -> Result<(), MeshError> {
         let positions: Vec<DVec3> = positions.into_iter().map(Into::into).collect();
-        if positions.len() != self.positions.len() {
-            return Err(MeshError::AttributeLength {
-                attribute: "positions",
-                len: positions.len(),
-                vertex_count: self.positions.len(),
-            });
-        }
+        self.check_len("positions", positions.len())?;
         if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
             return Err(MeshError::NonFinitePosition { vertex });
         }
@@ -460,13 +462,6 @@ impl TriMesh {
                 a.dot(b.cross(c)) / 6.0
             })
             .sum()
-    }
-
-    /// Full validation: non-finite positions, out-of-range or repeated indices, zero-area
-    /// triangles, non-manifold edges. See [`MeshReport`].
-    #[must_use]
-    pub fn report(&self) -> MeshReport {
-        MeshReport::of_raw(&self.positions, &self.triangles)
     }
 }
 

@@ -21,7 +21,8 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::mesh::TriMesh;
-use crate::spatial::{SpatialError, TriangleBvh};
+use crate::spatial::bvh::TriangleBvh;
+use crate::spatial::error::SpatialError;
 
 /// Triangle id stored in [`MeshMaps::triangle`] for pixels that hit nothing.
 pub const NO_TRIANGLE: u32 = u32::MAX;

@@ -33,7 +33,9 @@ use serde::Serialize;
 
 use crate::mesh::{Aabb, TriMesh};
 use crate::points::PointCloud;
-use crate::spatial::{PointIndex, SpatialError, TriangleBvh};
+use crate::spatial::bvh::TriangleBvh;
+use crate::spatial::error::SpatialError;
+use crate::spatial::kdtree::PointIndex;
 
 /// Default F-score thresholds, in the input's length unit: 1, 2.5, 5 and 10 mm for inputs in
 /// metres (2.5 mm gives the common "Recall@2.5mm").
@@ -578,7 +580,7 @@ where
 mod tests {
     use super::*;
     use crate::rng::Rng;
-    use crate::spatial::distance_f64;
+    use crate::spatial::kdtree::distance_f64;
 
     fn cloud(n: usize, seed: u64, normals: bool) -> PointCloud {
         let mut rng = Rng::new(seed);

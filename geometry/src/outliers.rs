@@ -40,7 +40,8 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::mesh::Aabb;
-use crate::spatial::{PointIndex, SpatialError, distance_f64};
+use crate::spatial::error::SpatialError;
+use crate::spatial::kdtree::{PointIndex, distance_f64};
 
 /// Why outliers could not be found.
 #[derive(Clone, Debug, thiserror::Error, PartialEq)]

@@ -2,7 +2,8 @@
 
 use glam::Vec3;
 
-use crate::mesh::{Aabb, MeshError, Rgba};
+use crate::color::Rgba;
+use crate::mesh::{Aabb, MeshError};
 
 /// A point cloud: positions with optional normals and colours (one per point).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -43,13 +44,7 @@ impl PointCloud {
     /// # Errors
     /// [`MeshError::AttributeLength`] when there is not one normal per point.
     pub fn with_normals(mut self, normals: Vec<Vec3>) -> Result<Self, MeshError> {
-        if normals.len() != self.positions.len() {
-            return Err(MeshError::AttributeLength {
-                attribute: "normals",
-                len: normals.len(),
-                vertex_count: self.positions.len(),
-            });
-        }
+        MeshError::check_attribute_len("normals", normals.len(), self.positions.len())?;
         self.normals = Some(normals);
         Ok(self)
     }
@@ -59,13 +54,7 @@ impl PointCloud {
     /// # Errors
     /// [`MeshError::AttributeLength`] when there is not one colour per point.
     pub fn with_colors(mut self, colors: Vec<Rgba>) -> Result<Self, MeshError> {
-        if colors.len() != self.positions.len() {
-            return Err(MeshError::AttributeLength {
-                attribute: "colors",
-                len: colors.len(),
-                vertex_count: self.positions.len(),
-            });
-        }
+        MeshError::check_attribute_len("colors", colors.len(), self.positions.len())?;
         self.colors = Some(colors);
         Ok(self)
     }

@@ -45,7 +45,7 @@ use glam::{DVec3, Vec3};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
-use crate::TriId;
+use crate::ids::TriId;
 use crate::mesh::TriMesh;
 use crate::points::PointCloud;
 use crate::rng::Rng;
@@ -892,16 +892,7 @@ mod tests {
     fn sphere(radius: f32, levels: usize) -> TriMesh {
         let octa = TriMesh::new(
             vec![Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z],
-            vec![
-                [0, 2, 4],
-                [2, 1, 4],
-                [1, 3, 4],
-                [3, 0, 4],
-                [2, 0, 5],
-                [1, 2, 5],
-                [3, 1, 5],
-                [0, 3, 5],
-            ],
+            crate::test_meshes::OCTAHEDRON_TRIANGLES.to_vec(),
         );
         let fine = crate::subdivide::midpoint(&octa, levels).unwrap();
         let positions = fine

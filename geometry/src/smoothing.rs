@@ -498,17 +498,7 @@ mod tests {
             -Vec3::Z * 2.0,
             Vec3::splat(7.0), // isolated
         ];
-        let t = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
-        TriMesh::new(p, t)
+        TriMesh::new(p, crate::test_meshes::OCTAHEDRON_TRIANGLES.to_vec())
     }
 
     #[test]

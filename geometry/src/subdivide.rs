@@ -4,7 +4,8 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
-use crate::mesh::{MeshError, Rgba, TriMesh};
+use crate::color::Rgba;
+use crate::mesh::{MeshError, TriMesh};
 use crate::topology::edge_key;
 
 /// Splits every triangle into four, `iterations` times, with one new vertex at the midpoint of

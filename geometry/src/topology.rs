@@ -5,6 +5,8 @@ use std::collections::HashMap;
 
 use rayon::slice::ParallelSliceMut;
 
+use crate::mesh::TriMesh;
+
 /// An undirected edge as a sorted vertex pair `(low, high)`.
 pub type Edge = (u32, u32);
 
@@ -157,7 +159,7 @@ pub struct TriangleClusters {
 impl TriangleClusters {
     /// Labels the edge-connected clusters of `mesh`.
     #[must_use]
-    pub fn of(mesh: &crate::TriMesh) -> Self {
+    pub fn of(mesh: &TriMesh) -> Self {
         let triangles = mesh.triangles();
         // Two triangles share the edge (a, b), a != b, when both hold a and b: look for b
         // among the triangles around a (no sort or hash of the edges, a few times faster on
@@ -256,7 +258,7 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::TriMesh;
+    use crate::mesh::TriMesh;
     use glam::Vec3;
 
     fn two_squares() -> TriMesh {

@@ -4,6 +4,7 @@ use std::fmt;
 
 use glam::DVec3;
 
+use crate::mesh::TriMesh;
 use crate::topology::{Edge, non_manifold_edges};
 
 /// Everything wrong (or merely unusual) with a triangle mesh. An empty report
@@ -24,7 +25,7 @@ pub struct MeshReport {
 }
 
 impl MeshReport {
-    /// Checks raw arrays, which may violate the [`crate::TriMesh`] invariants.
+    /// Checks raw arrays, which may violate the [`TriMesh`] invariants.
     #[must_use]
     pub fn of_raw(positions: &[DVec3], triangles: &[[u32; 3]]) -> Self {
         let mut report = Self {
@@ -62,6 +63,15 @@ impl MeshReport {
     #[must_use]
     pub fn is_clean(&self) -> bool {
         self == &Self::default()
+    }
+}
+
+impl TriMesh {
+    /// Full validation: non-finite positions, out-of-range or repeated indices, zero-area
+    /// triangles, non-manifold edges. See [`MeshReport`].
+    #[must_use]
+    pub fn report(&self) -> MeshReport {
+        MeshReport::of_raw(self.positions(), self.triangles())
     }
 }
 

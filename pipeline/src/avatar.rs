@@ -25,8 +25,8 @@
 use std::path::{Path, PathBuf};
 
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::camera::sphere_rig;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer};
+use trisplat_geometry::sphere_rig;
 use trisplat_splat::bind::attach_to_vertices;
 use trisplat_splat::frames::Convention;
 use trisplat_splat::gaussians::{GaussianSet, ParameterSpace};

@@ -29,9 +29,9 @@ use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, Increm
 use trisplat_extract::tsdf::{ColorImage, DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::camera::sphere_rig;
 use trisplat_geometry::cleanup::keep_largest_clusters;
 use trisplat_geometry::spatial::PointIndex;
+use trisplat_geometry::sphere_rig;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 

@@ -30,8 +30,8 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use trisplat_geometry::camera::sphere_rig;
 use trisplat_geometry::outliers::statistical_outliers;
+use trisplat_geometry::sphere_rig;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
 
@@ -88,7 +88,7 @@ impl Visibility {
 pub enum VisibilityError {
     /// The rig could not be placed.
     #[error("camera rig: {0}")]
-    Cameras(#[from] trisplat_geometry::camera::CameraError),
+    Cameras(#[from] trisplat_geometry::CameraError),
     /// A view could not be rendered.
     #[error("rendering camera {camera}: {cause}")]
     Render {

@@ -7,7 +7,7 @@ use glam::{DMat3, DVec3};
 use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2};
 use pyo3::prelude::*;
 use trisplat::geometry::Camera as RsCamera;
-use trisplat::geometry::camera::{read_cameras_json, read_transforms_json, sphere_rig as rig};
+use trisplat::geometry::{read_cameras_json, read_transforms_json, sphere_rig as rig};
 
 use crate::arrays::rows_in;
 use crate::error;

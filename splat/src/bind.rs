@@ -236,9 +236,9 @@ fn attach_stats(
     bound: &GaussianSet,
     mut distances: Vec<f64>,
 ) -> AttachStats {
-    let diagonal = |b: Option<trisplat_geometry::mesh::Aabb>| b.map_or(0.0, |b| b.diagonal());
+    let diagonal = |b: Option<trisplat_geometry::Aabb>| b.map_or(0.0, |b| b.diagonal());
     let template = diagonal(mesh.bounds());
-    let gaussians = diagonal(trisplat_geometry::mesh::Aabb::from_points(world.means()));
+    let gaussians = diagonal(trisplat_geometry::Aabb::from_points(world.means()));
     let size_ratio = if template > 0.0 {
         gaussians / template
     } else {

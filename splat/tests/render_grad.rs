@@ -235,7 +235,7 @@ fn degree3_fixture_scene() {
     let set =
         trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
             .unwrap();
-    let cams = trisplat_geometry::camera::read_cameras_json(&trisplat_fixtures::path(
+    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
         "render/random_cameras.json",
     ))
     .unwrap();
@@ -260,7 +260,7 @@ fn f32_forward_matches_the_renderer_and_f64_backward() {
     let set =
         trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
             .unwrap();
-    let cams = trisplat_geometry::camera::read_cameras_json(&trisplat_fixtures::path(
+    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
         "render/random_cameras.json",
     ))
     .unwrap();

@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use trisplat_geometry::animation::{Clip, GltfTemplate, WeightsTrack};
-use trisplat_geometry::camera::{parse_cameras_json, parse_transforms_json};
 use trisplat_geometry::io::{ObjVertices, gltf, obj, parse_npy, ply};
+use trisplat_geometry::{parse_cameras_json, parse_transforms_json};
 
 /// One fuzzed reader.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

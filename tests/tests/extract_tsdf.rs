@@ -20,12 +20,12 @@ use serde_json::Value;
 use trisplat_extract::tsdf::{
     DepthImage, TsdfError, TsdfOptions, fuse, read_depth, read_depth_dir, scene_radius,
 };
-use trisplat_geometry::camera::{read_cameras_json, write_cameras_json};
 use trisplat_geometry::io::{read_mesh, write_npy};
 use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::topology::{boundary_edges, non_manifold_edges};
 use trisplat_geometry::{Camera, TriMesh};
+use trisplat_geometry::{read_cameras_json, write_cameras_json};
 
 /// Samples per mesh for the Chamfer distance (as the reference).
 const SAMPLES: usize = 100_000;

@@ -309,7 +309,7 @@ fn images_do_not_depend_on_the_thread_count() {
     let set =
         trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
             .unwrap();
-    let cams = trisplat_geometry::camera::read_cameras_json(&trisplat_fixtures::path(
+    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
         "render/random_cameras.json",
     ))
     .unwrap();

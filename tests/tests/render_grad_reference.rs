@@ -9,7 +9,7 @@
 use std::path::Path;
 
 use serde_json::Value;
-use trisplat_geometry::camera::read_cameras_json;
+use trisplat_geometry::read_cameras_json;
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradRender, ImageGrads, Real, RenderOptions, backward,
     render_with_grad,

@@ -10,8 +10,8 @@
 //! quantity are `max |ours − torch| / max |torch|` over its values.
 
 use serde_json::Value;
-use trisplat_geometry::camera::read_cameras_json;
 use trisplat_geometry::mesh_render::NormalFrame;
+use trisplat_geometry::read_cameras_json;
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, GradRender, ImageGrads, Real, RenderMode, RenderOptions,
     backward, render_with_grad,

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use trisplat_geometry::camera::read_cameras_json;
 use trisplat_geometry::io::read_npy;
+use trisplat_geometry::read_cameras_json;
 use trisplat_splat::ply::read_gaussians;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
 

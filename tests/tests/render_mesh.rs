@@ -6,11 +6,11 @@
 //! script turns Open3D's ray distance into z-depth.
 
 use glam::Vec3;
-use trisplat_geometry::camera::read_cameras_json;
 use trisplat_geometry::io::{read_mesh, read_npy};
 use trisplat_geometry::mesh_render::{
     MeshRenderOptions, MeshRenderer, NO_TRIANGLE, NormalFrame, NormalSource,
 };
+use trisplat_geometry::read_cameras_json;
 
 /// The bound: z-depth within 1e-5 relative of Open3D where both hit.
 const MAX_DEPTH_RELATIVE_ERROR: f64 = 1e-5;

@@ -38,7 +38,7 @@
 //!
 //! # Render depth on the CPU
 //! ```
-//! use trisplat::geometry::camera::sphere_rig;
+//! use trisplat::geometry::sphere_rig;
 //! use trisplat::geometry::io::read_mesh;
 //! use trisplat::splat::bind::{BindOptions, init_bound};
 //! use trisplat::splat::deform::{DeformMode, Deformer};

@@ -5,9 +5,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use trisplat_geometry::camera::{orbit_rig, sphere_rig, write_cameras_json};
 use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::read_points;
+use trisplat_geometry::{orbit_rig, sphere_rig, write_cameras_json};
 use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::input::read_template;
 

@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use trisplat_geometry::Camera;
-use trisplat_geometry::camera::{read_cameras_json, read_transforms_json};
+use trisplat_geometry::{read_cameras_json, read_transforms_json};
 
 use crate::progress::Progress;
 

@@ -1,5 +1,5 @@
 use glam::DVec3;
-use trisplat_geometry::camera::sphere_rig;
+use trisplat_geometry::sphere_rig;
 use trisplat_geometry::topology::{boundary_edges, non_manifold_edges};
 
 use super::*;

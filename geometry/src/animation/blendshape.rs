@@ -26,10 +26,12 @@ use std::path::{Path, PathBuf};
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 
+use super::error::AnimationError;
+use super::gltf::{GltfTemplate, JointTurn};
 use super::sequence::check_topology;
-use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS, GltfTemplate, JointTurn};
-use crate::TriMesh;
-use crate::io::read_mesh;
+use super::template::{AnimatedTemplate, DEFAULT_FPS};
+use crate::io::files::read_mesh;
+use crate::mesh::TriMesh;
 
 /// A name in the form used to match blendshape targets with weight channels: lower case,
 /// a trailing `_L`/`_R` (or `.L`/`.R`) spelled `left`/`right`, `_` and `.` removed.
@@ -416,7 +418,7 @@ impl BlendshapeSet {
                 });
             }
             if let Some(v) = p.iter().position(|q| !q.is_finite()) {
-                return Err(crate::MeshError::NonFinitePosition { vertex: v }.into());
+                return Err(crate::mesh::MeshError::NonFinitePosition { vertex: v }.into());
             }
             names.push(name);
             positions.push(p);

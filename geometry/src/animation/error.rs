@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 
-use crate::MeshError;
-use crate::io::IoError;
+use crate::io::error::IoError;
+use crate::mesh::MeshError;
 
 /// A failed read or evaluation of an animated template. Every variant that comes from a file
 /// names the file and, where there is one, the glTF element (accessor, node, skin, animation,

@@ -19,8 +19,7 @@ mod error;
 mod gltf;
 mod sampler;
 mod sequence;
-
-use glam::DVec3;
+mod template;
 
 pub use self::blendshape::{
     BlendshapeAnimation, BlendshapeSet, GltfMorphAnimation, WeightsTrack, canonical_target_name,
@@ -29,47 +28,4 @@ pub use self::error::AnimationError;
 pub use self::gltf::{Clip, GltfTemplate, JointTurn, VertexSkinning};
 pub use self::sampler::Interpolation;
 pub use self::sequence::{MeshSequence, check_topology, natural_cmp};
-use crate::TriMesh;
-
-/// Frame rate used when a source has no timing of its own (the LAM/ARKit tracks are 30 fps).
-pub const DEFAULT_FPS: f64 = 30.0;
-
-/// A triangle mesh whose vertices move over a sequence of frames with fixed topology.
-pub trait AnimatedTemplate: Send + Sync {
-    /// Number of frames.
-    fn frame_count(&self) -> usize;
-
-    /// Time of `frame` in seconds, `None` past the last frame.
-    fn frame_time(&self, frame: usize) -> Option<f64>;
-
-    /// The triangles shared by every frame (those of [`Self::rest`]).
-    fn topology(&self) -> &[[u32; 3]];
-
-    /// The rest (neutral, bind or first-frame) mesh.
-    fn rest(&self) -> &TriMesh;
-
-    /// World-space vertex positions of `frame`, one per vertex of [`Self::rest`].
-    ///
-    /// # Errors
-    /// [`AnimationError::FrameOutOfRange`] past the last frame; source errors (an unreadable
-    /// or mismatched frame file) naming the file.
-    fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError>;
-
-    /// Channels of the driving track that move nothing (a weights track's names that match no
-    /// morph target or blendshape, such as ARKit's `tongueOut` on a head without a tongue
-    /// target); empty for every other animation.
-    fn unused_channels(&self) -> Vec<&str> {
-        Vec::new()
-    }
-
-    /// `frame` as a mesh with the template's topology.
-    ///
-    /// # Errors
-    /// As [`Self::frame`], and [`AnimationError::Invalid`] for non-finite positions.
-    fn frame_mesh(&self, frame: usize) -> Result<TriMesh, AnimationError> {
-        Ok(TriMesh::try_new(
-            self.frame(frame)?,
-            self.topology().to_vec(),
-        )?)
-    }
-}
+pub use self::template::{AnimatedTemplate, DEFAULT_FPS};

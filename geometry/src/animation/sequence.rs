@@ -7,9 +7,10 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::{AnimatedTemplate, AnimationError, DEFAULT_FPS};
-use crate::TriMesh;
-use crate::io::read_mesh;
+use super::error::AnimationError;
+use super::template::{AnimatedTemplate, DEFAULT_FPS, frame_rate_or};
+use crate::io::files::read_mesh;
+use crate::mesh::TriMesh;
 
 /// A sequence of mesh files with the topology of the first one.
 ///
@@ -225,9 +226,7 @@ impl MeshSequence {
     /// Sets the frame rate (finite and > 0; other values keep the current one).
     #[must_use]
     pub fn with_fps(mut self, fps: f64) -> Self {
-        if fps.is_finite() && fps > 0.0 {
-            self.fps = fps;
-        }
+        self.fps = frame_rate_or(fps, self.fps);
         self
     }
 

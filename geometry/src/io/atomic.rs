@@ -8,7 +8,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use super::IoError;
+use super::error::IoError;
 
 /// Writes `path` by calling `write` on a buffered temporary file in the same folder, then
 /// renaming it over `path`. On any error the temporary file is removed and `path` is untouched.

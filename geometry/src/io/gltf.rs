@@ -31,11 +31,11 @@ use gltf::accessor::Dimensions;
 use gltf::mesh::{Mode, Semantic};
 use serde_json::json;
 
-use super::IoError;
+use super::error::IoError;
 use super::gltf_codes::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UNSIGNED_INT};
 use super::gltf_data::GltfData;
-use crate::TriMesh;
-use crate::mesh::Rgba;
+use crate::color::Rgba;
+use crate::mesh::TriMesh;
 
 /// `COLOR_0` as RGBA (VEC3 gets alpha 1; normalised integers already scaled by the reader).
 fn read_colors(data: &GltfData, accessor: &gltf::Accessor<'_>) -> Result<Vec<Rgba>, IoError> {
@@ -369,7 +369,7 @@ fn for_each_instance(
 pub fn read_gltf(path: &Path) -> Result<TriMesh, IoError> {
     let data = GltfData::open(path)?;
     let out = gather(&data, false)?;
-    let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
+    let bad = |e: crate::mesh::MeshError| IoError::malformed(path, "mesh", e.to_string());
     let has = out.primitives > 0;
     let mut mesh = TriMesh::try_new(out.positions, out.triangles).map_err(bad)?;
     if has && out.all_normals {

@@ -24,7 +24,7 @@ use std::sync::Arc;
 
 use base64::Engine as _;
 
-use super::IoError;
+use super::error::IoError;
 use super::gltf::gather;
 use super::gltf_data::{GltfData, percent_decode};
 use crate::base_color::{BaseColor, Material, MaterialTexture};

@@ -76,9 +76,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 
+use super::atomic::write_atomically;
+use super::error::IoError;
+use super::files::read_mesh;
+use super::format::Format;
 use super::gltf_codes::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, TRIANGLES, UNSIGNED_INT};
-use super::{Format, IoError, write_atomically};
-use crate::TriMesh;
+use crate::mesh::TriMesh;
 
 /// Name of the animation, of the morph-target mesh and of the node-per-frame root.
 const SEQUENCE_NAME: &str = "sequence";
@@ -138,7 +141,7 @@ impl FrameSource for FrameFiles<'_> {
         let path = self.0.get(k).ok_or_else(|| {
             IoError::malformed(Path::new(""), format!("frame {k}"), "no such frame file")
         })?;
-        super::read_mesh(path).map(Cow::Owned)
+        read_mesh(path).map(Cow::Owned)
     }
 }
 

@@ -3,7 +3,8 @@
 
 use std::path::Path;
 
-use super::{IoError, write_atomically};
+use super::atomic::write_atomically;
+use super::error::IoError;
 
 /// A float array with its shape (C order: the last axis varies fastest).
 #[derive(Clone, Debug, PartialEq)]

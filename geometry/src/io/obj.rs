@@ -29,9 +29,9 @@ use std::path::Path;
 
 use glam::{DVec3, Vec2, Vec3};
 
-use super::IoError;
-use crate::TriMesh;
-use crate::mesh::Rgba;
+use super::error::IoError;
+use crate::color::Rgba;
+use crate::mesh::TriMesh;
 
 /// How OBJ corners become mesh vertices (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -259,7 +259,7 @@ fn per_vertex<T: Copy + PartialEq + Default>(
 }
 
 fn build(path: &Path, d: ObjData, mode: ObjVertices) -> Result<TriMesh, IoError> {
-    let bad = |e: crate::MeshError| IoError::malformed(path, "mesh", e.to_string());
+    let bad = |e: crate::mesh::MeshError| IoError::malformed(path, "mesh", e.to_string());
     let mode = match mode {
         ObjVertices::Auto => {
             let n = d.positions.len();

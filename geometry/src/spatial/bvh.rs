@@ -38,7 +38,9 @@ use obvhs::ray::{Ray, RayHit as ObvhsRayHit};
 use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 
-use super::{SpatialError, check_dpoints, check_points, morton_order};
+use super::error::SpatialError;
+use super::limits::{check_dpoints, check_points};
+use super::morton::morton_order;
 use crate::mesh::TriMesh;
 
 /// Leaf boxes grow by this fraction of the mesh's bounding-box diagonal, plus this fraction of

@@ -32,7 +32,9 @@ use glam::Vec3;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
-use super::{MAX_COORDINATE, SpatialError, check_points, morton_order};
+use super::error::SpatialError;
+use super::limits::{MAX_COORDINATE, check_points};
+use super::morton::morton_order;
 
 /// A nearest point: its index in the indexed set and its Euclidean distance (f64).
 #[derive(Clone, Copy, Debug, PartialEq)]

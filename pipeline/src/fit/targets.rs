@@ -13,8 +13,8 @@ use std::path::Path;
 use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_extract::tsdf::{find_image, read_depth};
+use trisplat_geometry::Rgba;
 use trisplat_geometry::base_color::BaseColor;
-use trisplat_geometry::mesh::Rgba;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame, NormalSource};
 use trisplat_geometry::{Camera, TriMesh};
 
