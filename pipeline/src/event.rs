@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use crate::config::Method;
 use crate::records::{FailedFrame, FrameEntry, FrameRecord};
-use crate::report::Report;
+use crate::report::model::Report;
 
 /// One thing a run tells, in the order it happens: notices, `Started`, then per frame in frame
 /// order its methods' results and either `FrameDone` or `FrameFailed`, then `Finishing`.

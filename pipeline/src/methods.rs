@@ -31,7 +31,7 @@ use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::cleanup::keep_largest_clusters;
 use trisplat_geometry::spatial::PointIndex;
-use trisplat_geometry::sphere_rig;
+use trisplat_geometry::{bounding_sphere, sphere_rig};
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
@@ -41,10 +41,6 @@ use crate::config::{
 };
 use crate::error::PipelineError;
 use crate::records::Resolved;
-
-/// Smallest bounding radius used for a rig, relative to the coordinates' magnitude (a single
-/// point still gets a rig).
-const MIN_RADIUS_REL: f64 = f32::EPSILON as f64;
 
 /// One deformed frame, as every mesher sees it.
 #[derive(Clone, Copy, Debug)]
@@ -70,31 +66,6 @@ pub struct MethodOutput {
     pub render_ms: Option<f64>,
     /// What the incremental update did (delaunay only).
     pub delaunay: Option<FrameStats>,
-}
-
-/// Centre and radius of the bounding sphere (about the box centre) of mesh `vertices` and
-/// `points` together (either may be empty).
-#[must_use]
-pub fn bounding_sphere(vertices: &[DVec3], points: &[Vec3]) -> Option<(DVec3, f64)> {
-    let all = || {
-        vertices
-            .iter()
-            .copied()
-            .chain(points.iter().map(|p| p.as_dvec3()))
-    };
-    let mut lo = DVec3::splat(f64::INFINITY);
-    let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    for p in all() {
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    if !(lo.is_finite() && hi.is_finite()) {
-        return None;
-    }
-    let center = (lo + hi) * 0.5;
-    let radius = all().map(|p| (p - center).length()).fold(0.0, f64::max);
-    let floor = MIN_RADIUS_REL * center.length().max(1.0);
-    Some((center, radius.max(floor)))
 }
 
 /// Mean distance from each point to its nearest other point (0 for a single point or only
@@ -535,18 +506,6 @@ impl Mesher {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn bounding_sphere_of_a_box() {
-        let pts = [Vec3::new(-1.0, 0.0, 0.0), Vec3::new(1.0, 2.0, 0.0)];
-        let (c, r) = bounding_sphere(&[], &pts).expect("finite");
-        assert_eq!(c, DVec3::new(0.0, 1.0, 0.0));
-        assert!((r - 2f64.sqrt()).abs() < 1e-12);
-        assert!(bounding_sphere(&[], &[]).is_none());
-        // One point: a tiny positive radius.
-        let (_, r) = bounding_sphere(&[DVec3::ONE], &[]).expect("finite");
-        assert!(r > 0.0);
-    }
 
     /// Two walls of wide flat Gaussians facing a camera on the z axis: a half-transparent one
     /// (opacity 0.6) at z = 1 in front of an opaque one at z = 2.

@@ -31,12 +31,11 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::outliers::statistical_outliers;
-use trisplat_geometry::sphere_rig;
+use trisplat_geometry::{bounding_sphere, sphere_rig};
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
 
 use crate::config::{DEFAULT_FOV_DEG, VisibilityRule};
-use crate::methods::bounding_sphere;
 use crate::records::GaussiansUsed;
 
 /// Frames of a run, besides the rest pose, whose poses the session gives [`decide`] (evenly

@@ -138,7 +138,7 @@ fn config(template: PathBuf, animation: Option<String>, output: PathBuf) -> Extr
 }
 
 fn radius(vertices: &[DVec3]) -> f64 {
-    trisplat_pipeline::methods::bounding_sphere(vertices, &[]).map_or(0.0, |(_, r)| r)
+    trisplat_geometry::bounding_sphere(vertices, &[]).map_or(0.0, |(_, r)| r)
 }
 
 #[test]

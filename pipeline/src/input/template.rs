@@ -4,13 +4,12 @@
 use std::path::Path;
 
 use glam::DVec3;
-use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate, VertexSkinning};
 use trisplat_geometry::cleanup::weld_vertices;
 use trisplat_geometry::io::read_mesh;
+use trisplat_geometry::{TriMesh, bounding_sphere};
 
 use crate::error::PipelineError;
-use crate::methods::bounding_sphere;
 
 /// Reads the template in world space, as the animation evaluates it.
 ///

@@ -10,7 +10,7 @@ mod builder;
 mod files;
 pub mod html;
 mod markdown;
-mod model;
+pub(crate) mod model;
 pub mod plot;
 mod table;
 pub mod thumbnail;
