@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::read_npy;
 
-use super::TsdfError;
+use super::error::TsdfError;
 
 /// Default divisor of 16-bit PNG depth values: millimetres to metres (Open3D, TUM).
 pub const DEFAULT_DEPTH_SCALE: f64 = 1000.0;
