@@ -20,7 +20,8 @@ const AUTO_BACKOFF_GROWTH: usize = 4;
 /// Longest run of rebuilds between probes.
 const AUTO_BACKOFF_MAX: usize = 1024;
 
-/// The automatic choice between updating and rebuilding ([`DelaunayOptions::auto_rebuild`]).
+/// The automatic choice between updating and rebuilding
+/// ([`DelaunayOptions::auto_rebuild`](super::DelaunayOptions::auto_rebuild)).
 /// An update judged costly is followed by a run of rebuilds; after it the update path is
 /// probed again, and a probe judged costly makes the next run [`AUTO_BACKOFF_GROWTH`] times
 /// longer ([`AUTO_BACKOFF_FIRST`] up to [`AUTO_BACKOFF_MAX`]). The first update after a

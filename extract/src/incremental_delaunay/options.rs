@@ -29,7 +29,7 @@ pub enum Lift {
     Surface,
 }
 
-/// Options of [`IncrementalDelaunay`].
+/// Options of [`IncrementalDelaunay`](super::IncrementalDelaunay).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DelaunayOptions {
     /// Hop hysteresis `τ`, relative to the mean template edge length: a Gaussian leaves its
@@ -39,7 +39,7 @@ pub struct DelaunayOptions {
     /// Rebuild from scratch every this many updates (0: never).
     pub rebuild_every: usize,
     /// Rebuild from scratch instead of updating while updates cost more than rebuilds (see
-    /// [`AutoRebuild`]); `false` keeps updating whatever the motion.
+    /// [`AutoRebuild`](super::AutoRebuild)); `false` keeps updating whatever the motion.
     pub auto_rebuild: bool,
     /// Placement of Gaussian vertices.
     pub lift: Lift,

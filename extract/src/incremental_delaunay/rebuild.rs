@@ -13,7 +13,7 @@ use super::options::Lift;
 use super::state::{Anchor, CACHED_MESHES, CachedChart, IncrementalDelaunay, SPARE_CAPACITY};
 use super::stats::FrameStats;
 
-/// Per triangle of the BVH: flat in the sense of [`FLAT_RATIO`] (see `certify::is_flat`).
+/// Per triangle of the BVH: flat in the sense of [`FLAT_RATIO`](super::FLAT_RATIO) (see `certify::is_flat`).
 pub(super) fn flat_triangles(bvh: &TriangleBvh) -> Vec<bool> {
     (0..bvh.triangle_count())
         .into_par_iter()

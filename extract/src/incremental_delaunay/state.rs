@@ -112,7 +112,7 @@ pub struct IncrementalDelaunay {
     pub(super) previous: Vec<Vec<CachedChart>>,
     /// The deformed template's triangles, refitted every frame, rebuilt with the charts.
     pub(super) bvh: Option<TriangleBvh>,
-    /// Per triangle of the deformed template: flat in the sense of [`FLAT_RATIO`].
+    /// Per triangle of the deformed template: flat in the sense of [`FLAT_RATIO`](super::FLAT_RATIO).
     pub(super) flat: Vec<bool>,
     pub(super) vertices: Vec<DVec3>,
     /// Per chart: its snapshot and its members' certificates (module `certify`), in the

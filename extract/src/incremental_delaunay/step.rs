@@ -23,7 +23,7 @@ const CHART_BATCH: usize = 64;
 struct SearchContext<'a> {
     bvh: &'a TriangleBvh,
     positions: &'a [DVec3],
-    /// Flat triangles (see [`FLAT_RATIO`]); `None` when there are none.
+    /// Flat triangles (see [`FLAT_RATIO`](super::FLAT_RATIO)); `None` when there are none.
     flat: Option<&'a [bool]>,
 }
 
@@ -495,7 +495,7 @@ impl IncrementalDelaunay {
     /// Exact hop check of a Gaussian at `q` in chart `a` (own squared distance `d2`) against
     /// `candidates`, which hold every triangle nearer than `cap`: `Err(target)` when it hops
     /// (the nearest triangle, ties to the smallest id, under the hop threshold), else
-    /// `Ok(((near, close), other))`: up to [`certify::MAX_CLOSE`] triangles `close` nearer
+    /// `Ok(((near, close), other))`: up to [`certify::MAX_CLOSE`](super::certify::MAX_CLOSE) triangles `close` nearer
     /// than the own distance plus [`certify::CLOSE_GAP_REL`] times `size`, `near` their
     /// distances (`+∞` in empty slots), and `other ≤ d_U` for every other triangle `U ≠ a`
     /// (and `≤ cap`). Candidates sorted by their boxes' squared distances `gap2` from a point
