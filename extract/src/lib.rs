@@ -19,6 +19,7 @@ pub mod alpha_shape;
 mod block_grid;
 pub mod carve;
 pub mod delaunay3d;
+mod image_file;
 pub mod incremental_delaunay;
 mod marching_cubes;
 mod mc_tables;
