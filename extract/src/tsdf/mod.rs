@@ -23,7 +23,7 @@
 //! over the frames in order, so the result does not depend on the thread count.
 //!
 //! Per block and frame, the depth range of the pixels the block projects onto (read pixel by
-//! pixel when the block covers at most [`RECT_SCAN_MAX`](volume::RECT_SCAN_MAX) of them, else from 16-pixel tiles)
+//! pixel when the block covers at most [`RECT_SCAN_MAX`](frame::RECT_SCAN_MAX) of them, else from 16-pixel tiles)
 //! decides the work: nothing when the block is behind the camera, outside the image or
 //! `trunc` behind every depth; tsdf = 1 for all its voxels without projecting them when it
 //! projects inside the image onto valid pixels only and lies `trunc` in front of all of them
@@ -31,13 +31,17 @@
 //! The outcome is the plain per-voxel rule's, which a test checks voxel by voxel on a dense
 //! box at coarse and fine voxels.
 
+mod allocate;
 mod error;
+mod frame;
 mod fuse;
 mod image;
+mod integrate;
 mod params;
 mod volume;
 
 pub use self::error::TsdfError;
+pub use self::frame::{Frame, PIXEL_MARGIN};
 pub use self::fuse::{
     DEFAULT_KEEP_CLUSTERS, DEFAULT_TRUNC_VOXELS, DEFAULT_VOXELS_PER_DEPTH_TRUNC, Fused,
     TsdfOptions, fuse, fuse_streamed, post_process, scene_radius,
@@ -47,4 +51,4 @@ pub use self::image::{
     read_depth, read_depth_dir,
 };
 pub use self::params::TsdfParams;
-pub use self::volume::{DEFAULT_MAX_BLOCKS, Frame, PIXEL_MARGIN, STREAM_BUDGET_BYTES, TsdfVolume};
+pub use self::volume::{DEFAULT_MAX_BLOCKS, STREAM_BUDGET_BYTES, TsdfVolume};
