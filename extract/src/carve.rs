@@ -25,6 +25,7 @@ use trisplat_geometry::io::read_npy;
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::{Aabb, Camera, TriMesh};
 
+use crate::image_file::{decode_image, is_plane, is_png, per_camera};
 use crate::marching_cubes::marching_cubes_dense;
 use crate::tsdf::scene_radius;
 
@@ -190,16 +191,8 @@ pub fn read_mask(path: &Path, camera: &Camera, threshold: f32) -> Result<Mask, C
             camera.name
         ))
     };
-    let is_png = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
-    let values: Vec<f32> = if is_png {
-        let img = image::ImageReader::open(path)
-            .map_err(|e| bad(e.to_string()))?
-            .with_guessed_format()
-            .map_err(|e| bad(e.to_string()))?
-            .decode()
-            .map_err(|e| bad(e.to_string()))?;
+    let values: Vec<f32> = if is_png(path) {
+        let img = decode_image(path).map_err(bad)?;
         if (img.width(), img.height()) != (w, h) {
             return Err(size_error(format!("{}x{}", img.width(), img.height())));
         }
@@ -219,11 +212,7 @@ pub fn read_mask(path: &Path, camera: &Camera, threshold: f32) -> Result<Mask, C
         }
     } else {
         let array = read_npy(path).map_err(|e| bad(e.to_string()))?;
-        let ok = match array.shape.as_slice() {
-            [rows, cols] | [rows, cols, 1] => (*rows, *cols) == (h as usize, w as usize),
-            _ => false,
-        };
-        if !ok {
+        if !is_plane(&array.shape, w as usize, h as usize) {
             return Err(size_error(format!("shape {:?}", array.shape)));
         }
         array.data
@@ -246,11 +235,7 @@ pub fn read_mask(path: &Path, camera: &Camera, threshold: f32) -> Result<Mask, C
 /// # Errors
 /// As [`find_mask`] and [`read_mask`].
 pub fn read_masks(dir: &Path, cameras: &[Camera], threshold: f32) -> Result<Vec<Mask>, CarveError> {
-    let results: Vec<Result<Mask, CarveError>> = cameras
-        .par_iter()
-        .map(|c| read_mask(&find_mask(dir, c)?, c, threshold))
-        .collect();
-    results.into_iter().collect()
+    per_camera(cameras, |c| read_mask(&find_mask(dir, c)?, c, threshold))
 }
 
 /// Options of [`carve`].

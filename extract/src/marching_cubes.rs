@@ -20,8 +20,8 @@ use glam::{DVec3, IVec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 
+use crate::block_grid::{BLOCK, BLOCK_VOXELS, BlockGrid, local_coords, local_index};
 use crate::mc_tables::{CORNERS, EDGES, TABLE, crossed_edges};
-use crate::tsdf::grid::{BLOCK, BLOCK_VOXELS, BlockGrid, local_coords, local_index};
 
 /// Vertices are placed at least this fraction of a voxel away from the ends of their edge
 /// (see the module docs). Open3D places them exactly at the interpolated zero; the difference

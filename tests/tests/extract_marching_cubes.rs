@@ -6,7 +6,7 @@
 //! are within [`VOLUME_REL`] of the analytic ones at these resolutions.
 
 use glam::DVec3;
-use trisplat_extract::marching_cubes::marching_cubes_dense;
+use trisplat_extract::marching_cubes_dense;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::topology::{boundary_edges, non_manifold_edges, unique_edges};
 

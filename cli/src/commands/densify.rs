@@ -1,8 +1,8 @@
 //! `trisplat densify G.ply -o OUT.ply [--template T] [--convention ...] [--mask FILE]
 //! [--op split|clone] [--split-above S] [--children N] [--shrink F] [--seed S]
 //! [--gate seed|stable] [--w2-threshold W] [--w2-to children|nearest]`, and the helpers `prune`
-//! and `refine` share: the gate argument, reading masks and baking a bound set to world space
-//! at the template's rest.
+//! and `refine` share: the gate argument, checking thresholds, reading masks and baking a bound
+//! set to world space at the template's rest.
 
 use std::path::{Path, PathBuf};
 
@@ -166,6 +166,39 @@ pub fn read_mask(path: &Path, n: usize) -> anyhow::Result<Vec<bool>> {
     Ok(mask)
 }
 
+/// [`load`], with a per-Gaussian selection: read from `mask` ([`read_mask`]), else `unmasked`
+/// for every Gaussian.
+///
+/// # Errors
+/// As [`load`] and [`read_mask`].
+pub fn load_masked(
+    path: &Path,
+    template: &TemplateArgs,
+    mask: Option<&Path>,
+    unmasked: bool,
+) -> anyhow::Result<(Loaded, Vec<bool>)> {
+    let loaded = load(path, template)?;
+    let n = loaded.set.len();
+    let selection = match mask {
+        Some(p) => read_mask(p, n)?,
+        None => vec![unmasked; n],
+    };
+    Ok((loaded, selection))
+}
+
+/// Checks the thresholds given, `(flag, value)`: each must be a non-negative number.
+///
+/// # Errors
+/// The first that is not, named by its flag.
+pub fn check_non_negative(thresholds: &[(&str, Option<f64>)]) -> anyhow::Result<()> {
+    for &(flag, v) in thresholds {
+        if v.is_some_and(|v| !v.is_finite() || v < 0.0) {
+            bail!("{flag}: must be a non-negative number");
+        }
+    }
+    Ok(())
+}
+
 /// Densify operations.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum OpArg {
@@ -251,14 +284,10 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
     if !(args.shrink.is_finite() && args.shrink > 0.0) {
         bail!("--shrink {}: must be a positive number", args.shrink);
     }
-    for (flag, v) in [
+    check_non_negative(&[
         ("--split-above", args.split_above),
         ("--w2-threshold", args.w2_threshold),
-    ] {
-        if v.is_some_and(|v| !v.is_finite() || v < 0.0) {
-            bail!("{flag}: must be a non-negative number");
-        }
-    }
+    ])?;
     if args.gate == GateArg::Stable && args.w2_threshold.is_none() && args.w2_to.is_some() {
         return Err(UsageError(
             "--w2-to needs a Wasserstein gate: give --w2-threshold W or --gate seed".into(),
@@ -266,13 +295,10 @@ pub fn run(args: DensifyArgs, ctx: &Context) -> anyhow::Result<()> {
         .into());
     }
     let spinner = ctx.progress.spinner("densifying");
-    let loaded = load(&args.gaussians, &args.template)?;
+    let (loaded, mut selected) =
+        load_masked(&args.gaussians, &args.template, args.mask.as_deref(), true)?;
     let name = args.gaussians.display().to_string();
     let n = loaded.set.len();
-    let mut selected = match &args.mask {
-        Some(p) => read_mask(p, n)?,
-        None => vec![true; n],
-    };
     let n_selected_before_gate = selected.iter().filter(|&&s| s).count();
     let options = SplitOptions {
         children: args.children as usize,

@@ -11,7 +11,7 @@ use trisplat_splat::densify::{
 };
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
-use super::densify::{GateArg, TemplateArgs, load, read_mask};
+use super::densify::{GateArg, TemplateArgs, check_non_negative, load_masked};
 use super::{Context, refuse_to_overwrite};
 
 /// Arguments of `trisplat prune`.
@@ -94,23 +94,16 @@ pub fn run(mut args: PruneArgs, ctx: &Context) -> anyhow::Result<()> {
              or --mask"
         );
     }
-    for (flag, v) in [
+    check_non_negative(&[
         ("--min-opacity", args.min_opacity),
         ("--outlier-threshold", args.outlier_threshold),
         ("--normal-threshold", args.normal_threshold),
-    ] {
-        if v.is_some_and(|v| !v.is_finite() || v < 0.0) {
-            bail!("{flag}: must be a non-negative number");
-        }
-    }
+    ])?;
     let spinner = ctx.progress.spinner("pruning");
-    let loaded = load(&args.gaussians, &args.template)?;
+    let (loaded, mut flagged) =
+        load_masked(&args.gaussians, &args.template, args.mask.as_deref(), false)?;
     let name = args.gaussians.display().to_string();
     let n = loaded.set.len();
-    let mut flagged = match &args.mask {
-        Some(p) => read_mask(p, n)?,
-        None => vec![false; n],
-    };
     if let Some(o) = args.min_opacity {
         for (i, f) in flagged.iter_mut().enumerate() {
             *f |= f64::from(loaded.set.opacity(i)) < o;

@@ -8,7 +8,11 @@ use trisplat_geometry::cleanup::{
 };
 use trisplat_geometry::{Camera, TriMesh};
 
-use super::{ColorImage, DEFAULT_MAX_BLOCKS, DepthImage, Frame, TsdfError, TsdfParams, TsdfVolume};
+use super::error::TsdfError;
+use super::frame::Frame;
+use super::image::{ColorImage, DepthImage};
+use super::params::TsdfParams;
+use super::volume::{DEFAULT_MAX_BLOCKS, TsdfVolume};
 
 /// Default truncation in voxels (2DGS: `sdf_trunc = 5 * voxel_size`).
 pub const DEFAULT_TRUNC_VOXELS: f64 = 5.0;

@@ -11,11 +11,11 @@
 
 use std::path::{Path, PathBuf};
 
-use rayon::prelude::*;
 use trisplat_geometry::Camera;
 use trisplat_geometry::io::read_npy;
 
-use super::TsdfError;
+use super::error::TsdfError;
+use crate::image_file::{decode_image, is_plane, is_png, per_camera};
 
 /// Default divisor of 16-bit PNG depth values: millimetres to metres (Open3D, TUM).
 pub const DEFAULT_DEPTH_SCALE: f64 = 1000.0;
@@ -155,11 +155,6 @@ pub fn find_image(dir: &Path, camera: &Camera, suffix: &str) -> Result<PathBuf, 
     })
 }
 
-fn is_png(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-}
-
 fn image_error(path: &Path, message: impl Into<String>) -> TsdfError {
     TsdfError::ImageFile {
         path: path.to_path_buf(),
@@ -191,12 +186,7 @@ pub fn read_depth(path: &Path, camera: &Camera, depth_scale: f64) -> Result<Dept
                 value: depth_scale,
             });
         }
-        let img = image::ImageReader::open(path)
-            .map_err(|e| image_error(path, e.to_string()))?
-            .with_guessed_format()
-            .map_err(|e| image_error(path, e.to_string()))?
-            .decode()
-            .map_err(|e| image_error(path, e.to_string()))?;
+        let img = decode_image(path).map_err(|message| image_error(path, message))?;
         let image::DynamicImage::ImageLuma16(img) = img else {
             return Err(image_error(
                 path,
@@ -221,11 +211,7 @@ pub fn read_depth(path: &Path, camera: &Camera, depth_scale: f64) -> Result<Dept
         return DepthImage::try_new(camera.width, camera.height, data);
     }
     let array = read_npy(path)?;
-    let ok = match array.shape.as_slice() {
-        [rows, cols] | [rows, cols, 1] => (*rows, *cols) == (h, w),
-        _ => false,
-    };
-    if !ok {
+    if !is_plane(&array.shape, w, h) {
         return Err(size_error(
             path,
             camera,
@@ -243,12 +229,7 @@ pub fn read_depth(path: &Path, camera: &Camera, depth_scale: f64) -> Result<Dept
 pub fn read_color(path: &Path, camera: &Camera) -> Result<ColorImage, TsdfError> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     if is_png(path) {
-        let img = image::ImageReader::open(path)
-            .map_err(|e| image_error(path, e.to_string()))?
-            .with_guessed_format()
-            .map_err(|e| image_error(path, e.to_string()))?
-            .decode()
-            .map_err(|e| image_error(path, e.to_string()))?;
+        let img = decode_image(path).map_err(|message| image_error(path, message))?;
         if (img.width() as usize, img.height() as usize) != (w, h) {
             return Err(size_error(
                 path,
@@ -293,11 +274,9 @@ pub fn read_depth_dir(
     cameras: &[Camera],
     depth_scale: f64,
 ) -> Result<Vec<DepthImage>, TsdfError> {
-    let results: Vec<Result<DepthImage, TsdfError>> = cameras
-        .par_iter()
-        .map(|c| read_depth(&find_image(dir, c, "depth")?, c, depth_scale))
-        .collect();
-    results.into_iter().collect()
+    per_camera(cameras, |c| {
+        read_depth(&find_image(dir, c, "depth")?, c, depth_scale)
+    })
 }
 
 /// Reads `<dir>/<img_name>_rgb.npy` (or `.png`) for every camera, in parallel.
@@ -305,9 +284,5 @@ pub fn read_depth_dir(
 /// # Errors
 /// As [`find_image`] and [`read_color`].
 pub fn read_color_dir(dir: &Path, cameras: &[Camera]) -> Result<Vec<ColorImage>, TsdfError> {
-    let results: Vec<Result<ColorImage, TsdfError>> = cameras
-        .par_iter()
-        .map(|c| read_color(&find_image(dir, c, "rgb")?, c))
-        .collect();
-    results.into_iter().collect()
+    per_camera(cameras, |c| read_color(&find_image(dir, c, "rgb")?, c))
 }

@@ -1,5 +1,5 @@
-//! A sparse grid of voxel blocks: the storage of [`super::TsdfVolume`] and the input of
-//! [`crate::marching_cubes`].
+//! A sparse grid of voxel blocks: the storage of [`crate::tsdf::TsdfVolume`] and the input of
+//! [`crate::marching_cubes()`].
 //!
 //! Voxel `g` (an integer index) sits at `origin + g * voxel`. Voxels are stored in blocks of
 //! [`BLOCK`]³; block `k` holds voxels `8k .. 8k + 7` on each axis. Each voxel has a value (the

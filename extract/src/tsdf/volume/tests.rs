@@ -4,6 +4,7 @@ use trisplat_geometry::topology::{boundary_edges, non_manifold_edges};
 
 use super::*;
 use crate::marching_cubes::marching_cubes_dense;
+use crate::tsdf::{TsdfOptions, fuse, scene_radius};
 
 const RADIUS: f64 = 0.3;
 const VOXEL: f64 = 0.02;

@@ -1,0 +1,261 @@
+//! One view ([`Frame`]) and what fusion prepares from it once: the camera maths, the
+//! effective depth and the culling tiles, and what the view does to a block (skip it, free
+//! space, or voxel by voxel).
+
+use glam::{DMat3, DVec3};
+use trisplat_geometry::Camera;
+
+use super::error::TsdfError;
+use super::image::{ColorImage, DepthImage};
+
+/// Projected coordinates must lie in `[PIXEL_MARGIN, size − PIXEL_MARGIN)` (Open3D's 0.0001).
+pub const PIXEL_MARGIN: f64 = 1e-4;
+
+/// Side of the square pixel tiles whose largest depth culls blocks behind the surface.
+pub(super) const TILE: usize = 16;
+
+/// One view: a camera, its depth map and optionally its colours (same size as the camera).
+#[derive(Clone, Copy, Debug)]
+pub struct Frame<'a> {
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Its depth map.
+    pub depth: &'a DepthImage,
+    /// Its colour image, for coloured volumes.
+    pub color: Option<&'a ColorImage>,
+}
+
+/// Per-frame data prepared once: camera maths, effective depth, culling tiles.
+pub(super) struct Prepared<'a> {
+    pub(super) name: &'a str,
+    pub(super) world_to_camera: DMat3,
+    pub(super) center: DVec3,
+    pub(super) fx: f64,
+    pub(super) fy: f64,
+    pub(super) cx: f64,
+    pub(super) cy: f64,
+    pub(super) width: usize,
+    pub(super) height: usize,
+    /// Depth with invalid values and those beyond `depth_trunc` set to 0.
+    pub(super) depth: Vec<f32>,
+    /// ((j + ½ − cx)/fx)² per column and ((i + ½ − cy)/fy)² per row: a pixel's ray-length
+    /// factor is `sqrt(1 + col_sq[j] + row_sq[i])`.
+    pub(super) col_sq: Vec<f64>,
+    pub(super) row_sq: Vec<f64>,
+    /// Largest depth per TILE x TILE tile (0 = no valid pixel).
+    pub(super) tile_max: Vec<f32>,
+    /// Smallest valid depth per tile (`f32::INFINITY` = none).
+    pub(super) tile_min: Vec<f32>,
+    /// Whether every pixel of the tile is valid.
+    pub(super) tile_full: Vec<bool>,
+    pub(super) tiles_x: usize,
+    pub(super) color: Option<&'a [[f32; 3]]>,
+}
+
+impl<'a> Prepared<'a> {
+    /// The tables of `frame`.
+    pub(super) fn new(frame: &Frame<'a>, depth_trunc: f64) -> Result<Self, TsdfError> {
+        let cam = frame.camera;
+        let (width, height) = (cam.width as usize, cam.height as usize);
+        if (frame.depth.width(), frame.depth.height()) != (cam.width, cam.height) {
+            return Err(TsdfError::ImageSize {
+                what: format!("depth map of camera {}", cam.name),
+                expected: (cam.width, cam.height),
+                found: format!("{}x{}", frame.depth.width(), frame.depth.height()),
+            });
+        }
+        if let Some(c) = frame.color
+            && (c.width(), c.height()) != (cam.width, cam.height)
+        {
+            return Err(TsdfError::ImageSize {
+                what: format!("colour image of camera {}", cam.name),
+                expected: (cam.width, cam.height),
+                found: format!("{}x{}", c.width(), c.height()),
+            });
+        }
+        let depth: Vec<f32> = frame
+            .depth
+            .data()
+            .iter()
+            .map(|&d| if f64::from(d) <= depth_trunc { d } else { 0.0 })
+            .collect();
+        let col_sq: Vec<f64> = (0..width)
+            .map(|j| ((j as f64 + 0.5 - cam.cx) / cam.fx).powi(2))
+            .collect();
+        let row_sq: Vec<f64> = (0..height)
+            .map(|i| ((i as f64 + 0.5 - cam.cy) / cam.fy).powi(2))
+            .collect();
+        let tiles_x = width.div_ceil(TILE);
+        let tiles_y = height.div_ceil(TILE);
+        let mut tile_max = vec![0.0f32; tiles_x * tiles_y];
+        let mut tile_min = vec![f32::INFINITY; tiles_x * tiles_y];
+        let mut tile_full = vec![true; tiles_x * tiles_y];
+        for (i, row) in depth.chunks_exact(width).enumerate() {
+            for (j, &d) in row.iter().enumerate() {
+                let t = (i / TILE) * tiles_x + j / TILE;
+                tile_max[t] = tile_max[t].max(d);
+                if d > 0.0 {
+                    tile_min[t] = tile_min[t].min(d);
+                } else {
+                    tile_full[t] = false;
+                }
+            }
+        }
+        Ok(Self {
+            name: &cam.name,
+            world_to_camera: cam.world_to_camera_rotation(),
+            center: cam.position(),
+            fx: cam.fx,
+            fy: cam.fy,
+            cx: cam.cx,
+            cy: cam.cy,
+            width,
+            height,
+            depth,
+            col_sq,
+            row_sq,
+            tile_max,
+            tile_min,
+            tile_full,
+            tiles_x,
+            color: frame.color.map(ColorImage::data),
+        })
+    }
+
+    /// What this frame does to the voxels of the box `[lo, hi]` (world; the first and last
+    /// voxel centres of a block): nothing when the box is behind the camera, projects outside
+    /// the image, or lies more than `trunc` behind the farthest depth of the pixels it covers;
+    /// tsdf = 1 for every voxel when the whole box projects inside the image onto valid
+    /// pixels and lies at least `trunc` in front of the nearest of them; otherwise it must be
+    /// looked at voxel by voxel.
+    pub(super) fn visit(&self, lo: DVec3, hi: DVec3, trunc: f64) -> Visit {
+        let mut z_min = f64::INFINITY;
+        let mut z_max = f64::NEG_INFINITY;
+        let (mut u_min, mut u_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut v_min, mut v_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        for c in 0..8 {
+            let p = DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            let q = self.world_to_camera * (p - self.center);
+            z_min = z_min.min(q.z);
+            z_max = z_max.max(q.z);
+            if q.z > 0.0 {
+                let (u, v) = (self.fx * q.x / q.z + self.cx, self.fy * q.y / q.z + self.cy);
+                u_min = u_min.min(u);
+                u_max = u_max.max(u);
+                v_min = v_min.min(v);
+                v_max = v_max.max(v);
+            }
+        }
+        if z_max <= 0.0 {
+            return Visit::Skip;
+        }
+        if z_min <= 0.0 {
+            // Straddles the camera plane: the projection is unbounded.
+            return Visit::Voxels;
+        }
+        let (w, h) = (self.width as f64, self.height as f64);
+        if u_max < PIXEL_MARGIN
+            || v_max < PIXEL_MARGIN
+            || u_min >= w - PIXEL_MARGIN
+            || v_min >= h - PIXEL_MARGIN
+        {
+            return Visit::Skip;
+        }
+        let inside = u_min >= PIXEL_MARGIN
+            && v_min >= PIXEL_MARGIN
+            && u_max < w - PIXEL_MARGIN
+            && v_max < h - PIXEL_MARGIN;
+        // The pixels the voxel centres can land on (the projection of the box lies in the
+        // box of its projected corners).
+        let col = |u: f64| u.clamp(0.0, w - 1.0) as usize;
+        let row = |v: f64| v.clamp(0.0, h - 1.0) as usize;
+        let (j0, j1, i0, i1) = (col(u_min), col(u_max), row(v_min), row(v_max));
+        let range = if (j1 - j0 + 1) * (i1 - i0 + 1) <= RECT_SCAN_MAX {
+            self.rect_depths(j0, j1, i0, i1)
+        } else {
+            self.tile_depths(j0, j1, i0, i1)
+        };
+        // sdf ≤ (d_max − z_min) · factor and factor ≥ 1: nothing passes sdf > −trunc.
+        if range.max == 0.0 || z_min - f64::from(range.max) >= trunc {
+            return Visit::Skip;
+        }
+        // sdf ≥ (d_min − z_max) · factor ≥ trunc for every voxel: tsdf = 1.
+        if inside && range.all_valid && f64::from(range.min) - z_max >= trunc {
+            return Visit::Free;
+        }
+        Visit::Voxels
+    }
+
+    /// The depth range of the pixels `[j0, j1] × [i0, i1]`, read one by one.
+    fn rect_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
+        let mut range = DepthRange::EMPTY;
+        for i in i0..=i1 {
+            for &d in &self.depth[i * self.width + j0..=i * self.width + j1] {
+                range.add(d, d > 0.0);
+            }
+        }
+        range
+    }
+
+    /// A depth range containing that of the pixels `[j0, j1] × [i0, i1]`, from the tiles
+    /// that cover them.
+    fn tile_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
+        let mut range = DepthRange::EMPTY;
+        for ty in i0 / TILE..=i1 / TILE {
+            for tx in j0 / TILE..=j1 / TILE {
+                let t = ty * self.tiles_x + tx;
+                range.max = range.max.max(self.tile_max[t]);
+                range.min = range.min.min(self.tile_min[t]);
+                range.all_valid &= self.tile_full[t];
+            }
+        }
+        range
+    }
+}
+
+/// Largest rectangle of pixels scanned one by one by [`Prepared::visit`] (larger ones use the
+/// tiles).
+const RECT_SCAN_MAX: usize = 64;
+
+/// What a frame does to a block ([`Prepared::visit`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Visit {
+    /// Nothing: no voxel is integrated.
+    Skip,
+    /// Every voxel is integrated with tsdf = 1 (free space in front of the surface).
+    Free,
+    /// Each voxel must be projected.
+    Voxels,
+}
+
+/// Depths seen over some pixels: the largest (0 when none is valid), the smallest valid
+/// (`+∞` when none), and whether every pixel is valid.
+#[derive(Clone, Copy, Debug)]
+struct DepthRange {
+    max: f32,
+    min: f32,
+    all_valid: bool,
+}
+
+impl DepthRange {
+    const EMPTY: Self = Self {
+        max: 0.0,
+        min: f32::INFINITY,
+        all_valid: true,
+    };
+
+    /// Adds a depth, valid or not (an invalid depth is 0 and only clears `all_valid`).
+    #[inline]
+    fn add(&mut self, d: f32, valid: bool) {
+        self.max = self.max.max(d);
+        if valid {
+            self.min = self.min.min(d);
+        } else {
+            self.all_valid = false;
+        }
+    }
+}
