@@ -1,6 +1,6 @@
 //! The three meshers, each turning one deformed frame into a mesh, and the scale-derived
 //! defaults of their parameters. Delaunay and alpha see only the means of the Gaussians
-//! [`crate::visibility`] keeps; tsdf renders every Gaussian of the frame.
+//! [`crate::Visibility`] keeps; tsdf renders every Gaussian of the frame.
 //!
 //! - **tsdf**: a sphere rig of `views` cameras (geometry's `sphere_rig`, 40° field of view)
 //!   around the bounding sphere of the frame (deformed template and every Gaussian's mean),
@@ -49,7 +49,7 @@ pub struct FrameInput<'a> {
     pub frame: usize,
     /// Deformed template vertices.
     pub positions: &'a [DVec3],
-    /// Deformed means of the Gaussians the point methods use ([`crate::visibility`]).
+    /// Deformed means of the Gaussians the point methods use ([`crate::Visibility`]).
     pub means: &'a [Vec3],
     /// The whole deformed (world-space) Gaussian set; present when the tsdf method runs.
     pub world: Option<&'a GaussianSet>,

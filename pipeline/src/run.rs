@@ -30,7 +30,7 @@ use crate::session::{FrameResult, MethodFrame, Session};
 /// `on_event` is told what happens as it happens ([`Event`]).
 ///
 /// Each frame's files are written as soon as they exist and recorded in the run journal
-/// (module [`crate::journal`]); a frame that fails is recorded and the run goes on (unless
+/// (`journal.jsonl`, [`crate::JOURNAL`]); a frame that fails is recorded and the run goes on (unless
 /// `control.fail_fast`), and the report lists it. Completed frames are never removed, so an
 /// interrupted run can be continued with `control.resume`.
 ///

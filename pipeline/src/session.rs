@@ -421,7 +421,7 @@ impl Session {
         Ok(session)
     }
 
-    /// Which Gaussians the point methods use ([`crate::visibility`]): the Gaussians' geometry
+    /// Which Gaussians the point methods use ([`crate::Visibility`]): the Gaussians' geometry
     /// rendered at the rest pose and at up to [`VISIBILITY_FRAMES`] frames spread over the run,
     /// by the tsdf rig with at least the default views and resolution (a coarse rig would miss
     /// small Gaussians between its pixel centres). A sampled frame that cannot be deformed is
@@ -607,7 +607,7 @@ impl Session {
     }
 
     /// Which Gaussians the point methods (delaunay, alpha) use, decided once when the session
-    /// opened, from the rest pose and frames sampled over the run ([`crate::visibility`]).
+    /// opened, from the rest pose and frames sampled over the run ([`crate::Visibility`]).
     #[must_use]
     pub fn visibility(&self) -> &Visibility {
         &self.visibility

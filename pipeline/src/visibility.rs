@@ -82,7 +82,7 @@ impl Visibility {
     }
 }
 
-/// Why [`decide`] failed.
+/// Why the decision of which Gaussians the point methods use failed.
 #[derive(Debug, thiserror::Error)]
 pub enum VisibilityError {
     /// The rig could not be placed.

@@ -23,7 +23,7 @@
 //! over the frames in order, so the result does not depend on the thread count.
 //!
 //! Per block and frame, the depth range of the pixels the block projects onto (read pixel by
-//! pixel when the block covers at most [`RECT_SCAN_MAX`](frame::RECT_SCAN_MAX) of them, else from 16-pixel tiles)
+//! pixel when the block covers at most `frame::RECT_SCAN_MAX` of them, else from 16-pixel tiles)
 //! decides the work: nothing when the block is behind the camera, outside the image or
 //! `trunc` behind every depth; tsdf = 1 for all its voxels without projecting them when it
 //! projects inside the image onto valid pixels only and lies `trunc` in front of all of them

@@ -294,7 +294,7 @@ impl TsdfVolume {
 
     /// The zero level set by marching cubes (welded, faces toward free space, cells with an
     /// unobserved corner skipped), with vertex colours when the volume has them. Not cleaned:
-    /// see [`post_process`].
+    /// see [`super::post_process`].
     #[must_use]
     pub fn extract_mesh(&self) -> TriMesh {
         marching_cubes(&self.grid)

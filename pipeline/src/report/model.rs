@@ -254,7 +254,7 @@ pub struct Report {
     pub tau_fraction: Option<f64>,
     /// Scale-derived parameters.
     pub resolved: Resolved,
-    /// Which Gaussians the point methods (delaunay, alpha) meshed ([`crate::visibility`]);
+    /// Which Gaussians the point methods (delaunay, alpha) meshed ([`crate::Visibility`]);
     /// absent when neither ran and in reports of older versions, which used them all.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gaussians_used: Option<GaussiansUsed>,
@@ -273,7 +273,7 @@ pub struct Report {
 
 /// Thumbnails of one frame's meshes: each method's mesh and the ground truth seen from the
 /// same camera, coloured by the distance of each visible point to the ground truth's surface
-/// (module [`crate::thumbnail`]).
+/// (module [`crate::report::thumbnail`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Thumbnails {
     /// The animation frame shown.
