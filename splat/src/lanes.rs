@@ -7,7 +7,7 @@
 //! `ν = |M|_F`, so `Q = Uᵀ M / ν` is close to a multiple of the identity whenever `J` is close
 //! to a similarity (the common case in animation). Per Gaussian, in the basis `B = U R_local`,
 //! `Bᵀ L / (ν s_max) = R_localᵀ Q R_local diag(s / s_max)` has nearly orthogonal columns, so
-//! the one-sided Jacobi iteration of [`crate::deform::rotation_and_scales`] (pairs of columns
+//! the one-sided Jacobi iteration of [`crate::svd::rotation_and_scales`] (pairs of columns
 //! rotated until orthogonal; `σ_i = |c_i|`, relative accuracy for small columns) needs fewer
 //! sweeps (2.7 per 8-lane batch on the benchmark, the confirming sweep included), most pairs
 //! after the first sweep rotated by a division-only series; the output rotation is the quaternion product
@@ -48,9 +48,9 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
-use crate::deform::{MIN_OUTPUT_SCALE, rotation_and_scales};
 use crate::frames::cofactor;
 use crate::gaussians::{quat_from_rotation, to_wxyz};
+use crate::svd::{MIN_OUTPUT_SCALE, rotation_and_scales};
 
 /// Gaussians per kernel call: eight SSE vectors of four `f32` per quantity. Larger batches
 /// amortise the per-batch work (gathers, branches on whole batches) better than they lose

@@ -22,6 +22,7 @@ pub mod ply;
 pub mod render;
 pub mod sh;
 pub mod spz;
+mod svd;
 #[cfg(test)]
 mod test_util;
 pub mod wasserstein;

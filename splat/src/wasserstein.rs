@@ -9,8 +9,8 @@
 
 use glam::{DMat3, DVec3};
 
-use crate::deform::jacobi_orthogonalise;
 use crate::gaussians::GaussianSet;
+use crate::svd::jacobi_orthogonalise;
 
 /// Covariance axes `L = R diag(s)` of Gaussian `i` (activated scales and rotation, `f64`).
 ///
