@@ -43,7 +43,7 @@ use super::composite::{ALPHA_THRESHOLD, CompositeRules};
 use super::options::RenderOptions;
 use super::project::{EPS_2D, GSPLAT_EXTENT};
 use super::screen::{
-    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible,
+    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible, shade,
 };
 use crate::GaussianSet;
 use crate::gaussians::sigmoid;
@@ -341,16 +341,9 @@ pub fn project_perspective(
             clip,
             options.antialiased,
         )?;
-        let color = if options.outputs.rgb {
-            crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
-        } else {
-            [0.0; 3]
-        };
-        let normal = if options.outputs.normal {
+        let (color, normal) = shade(set, i, mean - view.position, options.outputs, || {
             facing_normal(rot, s, mean - view.position, view.w2c, options.normal_frame)
-        } else {
-            [0.0; 3]
-        };
+        });
         let entry = ScreenEntry {
             id: i as u32,
             center: [p.box_center.x as f32, p.box_center.y as f32],

@@ -6,7 +6,7 @@ use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
 use glam::DVec3;
 
-use crate::gaussians::sh_coeffs_per_channel;
+use crate::sh::sh_coeffs_per_channel;
 use crate::{GaussianSet, ScaleDims};
 
 /// The parameters of world-space Gaussians as the differentiable renderer reads them, in `f64`:

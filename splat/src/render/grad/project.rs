@@ -9,11 +9,10 @@
 use glam::{DMat3, DVec3};
 
 use super::params::DiffParams;
-use crate::gaussians::sh_coeffs_per_channel;
-use crate::render::composite::ALPHA_THRESHOLD;
 use crate::render::options::{RenderOptions, Rules};
 pub(crate) use crate::render::project::View;
-use crate::render::project::{EPS_2D, row_span_coefficients, screen_footprint};
+use crate::render::project::ewa_screen;
+use crate::sh::sh_coeffs_per_channel;
 use crate::sh::{SH_C1, SH_C2, SH_C3, sh_basis};
 
 /// One projected Gaussian's screen quantities, in `f64`.
@@ -286,70 +285,37 @@ fn trace<P: DiffParams + ?Sized>(
             rot.y_axis * scale.y,
             rot.z_axis * scale.z,
         );
-    let (rx, ry) = (t.x / z, t.y / z);
-    let cx = rx.clamp(-v.lim_x.0, v.lim_x.1);
-    let cy = ry.clamp(-v.lim_y.0, v.lim_y.1);
-    let (tx, ty) = (z * cx, z * cy);
-    let j0 = DVec3::new(v.fx / z, 0.0, -v.fx * tx / (z * z));
-    let j1 = DVec3::new(0.0, v.fy / z, -v.fy * ty / (z * z));
-    let lt = l.transpose();
-    let a0 = lt * j0;
-    let a1 = lt * j1;
-    let (c00, c01, c11) = (a0.dot(a0), a0.dot(a1), a1.dot(a1));
-    let det_orig = c00 * c11 - c01 * c01;
-    let (d00, d11) = (c00 + EPS_2D, c11 + EPS_2D);
-    let det = d00 * d11 - c01 * c01;
-    if det <= 0.0 || !det.is_finite() {
-        return None;
-    }
-    let comp = if o.antialiased {
-        (det_orig / det).max(0.0).sqrt()
-    } else {
-        1.0
-    };
-    let opacity = sig * comp;
-    let u = v.fx * t.x / z + v.cx;
-    let w = v.fy * t.y / z + v.cy;
-    let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
-    let ([u, w], radius) = screen_footprint(
-        o.rules,
-        opacity,
-        log_ratio,
-        [d00, d11, det],
-        [u, w],
-        [v.width, v.height],
-    )?;
-    let inv = 1.0 / det;
+    let e = ewa_screen(v, o, t, l, sig)?;
     let (color, color_trace) = self::color(p, i, v.position);
     let screen = Screen {
-        mean: [u, w],
-        conic: [d11 * inv, -c01 * inv, d00 * inv],
-        opacity,
+        mean: e.mean,
+        conic: e.conic,
+        opacity: e.opacity,
         depth: z,
         color,
-        radius,
-        span: row_span_coefficients([d11 * inv, -c01 * inv, d00 * inv], log_ratio.max(0.0)),
+        radius: e.radius,
+        span: e.span,
     };
     let trace = Trace {
         t,
-        free_x: rx == cx,
-        free_y: ry == cy,
-        tx,
-        ty,
-        j0,
-        j1,
+        free_x: e.free[0],
+        free_y: e.free[1],
+        tx: e.tx,
+        ty: e.ty,
+        j0: e.j0,
+        j1: e.j1,
         l,
         rot,
         qn,
         qnorm,
         scale,
-        a0,
-        a1,
-        cov: [c00, c01, c11],
-        dil: [d00, c01, d11],
-        det,
+        a0: e.a0,
+        a1: e.a1,
+        cov: e.cov,
+        dil: e.dil,
+        det: e.det,
         sig,
-        comp,
+        comp: e.comp,
         color: color_trace,
     };
     Some((screen, trace))
