@@ -34,7 +34,7 @@ use trisplat_pipeline::methods::{FrameInput, Mesher, Resolved};
 use trisplat_pipeline::report::{FrameRecord, GtSamples, Summary, is_watertight, measure};
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{DeformMode, Deformer};
+use trisplat_splat::{DeformMode, Deformer};
 
 /// TSDF voxels as fractions of the bounding radius: radius / this.
 const VOXELS_PER_RADIUS: [f64; 3] = [64.0, 128.0, 256.0];

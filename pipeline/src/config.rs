@@ -408,7 +408,7 @@ pub struct ExtractOptions {
     /// §3 "Axes"). glTF's frame (+Y up, facing +Z) is luf; a Z-up mesh facing -Y (Blender's
     /// front) is lbu. Only the pictures use it.
     #[cfg_attr(feature = "cli", arg(long, value_name = "AXES", default_value = "luf"))]
-    pub view_axes: trisplat_splat::axes::Axes,
+    pub view_axes: trisplat_splat::Axes,
     /// Refuse a weights track with channels that drive nothing (without it they are listed
     /// once on stderr and in the report, and ignored).
     #[cfg_attr(feature = "cli", arg(long))]
@@ -508,7 +508,7 @@ impl Default for ExtractOptions {
             tau_fraction: Some(DEFAULT_TAU_FRACTION),
             strict: false,
             error_colors: false,
-            view_axes: trisplat_splat::axes::Axes::Luf,
+            view_axes: trisplat_splat::Axes::Luf,
             targets: OutputTarget::ALL.to_vec(),
             limits: Limits::default(),
         }

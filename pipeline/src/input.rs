@@ -12,11 +12,11 @@ use trisplat_geometry::animation::{
 };
 use trisplat_geometry::cleanup::weld_vertices;
 use trisplat_geometry::io::read_mesh;
+use trisplat_splat::Convention;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::bind::{BindOptions, init_bound};
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::frames::Convention;
 use trisplat_splat::ply::read_gaussians;
+use trisplat_splat::{BindOptions, init_bound};
+use trisplat_splat::{DeformMode, Deformer};
 
 use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, ExtractConfig, Mode};
 use crate::error::PipelineError;

@@ -315,7 +315,7 @@ struct FrameExtras {
     /// The F-score threshold: the colour scale is twice it.
     threshold: Tau,
     /// The template's axes, for the thumbnails' camera.
-    view_axes: trisplat_splat::axes::Axes,
+    view_axes: trisplat_splat::Axes,
 }
 
 /// One frame: meshed by every method, each mesh written (atomically) to its frame file, with
@@ -415,7 +415,7 @@ fn frame_pictures(
     r: &FrameResult,
     gt: Option<&GtSamples>,
     scale: Option<f64>,
-    view_axes: trisplat_splat::axes::Axes,
+    view_axes: trisplat_splat::Axes,
 ) -> Vec<(String, Picture)> {
     let points: Vec<glam::DVec3> = match gt {
         Some(g) => g.mesh.positions().to_vec(),

@@ -16,7 +16,7 @@
 //!   ([`crate::lanes`]), warm-started by the polar rotation of each triangle's `M`, and
 //!   [`rotation_and_scales`] in `f64` for Gaussians on ill-conditioned triangles or with axes
 //!   too unequal for `f32`. A singular value of 0 (a
-//!   collapsed triangle, or the flat axis of a 2DGS surfel) is stored as [`MIN_OUTPUT_SCALE`]
+//!   collapsed triangle, or the flat axis of a 2DGS surfel) is stored as [`crate::MIN_OUTPUT_SCALE`]
 //!   so the log-scale stays finite; the shortest axis is stored last.
 //!
 //! SH coefficients, opacities and extra properties are copied unchanged (view-dependent colour is
@@ -34,10 +34,6 @@ use crate::gaussians::{
     GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
 };
 use crate::lanes::{LANES, LaneBatch, LaneFactors, TriangleFactor, factor_f64, factor_lanes};
-pub use crate::svd::{
-    JACOBI_MAX_SWEEPS, JACOBI_SMALL_ROTATION, JACOBI_TOL, MIN_OUTPUT_SCALE, rotation_and_scales,
-    rotation_and_scales_svd,
-};
 
 /// Gaussians per rayon task.
 const CHUNK: usize = 2048;
@@ -760,6 +756,7 @@ where
 mod tests {
     use super::*;
     use crate::gaussians::{Binding, BindingEncoding};
+    use crate::svd::rotation_and_scales;
     use trisplat_geometry::rng::Rng;
 
     /// A bumpy grid with `side²` vertices and random bound Gaussians.

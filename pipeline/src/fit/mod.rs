@@ -37,7 +37,7 @@ use glam::DVec3;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::{Rng, splitmix64};
 use trisplat_geometry::{Camera, TriMesh};
-use trisplat_splat::densify::DensifyError;
+use trisplat_splat::DensifyError;
 use trisplat_splat::fit::adam::{Adam, LearningRates};
 use trisplat_splat::fit::bound::{
     BoundError, BoundParams, TriangleFrames, all_finite, grads_to_local, to_world,

@@ -14,7 +14,7 @@ use trisplat_geometry::TriMesh;
 
 use crate::frames::{FrameOptions, corners_of, gaussian_avatars_frame};
 use crate::gaussians::{GaussianParts, GaussianSet, ParameterSpace, ScaleDims, quat_from_rotation};
-use crate::render::grad::{DiffParams, GaussianGrads, GaussianParams};
+use crate::render::{DiffParams, GaussianGrads, GaussianParams};
 
 /// Why a set cannot be fitted as bound parameters.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]

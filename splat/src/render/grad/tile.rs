@@ -300,9 +300,8 @@ pub(super) fn forward_tile<F: Real, K: GradKernel<F, N>, const N: usize>(
                 return;
             }
             let w = alpha * t;
-            let color = K::color(sp);
-            for c in 0..3 {
-                s.rgb[c][p] += w * color[c];
+            for (rgb, &c) in s.rgb.iter_mut().zip(K::color(sp)) {
+                rgb[p] += w * c;
             }
             s.depth[p] += w * K::depth(sp, &hit);
             K::forward_add(sp, &hit, w, p, &mut s.extra);
