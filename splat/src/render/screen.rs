@@ -187,6 +187,21 @@ pub struct ScreenEntry {
     pub normal: [f32; 3],
 }
 
+impl ScreenEntry {
+    /// The entry of Gaussian `id` without colour or normal (the differentiable renderer keeps
+    /// those with its own per-splat data): box `center ± radius`, sort depth `depth`.
+    pub(crate) fn unshaded(id: usize, center: [f32; 2], radius: [f32; 2], depth: f64) -> Self {
+        Self {
+            id: id as u32,
+            center,
+            radius,
+            depth: depth as f32,
+            color: [0.0; 3],
+            normal: [0.0; 3],
+        }
+    }
+}
+
 /// Gaussians projected per parallel chunk (results do not depend on the thread count).
 const PROJECT_CHUNK: usize = 4096;
 

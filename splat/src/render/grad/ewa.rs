@@ -50,14 +50,7 @@ pub(super) fn gather<F: Real, P: DiffParams + ?Sized>(
         let s = project::project(params, i, view, options)?;
         let center = [s.mean[0] as f32, s.mean[1] as f32];
         let radius = [s.radius[0] as f32, s.radius[1] as f32];
-        let entry = ScreenEntry {
-            id: i as u32,
-            center,
-            radius,
-            depth: s.depth as f32,
-            color: [0.0; 3],
-            normal: [0.0; 3],
-        };
+        let entry = ScreenEntry::unshaded(i, center, radius, s.depth);
         let splat = Splat {
             mean: s.mean.map(F::of),
             conic: s.conic.map(F::of),

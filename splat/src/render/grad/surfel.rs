@@ -126,14 +126,7 @@ pub(super) fn gather<F: Real, P: DiffParams + ?Sized>(
         if x0 >= x1 || y0 >= y1 {
             return None;
         }
-        let entry = ScreenEntry {
-            id: i as u32,
-            center,
-            radius,
-            depth: s.depth as f32,
-            color: [0.0; 3],
-            normal: [0.0; 3],
-        };
+        let entry = ScreenEntry::unshaded(i, center, radius, s.depth);
         let surfel = GradSurfel {
             splat: s.splat,
             color: s.color.map(F::of),
