@@ -285,13 +285,13 @@ pub fn to_set(bound: &BoundParams) -> GaussianSet {
         opacity_logits: p.opacity_logits.iter().map(|&v| v as f32).collect(),
         sh_degree: p.sh_degree,
         sh: p.sh.iter().map(|&v| v as f32).collect(),
-        binding: Some(crate::Binding {
+        binding: Some(crate::gaussians::Binding {
             triangles: bound
                 .triangles
                 .iter()
                 .map(|&t| trisplat_geometry::TriId(t))
                 .collect(),
-            encoding: crate::BindingEncoding::default(),
+            encoding: crate::gaussians::BindingEncoding::default(),
         }),
         space: ParameterSpace::Local,
         extras: Vec::new(),

@@ -25,7 +25,7 @@ use super::options::{RenderOptions, Rules, SplatDepth};
 use super::screen::{
     Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible, shade,
 };
-use crate::GaussianSet;
+use crate::gaussians::GaussianSet;
 use crate::gaussians::sigmoid;
 
 /// gsplat's `eps2d`: the screen-space dilation added to `Σ2D`'s diagonal.
@@ -294,8 +294,9 @@ fn ray_depth_slope(axes: DMat3, scales: DVec3, t: DVec3, [fx, fy]: [f64; 2]) -> 
 /// Pixels of rounding margin on each side of an analytic row span.
 pub(crate) const SPAN_MARGIN: f32 = 0.5;
 
-/// What a 3DGS projection needs to know of the camera, precomputed once.
-pub(crate) struct View {
+/// What every projection needs of a pinhole camera, precomputed once.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pinhole {
     pub(crate) w2c: DMat3,
     pub(crate) position: DVec3,
     pub(crate) fx: f64,
@@ -304,6 +305,27 @@ pub(crate) struct View {
     pub(crate) cy: f64,
     pub(crate) width: f64,
     pub(crate) height: f64,
+}
+
+impl Pinhole {
+    /// The pinhole of `camera`.
+    pub(crate) fn of(camera: &Camera) -> Self {
+        Self {
+            w2c: camera.world_to_camera_rotation(),
+            position: camera.position(),
+            fx: camera.fx,
+            fy: camera.fy,
+            cx: camera.cx,
+            cy: camera.cy,
+            width: f64::from(camera.width),
+            height: f64::from(camera.height),
+        }
+    }
+}
+
+/// What a 3DGS projection needs to know of the camera, precomputed once.
+pub(crate) struct View {
+    pub(crate) cam: Pinhole,
     /// `(−lower, upper)` limits of x/z in the Jacobian clamp.
     pub(crate) lim_x: (f64, f64),
     pub(crate) lim_y: (f64, f64),
@@ -335,14 +357,7 @@ impl View {
             }
         };
         Self {
-            w2c: camera.world_to_camera_rotation(),
-            position: camera.position(),
-            fx: camera.fx,
-            fy: camera.fy,
-            cx: camera.cx,
-            cy: camera.cy,
-            width,
-            height,
+            cam: Pinhole::of(camera),
             lim_x,
             lim_y,
         }
@@ -484,8 +499,8 @@ pub(crate) fn ewa_screen(
         ry.clamp(-v.lim_y.0, v.lim_y.1),
     );
     let (tx, ty) = (z * cx, z * cy);
-    let j0 = DVec3::new(v.fx / z, 0.0, -v.fx * tx / (z * z));
-    let j1 = DVec3::new(0.0, v.fy / z, -v.fy * ty / (z * z));
+    let j0 = DVec3::new(v.cam.fx / z, 0.0, -v.cam.fx * tx / (z * z));
+    let j1 = DVec3::new(0.0, v.cam.fy / z, -v.cam.fy * ty / (z * z));
     // Rows of J L: Σ2D = (J L)(J L)ᵀ.
     let lt = l.transpose();
     let a0 = lt * j0;
@@ -503,8 +518,8 @@ pub(crate) fn ewa_screen(
     } else {
         (1.0, opacity)
     };
-    let u = v.fx * t.x / z + v.cx;
-    let w = v.fy * t.y / z + v.cy;
+    let u = v.cam.fx * t.x / z + v.cam.cx;
+    let w = v.cam.fy * t.y / z + v.cam.cy;
     // `ln(255 opacity)`: the largest sigma with alpha >= 1/255 (negative, NaN or -inf for
     // opacities below 1/255, which gsplat culls and the original rules clamp to 0 below).
     let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
@@ -514,7 +529,7 @@ pub(crate) fn ewa_screen(
         log_ratio,
         [d00, d11, det],
         [u, w],
-        [v.width, v.height],
+        [v.cam.width, v.cam.height],
     )?;
     let inv = 1.0 / det;
     let conic = [d11 * inv, -c01 * inv, d00 * inv];
@@ -540,7 +555,7 @@ pub(crate) fn ewa_screen(
 
 fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Option<Projected> {
     let mean = set.means()[i].as_dvec3();
-    let t = v.w2c * (mean - v.position);
+    let t = v.cam.w2c * (mean - v.cam.position);
     let z = t.z;
     if !(z > f64::from(o.near) && z < f64::from(o.far)) {
         return None;
@@ -552,14 +567,14 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
     // Camera-space covariance as L Lᵀ with L = W R S (no cancellation for tiny scales).
     let rot = set.rotation_matrix(i);
     let s = set.scale(i).as_dvec3();
-    let l = v.w2c * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
+    let l = v.cam.w2c * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
     let e = ewa_screen(v, o, t, l, opacity)?;
     let (slope, reach) = match o.splat_depth {
         SplatDepth::Mean => ([0.0; 2], 0.0),
-        SplatDepth::Ray => ray_depth_slope(v.w2c * rot, s, t, [v.fx, v.fy]),
+        SplatDepth::Ray => ray_depth_slope(v.cam.w2c * rot, s, t, [v.cam.fx, v.cam.fy]),
     };
-    let (color, normal) = shade(set, i, mean - v.position, o.outputs, || {
-        facing_normal(rot, s, mean - v.position, v.w2c, o.normal_frame)
+    let (color, normal) = shade(set, i, mean - v.cam.position, o.outputs, || {
+        facing_normal(rot, s, mean - v.cam.position, v.cam.w2c, o.normal_frame)
     });
     let [u, w] = e.mean;
     Some(Projected {

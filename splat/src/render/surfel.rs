@@ -39,7 +39,7 @@ use super::composite::{ALPHA_THRESHOLD, CompositeRules, MedianRule};
 use super::options::RenderOptions;
 use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel, gather_visible, shade};
 use super::tiles::{TILE_SIZE, TileRect, tile_range};
-use crate::GaussianSet;
+use crate::gaussians::GaussianSet;
 use crate::gaussians::sigmoid;
 
 /// hbb1's `FilterInvSquare`: `rho2d = 2 |centre − pixel|²`, a screen-space Gaussian of

@@ -267,7 +267,7 @@ fn trace<P: DiffParams + ?Sized>(
     o: &RenderOptions,
 ) -> Option<(Screen, Trace)> {
     let mean = p.mean(i);
-    let t = v.w2c * (mean - v.position);
+    let t = v.cam.w2c * (mean - v.cam.position);
     let z = t.z;
     if !(z > f64::from(o.near) && z < f64::from(o.far)) {
         return None;
@@ -279,14 +279,14 @@ fn trace<P: DiffParams + ?Sized>(
     let (qn, qnorm) = normalized(p.rotation(i));
     let rot = rotation_matrix(qn);
     let scale = p.log_scale(i).exp();
-    let l = v.w2c
+    let l = v.cam.w2c
         * DMat3::from_cols(
             rot.x_axis * scale.x,
             rot.y_axis * scale.y,
             rot.z_axis * scale.z,
         );
     let e = ewa_screen(v, o, t, l, sig)?;
-    let (color, color_trace) = self::color(p, i, v.position);
+    let (color, color_trace) = self::color(p, i, v.cam.position);
     let screen = Screen {
         mean: e.mean,
         conic: e.conic,
@@ -428,7 +428,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
         tr.j0 * g_a0.z + tr.j1 * g_a1.z,
     );
     // L = W R S.
-    let g_m = v.w2c.transpose() * g_l;
+    let g_m = v.cam.w2c.transpose() * g_l;
     let cols = [g_m.x_axis, g_m.y_axis, g_m.z_axis];
     let rcols = [tr.rot.x_axis, tr.rot.y_axis, tr.rot.z_axis];
     let sc = tr.scale.to_array();
@@ -441,7 +441,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     out.rotation = quaternion_vjp(tr.qn, tr.qnorm, g_r);
 
     // Camera-space mean t: the Jacobian, the projected mean and the depth.
-    let (fx, fy) = (v.fx, v.fy);
+    let (fx, fy) = (v.cam.fx, v.cam.fy);
     let z = tr.t.z;
     let (rz, rz2) = (1.0 / z, 1.0 / (z * z));
     let rz3 = rz2 * rz;
@@ -465,7 +465,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     g_t.y += gw * fy * rz;
     g_t.z -= (gu * fx * tr.t.x + gw * fy * tr.t.y) * rz2;
     g_t.z += g.depth;
-    g_mean += v.w2c.transpose() * g_t;
+    g_mean += v.cam.w2c.transpose() * g_t;
     out.mean = g_mean.to_array();
     Some(out)
 }
