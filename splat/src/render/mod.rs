@@ -22,6 +22,7 @@ mod image;
 mod inputs;
 mod options;
 mod perspective;
+mod pinhole;
 mod project;
 mod run;
 mod screen;

@@ -41,7 +41,8 @@ use trisplat_geometry::Camera;
 
 use super::composite::{ALPHA_THRESHOLD, CompositeRules};
 use super::options::RenderOptions;
-use super::project::{EPS_2D, GSPLAT_EXTENT, Pinhole};
+use super::pinhole::Pinhole;
+use super::project::{EPS_2D, GSPLAT_EXTENT};
 use super::screen::{
     Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible, shade,
 };

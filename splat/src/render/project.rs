@@ -22,6 +22,7 @@ use trisplat_geometry::Camera;
 
 use super::composite::ALPHA_THRESHOLD;
 use super::options::{RenderOptions, Rules, SplatDepth};
+use super::pinhole::Pinhole;
 use super::screen::{
     Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible, shade,
 };
@@ -293,35 +294,6 @@ fn ray_depth_slope(axes: DMat3, scales: DVec3, t: DVec3, [fx, fy]: [f64; 2]) -> 
 
 /// Pixels of rounding margin on each side of an analytic row span.
 pub(crate) const SPAN_MARGIN: f32 = 0.5;
-
-/// What every projection needs of a pinhole camera, precomputed once.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Pinhole {
-    pub(crate) w2c: DMat3,
-    pub(crate) position: DVec3,
-    pub(crate) fx: f64,
-    pub(crate) fy: f64,
-    pub(crate) cx: f64,
-    pub(crate) cy: f64,
-    pub(crate) width: f64,
-    pub(crate) height: f64,
-}
-
-impl Pinhole {
-    /// The pinhole of `camera`.
-    pub(crate) fn of(camera: &Camera) -> Self {
-        Self {
-            w2c: camera.world_to_camera_rotation(),
-            position: camera.position(),
-            fx: camera.fx,
-            fy: camera.fy,
-            cx: camera.cx,
-            cy: camera.cy,
-            width: f64::from(camera.width),
-            height: f64::from(camera.height),
-        }
-    }
-}
 
 /// What a 3DGS projection needs to know of the camera, precomputed once.
 pub(crate) struct View {

@@ -37,6 +37,7 @@ use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::composite::{ALPHA_THRESHOLD, CompositeRules, MedianRule};
 use super::options::RenderOptions;
+use super::pinhole::Pinhole;
 use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel, gather_visible, shade};
 use super::tiles::{TILE_SIZE, TileRect, tile_range};
 use crate::gaussians::GaussianSet;
@@ -288,26 +289,21 @@ pub struct ProjectedSurfel {
 /// What the surfel projection needs of the camera.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct View {
-    pub(crate) w2c: DMat3,
-    pub(crate) position: DVec3,
-    pub(crate) fx: f64,
-    pub(crate) fy: f64,
-    /// Principal point shifted by −0.5 (integer pixel centres).
-    pub(crate) cx: f64,
-    pub(crate) cy: f64,
+    /// The camera, its principal point shifted by −0.5 (integer pixel centres).
+    pub(crate) cam: Pinhole,
     pub(crate) near: f64,
     pub(crate) far: f64,
 }
 
 impl View {
     pub(crate) fn new(camera: &Camera, near: f64, far: f64) -> Self {
+        let cam = Pinhole::of(camera);
         Self {
-            w2c: camera.world_to_camera_rotation(),
-            position: camera.position(),
-            fx: camera.fx,
-            fy: camera.fy,
-            cx: camera.cx - 0.5,
-            cy: camera.cy - 0.5,
+            cam: Pinhole {
+                cx: cam.cx - 0.5,
+                cy: cam.cy - 0.5,
+                ..cam
+            },
             near,
             far,
         }
@@ -339,13 +335,19 @@ pub(crate) fn project_with(
     scale: DVec2,
     opacity: f64,
 ) -> Option<ProjectedSurfel> {
-    let t = v.w2c * (mean - v.position);
+    let t = v.cam.w2c * (mean - v.cam.position);
     if !(t.z > v.near && t.z < v.far) {
         return None;
     }
-    let tu = v.w2c * (rotation.x_axis * scale.x);
-    let tv = v.w2c * (rotation.y_axis * scale.y);
-    let row = |c: DVec3| DVec3::new(v.fx * c.x + v.cx * c.z, v.fy * c.y + v.cy * c.z, c.z);
+    let tu = v.cam.w2c * (rotation.x_axis * scale.x);
+    let tv = v.cam.w2c * (rotation.y_axis * scale.y);
+    let row = |c: DVec3| {
+        DVec3::new(
+            v.cam.fx * c.x + v.cam.cx * c.z,
+            v.cam.fy * c.y + v.cam.cy * c.z,
+            c.z,
+        )
+    };
     // Columns of M = K [Tu Tv p]; hbb1's Tu, Tv, Tw are its rows.
     let (c0, c1, c2) = (row(tu), row(tv), row(t));
     let rows = [
@@ -368,7 +370,7 @@ pub(crate) fn project_with(
     if !(center.is_finite() && radius.is_finite()) {
         return None;
     }
-    let n = v.w2c * rotation.z_axis;
+    let n = v.cam.w2c * rotation.z_axis;
     let normal_camera = if n.z < 0.0 { n } else { -n };
     Some(ProjectedSurfel {
         splat: SurfelSplat {
@@ -426,7 +428,7 @@ pub fn project_surfels(
         if x0 >= x1 || y0 >= y1 {
             return None;
         }
-        let (color, normal) = shade(set, i, mean - view.position, options.outputs, || {
+        let (color, normal) = shade(set, i, mean - view.cam.position, options.outputs, || {
             match options.normal_frame {
                 NormalFrame::Camera => p.normal_camera,
                 NormalFrame::World => c2w * p.normal_camera,
