@@ -14,9 +14,9 @@ use std::time::Instant;
 use glam::{DMat3, DQuat, DVec3, Vec3};
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::{TriId, TriMesh};
-use trisplat_splat::deform::{DeformMode, Deformer, FrameHold, WorldGeometry};
-use trisplat_splat::frames::{CanonicalTriangle, FrameOptions, corners_of};
 use trisplat_splat::{Binding, BindingEncoding, GaussianParts, GaussianSet, ParameterSpace};
+use trisplat_splat::{CanonicalTriangle, FrameOptions, corners_of};
+use trisplat_splat::{DeformMode, Deformer, FrameHold, WorldGeometry};
 
 /// Gaussians per Spot triangle: 5,856 × 17 = 99,552.
 const PER_TRIANGLE: usize = 17;

@@ -26,8 +26,8 @@ use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::sampling::sample_uniform;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::bind::{BindOptions, init_bound};
-use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
+use trisplat_splat::{BindOptions, init_bound};
+use trisplat_splat::{DeformMode, Deformer, WorldGeometry};
 
 /// The FLAME template in the shared data folder (not redistributable: never a fixture).
 const FLAME: &str = concat!(

@@ -17,13 +17,13 @@ use trisplat_geometry::Camera;
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::sampling::sample_uniform;
-use trisplat_splat::gaussians::{logit, to_wxyz};
-use trisplat_splat::render::surfel::SURFEL_NEAR;
+use trisplat_splat::render::SURFEL_NEAR;
 use trisplat_splat::render::{
     BackwardStats, GaussianGrads, ImageGrads, Outputs, RenderMode, RenderOptions, RenderStats,
     backward_into, render, render_with_grad,
 };
 use trisplat_splat::{GaussianParts, GaussianSet};
+use trisplat_splat::{logit, to_wxyz};
 
 /// The FLAME registered scan (not redistributable: read from the shared data folder).
 const SCAN: &str = concat!(

@@ -37,7 +37,7 @@ use trisplat_pipeline::records::{FrameRecord, Resolved};
 use trisplat_pipeline::report::Summary;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{DeformMode, Deformer};
+use trisplat_splat::{DeformMode, Deformer};
 
 /// TSDF voxels as fractions of the bounding radius: radius / this.
 const VOXELS_PER_RADIUS: [f64; 3] = [64.0, 128.0, 256.0];

@@ -9,7 +9,7 @@ use common::{BIN, fresh_dir, listing};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use trisplat_splat::axes::Axes;
+use trisplat_splat::Axes;
 use trisplat_splat::gltf_splat::read_gltf_gaussians;
 use trisplat_splat::ply::read_gaussians;
 use trisplat_splat::spz::{SpzReadOptions, read_spz};

@@ -19,7 +19,7 @@
 //!   permutation of the vertices and otherwise unused.
 //!
 //! Bound here, each Gaussian goes to a triangle around its vertex
-//! ([`trisplat_splat::bind::attach_to_vertices`]), so it follows that part of the mesh in every
+//! ([`trisplat_splat::attach_to_vertices`]), so it follows that part of the mesh in every
 //! deformation mode; at rest the bound set renders exactly the Gaussians LAM placed.
 
 use std::path::{Path, PathBuf};
@@ -27,12 +27,12 @@ use std::path::{Path, PathBuf};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer};
 use trisplat_geometry::sphere_rig;
-use trisplat_splat::bind::attach_to_vertices;
-use trisplat_splat::frames::Convention;
-use trisplat_splat::gaussians::{GaussianSet, ParameterSpace};
+use trisplat_splat::Convention;
+use trisplat_splat::attach_to_vertices;
 use trisplat_splat::ply::read_gaussians;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
-use trisplat_splat::sh::rgb_to_dc;
+use trisplat_splat::rgb_to_dc;
+use trisplat_splat::{GaussianSet, ParameterSpace};
 
 use crate::error::PipelineError;
 

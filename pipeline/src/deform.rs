@@ -7,8 +7,8 @@ use glam::{DMat4, DVec3};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::{AnimatedTemplate, GltfTemplate};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{Collapsed, DeformError, Deformer, FrameHold, WorldGeometry};
-use trisplat_splat::lbs::LbsDeformer;
+use trisplat_splat::LbsDeformer;
+use trisplat_splat::{Collapsed, DeformError, Deformer, FrameHold, WorldGeometry};
 
 use crate::config::Mode;
 use crate::error::PipelineError;

@@ -9,9 +9,9 @@ use trisplat_geometry::CameraError;
 use trisplat_geometry::animation::AnimationError;
 use trisplat_geometry::io::IoError;
 use trisplat_geometry::metrics::MetricsError;
-use trisplat_splat::bind::BindError;
-use trisplat_splat::deform::DeformError;
-use trisplat_splat::lbs::LbsError;
+use trisplat_splat::BindError;
+use trisplat_splat::DeformError;
+use trisplat_splat::LbsError;
 use trisplat_splat::render::RenderError;
 
 use crate::config::Method;

@@ -510,7 +510,7 @@ mod tests {
     /// Two walls of wide flat Gaussians facing a camera on the z axis: a half-transparent one
     /// (opacity 0.6) at z = 1 in front of an opaque one at z = 2.
     fn two_walls() -> (GaussianSet, Camera) {
-        use trisplat_splat::gaussians::{GaussianParts, ParameterSpace, ScaleDims};
+        use trisplat_splat::{GaussianParts, ParameterSpace, ScaleDims};
         let logit = |o: f32| (o / (1.0 - o)).ln();
         let mut parts = GaussianParts {
             means: Vec::new(),

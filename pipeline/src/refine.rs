@@ -18,14 +18,14 @@
 //!    Gaussian nearest to it (world-space rotation, scales, opacity, SH, extra properties), at
 //!    the point;
 //! 6. **bind**: the new Gaussians bound to template triangles with the binding code
-//!    (`splat::bind::attach_to_triangles`): by default the triangle of the old Gaussian they
+//!    (`splat::attach_to_triangles`): by default the triangle of the old Gaussian they
 //!    copy ([`Rebind::Inherit`], so LAM's per-vertex Gaussians stay with their part of the
 //!    mesh), or the nearest triangle ([`Rebind::Nearest`], as `bind --gaussians`). Binding
 //!    inheritance: a triangle that had Gaussians and would be left without any keeps its first
 //!    old Gaussian (counted as `refilled`);
 //! 7. **prune** (optional): outlier and normal-consistency pruning of the new set in world
 //!    space with the gate's form and thresholds ([`PruneCriteria`]; the seed's ε_o = 0.015,
-//!    ε_n = 0.3, k = 5 by default), never emptying a triangle (`splat::densify::prune`);
+//!    ε_n = 0.3, k = 5 by default), never emptying a triangle (`splat::prune`);
 //! 8. **chamfer**: the Chamfer distance of the centres to the template's surface (surface
 //!    mode of docs/conventions.md §8: centres to the exact surface, the template's area-uniform
 //!    samples to the nearest centre).
@@ -45,14 +45,14 @@ use trisplat_geometry::smoothing::{SmoothOptions, smooth};
 use trisplat_geometry::spatial::{PointIndex, TriangleBvh};
 use trisplat_geometry::topology::TriangleClusters;
 use trisplat_geometry::{PointCloud, TriId, TriMesh};
+use trisplat_splat::Convention;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::bind::attach_to_triangles;
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::densify::{
+use trisplat_splat::attach_to_triangles;
+use trisplat_splat::{
     DEFAULT_NEIGHBOURS, Gate, SEED_NORMAL, SEED_OUTLIER, TriangleCounts, normal_deviation_mask,
     normal_inconsistency_mask, outlier_mask, prune,
 };
-use trisplat_splat::frames::Convention;
+use trisplat_splat::{DeformMode, Deformer};
 
 use crate::config::DEFAULT_ALPHA_SPACINGS;
 use crate::methods::mean_spacing;

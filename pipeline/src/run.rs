@@ -9,7 +9,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_geometry::metrics::Tau;
-use trisplat_splat::axes::Axes;
+use trisplat_splat::Axes;
 
 use crate::config::{ExtractConfig, Method, OutputTarget, RunControl};
 use crate::error::{PipelineError, first_error_in_order};

@@ -31,9 +31,9 @@ use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::MeshSequence;
 use trisplat_geometry::io::read_mesh;
+use trisplat_splat::Convention;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{Collapsed, Deformer, WorldGeometry};
-use trisplat_splat::frames::Convention;
+use trisplat_splat::{Collapsed, Deformer, WorldGeometry};
 
 use crate::avatar::bind_lam;
 use crate::config::GaussianLayout;

@@ -213,7 +213,7 @@ fn raise_largest_weights(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use trisplat_splat::gaussians::{GaussianParts, ParameterSpace, ScaleDims, logit};
+    use trisplat_splat::{GaussianParts, ParameterSpace, ScaleDims, logit};
 
     /// A sphere of `n` Gaussians of radius 1 (opaque, flat, tangent), one Gaussian at its
     /// centre and one far outside.

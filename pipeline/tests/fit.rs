@@ -6,9 +6,9 @@ use trisplat_geometry::{Camera, TriMesh};
 use trisplat_pipeline::fit::{
     DensifyOptions, FitError, FitOptions, TargetColor, fit, mesh_targets,
 };
-use trisplat_splat::bind::{BindOptions, init_bound};
 use trisplat_splat::fit::bound::{BoundParams, to_set};
 use trisplat_splat::render::RenderMode;
+use trisplat_splat::{BindOptions, init_bound};
 
 /// A square in the plane z = 0 seen head-on from z = -2, colours red at x = -1 and blue at
 /// x = +1.

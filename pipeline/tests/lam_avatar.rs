@@ -13,10 +13,10 @@ use trisplat_pipeline::avatar::{
     AvatarFolder, LAM_VERTEX_ORDER, bind_lam, read_lam_gaussians, silhouette_iou,
 };
 use trisplat_pipeline::input::read_template;
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::frames::Convention;
+use trisplat_splat::Convention;
+use trisplat_splat::SH_C0;
 use trisplat_splat::ply::read_gaussians;
-use trisplat_splat::sh::SH_C0;
+use trisplat_splat::{DeformMode, Deformer};
 
 fn folder() -> PathBuf {
     trisplat_fixtures::path("lam_mini")

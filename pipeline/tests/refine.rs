@@ -7,9 +7,9 @@ use trisplat_geometry::TriMesh;
 use trisplat_geometry::spatial::{PointIndex, TriangleBvh};
 use trisplat_pipeline::refine::{PruneCriteria, Rebind, RefineError, RefineOptions, refine};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::bind::{BindOptions, init_bound};
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::densify::TriangleCounts;
+use trisplat_splat::TriangleCounts;
+use trisplat_splat::{BindOptions, init_bound};
+use trisplat_splat::{DeformMode, Deformer};
 
 fn spot() -> TriMesh {
     trisplat_fixtures::spot().expect("spot fixture")

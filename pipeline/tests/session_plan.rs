@@ -172,7 +172,7 @@ fn rest_means_come_from_the_rest_template_in_every_mode() {
         config.frames = Some("5..6".to_owned());
         let session = Session::open(&config).expect("open");
         let deform_mode = trisplat_pipeline::input::deform_mode(mode);
-        let expected = trisplat_splat::deform::Deformer::new(session.template(), deform_mode)
+        let expected = trisplat_splat::Deformer::new(session.template(), deform_mode)
             .means(session.gaussians(), session.template().positions())
             .expect("rest means");
         assert_eq!(session.rest_means(), expected.as_slice(), "{mode:?}");

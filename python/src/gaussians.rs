@@ -10,21 +10,21 @@ use numpy::{
 };
 use pyo3::prelude::*;
 use trisplat::geometry::TriId;
-use trisplat::splat::axes::Axes;
-use trisplat::splat::bind::{
-    AttachLimits, BindOptions, attach as attach_set, attach_checked, init_bound,
-};
-use trisplat::splat::deform::{DeformMode, Deformer as RsDeformer};
-use trisplat::splat::frames::Convention;
-use trisplat::splat::gaussians::{
-    Binding, BindingEncoding, ExtraProperty, GaussianParts, GaussianSet, ParameterSpace, ScaleDims,
-    sh_coeffs_per_channel,
-};
+use trisplat::splat::Axes;
+use trisplat::splat::Convention;
 use trisplat::splat::gltf_splat::{read_gltf_gaussians, write_gltf_gaussians};
 use trisplat::splat::ply::{
     PlyEncoding, PlyWriteOptions, read_gaussians as read_ply, write_gaussians as write_ply,
 };
 use trisplat::splat::spz::{SpzReadOptions, SpzWriteOptions, read_spz, write_spz};
+use trisplat::splat::{
+    AttachLimits, BindOptions, attach as attach_set, attach_checked, init_bound,
+};
+use trisplat::splat::{
+    Binding, BindingEncoding, ExtraProperty, GaussianParts, GaussianSet, ParameterSpace, ScaleDims,
+    sh_coeffs_per_channel,
+};
+use trisplat::splat::{DeformMode, Deformer as RsDeformer};
 
 use crate::arrays::{CloneBound, rows_in, rows_out, vec_in, vec_out};
 use crate::error;

@@ -3,7 +3,7 @@
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use trisplat::geometry::mesh_render::NormalFrame;
-use trisplat::splat::render::options::{DEFAULT_FAR, DEFAULT_NEAR};
+use trisplat::splat::render::{DEFAULT_FAR, DEFAULT_NEAR};
 use trisplat::splat::render::{
     Outputs, RenderMode, RenderOptions, Rules, SplatDepth, render as render_set,
 };

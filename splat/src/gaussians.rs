@@ -21,12 +21,7 @@ pub const MAX_LOG_SCALE: f32 = 88.0;
 /// How many issues a [`GaussianReport`] lists before it only counts.
 pub const MAX_REPORTED_ISSUES: usize = 100;
 
-/// Number of SH coefficients per colour channel for `degree`: `(degree + 1)²`.
-#[must_use]
-pub const fn sh_coeffs_per_channel(degree: u8) -> usize {
-    let d = degree as usize + 1;
-    d * d
-}
+pub use crate::sh::sh_coeffs_per_channel;
 
 /// Whether Gaussians carry three scales (3DGS) or two (2DGS surfels, flat along local z).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

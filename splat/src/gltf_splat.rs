@@ -38,13 +38,13 @@ use serde_json::{Value, json};
 use trisplat_geometry::io::gltf::{GltfFile, glb_from_parts, gltf_text_from_parts};
 use trisplat_geometry::io::{IoError, write_atomically};
 
-use crate::deform::rotation_and_scales;
 use crate::gaussians::{
     GaussianError, GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz,
     quat_from_rotation, sh_coeffs_per_channel, sigmoid,
 };
 use crate::sh::{SH_C0, ShChange};
 pub use crate::spz::{OPAQUE_LOGIT, TRANSPARENT_LOGIT};
+use crate::svd::rotation_and_scales;
 use trisplat_geometry::io::gltf_codes::{
     ARRAY_BUFFER, BYTE, FLOAT, POINTS, SHORT, UNSIGNED_BYTE, UNSIGNED_SHORT,
 };

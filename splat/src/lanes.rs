@@ -7,7 +7,7 @@
 //! `ν = |M|_F`, so `Q = Uᵀ M / ν` is close to a multiple of the identity whenever `J` is close
 //! to a similarity (the common case in animation). Per Gaussian, in the basis `B = U R_local`,
 //! `Bᵀ L / (ν s_max) = R_localᵀ Q R_local diag(s / s_max)` has nearly orthogonal columns, so
-//! the one-sided Jacobi iteration of [`crate::deform::rotation_and_scales`] (pairs of columns
+//! the one-sided Jacobi iteration of [`crate::svd::rotation_and_scales`] (pairs of columns
 //! rotated until orthogonal; `σ_i = |c_i|`, relative accuracy for small columns) needs fewer
 //! sweeps (2.7 per 8-lane batch on the benchmark, the confirming sweep included), most pairs
 //! after the first sweep rotated by a division-only series; the output rotation is the quaternion product
@@ -30,8 +30,8 @@
 //!
 //! **Accuracy** (test `lanes_match_the_f64_factorisation`, random and adversarial inputs:
 //! near-singular `M` up to the condition bound, repeated scales, anisotropy up to the spread
-//! bound, log-scales down to −29): covariance entries within [`COVARIANCE_TOL`] of the largest
-//! entry and log-scales within [`LOG_SCALE_TOL`] of the `f64` factorisation; measured worst
+//! bound, log-scales down to −29): covariance entries within `COVARIANCE_TOL` of the largest
+//! entry and log-scales within `LOG_SCALE_TOL` of the `f64` factorisation; measured worst
 //! 3.6e-6 (covariance) and 1.9e-6 (log-scales, one ulp of `ln σ ≈ 30`). On the benchmark's
 //! 99,552 Gaussians (`trisplat-bench deform --check`) the deformed covariances are within
 //! 2.8e-6 (largest entry error / largest entry) and 2.4e-6 (Frobenius) of `Σ' = M Σ Mᵀ` in
@@ -48,9 +48,9 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
-use crate::deform::{MIN_OUTPUT_SCALE, rotation_and_scales};
 use crate::frames::cofactor;
 use crate::gaussians::{quat_from_rotation, to_wxyz};
+use crate::svd::{MIN_OUTPUT_SCALE, rotation_and_scales};
 
 /// Gaussians per kernel call: eight SSE vectors of four `f32` per quantity. Larger batches
 /// amortise the per-batch work (gathers, branches on whole batches) better than they lose
@@ -73,14 +73,6 @@ pub const MAX_LOG_SCALE_SPREAD: f32 = 24.0;
 /// factorisation keeps every Gaussian, tiny axes included, to ≤ 1e-5.
 pub const MAX_CONDITION: f64 = 30.0;
 
-/// Tolerance of the kernel against the `f64` factorisation on covariance entries, relative to
-/// the largest entry (tested; see the module docs for the measured worst case).
-pub const COVARIANCE_TOL: f64 = 1e-5;
-
-/// Tolerance of the kernel against the `f64` factorisation on log-scales (absolute; the `f32`
-/// storage of `ln σ ≈ 30` alone is 2e-6 per rounding).
-pub const LOG_SCALE_TOL: f64 = 1e-5;
-
 /// Relative orthogonality below which a column pair is left alone (a few `f32` ulps).
 const PAIR_TOL: f32 = 1e-6;
 
@@ -102,14 +94,6 @@ const POLAR_TOL: f64 = 0.1;
 /// Newton steps at most for the polar rotation (a near-similarity needs 1-3; an
 /// ill-conditioned `M` stopped early is still a valid, only poorer, warm start).
 const POLAR_MAX_STEPS: usize = 6;
-
-/// Whether Gaussians on a triangle with this `M` need the `f64` factorisation (ill-conditioned
-/// or singular `M`: strong anisotropic stretch, collapsed triangles).
-#[must_use]
-pub fn needs_f64(m: DMat3) -> bool {
-    let det = m.determinant();
-    !well_conditioned(frob2(m), frob2(cofactor(m)), det.abs())
-}
 
 /// `κ_F = |M|_F |cof M|_F / |det M| ≤ MAX_CONDITION`, from the squares (no roots, no division:
 /// `det` may be 0).
@@ -137,7 +121,7 @@ pub struct TriangleFactor {
     pub u: [f32; 4],
     /// `ln ν`.
     pub ln_norm: f32,
-    /// Factorise this triangle's Gaussians in `f64` ([`needs_f64`], or no proper polar
+    /// Factorise this triangle's Gaussians in `f64` (`needs_f64`, or no proper polar
     /// rotation).
     pub exact: bool,
 }
@@ -512,7 +496,7 @@ const SERIES_LIMIT: f32 = 0.03;
 /// Lane-wise operations as plain loops over [`LANES`] values (each one vectorises on its own,
 /// whatever the code around it); masks are all-ones / all-zeros bit patterns.
 mod v {
-    use super::{LANES, Lanes};
+    use crate::lanes::{LANES, Lanes};
 
     /// A lane mask: `u32::MAX` where true.
     pub type Mask = [u32; LANES];
@@ -783,6 +767,14 @@ pub fn factor_f64(
 mod tests {
     use super::*;
     use trisplat_geometry::rng::Rng;
+
+    /// Tolerance of the kernel against the `f64` factorisation on covariance entries, relative to
+    /// the largest entry (tested; see the module docs for the measured worst case).
+    const COVARIANCE_TOL: f64 = 1e-5;
+
+    /// Tolerance of the kernel against the `f64` factorisation on log-scales (absolute; the `f32`
+    /// storage of `ln σ ≈ 30` alone is 2e-6 per rounding).
+    const LOG_SCALE_TOL: f64 = 1e-5;
 
     fn cov(q: [f32; 4], ls: [f32; 3]) -> DMat3 {
         let [w, x, y, z] = q.map(f64::from);

@@ -25,7 +25,7 @@ use trisplat_geometry::spatial::closest_point_on_triangle;
 
 use crate::deform::{DeformError, DeformMode, Deformer, WorldGeometry};
 use crate::frames::{FrameOptions, corners_of};
-use crate::gaussians::{GaussianParts, GaussianSet, ParameterSpace, ScaleDims, to_wxyz};
+use crate::gaussians::{GaussianSet, ScaleDims, to_wxyz};
 
 /// Relative size of `|det|` (against the cube of the largest column) below which a blended
 /// rest matrix counts as singular.
@@ -377,19 +377,12 @@ impl LbsDeformer {
             rotations.push(q);
             log_scales.push(s);
         }
-        Ok(GaussianSet::new_unchecked(GaussianParts {
+        let geometry = WorldGeometry {
             means,
-            log_scales,
-            scale_dims: set.scale_dims(),
             rotations,
-            opacity_logits: set.opacity_logits().to_vec(),
-            sh_degree: set.sh_degree(),
-            sh: set.sh().to_vec(),
-            binding: None,
-            space: ParameterSpace::World,
-            extras: set.extras().to_vec(),
-            property_order: set.property_order().map(<[String]>::to_vec),
-        }))
+            log_scales,
+        };
+        Ok(geometry.into_set(set))
     }
 }
 

@@ -6,7 +6,12 @@
 
 use glam::{DMat3, DVec3};
 
-use crate::gaussians::sh_coeffs_per_channel;
+/// Number of SH coefficients per colour channel for `degree`: `(degree + 1)²`.
+#[must_use]
+pub const fn sh_coeffs_per_channel(degree: u8) -> usize {
+    let d = degree as usize + 1;
+    d * d
+}
 
 /// `Y_0^0 = 1 / (2 √π)`.
 pub const SH_C0: f64 = 0.282_094_791_773_878_14;

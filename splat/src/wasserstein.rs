@@ -9,8 +9,8 @@
 
 use glam::{DMat3, DVec3};
 
-use crate::deform::jacobi_orthogonalise;
 use crate::gaussians::GaussianSet;
+use crate::svd::jacobi_orthogonalise;
 
 /// Covariance axes `L = R diag(s)` of Gaussian `i` (activated scales and rotation, `f64`).
 ///
@@ -36,7 +36,7 @@ pub fn bures_sq(l1: DMat3, l2: DMat3) -> f64 {
 /// (identity for a non-finite `k`).
 ///
 /// One-sided Jacobi on the columns of `k` (the iteration of
-/// [`crate::deform::rotation_and_scales`]) with the rotations accumulated in `Q`, so that
+/// [`crate::svd::rotation_and_scales`]) with the rotations accumulated in `Q`, so that
 /// `k Q = [σ_i p_i]`. For nearly singular covariances `k = L2ᵀ L1` is strongly graded; a
 /// bidiagonalising SVD (nalgebra's) is accurate to `ε σ_max` absolute only, which garbles the
 /// smallest singular triple and cost `B²` up to 1.6e-4 relative for Gaussians with scale ratio

@@ -291,7 +291,7 @@ fn bound_parameter_gradients_through_the_renderer() {
 fn world_parameters_match_the_deformer() {
     let (mesh, posed, bound) = bound_scene();
     let set = trisplat_splat::fit::bound::to_set(&bound);
-    let deformer = trisplat_splat::deform::Deformer::new(&mesh, Default::default());
+    let deformer = trisplat_splat::Deformer::new(&mesh, Default::default());
     let baked = deformer.deform(&set, &posed).unwrap();
     let frames = TriangleFrames::binding(&mesh, &posed);
     let b32 = BoundParams::from_set(&set, 2).unwrap();

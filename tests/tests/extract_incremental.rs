@@ -12,8 +12,8 @@ use trisplat_geometry::TriMesh;
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::topology::edge_triangles;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::bind::{BindOptions, init_bound};
-use trisplat_splat::deform::{DeformMode, Deformer, WorldGeometry};
+use trisplat_splat::{BindOptions, init_bound};
+use trisplat_splat::{DeformMode, Deformer, WorldGeometry};
 
 /// Frames of the test animation.
 const FRAMES: usize = 10;

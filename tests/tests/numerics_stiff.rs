@@ -25,18 +25,18 @@ use trisplat_extract::alpha_shape::{alpha_shape_from_delaunay, circumradius};
 use trisplat_extract::delaunay3d::Delaunay3d;
 use trisplat_extract::tsdf::{DepthImage, Frame, TsdfParams, TsdfVolume};
 use trisplat_geometry::{Camera, TriId, TriMesh};
-use trisplat_splat::deform::{
-    DeformMode, Deformer, FrameHold, rotation_and_scales, rotation_and_scales_svd,
-};
-use trisplat_splat::frames::{
-    CanonicalTriangle, Convention, FrameOptions, deformation_gradient, edge_matrix, frame,
-    gaussian_avatars_frame, transform_normal,
-};
-use trisplat_splat::lbs::polar_rotation;
-use trisplat_splat::wasserstein::{bures_sq, w2_sq};
+use trisplat_splat::polar_rotation;
 use trisplat_splat::{
     Binding, BindingEncoding, GaussianParts, GaussianSet, ParameterSpace, ScaleDims,
 };
+use trisplat_splat::{
+    CanonicalTriangle, Convention, FrameOptions, deformation_gradient, edge_matrix, frame,
+    gaussian_avatars_frame, transform_normal,
+};
+use trisplat_splat::{
+    DeformMode, Deformer, FrameHold, rotation_and_scales, rotation_and_scales_svd,
+};
+use trisplat_splat::{bures_sq, w2_sq};
 
 /// Unit roundoff of `f64` (2⁻⁵³).
 const U64: f64 = f64::EPSILON / 2.0;

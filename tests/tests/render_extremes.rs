@@ -5,7 +5,7 @@ use trisplat_geometry::Camera;
 use trisplat_geometry::TriId;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_splat::glam::{DVec3, Vec3};
-use trisplat_splat::render::options::DEFAULT_NEAR;
+use trisplat_splat::render::DEFAULT_NEAR;
 use trisplat_splat::render::{Outputs, RenderError, RenderMode, RenderOptions, render};
 use trisplat_splat::{Binding, GaussianParts, GaussianSet, ParameterSpace};
 
@@ -203,7 +203,7 @@ fn one_gaussian_by_hand() {
     )
     .unwrap();
     let opacity = 0.8f32;
-    let logit = trisplat_splat::gaussians::logit(opacity);
+    let logit = trisplat_splat::logit(opacity);
     let mut parts = GaussianParts {
         means: vec![Vec3::new(0.0, 0.0, z as f32)],
         log_scales: vec![Vec3::new((s as f32).ln(), (s as f32).ln(), -29.0)],

@@ -14,10 +14,10 @@
 
 use glam::{DMat3, DQuat, DVec3, EulerRot, Vec3};
 use trisplat_geometry::Camera;
-use trisplat_splat::gaussians::{logit, to_wxyz};
-use trisplat_splat::render::perspective::{PERSPECTIVE_RULES, project_perspective};
 use trisplat_splat::render::{Outputs, RenderMode, RenderOptions, RenderStats, rasterize, render};
+use trisplat_splat::render::{PERSPECTIVE_RULES, project_perspective};
 use trisplat_splat::{GaussianParts, GaussianSet};
+use trisplat_splat::{logit, to_wxyz};
 
 /// The bound for the narrow field of view: alpha within 1e-3 of 3DGS mode.
 const NARROW_FOV_MAX_ALPHA_DIFF: f32 = 1e-3;

@@ -11,8 +11,8 @@ use serde::Deserialize;
 use trisplat_geometry::io::read_npy;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::read_cameras_json;
-use trisplat_splat::render::surfel::{SURFEL_NEAR, SURFEL_RULES, project_surfels};
 use trisplat_splat::render::{Outputs, RenderMode, RenderOptions, RenderStats, rasterize};
+use trisplat_splat::render::{SURFEL_NEAR, SURFEL_RULES, project_surfels};
 use trisplat_splat::{GaussianParts, GaussianSet, ScaleDims};
 
 /// Alpha, rgb and composited normals: absolute error (the issue asks 1e-4 for alpha). Ours

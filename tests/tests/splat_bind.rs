@@ -4,13 +4,11 @@
 use std::path::Path;
 
 use trisplat_geometry::rng::Rng;
-use trisplat_splat::bind::{
-    AttachLimits, BindError, BindOptions, attach, attach_checked, init_bound,
-};
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::frames::Convention;
+use trisplat_splat::Convention;
 use trisplat_splat::glam::{DMat3, Vec3};
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians_from_bytes, write_gaussians_to};
+use trisplat_splat::{AttachLimits, BindError, BindOptions, attach, attach_checked, init_bound};
+use trisplat_splat::{DeformMode, Deformer};
 use trisplat_splat::{GaussianParts, GaussianSet, ParameterSpace};
 
 /// Attach + bake round trip, relative to the template's bounding-box diagonal (means) or the

@@ -4,12 +4,12 @@
 
 use trisplat_geometry::rng::Rng;
 use trisplat_geometry::{TriId, TriMesh};
-use trisplat_splat::deform::{DeformError, DeformMode, Deformer};
-use trisplat_splat::frames::{FrameOptions, surfhead_frame};
 use trisplat_splat::glam::{DMat3, DQuat, DVec3, Vec3};
 use trisplat_splat::{
     Binding, BindingEncoding, GaussianParts, GaussianSet, ParameterSpace, ScaleDims,
 };
+use trisplat_splat::{DeformError, DeformMode, Deformer};
+use trisplat_splat::{FrameOptions, surfhead_frame};
 
 /// Agreement with the float64 evaluation, relative (the acceptance bound of issue 3).
 const REL_TOL: f64 = 1e-5;

@@ -3,12 +3,12 @@
 
 use proptest::prelude::*;
 use trisplat_geometry::TriId;
-use trisplat_splat::densify::{
+use trisplat_splat::glam::Vec3;
+use trisplat_splat::{Binding, BindingEncoding, GaussianParts, GaussianSet, ParameterSpace};
+use trisplat_splat::{
     DensifyError, SplitOptions, TriangleCounts, clone_selected, normal_inconsistency_mask,
     outlier_mask, prune, split_selected, w2_gate, w2_to_nearest,
 };
-use trisplat_splat::glam::Vec3;
-use trisplat_splat::{Binding, BindingEncoding, GaussianParts, GaussianSet, ParameterSpace};
 
 /// One Gaussian per triangle (GaussianAvatars' initial binding) plus `extra` more on triangle
 /// `extra_tri`.

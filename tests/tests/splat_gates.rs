@@ -3,12 +3,12 @@
 //! agreeing wherever both are defined (docs/conventions.md §4).
 
 use trisplat_geometry::rng::Rng;
-use trisplat_splat::densify::{
+use trisplat_splat::glam::{DVec3, Vec3};
+use trisplat_splat::{
     DensifyError, SEED_NORMAL, SEED_OUTLIER, SEED_W2_SQ, SplitOptions, normal_deviation_mask,
     normal_inconsistency_mask, outlier_mask, seed_w2_gate, split_selected, w2_gate,
     w2_sq_to_children, w2_sq_to_nearest,
 };
-use trisplat_splat::glam::{DVec3, Vec3};
 use trisplat_splat::{GaussianParts, GaussianSet};
 
 /// `n` world-space Gaussians with random centres in a unit cube, rotations and log-scales in

@@ -10,14 +10,14 @@ use base64::Engine as _;
 use glam::{DMat3, DQuat, DVec3, Vec3};
 use serde_json::{Value, json};
 use trisplat_geometry::TriId;
-use trisplat_splat::gaussians::{
-    Binding, GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, sigmoid,
-};
+use trisplat_splat::eval_rgb;
 use trisplat_splat::gltf_splat::{
     EXTENSION, GltfSplatError, OPAQUE_LOGIT, TRANSPARENT_LOGIT, ZERO_LOG_SCALE, glb_gaussians,
     gltf_text_gaussians, has_gaussian_splats, read_gltf_gaussians, write_gltf_gaussians,
 };
-use trisplat_splat::sh::eval_rgb;
+use trisplat_splat::{
+    Binding, GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, sigmoid,
+};
 
 fn random_set(n: usize, degree: u8, seed: u64) -> GaussianSet {
     let mut rng = trisplat_geometry::rng::Rng::new(seed);

@@ -3,10 +3,10 @@
 
 use trisplat_geometry::animation::{AnimatedTemplate, Clip, GltfTemplate};
 use trisplat_geometry::rng::Rng;
-use trisplat_splat::bind::attach;
-use trisplat_splat::frames::Convention;
+use trisplat_splat::Convention;
+use trisplat_splat::LbsDeformer;
+use trisplat_splat::attach;
 use trisplat_splat::glam::{DMat3, DQuat, DVec3, Vec3};
-use trisplat_splat::lbs::LbsDeformer;
 use trisplat_splat::{GaussianParts, GaussianSet};
 
 /// Gaussians at vertices against skinned vertices, relative to the model's bounding-box
@@ -102,7 +102,7 @@ fn check(file: &str) {
                     rel.z_axis.truncate(),
                 );
                 let q_joint =
-                    DQuat::from_mat3(&trisplat_splat::lbs::polar_rotation(lin).expect("rotation"));
+                    DQuat::from_mat3(&trisplat_splat::polar_rotation(lin).expect("rotation"));
                 let [rw, rx, ry, rz] = at_rest.rotations()[v].map(f64::from);
                 let want_q = q_joint * DQuat::from_xyzw(rx, ry, rz, rw);
                 let [gw, gx, gy, gz] = moved.rotations()[v].map(f64::from);

@@ -12,12 +12,12 @@ use std::path::Path;
 use glam::{DQuat, Vec3};
 use serde_json::Value;
 use trisplat_geometry::TriId;
-use trisplat_splat::axes::Axes;
-use trisplat_splat::gaussians::{Binding, GaussianParts, GaussianSet, ParameterSpace, ScaleDims};
+use trisplat_splat::Axes;
 use trisplat_splat::spz::{
     OPAQUE_LOGIT, SpzError, SpzReadOptions, SpzWriteOptions, TRANSPARENT_LOGIT, decode_spz,
     encode_spz, read_spz,
 };
+use trisplat_splat::{Binding, GaussianParts, GaussianSet, ParameterSpace, ScaleDims};
 
 fn fixture(name: &str) -> std::path::PathBuf {
     trisplat_fixtures::path(&format!("reference/spz/{name}"))
@@ -244,8 +244,8 @@ fn random_set(n: usize, degree: u8, seed: u64) -> GaussianSet {
 
 /// Rotation angle between two raw quaternions, radians.
 fn angle(a: [f32; 4], b: [f32; 4]) -> f64 {
-    let qa = trisplat_splat::gaussians::normalize_wxyz(a).expect("a");
-    let qb = trisplat_splat::gaussians::normalize_wxyz(b).expect("b");
+    let qa = trisplat_splat::normalize_wxyz(a).expect("a");
+    let qb = trisplat_splat::normalize_wxyz(b).expect("b");
     2.0 * qa.dot(qb).abs().min(1.0).acos()
 }
 
@@ -253,7 +253,7 @@ fn angle(a: [f32; 4], b: [f32; 4]) -> f64 {
 /// or the three other than the largest, with the largest made positive (versions 3-4).
 fn stored_component_error(a: [f32; 4], b: [f32; 4], version: u32) -> f64 {
     let unit = |q: [f32; 4]| {
-        let u = trisplat_splat::gaussians::normalize_wxyz(q).expect("q");
+        let u = trisplat_splat::normalize_wxyz(q).expect("q");
         [u.x, u.y, u.z, u.w]
     };
     let (mut qa, mut qb) = (unit(a), unit(b));

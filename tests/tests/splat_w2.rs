@@ -2,8 +2,8 @@
 //! against closed forms for near-identical Gaussians stored in float32.
 
 use trisplat_splat::glam::{DMat3, DQuat, DVec3, Vec3};
-use trisplat_splat::wasserstein::{gaussian_w2_sq, w2_sq};
 use trisplat_splat::{GaussianParts, GaussianSet};
+use trisplat_splat::{gaussian_w2_sq, w2_sq};
 
 /// Agreement with scipy's sqrtm evaluation, relative (issue 3's acceptance bound).
 const SQRTM_REL_TOL: f64 = 1e-6;

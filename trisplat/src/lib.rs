@@ -23,8 +23,8 @@
 //! # Bind Gaussians to its triangles, deform them with the mesh
 //! ```
 //! use trisplat::geometry::io::read_mesh;
-//! use trisplat::splat::bind::{BindOptions, init_bound};
-//! use trisplat::splat::deform::{DeformMode, Deformer};
+//! use trisplat::splat::{BindOptions, init_bound};
+//! use trisplat::splat::{DeformMode, Deformer};
 //!
 //! let mesh = read_mesh(&trisplat_fixtures::path("spot_triangulated.obj"))?;
 //! // One Gaussian per triangle at its centroid (GaussianAvatars' initialisation).
@@ -40,8 +40,8 @@
 //! ```
 //! use trisplat::geometry::sphere_rig;
 //! use trisplat::geometry::io::read_mesh;
-//! use trisplat::splat::bind::{BindOptions, init_bound};
-//! use trisplat::splat::deform::{DeformMode, Deformer};
+//! use trisplat::splat::{BindOptions, init_bound};
+//! use trisplat::splat::{DeformMode, Deformer};
 //! use trisplat::splat::render::{RenderOptions, render};
 //!
 //! let mesh = read_mesh(&trisplat_fixtures::path("spot_triangulated.obj"))?;
@@ -92,8 +92,8 @@
 //! ```
 //! use trisplat::geometry::io::read_mesh;
 //! use trisplat::pipeline::refine::{RefineOptions, refine};
-//! use trisplat::splat::bind::{BindOptions, init_bound};
-//! use trisplat::splat::densify::TriangleCounts;
+//! use trisplat::splat::{BindOptions, init_bound};
+//! use trisplat::splat::TriangleCounts;
 //!
 //! let mesh = read_mesh(&trisplat_fixtures::path("spot_triangulated.obj"))?;
 //! let bound = init_bound(&mesh, &BindOptions { per_triangle: 2, ..BindOptions::default() })?;

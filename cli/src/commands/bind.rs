@@ -6,12 +6,12 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use trisplat_pipeline::avatar::{AvatarFolder, Silhouettes, bind_lam, silhouette_iou};
 use trisplat_pipeline::input::read_template;
-use trisplat_splat::bind::{
+use trisplat_splat::Convention;
+use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+use trisplat_splat::{
     AttachLimits, BindOptions, DEFAULT_INITIAL_OPACITY, attach, attach_checked, init_bound,
 };
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::frames::Convention;
-use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+use trisplat_splat::{DeformMode, Deformer};
 
 use super::{Context, refuse_to_overwrite};
 

@@ -9,14 +9,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use trisplat_pipeline::input::read_template;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::densify::{
+use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+use trisplat_splat::{
     DEFAULT_SPLIT_CHILDREN, DEFAULT_SPLIT_SHRINK, SEED_W2_SQ, SplitOptions, TriangleCounts,
     W2Pairs, clone_selected, seed_w2_gate, split_selected, w2_gate, w2_sq_to_children,
     w2_sq_to_nearest,
 };
-use trisplat_splat::frames::{FrameOptions, corners_of, frame};
-use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+use trisplat_splat::{DeformMode, Deformer};
+use trisplat_splat::{FrameOptions, corners_of, frame};
 
 use super::bind::ConventionArg;
 use super::{Context, UsageError, refuse_to_overwrite};
@@ -33,7 +33,7 @@ pub struct TemplateArgs {
     pub convention: ConventionArg,
 }
 
-/// The form of the densification and pruning criteria (`splat::densify::Gate`,
+/// The form of the densification and pruning criteria (`splat::Gate`,
 /// docs/conventions.md §4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum GateArg {

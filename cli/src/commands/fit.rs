@@ -23,7 +23,7 @@ use trisplat_splat::fit::adam::LearningRates;
 use trisplat_splat::fit::density::{self, DensifyOptions};
 use trisplat_splat::fit::loss::DEFAULT_LAMBDA_DSSIM;
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
-use trisplat_splat::render::surfel::SURFEL_NEAR;
+use trisplat_splat::render::SURFEL_NEAR;
 use trisplat_splat::render::{RenderMode, RenderOptions};
 
 use super::render::parse_rgb;

@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
+use trisplat_splat::Axes;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::axes::Axes;
 use trisplat_splat::gltf_splat::{read_gltf_gaussians, write_gltf_gaussians};
 use trisplat_splat::ply::{PlyEncoding, PlyWriteOptions, read_gaussians, write_gaussians};
 use trisplat_splat::spz::{SpzReadOptions, SpzWriteOptions, read_spz, write_spz};

@@ -9,8 +9,8 @@ use trisplat_extract::carve::{CarveOptions, carve, read_masks};
 use trisplat_geometry::Aabb;
 use trisplat_geometry::glam::{DVec3, Vec3};
 use trisplat_geometry::io::{WriteOptions, write_mesh};
-use trisplat_splat::gaussians::{GaussianParts, GaussianSet, ParameterSpace, logit};
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
+use trisplat_splat::{GaussianParts, GaussianSet, ParameterSpace, logit};
 
 use super::sample::DEFAULT_MAX_POINTS;
 use super::{Context, MAX_IMAGE_PIXELS, read_camera_file, refuse_to_overwrite};

@@ -5,11 +5,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use trisplat_splat::densify::{
+use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
+use trisplat_splat::{
     DEFAULT_NEIGHBOURS, SEED_NORMAL, SEED_OUTLIER, TriangleCounts, normal_deviation_mask,
     normal_inconsistency_mask, outlier_mask, prune,
 };
-use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
 use super::densify::{GateArg, TemplateArgs, check_non_negative, load_masked};
 use super::{Context, refuse_to_overwrite};

@@ -19,10 +19,10 @@ use trisplat_pipeline::refine::{
     DEFAULT_CHAMFER_SAMPLES, DEFAULT_ROUNDS, PruneCriteria, Rebind, RefineOptions, RoundReport,
     refine,
 };
-use trisplat_splat::deform::DeformMode;
-use trisplat_splat::densify::{DEFAULT_NEIGHBOURS, Gate, SEED_NORMAL, SEED_OUTLIER};
-use trisplat_splat::frames::Convention;
+use trisplat_splat::Convention;
+use trisplat_splat::DeformMode;
 use trisplat_splat::ply::{PlyWriteOptions, read_gaussians, write_gaussians};
+use trisplat_splat::{DEFAULT_NEIGHBOURS, Gate, SEED_NORMAL, SEED_OUTLIER};
 
 use super::bind::ConventionArg;
 use super::densify::GateArg;

@@ -11,10 +11,10 @@ use trisplat_geometry::glam::DVec3;
 use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::mesh_render::{MeshRenderOptions, MeshRenderer, NormalFrame};
 use trisplat_splat::ply::read_gaussians_local;
-use trisplat_splat::render::image::{file_stem, image_files};
 use trisplat_splat::render::{
-    Outputs, RenderImages, RenderMode, RenderOptions, SplatDepth, options::DEFAULT_FAR, render,
+    DEFAULT_FAR, Outputs, RenderImages, RenderMode, RenderOptions, SplatDepth, render,
 };
+use trisplat_splat::render::{file_stem, image_files};
 
 use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
 
@@ -273,7 +273,7 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     if let Some(near) = args.near {
         options.near = near;
     } else if options.mode == RenderMode::Surfel2d {
-        options.near = trisplat_splat::render::surfel::SURFEL_NEAR;
+        options.near = trisplat_splat::render::SURFEL_NEAR;
     }
     options.far = args.far;
     options.normal_frame = frame;

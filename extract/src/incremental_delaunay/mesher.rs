@@ -242,7 +242,7 @@ impl IncrementalDelaunay {
     }
 
     /// Moves to a new frame: `positions` are the deformed template vertices, `means` the
-    /// deformed Gaussian means (e.g. from `trisplat_splat::deform::Deformer::deform_geometry`). The first update, and
+    /// deformed Gaussian means (e.g. from `trisplat_splat::Deformer::deform_geometry`). The first update, and
     /// every [`DelaunayOptions::rebuild_every`]-th, rebuilds from scratch; the others
     /// re-triangulate only the charts that Gaussians left or entered.
     ///

@@ -112,7 +112,7 @@ pub struct OutputOptions {
     /// §3 "Axes"). glTF's frame (+Y up, facing +Z) is luf; a Z-up mesh facing -Y (Blender's
     /// front) is lbu. Only the pictures use it.
     #[cfg_attr(feature = "cli", arg(long, value_name = "AXES", default_value = "luf"))]
-    pub view_axes: trisplat_splat::axes::Axes,
+    pub view_axes: trisplat_splat::Axes,
     /// What to write, comma-separated: meshes (per-frame PLYs), glb (the animated sequence;
     /// its frames are written to assemble it and removed after unless meshes is asked too),
     /// report (report.json, report.md, report.html with its thumbnails, the plot as SVG and
@@ -126,7 +126,7 @@ impl Default for OutputOptions {
     fn default() -> Self {
         Self {
             error_colors: false,
-            view_axes: trisplat_splat::axes::Axes::Luf,
+            view_axes: trisplat_splat::Axes::Luf,
             targets: OutputTarget::ALL.to_vec(),
         }
     }

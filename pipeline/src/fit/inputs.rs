@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use trisplat_geometry::Camera;
-use trisplat_splat::densify::DensifyError;
+use trisplat_splat::DensifyError;
 use trisplat_splat::fit::bound::BoundError;
 use trisplat_splat::render::GradError;
 

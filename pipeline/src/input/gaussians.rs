@@ -4,11 +4,11 @@
 use std::path::{Path, PathBuf};
 
 use trisplat_geometry::TriMesh;
+use trisplat_splat::Convention;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::bind::{BindOptions, init_bound};
-use trisplat_splat::deform::{DeformMode, Deformer};
-use trisplat_splat::frames::Convention;
 use trisplat_splat::ply::read_gaussians;
+use trisplat_splat::{BindOptions, init_bound};
+use trisplat_splat::{DeformMode, Deformer};
 
 use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, Mode};
 use crate::error::PipelineError;

@@ -4,7 +4,7 @@ use std::path::Path;
 use glam::DVec3;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::animation::VertexSkinning;
-use trisplat_splat::deform::Deformer;
+use trisplat_splat::Deformer;
 
 use super::*;
 use crate::config::{BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, Mode};

@@ -25,7 +25,7 @@ use rayon::prelude::*;
 use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::spatial::{SpatialError, TriangleBvh};
 use trisplat_geometry::{Camera, Rgba, TriMesh};
-use trisplat_splat::axes::Axes;
+use trisplat_splat::Axes;
 
 /// Height of a thumbnail in pixels.
 pub const THUMBNAIL_HEIGHT: u32 = 360;

@@ -6,7 +6,7 @@
 //! step 1 (torch's Adam, which 3DGS uses, keeps one step count per tensor; a Gaussian added at
 //! step 10,000 then gets almost no bias correction of its zeroed moments).
 
-use crate::render::grad::{GaussianGrads, GaussianParams};
+use crate::render::{GaussianGrads, GaussianParams};
 
 /// Learning rates per parameter group.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -14,7 +14,7 @@ use trisplat_geometry::TriMesh;
 
 use crate::frames::{FrameOptions, corners_of, gaussian_avatars_frame};
 use crate::gaussians::{GaussianParts, GaussianSet, ParameterSpace, ScaleDims, quat_from_rotation};
-use crate::render::grad::{DiffParams, GaussianGrads, GaussianParams};
+use crate::render::{DiffParams, GaussianGrads, GaussianParams};
 
 /// Why a set cannot be fitted as bound parameters.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -285,13 +285,13 @@ pub fn to_set(bound: &BoundParams) -> GaussianSet {
         opacity_logits: p.opacity_logits.iter().map(|&v| v as f32).collect(),
         sh_degree: p.sh_degree,
         sh: p.sh.iter().map(|&v| v as f32).collect(),
-        binding: Some(crate::Binding {
+        binding: Some(crate::gaussians::Binding {
             triangles: bound
                 .triangles
                 .iter()
                 .map(|&t| trisplat_geometry::TriId(t))
                 .collect(),
-            encoding: crate::BindingEncoding::default(),
+            encoding: crate::gaussians::BindingEncoding::default(),
         }),
         space: ParameterSpace::Local,
         extras: Vec::new(),

@@ -42,7 +42,7 @@ use crate::densify::{
 };
 use crate::fit::adam::Adam;
 use crate::fit::bound::{BoundParams, TriangleFrames, to_set};
-use crate::render::grad::GaussianParams;
+use crate::render::GaussianParams;
 
 /// 3DGS's `densify_grad_threshold` (mean NDC gradient norm), also GaussianAvatars'.
 pub const DEFAULT_GRAD_THRESHOLD: f64 = 0.0002;

@@ -3,7 +3,7 @@
 //!
 //! Every loss returns its value (in `f64`) and **adds** `scale ×` its gradient into a buffer
 //! laid out like the rendered image, so several losses weighted by their `λ` fill one
-//! [`crate::render::grad::ImageGrads`] without temporaries. Images are row-major; colour images
+//! [`crate::render::ImageGrads`] without temporaries. Images are row-major; colour images
 //! interleaved `[H, W, C]`. Sums are in `f64` whatever the image type ([`Real`]).
 //!
 //! - [`l1`]: `mean |x − y|` over every value (gradient `sign(x − y) / N`, 0 where equal).
@@ -21,7 +21,7 @@
 use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
-use crate::render::grad::Real;
+use crate::render::Real;
 
 /// 3DGS's `λ_dssim`: loss = `(1 − λ) L1 + λ (1 − SSIM)`.
 pub const DEFAULT_LAMBDA_DSSIM: f64 = 0.2;

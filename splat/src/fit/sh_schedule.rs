@@ -12,8 +12,8 @@
 //! Layout (file order, per Gaussian, `K = (degree + 1)²`): `f_dc_0..2` (one per channel), then
 //! `f_rest` channel-major (`K − 1` per channel).
 
-use crate::gaussians::sh_coeffs_per_channel;
-use crate::render::grad::GaussianParams;
+use crate::render::GaussianParams;
+use crate::sh::sh_coeffs_per_channel;
 
 /// The active degree after `done` iterations (3DGS: one more every `every` iterations, counted
 /// from 1), capped at `max`; `None` keeps every band from the start.

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use super::image::RenderImages;
 use super::options::Outputs;
 use super::screen::{ScreenSplats, SplatKernel};
-use super::tiles::{TILE_SIZE, TileBins, TileRect, depth_order};
+use super::tiles::{TILE_SIZE, TileBins, TileRect, box_pixels, depth_order, hi, lo};
 
 /// Pixels per tile.
 const TILE_PIXELS: usize = (TILE_SIZE * TILE_SIZE) as usize;
@@ -122,20 +122,6 @@ fn split_bands(buf: &mut Option<Vec<f32>>, chunk: usize, n: usize) -> Vec<Option
         Some(buf) => buf.chunks_mut(chunk.max(1)).map(Some).collect(),
         None => (0..n).map(|_| None).collect(),
     }
-}
-
-/// First local index `>= floor(v − start)`, clamped to `0..=n` (no `floor` call: the baseline
-/// x86-64 target has no rounding instruction; truncation equals floor for the values kept).
-#[inline(always)]
-fn lo(v: f32, start: u32, n: usize) -> usize {
-    ((v - start as f32).max(0.0) as usize).min(n)
-}
-
-/// One past a local index `>= ceil(v − start)` (conservative by at most one), clamped to `0..=n`.
-#[inline(always)]
-fn hi(v: f32, start: u32, n: usize) -> usize {
-    let x = v - start as f32 + 1.0;
-    if x > 0.0 { (x as usize + 1).min(n) } else { 0 }
 }
 
 /// Bins, sorts and composites `screen` (evaluated by `kernel`) into a `width × height` image.
@@ -491,18 +477,14 @@ impl<K: SplatKernel> TileContext<'_, K> {
             };
             // Local pixel range of this splat in the tile: pixel centres j + off within
             // [c - r, c + r] (rounded outwards), or the whole tile.
-            let (lx0, lx1, ly0, ly1) = if r.clip_to_box {
-                let c = packed.center;
-                let rad = packed.radius;
-                (
-                    lo(c[0] - rad[0] - off, x_start, tw),
-                    hi(c[0] + rad[0] - off, x_start, tw),
-                    lo(c[1] - rad[1] - off, y_start, th),
-                    hi(c[1] + rad[1] - off, y_start, th),
-                )
-            } else {
-                (0, tw, 0, th)
-            };
+            let (lx0, lx1, ly0, ly1) = box_pixels(
+                r.clip_to_box,
+                packed.center,
+                packed.radius,
+                off,
+                (x_start, y_start),
+                (tw, th),
+            );
             let mut largest = Vec4::ZERO;
             let splat = RowSplat {
                 color: packed.color,

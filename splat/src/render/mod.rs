@@ -11,200 +11,52 @@
 //!
 //! Stages 2 and 3 are shared by every mode: see [`screen`] for how a mode plugs in. All stages
 //! run in parallel with rayon; the images do not depend on the thread count.
+//!
+//! The stage modules are private: their public items are re-exported here (`render::render`,
+//! `render::SURFEL_RULES`, `render::render_with_grad`, ...). The plain entry point is in `run`,
+//! the input checks in `inputs`, the differentiable renderer (both passes) in `grad`.
 
-pub mod composite;
-pub mod grad;
-pub mod image;
-pub mod options;
-pub mod perspective;
-pub mod project;
-pub mod screen;
-pub mod surfel;
-pub mod tiles;
-
-use std::time::Instant;
-
-use trisplat_geometry::Camera;
+mod composite;
+mod grad;
+mod image;
+mod inputs;
+mod options;
+mod perspective;
+mod pinhole;
+mod project;
+mod run;
+mod screen;
+mod surfel;
+mod tiles;
 
 pub use composite::{
-    CompositeRules, MedianRule, RenderStats, rasterize, rasterize_with_contribution,
+    ALPHA_THRESHOLD, CompositeRules, GSPLAT_MAX_ALPHA, MEDIAN_TRANSMITTANCE, MedianRule,
+    ORIGINAL_MAX_ALPHA, RenderStats, STOP_TRANSMITTANCE, rasterize, rasterize_with_contribution,
 };
 pub use grad::{
-    BackwardStats, DiffParams, GaussianGrads, GaussianParams, GradError, GradRender, ImageGrads,
-    Real, backward, backward_into, render_with_grad,
+    BackwardStats, DIST_FAR, DIST_NEAR, DiffParams, GaussianGrads, GaussianParams, GradError,
+    GradRender, ImageGrads, Real, backward, backward_into, render_with_grad,
 };
-pub use image::RenderImages;
-pub use options::{Outputs, RenderMode, RenderOptions, Rules, SplatDepth};
-pub use screen::{Sample, ScreenSplats, SplatKernel};
-
-use crate::{GaussianSet, ParameterSpace};
-
-/// Largest image the renderer accepts, in pixels (16384 × 16384).
-pub const MAX_PIXELS: u64 = 1 << 28;
-
-/// Why a render cannot be done.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum RenderError {
-    /// The Gaussians are in local triangle frames (a bound GaussianAvatars file).
-    #[error(
-        "the Gaussians are in local triangle frames (bound to a template); bake them to world space first (trisplat deform)"
-    )]
-    LocalParameters,
-    /// The near/far planes are not `0 < near < far`.
-    #[error("near {near} and far {far} planes must satisfy 0 < near < far")]
-    BadClipPlanes {
-        /// Near plane.
-        near: f32,
-        /// Far plane.
-        far: f32,
-    },
-    /// The background colour is not finite.
-    #[error("background colour {0:?} is not finite")]
-    BadBackground([f32; 3]),
-    /// The image has more than [`MAX_PIXELS`] pixels.
-    #[error("image {width}x{height} exceeds the {MAX_PIXELS}-pixel limit")]
-    ImageTooLarge {
-        /// Width.
-        width: u32,
-        /// Height.
-        height: u32,
-    },
-}
-
-/// The images of one render and how long its stages took.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RenderOutput {
-    /// The requested images.
-    pub images: RenderImages,
-    /// Stage timings and counts.
-    pub stats: RenderStats,
-    /// With [`RenderOptions::contribution`]: per Gaussian of the set, the largest blending
-    /// weight `w = α·T` it received at any pixel (0 when culled or hidden everywhere).
-    pub contribution: Option<Vec<f32>>,
-}
-
-/// Checks what every mode needs: world-space Gaussians, valid clip planes and background, an
-/// image size within [`MAX_PIXELS`].
-///
-/// # Errors
-/// The first problem found.
-pub fn check_inputs(
-    set: &GaussianSet,
-    camera: &Camera,
-    options: &RenderOptions,
-) -> Result<(), RenderError> {
-    if set.space() == ParameterSpace::Local {
-        return Err(RenderError::LocalParameters);
-    }
-    let (near, far) = (options.near, options.far);
-    if !(near > 0.0 && far > near && near.is_finite()) {
-        return Err(RenderError::BadClipPlanes { near, far });
-    }
-    if !options.background.iter().all(|v| v.is_finite()) {
-        return Err(RenderError::BadBackground(options.background));
-    }
-    if u64::from(camera.width) * u64::from(camera.height) > MAX_PIXELS {
-        return Err(RenderError::ImageTooLarge {
-            width: camera.width,
-            height: camera.height,
-        });
-    }
-    Ok(())
-}
-
-/// Renders `set` (world space) as seen by `camera` with the mode of `options` (3DGS EWA
-/// splatting with gsplat's or the original rules, 2DGS surfels with [`surfel::SURFEL_RULES`],
-/// or perspective-aware evaluation with [`perspective::PERSPECTIVE_RULES`]). `options.near` is
-/// used as given in every mode (hbb1's 2DGS code uses [`surfel::SURFEL_NEAR`]).
-///
-/// # Errors
-/// [`RenderError`] for local (bound, unbaked) Gaussians, bad options or too large images.
-pub fn render(
-    set: &GaussianSet,
-    camera: &Camera,
-    options: &RenderOptions,
-) -> Result<RenderOutput, RenderError> {
-    check_inputs(set, camera, options)?;
-    let run = Run {
-        n: set.len(),
-        start: Instant::now(),
-        size: (camera.width, camera.height),
-        options,
-    };
-    match options.mode {
-        RenderMode::Gaussian3d => {
-            let (screen, kernel) = project::project_ewa(set, camera, options);
-            let rules = match options.rules {
-                Rules::Gsplat => CompositeRules::GSPLAT,
-                Rules::Original3dgs => CompositeRules::ORIGINAL_3DGS,
-            };
-            Ok(finish(&screen, &kernel, &rules, &run))
-        }
-        RenderMode::Surfel2d => {
-            let (screen, kernel) = surfel::project_surfels(set, camera, options);
-            Ok(finish(&screen, &kernel, &surfel::SURFEL_RULES, &run))
-        }
-        RenderMode::Perspective => {
-            let (screen, kernel) = perspective::project_perspective(set, camera, options);
-            Ok(finish(
-                &screen,
-                &kernel,
-                &perspective::PERSPECTIVE_RULES,
-                &run,
-            ))
-        }
-    }
-}
-
-/// One call of [`render`], as its shared stages see it.
-struct Run<'a> {
-    /// Gaussians in the set.
-    n: usize,
-    /// When the projection started.
-    start: Instant,
-    /// Image width and height.
-    size: (u32, u32),
-    options: &'a RenderOptions,
-}
-
-/// The shared sort and composite stages after a mode's projection.
-fn finish<K: SplatKernel>(
-    screen: &ScreenSplats,
-    kernel: &K,
-    rules: &CompositeRules,
-    run: &Run<'_>,
-) -> RenderOutput {
-    let Run {
-        n,
-        start,
-        size,
-        options,
-    } = *run;
-    let mut stats = RenderStats {
-        project_s: start.elapsed().as_secs_f64(),
-        ..RenderStats::default()
-    };
-    let (images, by_screen) = rasterize_with_contribution(
-        screen,
-        kernel,
-        size,
-        rules,
-        options.outputs,
-        options.background,
-        options.contribution,
-        &mut stats,
-    );
-    let contribution = by_screen.map(|by_screen| {
-        let mut by_set = vec![0.0; n];
-        for (&id, w) in screen.ids.iter().zip(by_screen) {
-            by_set[id as usize] = w;
-        }
-        by_set
-    });
-    RenderOutput {
-        images,
-        stats,
-        contribution,
-    }
-}
+pub use image::{
+    IMAGE_KINDS, RenderImages, depth_picture, file_stem, image_files, normal_picture, turbo,
+};
+pub use inputs::{MAX_PIXELS, RenderError, check_inputs};
+pub use options::{
+    DEFAULT_FAR, DEFAULT_NEAR, ORIGINAL_3DGS_NEAR, Outputs, RenderMode, RenderOptions, Rules,
+    SplatDepth,
+};
+pub use perspective::{
+    BOX_MARGIN, PERSPECTIVE_RULES, PerspectiveKernel, PerspectiveSplat, ProjectedPerspective,
+    RayMax, project_perspective,
+};
+pub use project::{
+    EPS_2D, EwaKernel, EwaSplat, FRUSTUM_MARGIN, GSPLAT_EXTENT, ORIGINAL_EXTENT, exp_f32, exp_neg4,
+    project_ewa,
+};
+pub use run::{RenderOutput, render};
+pub use screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
+pub use surfel::{
+    FILTER_INV_SQUARE, FILTER_SIZE, ProjectedSurfel, SURFEL_EXTENT, SURFEL_NEAR, SURFEL_RULES,
+    SurfelKernel, SurfelSample, SurfelSplat, project_surfel, project_surfels,
+};
+pub use tiles::{TILE_SIZE, TileBins, TileRect, depth_order, sort_key, tile_range};

@@ -41,11 +41,12 @@ use trisplat_geometry::Camera;
 
 use super::composite::{ALPHA_THRESHOLD, CompositeRules};
 use super::options::RenderOptions;
+use super::pinhole::Pinhole;
 use super::project::{EPS_2D, GSPLAT_EXTENT};
 use super::screen::{
-    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible,
+    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible, shade,
 };
-use crate::GaussianSet;
+use crate::gaussians::GaussianSet;
 use crate::gaussians::sigmoid;
 
 /// Screen boxes are widened by this many pixels so that `f32` rounding of their centre and
@@ -162,19 +163,6 @@ impl SplatKernel for PerspectiveKernel {
     }
 }
 
-/// What the projection needs of the camera.
-#[derive(Clone, Copy, Debug)]
-struct View {
-    w2c: DMat3,
-    position: DVec3,
-    fx: f64,
-    fy: f64,
-    cx: f64,
-    cy: f64,
-    width: f64,
-    height: f64,
-}
-
 /// A projected Gaussian: kernel data and its screen box (centre, half sizes in pixels).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProjectedPerspective {
@@ -186,21 +174,8 @@ pub struct ProjectedPerspective {
     pub box_radius: DVec2,
 }
 
-fn view_of(camera: &Camera) -> View {
-    View {
-        w2c: camera.world_to_camera_rotation(),
-        position: camera.position(),
-        fx: camera.fx,
-        fy: camera.fy,
-        cx: camera.cx,
-        cy: camera.cy,
-        width: f64::from(camera.width),
-        height: f64::from(camera.height),
-    }
-}
-
 fn project_with(
-    v: &View,
+    v: &Pinhole,
     t: DVec3,
     cov: DMat3,
     opacity: f64,
@@ -324,7 +299,7 @@ pub fn project_perspective(
     camera: &Camera,
     options: &RenderOptions,
 ) -> (ScreenSplats, PerspectiveKernel) {
-    let view = view_of(camera);
+    let view = Pinhole::of(camera);
     let clip = (f64::from(options.near), f64::from(options.far));
     let (screen, splats) = gather_visible(set.len(), options.outputs, |i| {
         let mean = set.means()[i].as_dvec3();
@@ -341,16 +316,9 @@ pub fn project_perspective(
             clip,
             options.antialiased,
         )?;
-        let color = if options.outputs.rgb {
-            crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
-        } else {
-            [0.0; 3]
-        };
-        let normal = if options.outputs.normal {
+        let (color, normal) = shade(set, i, mean - view.position, options.outputs, || {
             facing_normal(rot, s, mean - view.position, view.w2c, options.normal_frame)
-        } else {
-            [0.0; 3]
-        };
+        });
         let entry = ScreenEntry {
             id: i as u32,
             center: [p.box_center.x as f32, p.box_center.y as f32],
@@ -402,7 +370,7 @@ mod tests {
     #[test]
     fn closed_form_matches_the_inverse_form() {
         let cam = camera(100.0, (80, 60));
-        let view = view_of(&cam);
+        let view = Pinhole::of(&cam);
         let mean = DVec3::new(0.7, -0.4, 2.5);
         let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -0.8, 1.1);
         let p = project_with(
@@ -442,7 +410,7 @@ mod tests {
     #[test]
     fn box_bounds_the_visible_region() {
         let cam = camera(120.0, (96, 64));
-        let view = view_of(&cam);
+        let view = Pinhole::of(&cam);
         let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.2, 0.9, -0.4);
         for (mean, s, o) in [
             (DVec3::new(1.2, 0.3, 1.5), DVec3::new(0.8, 0.05, 0.1), 0.95),
@@ -477,7 +445,7 @@ mod tests {
     #[test]
     fn extremes_are_finite() {
         let cam = camera(90.0, (32, 24));
-        let view = view_of(&cam);
+        let view = Pinhole::of(&cam);
         let clip = (0.01, 1e10);
         // Log-scale −29: the dilation alone, a gsplat-sized blob (3.33 σ of √0.3 px ≈ 2 px).
         let tiny = project_with(

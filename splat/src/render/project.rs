@@ -22,10 +22,11 @@ use trisplat_geometry::Camera;
 
 use super::composite::ALPHA_THRESHOLD;
 use super::options::{RenderOptions, Rules, SplatDepth};
+use super::pinhole::Pinhole;
 use super::screen::{
-    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible,
+    Sample, ScreenEntry, ScreenSplats, SplatKernel, facing_normal, gather_visible, shade,
 };
-use crate::GaussianSet;
+use crate::gaussians::GaussianSet;
 use crate::gaussians::sigmoid;
 
 /// gsplat's `eps2d`: the screen-space dilation added to `Σ2D`'s diagonal.
@@ -141,17 +142,24 @@ impl SplatKernel for EwaKernel {
     #[inline(always)]
     fn row_span(&self, i: usize, py: f32) -> Option<(f32, f32)> {
         let s = &self.splats[i];
-        let [p, q, r] = s.span;
-        let dy = s.mean[1] - py;
-        let root_sq = q * dy * dy + r;
-        let center = s.mean[0] + p * dy;
-        if root_sq < 0.0 {
-            // Empty up to rounding: keep a margin around the vertex for safety.
-            return Some((center - SPAN_MARGIN, center + SPAN_MARGIN));
-        }
-        let root = root_sq.sqrt();
-        Some((center - root - SPAN_MARGIN, center + root + SPAN_MARGIN))
+        Some(row_bounds(s.span, s.mean, py))
     }
+}
+
+/// The columns of row `py` a splat with row-span coefficients `span` ([`EwaSplat::span`]) and
+/// projected mean `mean` can cover: `−p dy ± sqrt(q dy² + r)` around `mean_x`, widened by
+/// [`SPAN_MARGIN`].
+#[inline(always)]
+pub(crate) fn row_bounds([p, q, r]: [f32; 3], mean: [f32; 2], py: f32) -> (f32, f32) {
+    let dy = mean[1] - py;
+    let root_sq = q * dy * dy + r;
+    let center = mean[0] + p * dy;
+    if root_sq < 0.0 {
+        // Empty up to rounding: keep a margin around the vertex for safety.
+        return (center - SPAN_MARGIN, center + SPAN_MARGIN);
+    }
+    let root = root_sq.sqrt();
+    (center - root - SPAN_MARGIN, center + root + SPAN_MARGIN)
 }
 
 /// The depth offset of splat `s` at `d = mean − pixel` ([`EwaSplat::depth_slope`]): exactly 0
@@ -289,14 +297,7 @@ pub(crate) const SPAN_MARGIN: f32 = 0.5;
 
 /// What a 3DGS projection needs to know of the camera, precomputed once.
 pub(crate) struct View {
-    pub(crate) w2c: DMat3,
-    pub(crate) position: DVec3,
-    pub(crate) fx: f64,
-    pub(crate) fy: f64,
-    pub(crate) cx: f64,
-    pub(crate) cy: f64,
-    pub(crate) width: f64,
-    pub(crate) height: f64,
+    pub(crate) cam: Pinhole,
     /// `(−lower, upper)` limits of x/z in the Jacobian clamp.
     pub(crate) lim_x: (f64, f64),
     pub(crate) lim_y: (f64, f64),
@@ -328,14 +329,7 @@ impl View {
             }
         };
         Self {
-            w2c: camera.world_to_camera_rotation(),
-            position: camera.position(),
-            fx: camera.fx,
-            fy: camera.fy,
-            cx: camera.cx,
-            cy: camera.cy,
-            width,
-            height,
+            cam: Pinhole::of(camera),
             lim_x,
             lim_y,
         }
@@ -425,9 +419,115 @@ pub(crate) fn screen_footprint(
     Some(([u, w], radius))
 }
 
+/// A Gaussian's EWA screen footprint and the intermediates its vector-Jacobian product reuses.
+pub(crate) struct EwaScreen {
+    /// `x/z` and `y/z` clamped as in the Jacobian, times `z`.
+    pub(crate) tx: f64,
+    pub(crate) ty: f64,
+    /// Whether `x/z` (`y/z`) lies inside the clamp.
+    pub(crate) free: [bool; 2],
+    /// Rows of the clamped Jacobian `J`.
+    pub(crate) j0: DVec3,
+    pub(crate) j1: DVec3,
+    /// Rows of `J L`.
+    pub(crate) a0: DVec3,
+    pub(crate) a1: DVec3,
+    /// `Σ2D = (J L)(J L)ᵀ` as `(c00, c01, c11)`, before the dilation.
+    pub(crate) cov: [f64; 3],
+    /// The dilated `Σ2D` as `(d00, c01, d11)` and its determinant.
+    pub(crate) dil: [f64; 3],
+    pub(crate) det: f64,
+    /// The antialiasing compensation (1 when off).
+    pub(crate) comp: f64,
+    /// The opacity times the compensation.
+    pub(crate) opacity: f64,
+    /// Projected mean (pixels).
+    pub(crate) mean: [f64; 2],
+    /// Screen box half sizes.
+    pub(crate) radius: [f64; 2],
+    /// Conic `(a, b, c)`: the inverse of the dilated `Σ2D`.
+    pub(crate) conic: [f64; 3],
+    /// Row-span coefficients ([`EwaSplat::span`]).
+    pub(crate) span: [f32; 3],
+}
+
+/// The EWA projection of a Gaussian at camera-space position `t` (`t.z` within the clip
+/// planes) with camera-space covariance `l lᵀ` (`l = W R S`) and opacity `opacity`: the
+/// clamped Jacobian, the dilated screen covariance, the antialiasing compensation and the
+/// screen box by `o`'s rules; `None` when culled.
+#[inline(always)]
+pub(crate) fn ewa_screen(
+    v: &View,
+    o: &RenderOptions,
+    t: DVec3,
+    l: DMat3,
+    opacity: f64,
+) -> Option<EwaScreen> {
+    let z = t.z;
+    // Clamped Jacobian rows.
+    let (rx, ry) = (t.x / z, t.y / z);
+    let (cx, cy) = (
+        rx.clamp(-v.lim_x.0, v.lim_x.1),
+        ry.clamp(-v.lim_y.0, v.lim_y.1),
+    );
+    let (tx, ty) = (z * cx, z * cy);
+    let j0 = DVec3::new(v.cam.fx / z, 0.0, -v.cam.fx * tx / (z * z));
+    let j1 = DVec3::new(0.0, v.cam.fy / z, -v.cam.fy * ty / (z * z));
+    // Rows of J L: Σ2D = (J L)(J L)ᵀ.
+    let lt = l.transpose();
+    let a0 = lt * j0;
+    let a1 = lt * j1;
+    let (c00, c01, c11) = (a0.dot(a0), a0.dot(a1), a1.dot(a1));
+    let det_orig = c00 * c11 - c01 * c01;
+    let (d00, d11) = (c00 + EPS_2D, c11 + EPS_2D);
+    let det = d00 * d11 - c01 * c01;
+    if det <= 0.0 || !det.is_finite() {
+        return None;
+    }
+    let (comp, opacity) = if o.antialiased {
+        let comp = (det_orig / det).max(0.0).sqrt();
+        (comp, opacity * comp)
+    } else {
+        (1.0, opacity)
+    };
+    let u = v.cam.fx * t.x / z + v.cam.cx;
+    let w = v.cam.fy * t.y / z + v.cam.cy;
+    // `ln(255 opacity)`: the largest sigma with alpha >= 1/255 (negative, NaN or -inf for
+    // opacities below 1/255, which gsplat culls and the original rules clamp to 0 below).
+    let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
+    let (mean, radius) = screen_footprint(
+        o.rules,
+        opacity,
+        log_ratio,
+        [d00, d11, det],
+        [u, w],
+        [v.cam.width, v.cam.height],
+    )?;
+    let inv = 1.0 / det;
+    let conic = [d11 * inv, -c01 * inv, d00 * inv];
+    Some(EwaScreen {
+        tx,
+        ty,
+        free: [rx == cx, ry == cy],
+        j0,
+        j1,
+        a0,
+        a1,
+        cov: [c00, c01, c11],
+        dil: [d00, c01, d11],
+        det,
+        comp,
+        opacity,
+        mean,
+        radius,
+        conic,
+        span: row_span_coefficients(conic, log_ratio.max(0.0)),
+    })
+}
+
 fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Option<Projected> {
     let mean = set.means()[i].as_dvec3();
-    let t = v.w2c * (mean - v.position);
+    let t = v.cam.w2c * (mean - v.cam.position);
     let z = t.z;
     if !(z > f64::from(o.near) && z < f64::from(o.far)) {
         return None;
@@ -439,70 +539,28 @@ fn project_one(set: &GaussianSet, i: usize, v: &View, o: &RenderOptions) -> Opti
     // Camera-space covariance as L Lᵀ with L = W R S (no cancellation for tiny scales).
     let rot = set.rotation_matrix(i);
     let s = set.scale(i).as_dvec3();
-    let l = v.w2c * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
-    // Clamped Jacobian rows.
-    let tx = z * (t.x / z).clamp(-v.lim_x.0, v.lim_x.1);
-    let ty = z * (t.y / z).clamp(-v.lim_y.0, v.lim_y.1);
-    let j0 = DVec3::new(v.fx / z, 0.0, -v.fx * tx / (z * z));
-    let j1 = DVec3::new(0.0, v.fy / z, -v.fy * ty / (z * z));
-    // Rows of J L: Σ2D = (J L)(J L)ᵀ.
-    let lt = l.transpose();
-    let a0 = lt * j0;
-    let a1 = lt * j1;
-    let c00 = a0.dot(a0);
-    let c01 = a0.dot(a1);
-    let c11 = a1.dot(a1);
-    let det_orig = c00 * c11 - c01 * c01;
-    let (c00, c11) = (c00 + EPS_2D, c11 + EPS_2D);
-    let det = c00 * c11 - c01 * c01;
-    if det <= 0.0 || !det.is_finite() {
-        return None;
-    }
-    let opacity = if o.antialiased {
-        opacity * (det_orig / det).max(0.0).sqrt()
-    } else {
-        opacity
-    };
-    let u = v.fx * t.x / z + v.cx;
-    let w = v.fy * t.y / z + v.cy;
-    // `ln(255 opacity)`: the largest sigma with alpha >= 1/255 (negative, NaN or -inf for
-    // opacities below 1/255, which gsplat culls and the original rules clamp to 0 below).
-    let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
-    let ([u, w], radius) = screen_footprint(
-        o.rules,
-        opacity,
-        log_ratio,
-        [c00, c11, det],
-        [u, w],
-        [v.width, v.height],
-    )?;
-    let inv = 1.0 / det;
+    let l = v.cam.w2c * DMat3::from_cols(rot.x_axis * s.x, rot.y_axis * s.y, rot.z_axis * s.z);
+    let e = ewa_screen(v, o, t, l, opacity)?;
     let (slope, reach) = match o.splat_depth {
         SplatDepth::Mean => ([0.0; 2], 0.0),
-        SplatDepth::Ray => ray_depth_slope(v.w2c * rot, s, t, [v.fx, v.fy]),
+        SplatDepth::Ray => ray_depth_slope(v.cam.w2c * rot, s, t, [v.cam.fx, v.cam.fy]),
     };
-    let color = if o.outputs.rgb {
-        crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - v.position)
-    } else {
-        [0.0; 3]
-    };
-    let normal = if o.outputs.normal {
-        facing_normal(rot, s, mean - v.position, v.w2c, o.normal_frame)
-    } else {
-        [0.0; 3]
-    };
+    let (color, normal) = shade(set, i, mean - v.cam.position, o.outputs, || {
+        facing_normal(rot, s, mean - v.cam.position, v.cam.w2c, o.normal_frame)
+    });
+    let [u, w] = e.mean;
     Some(Projected {
         id: i as u32,
         center: [u as f32, w as f32],
-        radius: [radius[0] as f32, radius[1] as f32],
+        radius: [e.radius[0] as f32, e.radius[1] as f32],
         splat: EwaSplat {
             mean: [u as f32, w as f32],
-            conic: [(c11 * inv) as f32, (-c01 * inv) as f32, (c00 * inv) as f32],
-            opacity: opacity as f32,
+            conic: e.conic.map(|c| c as f32),
+            opacity: e.opacity as f32,
             depth: z as f32,
             depth_slope: slope,
             depth_reach: reach,
-            span: row_span_coefficients([c11 * inv, -c01 * inv, c00 * inv], log_ratio.max(0.0)),
+            span: e.span,
         },
         color,
         normal,

@@ -21,6 +21,8 @@ use rayon::prelude::*;
 use trisplat_geometry::mesh_render::NormalFrame;
 
 use super::options::Outputs;
+use crate::gaussians::GaussianSet;
+use crate::sh::eval_rgb;
 
 /// One splat's contribution at one pixel, before the compositing rules are applied.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -185,6 +187,21 @@ pub struct ScreenEntry {
     pub normal: [f32; 3],
 }
 
+impl ScreenEntry {
+    /// The entry of Gaussian `id` without colour or normal (the differentiable renderer keeps
+    /// those with its own per-splat data): box `center ± radius`, sort depth `depth`.
+    pub(crate) fn unshaded(id: usize, center: [f32; 2], radius: [f32; 2], depth: f64) -> Self {
+        Self {
+            id: id as u32,
+            center,
+            radius,
+            depth: depth as f32,
+            color: [0.0; 3],
+            normal: [0.0; 3],
+        }
+    }
+}
+
 /// Gaussians projected per parallel chunk (results do not depend on the thread count).
 const PROJECT_CHUNK: usize = 4096;
 
@@ -211,6 +228,25 @@ pub(crate) fn gather_visible<S: Send>(
         splats.push(splat);
     }
     (screen, splats)
+}
+
+/// Gaussian `i`'s colour seen along `view_dir` (camera to mean) and its normal (`normal()`),
+/// each only when `outputs` asks for it (zeros otherwise).
+#[inline]
+pub(crate) fn shade(
+    set: &GaussianSet,
+    i: usize,
+    view_dir: DVec3,
+    outputs: Outputs,
+    normal: impl FnOnce() -> [f32; 3],
+) -> ([f32; 3], [f32; 3]) {
+    let color = if outputs.rgb {
+        eval_rgb(set.sh_degree(), set.sh_coeffs(i), view_dir)
+    } else {
+        [0.0; 3]
+    };
+    let normal = if outputs.normal { normal() } else { [0.0; 3] };
+    (color, normal)
 }
 
 /// The Gaussian's shortest axis (first of equal ones) turned to face the camera (against

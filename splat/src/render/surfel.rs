@@ -35,13 +35,12 @@ use glam::{DMat3, DVec2, DVec3};
 use trisplat_geometry::Camera;
 use trisplat_geometry::mesh_render::NormalFrame;
 
-use super::composite::{
-    ALPHA_THRESHOLD, CompositeRules, MedianRule, ORIGINAL_MAX_ALPHA, STOP_TRANSMITTANCE,
-};
+use super::composite::{ALPHA_THRESHOLD, CompositeRules, MedianRule};
 use super::options::RenderOptions;
-use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel, gather_visible};
+use super::pinhole::Pinhole;
+use super::screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel, gather_visible, shade};
 use super::tiles::{TILE_SIZE, TileRect, tile_range};
-use crate::GaussianSet;
+use crate::gaussians::GaussianSet;
 use crate::gaussians::sigmoid;
 
 /// hbb1's `FilterInvSquare`: `rho2d = 2 |centre − pixel|²`, a screen-space Gaussian of
@@ -62,15 +61,10 @@ pub const SURFEL_NEAR: f32 = 0.2;
 /// would fall strictly below 1e-4, integer pixel centres (the module shifts the principal
 /// point), every pixel of the touched tiles, 3DGS `getRect` tiles, median depth from the last
 /// splat met while `T > 0.5`.
+/// These are the original 3DGS rules but for the median.
 pub const SURFEL_RULES: CompositeRules = CompositeRules {
-    max_alpha: ORIGINAL_MAX_ALPHA,
-    min_alpha: ALPHA_THRESHOLD,
-    stop_transmittance: STOP_TRANSMITTANCE,
-    stop_inclusive: false,
-    pixel_offset: 0.0,
-    clip_to_box: false,
-    tile_rect: TileRect::Original3dgs,
     median: MedianRule::LastWhileAboveHalf,
+    ..CompositeRules::ORIGINAL_3DGS
 };
 
 /// Per-pixel data of one projected surfel.
@@ -100,6 +94,26 @@ pub struct SurfelSample {
     pub rho2d: f64,
 }
 
+/// A surfel met by a pixel's ray: [`SurfelSplat::evaluate`]'s values and the intermediates of
+/// its vector-Jacobian product.
+pub(crate) struct SurfelHit {
+    /// `k = x Tw − Tu`, `l = y Tw − Tv`, `p = k × l`.
+    pub(crate) k: DVec3,
+    pub(crate) l: DVec3,
+    pub(crate) p: DVec3,
+    /// Surfel coordinates of the intersection.
+    pub(crate) s: DVec2,
+    /// Whether the ray-splat term won (`rho3d ≤ rho2d`).
+    pub(crate) on_disc: bool,
+    /// `exp(−rho / 2)`.
+    pub(crate) falloff: f64,
+    /// `opacity × falloff`, unclamped.
+    pub(crate) alpha: f64,
+    pub(crate) depth: f64,
+    pub(crate) rho3d: f64,
+    pub(crate) rho2d: f64,
+}
+
 impl SurfelSplat {
     /// Evaluates the surfel at pixel coordinates `(x, y)` (integer values are pixel centres);
     /// `None` when the ray is parallel to the surfel (hbb1's `BACKFACE_CULL`), the depth is
@@ -107,6 +121,18 @@ impl SurfelSplat {
     #[inline]
     #[must_use]
     pub fn evaluate(&self, x: f64, y: f64) -> Option<SurfelSample> {
+        self.hit(x, y).map(|h| SurfelSample {
+            alpha: h.alpha,
+            depth: h.depth,
+            rho3d: h.rho3d,
+            rho2d: h.rho2d,
+        })
+    }
+
+    /// [`Self::evaluate`] with the intermediates its vector-Jacobian product needs (the
+    /// differentiable renderer's 2DGS mode).
+    #[inline(always)]
+    pub(crate) fn hit(&self, x: f64, y: f64) -> Option<SurfelHit> {
         let [tu, tv, tw] = self.rows;
         let k = x * tw - tu;
         let l = y * tw - tv;
@@ -117,7 +143,8 @@ impl SurfelSplat {
         let s = DVec2::new(p.x / p.z, p.y / p.z);
         let rho3d = s.length_squared();
         let rho2d = FILTER_INV_SQUARE * (self.center - DVec2::new(x, y)).length_squared();
-        let (rho, depth) = if rho3d <= rho2d {
+        let on_disc = rho3d <= rho2d;
+        let (rho, depth) = if on_disc {
             (rho3d, s.x * tw.x + s.y * tw.y + tw.z)
         } else {
             (rho2d, tw.z)
@@ -125,8 +152,15 @@ impl SurfelSplat {
         if depth.is_nan() || depth < self.near || !rho.is_finite() {
             return None;
         }
-        Some(SurfelSample {
-            alpha: self.opacity * (-0.5 * rho).exp(),
+        let falloff = (-0.5 * rho).exp();
+        Some(SurfelHit {
+            k,
+            l,
+            p,
+            s,
+            on_disc,
+            falloff,
+            alpha: self.opacity * falloff,
             depth,
             rho3d,
             rho2d,
@@ -255,26 +289,21 @@ pub struct ProjectedSurfel {
 /// What the surfel projection needs of the camera.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct View {
-    pub(crate) w2c: DMat3,
-    pub(crate) position: DVec3,
-    pub(crate) fx: f64,
-    pub(crate) fy: f64,
-    /// Principal point shifted by −0.5 (integer pixel centres).
-    pub(crate) cx: f64,
-    pub(crate) cy: f64,
+    /// The camera, its principal point shifted by −0.5 (integer pixel centres).
+    pub(crate) cam: Pinhole,
     pub(crate) near: f64,
     pub(crate) far: f64,
 }
 
 impl View {
     pub(crate) fn new(camera: &Camera, near: f64, far: f64) -> Self {
+        let cam = Pinhole::of(camera);
         Self {
-            w2c: camera.world_to_camera_rotation(),
-            position: camera.position(),
-            fx: camera.fx,
-            fy: camera.fy,
-            cx: camera.cx - 0.5,
-            cy: camera.cy - 0.5,
+            cam: Pinhole {
+                cx: cam.cx - 0.5,
+                cy: cam.cy - 0.5,
+                ..cam
+            },
             near,
             far,
         }
@@ -306,13 +335,19 @@ pub(crate) fn project_with(
     scale: DVec2,
     opacity: f64,
 ) -> Option<ProjectedSurfel> {
-    let t = v.w2c * (mean - v.position);
+    let t = v.cam.w2c * (mean - v.cam.position);
     if !(t.z > v.near && t.z < v.far) {
         return None;
     }
-    let tu = v.w2c * (rotation.x_axis * scale.x);
-    let tv = v.w2c * (rotation.y_axis * scale.y);
-    let row = |c: DVec3| DVec3::new(v.fx * c.x + v.cx * c.z, v.fy * c.y + v.cy * c.z, c.z);
+    let tu = v.cam.w2c * (rotation.x_axis * scale.x);
+    let tv = v.cam.w2c * (rotation.y_axis * scale.y);
+    let row = |c: DVec3| {
+        DVec3::new(
+            v.cam.fx * c.x + v.cam.cx * c.z,
+            v.cam.fy * c.y + v.cam.cy * c.z,
+            c.z,
+        )
+    };
     // Columns of M = K [Tu Tv p]; hbb1's Tu, Tv, Tw are its rows.
     let (c0, c1, c2) = (row(tu), row(tv), row(t));
     let rows = [
@@ -335,7 +370,7 @@ pub(crate) fn project_with(
     if !(center.is_finite() && radius.is_finite()) {
         return None;
     }
-    let n = v.w2c * rotation.z_axis;
+    let n = v.cam.w2c * rotation.z_axis;
     let normal_camera = if n.z < 0.0 { n } else { -n };
     Some(ProjectedSurfel {
         splat: SurfelSplat {
@@ -393,21 +428,14 @@ pub fn project_surfels(
         if x0 >= x1 || y0 >= y1 {
             return None;
         }
-        let color = if options.outputs.rgb {
-            crate::sh::eval_rgb(set.sh_degree(), set.sh_coeffs(i), mean - view.position)
-        } else {
-            [0.0; 3]
-        };
-        let normal = if options.outputs.normal {
+        let (color, normal) = shade(set, i, mean - view.cam.position, options.outputs, || {
             match options.normal_frame {
                 NormalFrame::Camera => p.normal_camera,
                 NormalFrame::World => c2w * p.normal_camera,
             }
             .as_vec3()
             .to_array()
-        } else {
-            [0.0; 3]
-        };
+        });
         let entry = ScreenEntry {
             id: i as u32,
             center: [p.splat.center.x as f32, p.splat.center.y as f32],

@@ -18,6 +18,46 @@ pub enum TileRect {
     Original3dgs,
 }
 
+/// First local index `>= floor(v − start)`, clamped to `0..=n` (no `floor` call: the baseline
+/// x86-64 target has no rounding instruction; truncation equals floor for the values kept).
+#[inline(always)]
+pub(crate) fn lo(v: f32, start: u32, n: usize) -> usize {
+    ((v - start as f32).max(0.0) as usize).min(n)
+}
+
+/// One past a local index `>= ceil(v − start)` (conservative by at most one), clamped to `0..=n`.
+#[inline(always)]
+pub(crate) fn hi(v: f32, start: u32, n: usize) -> usize {
+    let x = v - start as f32 + 1.0;
+    if x > 0.0 { (x as usize + 1).min(n) } else { 0 }
+}
+
+/// The local pixel rectangle `(lx0, lx1, ly0, ly1)` of a splat in the `tw × th` tile at
+/// `(x0, y0)`: with `clip`, the pixel centres `j + off` within its screen box `center ± radius`
+/// (rounded outwards); otherwise the whole tile.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn box_pixels(
+    clip: bool,
+    center: [f32; 2],
+    radius: [f32; 2],
+    off: f32,
+    (x0, y0): (u32, u32),
+    (tw, th): (usize, usize),
+) -> (usize, usize, usize, usize) {
+    if clip {
+        let (c, r) = (center, radius);
+        (
+            lo(c[0] - r[0] - off, x0, tw),
+            hi(c[0] + r[0] - off, x0, tw),
+            lo(c[1] - r[1] - off, y0, th),
+            hi(c[1] + r[1] - off, y0, th),
+        )
+    } else {
+        (0, tw, 0, th)
+    }
+}
+
 /// The tile rectangle `[x0, x1) × [y0, y1)` of a box, clamped to the grid.
 #[inline]
 #[must_use]

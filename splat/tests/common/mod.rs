@@ -3,7 +3,7 @@
 use glam::{DVec3, Quat, Vec3};
 use trisplat_geometry::Camera;
 use trisplat_splat::GaussianSet;
-use trisplat_splat::gaussians::{GaussianParts, ParameterSpace, ScaleDims, logit};
+use trisplat_splat::{GaussianParts, ParameterSpace, ScaleDims, logit};
 
 /// World-space Gaussians (SH degree 0, black) with these means, rotations, log-scales and
 /// opacities.

@@ -6,8 +6,8 @@ use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
 use glam::DVec3;
 
-use crate::gaussians::sh_coeffs_per_channel;
-use crate::{GaussianSet, ScaleDims};
+use crate::gaussians::{GaussianSet, ScaleDims};
+use crate::sh::sh_coeffs_per_channel;
 
 /// The parameters of world-space Gaussians as the differentiable renderer reads them, in `f64`:
 /// the raw (unactivated) values a fitter optimises. Implemented for [`GaussianSet`] (its `f32`
@@ -44,7 +44,7 @@ impl DiffParams for GaussianSet {
         GaussianSet::len(self)
     }
     fn is_world(&self) -> bool {
-        self.space() != crate::ParameterSpace::Local
+        self.space() != crate::gaussians::ParameterSpace::Local
     }
     fn sh_degree(&self) -> u8 {
         GaussianSet::sh_degree(self).min(3)

@@ -9,11 +9,10 @@
 use glam::{DMat3, DVec3};
 
 use super::params::DiffParams;
-use crate::gaussians::sh_coeffs_per_channel;
-use crate::render::composite::ALPHA_THRESHOLD;
 use crate::render::options::{RenderOptions, Rules};
 pub(crate) use crate::render::project::View;
-use crate::render::project::{EPS_2D, row_span_coefficients, screen_footprint};
+use crate::render::project::ewa_screen;
+use crate::sh::sh_coeffs_per_channel;
 use crate::sh::{SH_C1, SH_C2, SH_C3, sh_basis};
 
 /// One projected Gaussian's screen quantities, in `f64`.
@@ -268,7 +267,7 @@ fn trace<P: DiffParams + ?Sized>(
     o: &RenderOptions,
 ) -> Option<(Screen, Trace)> {
     let mean = p.mean(i);
-    let t = v.w2c * (mean - v.position);
+    let t = v.cam.w2c * (mean - v.cam.position);
     let z = t.z;
     if !(z > f64::from(o.near) && z < f64::from(o.far)) {
         return None;
@@ -280,76 +279,43 @@ fn trace<P: DiffParams + ?Sized>(
     let (qn, qnorm) = normalized(p.rotation(i));
     let rot = rotation_matrix(qn);
     let scale = p.log_scale(i).exp();
-    let l = v.w2c
+    let l = v.cam.w2c
         * DMat3::from_cols(
             rot.x_axis * scale.x,
             rot.y_axis * scale.y,
             rot.z_axis * scale.z,
         );
-    let (rx, ry) = (t.x / z, t.y / z);
-    let cx = rx.clamp(-v.lim_x.0, v.lim_x.1);
-    let cy = ry.clamp(-v.lim_y.0, v.lim_y.1);
-    let (tx, ty) = (z * cx, z * cy);
-    let j0 = DVec3::new(v.fx / z, 0.0, -v.fx * tx / (z * z));
-    let j1 = DVec3::new(0.0, v.fy / z, -v.fy * ty / (z * z));
-    let lt = l.transpose();
-    let a0 = lt * j0;
-    let a1 = lt * j1;
-    let (c00, c01, c11) = (a0.dot(a0), a0.dot(a1), a1.dot(a1));
-    let det_orig = c00 * c11 - c01 * c01;
-    let (d00, d11) = (c00 + EPS_2D, c11 + EPS_2D);
-    let det = d00 * d11 - c01 * c01;
-    if det <= 0.0 || !det.is_finite() {
-        return None;
-    }
-    let comp = if o.antialiased {
-        (det_orig / det).max(0.0).sqrt()
-    } else {
-        1.0
-    };
-    let opacity = sig * comp;
-    let u = v.fx * t.x / z + v.cx;
-    let w = v.fy * t.y / z + v.cy;
-    let log_ratio = (opacity / f64::from(ALPHA_THRESHOLD)).ln();
-    let ([u, w], radius) = screen_footprint(
-        o.rules,
-        opacity,
-        log_ratio,
-        [d00, d11, det],
-        [u, w],
-        [v.width, v.height],
-    )?;
-    let inv = 1.0 / det;
-    let (color, color_trace) = self::color(p, i, v.position);
+    let e = ewa_screen(v, o, t, l, sig)?;
+    let (color, color_trace) = self::color(p, i, v.cam.position);
     let screen = Screen {
-        mean: [u, w],
-        conic: [d11 * inv, -c01 * inv, d00 * inv],
-        opacity,
+        mean: e.mean,
+        conic: e.conic,
+        opacity: e.opacity,
         depth: z,
         color,
-        radius,
-        span: row_span_coefficients([d11 * inv, -c01 * inv, d00 * inv], log_ratio.max(0.0)),
+        radius: e.radius,
+        span: e.span,
     };
     let trace = Trace {
         t,
-        free_x: rx == cx,
-        free_y: ry == cy,
-        tx,
-        ty,
-        j0,
-        j1,
+        free_x: e.free[0],
+        free_y: e.free[1],
+        tx: e.tx,
+        ty: e.ty,
+        j0: e.j0,
+        j1: e.j1,
         l,
         rot,
         qn,
         qnorm,
         scale,
-        a0,
-        a1,
-        cov: [c00, c01, c11],
-        dil: [d00, c01, d11],
-        det,
+        a0: e.a0,
+        a1: e.a1,
+        cov: e.cov,
+        dil: e.dil,
+        det: e.det,
         sig,
-        comp,
+        comp: e.comp,
         color: color_trace,
     };
     Some((screen, trace))
@@ -462,7 +428,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
         tr.j0 * g_a0.z + tr.j1 * g_a1.z,
     );
     // L = W R S.
-    let g_m = v.w2c.transpose() * g_l;
+    let g_m = v.cam.w2c.transpose() * g_l;
     let cols = [g_m.x_axis, g_m.y_axis, g_m.z_axis];
     let rcols = [tr.rot.x_axis, tr.rot.y_axis, tr.rot.z_axis];
     let sc = tr.scale.to_array();
@@ -475,7 +441,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     out.rotation = quaternion_vjp(tr.qn, tr.qnorm, g_r);
 
     // Camera-space mean t: the Jacobian, the projected mean and the depth.
-    let (fx, fy) = (v.fx, v.fy);
+    let (fx, fy) = (v.cam.fx, v.cam.fy);
     let z = tr.t.z;
     let (rz, rz2) = (1.0 / z, 1.0 / (z * z));
     let rz3 = rz2 * rz;
@@ -499,7 +465,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     g_t.y += gw * fy * rz;
     g_t.z -= (gu * fx * tr.t.x + gw * fy * tr.t.y) * rz2;
     g_t.z += g.depth;
-    g_mean += v.w2c.transpose() * g_t;
+    g_mean += v.cam.w2c.transpose() * g_t;
     out.mean = g_mean.to_array();
     Some(out)
 }

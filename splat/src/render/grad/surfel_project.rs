@@ -90,7 +90,7 @@ fn activate<P: DiffParams + ?Sized>(p: &P, i: usize) -> Activated {
 
 /// The camera-space third axis and the sign that turns it to face the camera (z ≤ 0).
 fn facing(v: &View, rot: &DMat3) -> (DVec3, f64) {
-    let n = v.w2c * rot.z_axis;
+    let n = v.cam.w2c * rot.z_axis;
     if n.z < 0.0 { (n, 1.0) } else { (-n, -1.0) }
 }
 
@@ -108,9 +108,9 @@ fn trace<P: DiffParams + ?Sized>(
     let (n_camera, _) = facing(v, &a.rot);
     let normal = match frame {
         NormalFrame::Camera => n_camera,
-        NormalFrame::World => v.w2c.transpose() * n_camera,
+        NormalFrame::World => v.cam.w2c.transpose() * n_camera,
     };
-    let (color, color_trace) = color(p, i, v.position);
+    let (color, color_trace) = color(p, i, v.cam.position);
     let screen = SurfelScreen {
         splat: s.splat,
         radius: s.radius,
@@ -168,7 +168,13 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     let [gu, gv, gw] = g_rows;
     let column = |m: usize| DVec3::new(gu[m], gv[m], gw[m]);
     // Column = K c with K c = (fx c.x + cx c.z, fy c.y + cy c.z, c.z).
-    let through_k = |g: DVec3| DVec3::new(v.fx * g.x, v.fy * g.y, v.cx * g.x + v.cy * g.y + g.z);
+    let through_k = |g: DVec3| {
+        DVec3::new(
+            v.cam.fx * g.x,
+            v.cam.fy * g.y,
+            v.cam.cx * g.x + v.cam.cy * g.y + g.z,
+        )
+    };
     let (g_tu, g_tv, g_t) = (
         through_k(column(0)),
         through_k(column(1)),
@@ -176,7 +182,7 @@ pub(crate) fn project_vjp<P: DiffParams + ?Sized>(
     );
 
     // Tu = W R e_x s_u, Tv = W R e_y s_v, p = W (mean − camera), n = ±W R e_z.
-    let wt = v.w2c.transpose();
+    let wt = v.cam.w2c.transpose();
     let (g_axis_u, g_axis_v) = (wt * g_tu, wt * g_tv);
     let (_, flip) = facing(v, &a.rot);
     let g_axis_n = flip
