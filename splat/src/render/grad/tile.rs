@@ -339,7 +339,10 @@ pub(super) fn forward_tile<F: Real, K: GradKernel<F, N>, const N: usize>(
 /// `Σ_{j > k} w_j q_j + g_T T_final` (`g_T` = d loss / d T_final):
 /// `d loss / d α_k = T_k q_k − behind / (1 − α_k)` ([`unblend`]).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the tile loop's inputs, borrowed separately so the kernel and the slots can be shared"
+)]
 pub(super) fn backward_tile<F: Real, K: GradKernel<F, N>, const N: usize>(
     kernel: &K,
     items: &[K::Item],
