@@ -170,7 +170,7 @@ fn link_thumbnails(
 
 /// The first field (by report name) in which two shard reports are not the same job.
 fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
-    let fields: [(&'static str, bool); 14] = [
+    let fields: [(&'static str, bool); 15] = [
         ("version", a.version == b.version),
         ("template", a.template == b.template),
         (
@@ -187,6 +187,7 @@ fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
         ("tau", a.tau == b.tau),
         ("tau_fraction", a.tau_fraction == b.tau_fraction),
         ("resolved", a.resolved == b.resolved),
+        ("gaussians_used", a.gaussians_used == b.gaussians_used),
         (
             "methods",
             a.methods.len() == b.methods.len()

@@ -175,7 +175,7 @@ pub struct GaussiansUsed {
     pub hidden: usize,
     /// Left out as floaters (statistical outliers among the rest).
     pub floaters: usize,
-    /// Poses rendered to decide: the rest pose and sampled frames of the run (0: not decided).
+    /// Poses rendered to decide: the rest pose and frames sampled over the track (0: not decided).
     #[serde(default)]
     pub poses: usize,
 }

@@ -422,7 +422,8 @@ impl Session {
     }
 
     /// Which Gaussians the point methods use ([`crate::Visibility`]): the Gaussians' geometry
-    /// rendered at the rest pose and at up to [`VISIBILITY_FRAMES`] frames spread over the run,
+    /// rendered at the rest pose and at up to [`VISIBILITY_FRAMES`] frames spread over the whole
+    /// track (whatever frames this run meshes, so that shards decide as one run does),
     /// by the tsdf rig with at least the default views and resolution (a coarse rig would miss
     /// small Gaussians between its pixel centres). A sampled frame that cannot be deformed is
     /// skipped (the run reports it when it gets there).
@@ -455,7 +456,10 @@ impl Session {
                 cause,
             })?;
         let mut posed = Vec::new();
-        for frame in sample_frames(self.frames.clone(), VISIBILITY_FRAMES) {
+        // Sampled over the whole track, not the run's frames, so that every shard of a track
+        // decides the same (docs/shards.md: shards merged equal one run).
+        let track = 0..self.animation.get().frame_count();
+        for frame in sample_frames(track, VISIBILITY_FRAMES) {
             let Ok(positions) = self.positions(frame) else {
                 continue;
             };
@@ -607,7 +611,7 @@ impl Session {
     }
 
     /// Which Gaussians the point methods (delaunay, alpha) use, decided once when the session
-    /// opened, from the rest pose and frames sampled over the run ([`crate::Visibility`]).
+    /// opened, from the rest pose and frames sampled over the whole track ([`crate::Visibility`]).
     #[must_use]
     pub fn visibility(&self) -> &Visibility {
         &self.visibility

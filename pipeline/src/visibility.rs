@@ -5,7 +5,8 @@
 //!
 //! Decided once per run and applied to every frame (the same Gaussians in every frame, so the
 //! incremental Delaunay mesher keeps one point set), from the rest pose and frames sampled
-//! over the run ([`VISIBILITY_FRAMES`] of them), so that what one of them exposes (the
+//! over the whole track ([`VISIBILITY_FRAMES`] of them, whatever frames the run meshes, so
+//! that the shards of a track decide as one run does), so that what one of them exposes (the
 //! inside of an opening mouth) is kept:
 //!
 //! 1. **hidden**: the Gaussians of each pose are rendered (3DGS, gsplat's rules) from the tsdf
@@ -38,8 +39,9 @@ use trisplat_splat::render::{Outputs, RenderOptions, render};
 use crate::config::{DEFAULT_FOV_DEG, VisibilityRule};
 use crate::records::GaussiansUsed;
 
-/// Frames of a run, besides the rest pose, whose poses the session gives [`decide`] (evenly
-/// spaced over the run; every frame of a shorter run).
+/// Frames of the track, besides the rest pose, whose poses the session gives [`decide`] (evenly
+/// spaced over the whole track, whatever frames the run meshes; every frame of a shorter
+/// track).
 pub const VISIBILITY_FRAMES: usize = 4;
 
 /// Which Gaussians the point methods use.

@@ -297,7 +297,7 @@ impl Session {
     }
 
     /// Which Gaussians delaunay and alpha mesh (decided when the session opened, from the
-    /// rest pose and frames sampled over the run, docs/conventions.md §6): a dict of ``total``,
+    /// rest pose and frames sampled over the whole track, docs/conventions.md §6): a dict of ``total``,
     /// ``kept``, ``hidden``, ``floaters``, ``poses`` and the rule (``min_contribution``,
     /// ``floater_std_ratio``, ``floater_neighbors``), as ``gaussians_used`` in report.json.
     #[getter]

@@ -132,7 +132,7 @@ def test_session_of_a_lam_avatar_folder():
     used = session.gaussians_used  # the mouth's and eyes' inner Gaussians render nothing
     assert used["hidden"] > 0 and used["floaters"] == 0 and used["floater_std_ratio"] is None
     assert used["kept"] + used["hidden"] == used["total"] == len(session.gaussians)
-    assert used["poses"] == 3  # the rest pose and the run's two frames
+    assert used["poses"] == 5  # the rest pose and 4 frames spread over the 10-frame track
     every = trisplat.Session(lam, animation=str(lam / "expression.json"), methods=["alpha"],
                              min_contribution=0.0, floater_std_ratio=1.0, tsdf_alpha_cut=0.25)
     assert every.gaussians_used["hidden"] == 0 and every.gaussians_used["floaters"] > 0

@@ -22,7 +22,7 @@ pub const DEFAULT_FLOATER_NEIGHBORS: usize = 20;
 pub struct VisibilityRule {
     /// Delaunay and alpha: leave out the Gaussians whose largest blending weight (alpha x
     /// transmittance) at any pixel of the tsdf rig's views of the rest pose and of 4 frames
-    /// spread over the run is below W: they change no pixel by that much, such as those
+    /// spread over the whole track is below W: they change no pixel by that much, such as those
     /// inside the closed mouth (the default is one 8-bit step; 0 keeps them all; tsdf renders
     /// every Gaussian in each frame anyway; docs/conventions.md §6).
     #[cfg_attr(feature = "cli", arg(long, value_name = "W",
