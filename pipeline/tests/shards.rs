@@ -40,12 +40,19 @@ fn config(methods: &[Method], frames: &str, out: &Path) -> ExtractConfig {
 }
 
 fn extract(methods: &[Method], frames: &str, out: &Path) -> Report {
-    run(&config(methods, frames, out), RunControl::default(), &mut |_| {}).expect("run")
+    run(
+        &config(methods, frames, out),
+        RunControl::default(),
+        &mut |_| {},
+    )
+    .expect("run")
 }
 
 /// A fresh folder under the target directory.
 fn fresh_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("shards").join(name);
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("shards")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("dir");
     dir
@@ -60,7 +67,11 @@ fn any_split_of_the_track_merges_to_one_run() {
     assert_eq!(one.frames, (0..10).collect::<Vec<_>>());
     let used = one.gaussians_used.expect("point methods ran");
     assert!(used.hidden > 0, "the fixture hides Gaussians: {used:?}");
-    for split in [&["0..5", "5..10"][..], &["0..1", "1..4", "4..10"], &["0..9", "9..10"]] {
+    for split in [
+        &["0..5", "5..10"][..],
+        &["0..1", "1..4", "4..10"],
+        &["0..9", "9..10"],
+    ] {
         let name = split.join("_");
         let shards: Vec<PathBuf> = split
             .iter()
