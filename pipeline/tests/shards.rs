@@ -1,7 +1,8 @@
 //! Shards merged equal one run, byte for byte (docs/shards.md): whatever a run decides once
 //! (here which Gaussians delaunay and alpha mesh) is a function of the whole track, not of
-//! the shard's frames. On the LAM fixture, whose closed mouth and eyes hide Gaussians that
-//! some frames expose, over several splits.
+//! the shard's frames. On the LAM fixture driven by a track whose mouth is closed for seven
+//! frames and wide open for the last three (exposing Gaussians the closed mouth hides), over
+//! several splits.
 
 use std::path::{Path, PathBuf};
 
@@ -9,17 +10,34 @@ use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::config::{BindOptions, GaussianLayout, OutputOptions, OutputTarget};
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Report, RunControl, merge, run};
 
-/// The LAM fixture's track (10 frames) meshed by `methods` over `frames` into `out`: frame
-/// files and report only.
-fn config(methods: &[Method], frames: &str, out: &Path) -> ExtractConfig {
+/// A 10-frame weights track for the fixture's targets: the mouth closed in frames 0..7, the
+/// jaw open and the tongue out in frames 7..10.
+fn opening_mouth(dir: &Path) -> PathBuf {
+    let frames: Vec<String> = (0..10)
+        .map(|i| {
+            let open = if i < 7 { 0 } else { 1 };
+            format!(
+                r#"{{"weights": [{open}, 0, 0, {open}], "time": {}, "rotation": []}}"#,
+                f64::from(i) / 30.0
+            )
+        })
+        .collect();
+    let text = format!(
+        r#"{{"names": ["jawOpen", "mouthSmileLeft", "eyeBlinkLeft", "tongueOut"], "frames": [{}]}}"#,
+        frames.join(", ")
+    );
+    let path = dir.join("opening_mouth.json");
+    std::fs::write(&path, text).expect("track");
+    path
+}
+
+/// The LAM fixture driven by `track` (10 frames), meshed by `methods` over `frames` into
+/// `out`: frame files and report only.
+fn config(track: &Path, methods: &[Method], frames: &str, out: &Path) -> ExtractConfig {
     let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
     ExtractConfig {
         template: avatar.template,
-        animation: Some(
-            trisplat_fixtures::path("lam_mini/expression.json")
-                .display()
-                .to_string(),
-        ),
+        animation: Some(track.display().to_string()),
         gaussians: Some(avatar.gaussians),
         methods: methods.to_vec(),
         output: out.to_path_buf(),
@@ -39,13 +57,9 @@ fn config(methods: &[Method], frames: &str, out: &Path) -> ExtractConfig {
     }
 }
 
-fn extract(methods: &[Method], frames: &str, out: &Path) -> Report {
-    run(
-        &config(methods, frames, out),
-        RunControl::default(),
-        &mut |_| {},
-    )
-    .expect("run")
+fn extract(track: &Path, methods: &[Method], frames: &str, out: &Path) -> Report {
+    let config = config(track, methods, frames, out);
+    run(&config, RunControl::default(), &mut |_| {}).expect("run")
 }
 
 /// A fresh folder under the target directory.
@@ -62,8 +76,9 @@ fn fresh_dir(name: &str) -> PathBuf {
 fn any_split_of_the_track_merges_to_one_run() {
     let methods = [Method::Delaunay, Method::Alpha];
     let dir = fresh_dir("lam");
+    let track = opening_mouth(&dir);
     let whole = dir.join("whole");
-    let one = extract(&methods, "0..10", &whole);
+    let one = extract(&track, &methods, "0..10", &whole);
     assert_eq!(one.frames, (0..10).collect::<Vec<_>>());
     let used = one.gaussians_used.expect("point methods ran");
     assert!(used.hidden > 0, "the fixture hides Gaussians: {used:?}");
@@ -78,7 +93,7 @@ fn any_split_of_the_track_merges_to_one_run() {
             .enumerate()
             .map(|(i, frames)| {
                 let out = dir.join(format!("{name}_{i}"));
-                let shard = extract(&methods, frames, &out);
+                let shard = extract(&track, &methods, frames, &out);
                 assert_eq!(shard.gaussians_used, one.gaussians_used, "shard {frames}");
                 out
             })
