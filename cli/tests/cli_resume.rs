@@ -313,6 +313,118 @@ fn two_shards_merge_to_one_run() {
     assert!(line.contains("is the run finished"), "{line}");
 }
 
+/// `--shard auto` reads a Slurm array task's or a Kubernetes pod's index; `merge` joins the
+/// shards of one split to one run, refuses an incomplete split and frames in no shard, names
+/// what is wrong, and writes nothing then.
+#[test]
+fn shards_from_the_environment_merge_and_incomplete_splits_are_refused() {
+    let dir = fresh_dir("shard_auto");
+    let (template, frames) = frames_case(&dir);
+    let through = dir.join("through");
+    run_ok(&extract_args(&template, &frames, &through));
+    let shard = |name: &str, env: &[(&str, &str)], extra: &[&str]| {
+        let out = dir.join(name);
+        let mut args = extract_args(&template, &frames, &out);
+        args.extend(["--shard", "auto"]);
+        args.extend(extra);
+        let mut command = std::process::Command::new(common::BIN);
+        command.args(&args);
+        for var in [
+            "SLURM_ARRAY_TASK_ID",
+            "SLURM_ARRAY_TASK_COUNT",
+            "SLURM_ARRAY_TASK_MIN",
+            "SLURM_ARRAY_TASK_STEP",
+            "JOB_COMPLETION_INDEX",
+        ] {
+            command.env_remove(var);
+        }
+        command.envs(env.iter().copied());
+        (out, command.output().expect("run trisplat"))
+    };
+    // An array 1-3 (`sbatch --array=1-3`): task 3 is shard 2/3, frames 4..6.
+    let slurm = |id: &'static str| {
+        let vars = [
+            ("SLURM_ARRAY_TASK_ID", id),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+        ];
+        let (out, o) = shard(&format!("slurm_{id}"), &vars, &[]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    };
+    let (a, c) = (slurm("1"), slurm("3"));
+    assert_eq!(report(&c)["frames"], serde_json::json!([4, 5]));
+    assert_eq!(
+        report(&c)["shard"],
+        serde_json::json!({"index": 2, "count": 3, "job_frames": [0, 6]})
+    );
+    let refused = dir.join("refused");
+    let line = one_error_line(&run(&["merge", s(&a), s(&c), "-o", s(&refused)]));
+    assert!(line.contains("shard(s) missing: 1/3"), "{line}");
+    assert!(!refused.exists(), "a refused merge created its folder");
+    // The middle shard from a Kubernetes pod: the same split.
+    let (b, o) = shard(
+        "k8s_1",
+        &[("JOB_COMPLETION_INDEX", "1")],
+        &["--shard-count", "3"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let merged = dir.join("merged");
+    run_ok(&["merge", s(&c), s(&a), s(&b), "-q", "-o", s(&merged)]);
+    assert_same_run(&through, &merged, "the merge of --shard auto runs");
+    let line = one_error_line(&run(&["merge", s(&a), s(&b), s(&a), "-o", s(&refused)]));
+    assert!(line.contains("is given twice"), "{line}");
+
+    // Missing and inconsistent variables: a usage error, nothing written.
+    for (vars, says) in [
+        (&[][..], "neither a Slurm array task"),
+        (
+            &[("SLURM_ARRAY_TASK_ID", "2")][..],
+            "SLURM_ARRAY_TASK_COUNT is not",
+        ),
+        (
+            &[
+                ("SLURM_ARRAY_TASK_ID", "7"),
+                ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ][..],
+            "out of range",
+        ),
+    ] {
+        let (out, o) = shard("bad", vars, &[]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{vars:?}: {stderr}");
+        assert!(
+            stderr.starts_with("error: ") && stderr.contains(says),
+            "{vars:?}: {stderr}"
+        );
+        assert!(
+            !out.exists(),
+            "{vars:?}: the refused run created its folder"
+        );
+    }
+
+    // `--frames` shards with a gap between them: the frames in none are named.
+    let frames_shard = |name: &str, range: &'static str| {
+        let out = dir.join(name);
+        let mut args = extract_args(&template, &frames, &out);
+        args.extend(["--frames", range]);
+        run_ok(&args);
+        out
+    };
+    let (x, y) = (frames_shard("x", "0..2"), frames_shard("y", "4..6"));
+    let line = one_error_line(&run(&["merge", s(&x), s(&y), "-o", s(&refused)]));
+    assert!(
+        line.contains("frame(s) 2..4 of the job are in no shard"),
+        "{line}"
+    );
+    // A shard whose run still holds its lock.
+    let held = trisplat_pipeline::FolderLock::acquire(&y).expect("lock");
+    let line = one_error_line(&run(&["merge", s(&x), s(&y), "-o", s(&refused)]));
+    assert!(line.contains("is still running"), "{line}");
+    drop(held);
+    assert!(!refused.exists());
+}
+
 /// `--gt-sequence`: one ground-truth mesh per frame. The frames of the animation themselves as
 /// ground truth score as `--gt template` does (the same surfaces); a sequence shorter than the
 /// frames is refused naming the option; `--gt` and `--gt-sequence` exclude each other.

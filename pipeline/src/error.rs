@@ -360,6 +360,12 @@ pub enum PipelineError {
         /// Why.
         problem: String,
     },
+    /// A `--shard` that cannot be taken (no frame for it, `auto` without a job's variables).
+    #[error("{problem}")]
+    Shard {
+        /// What is wrong, naming the values.
+        problem: String,
+    },
     /// Shards that cannot be merged.
     #[error("{path}: cannot merge: {problem}")]
     Merge {

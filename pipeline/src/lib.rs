@@ -91,7 +91,8 @@ mod session;
 mod visibility;
 
 pub use config::{
-    ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl,
+    ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl, Shard,
+    ShardOptions, ShardSpec,
 };
 pub use error::PipelineError;
 pub use event::Event;

@@ -44,6 +44,19 @@ impl FolderLock {
             Err(TryLockError::Error(cause)) => Err(PipelineError::Lock { path, cause }),
         }
     }
+
+    /// Takes the lock of `dir` when it has a lock file, without creating one (so a folder
+    /// that is only read is not written to); `None` when it has none.
+    ///
+    /// # Errors
+    /// As [`FolderLock::acquire`].
+    pub fn acquire_existing(dir: &Path) -> Result<Option<Self>, PipelineError> {
+        if dir.join(LOCK_FILE).is_file() {
+            Self::acquire(dir).map(Some)
+        } else {
+            Ok(None)
+        }
+    }
 }
 
 #[cfg(test)]

@@ -135,6 +135,18 @@ pub struct FrameEntry {
     pub delaunay: Option<DelaunayFrame>,
 }
 
+/// The shard of a track a run was (`--shard I/N`), as its report records it; `merge` checks
+/// that its shards are the parts of one selection, each once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ShardRecord {
+    /// This shard's position, `0..count`.
+    pub index: usize,
+    /// How many shards split the job's frames.
+    pub count: usize,
+    /// The frames the shards split (`--frames`, or the whole track): `[start, end)`.
+    pub job_frames: [usize; 2],
+}
+
 /// A frame that failed, and why.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FailedFrame {

@@ -39,6 +39,7 @@ use crate::avatar::bind_lam;
 use crate::config::GaussianLayout;
 use crate::config::{
     DEFAULT_RESOLUTION, DEFAULT_VIEWS, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
+    ShardOptions,
 };
 use crate::deform::{Engine, EngineInputs};
 use crate::error::{PipelineError, first_error_in_order};
@@ -50,7 +51,7 @@ use crate::input::{
 use crate::methods::{FrameInput, Mesher, MethodOutput, parameters};
 use crate::metrics::{GtSamples, is_watertight, measure_with};
 use crate::plan::{Plan, Stage};
-use crate::records::{FrameMetrics, FrameRecord, Resolved};
+use crate::records::{FrameMetrics, FrameRecord, Resolved, ShardRecord};
 use crate::report::Report;
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
@@ -167,6 +168,8 @@ pub struct Session {
     executed: Vec<Stage>,
     /// Run the methods of a frame one after another instead of side by side.
     serial_methods: bool,
+    /// The shard of the track this run is (`--shard`), as its report records it.
+    shard: Option<ShardRecord>,
 }
 
 impl std::fmt::Debug for Session {
@@ -239,7 +242,8 @@ impl Session {
         } else {
             WeldedTemplate::unwelded(&stored)
         };
-        let frames = parse_frames(config.frames.as_deref(), anim.frame_count())?;
+        let selected = parse_frames(config.frames.as_deref(), anim.frame_count())?;
+        let (frames, shard) = shard_frames(&o.shard, selected)?;
         // The scale-derived defaults come from the template: its frames must share its scale.
         let first_positions = to_local(anim.frame(frames.start)?, origin);
         check_scale(
@@ -398,6 +402,7 @@ impl Session {
             scratch: WorldGeometry::default(),
             executed,
             serial_methods: false,
+            shard,
         };
         session.visibility = session.decide_visibility(o, &gaussians_path)?;
         let mut kept_rest_means = Vec::new();
@@ -533,6 +538,7 @@ impl Session {
                 .any(|m| matches!(m, Method::Delaunay | Method::Alpha))
                 .then_some(self.visibility.used),
             serial_methods: self.serial_methods,
+            shard: self.shard,
             methods: BTreeMap::new(),
             thumbnails: None,
         };
@@ -1108,6 +1114,29 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
         });
     }
     Ok(())
+}
+
+/// The frames this run meshes: `shard`'s part of the `selected` frames (all of them without
+/// `--shard`), and the shard as the report records it. `--shard auto` is read from the
+/// process's environment here when the caller did not resolve it.
+fn shard_frames(
+    shard: &ShardOptions,
+    selected: Range<usize>,
+) -> Result<(Range<usize>, Option<ShardRecord>), PipelineError> {
+    let refused = |problem| PipelineError::Shard { problem };
+    let Some(s) = shard
+        .resolve(&|name| std::env::var(name).ok())
+        .map_err(refused)?
+    else {
+        return Ok((selected, None));
+    };
+    let frames = s.frames(selected.clone()).map_err(refused)?;
+    let record = ShardRecord {
+        index: s.index,
+        count: s.count,
+        job_frames: [selected.start, selected.end],
+    };
+    Ok((frames, Some(record)))
 }
 
 /// Up to `count` frames of `frames`, evenly spaced from its first to its last (all of them

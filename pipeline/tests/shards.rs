@@ -8,7 +8,10 @@ use std::path::{Path, PathBuf};
 
 use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::config::{BindOptions, GaussianLayout, OutputOptions, OutputTarget};
-use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Report, RunControl, merge, run};
+use trisplat_pipeline::{
+    ExtractConfig, ExtractOptions, Method, PipelineError, Report, RunControl, Shard, ShardOptions,
+    ShardSpec, merge, run,
+};
 
 /// A 10-frame weights track for the fixture's targets: the mouth closed in frames 0..7, the
 /// jaw open and the tongue out in frames 7..10.
@@ -109,5 +112,77 @@ fn any_split_of_the_track_merges_to_one_run() {
                 assert!(a == b, "split {name}: {file} differs from one run");
             }
         }
+    }
+}
+
+/// `report` as JSON with what a shard may not reproduce blanked: wall times, and the
+/// incremental Delaunay's statistics (each shard starts with a rebuild).
+fn without_timings(report: &Report) -> serde_json::Value {
+    let mut r = report.clone();
+    r.deform_ms.iter_mut().for_each(|t| *t = 0.0);
+    r.thumbnails = None;
+    for m in r.methods.values_mut() {
+        for f in &mut m.frames {
+            f.ms = 0.0;
+            f.render_ms = f.render_ms.map(|_| 0.0);
+        }
+        m.mean = trisplat_pipeline::report::Summary::of(&m.frames);
+        m.relation = None;
+        m.delaunay = None;
+    }
+    serde_json::to_value(&r).expect("json")
+}
+
+#[test]
+fn shard_flags_split_the_track_and_merge_refuses_an_incomplete_split() {
+    let methods = [Method::Tsdf, Method::Delaunay, Method::Alpha];
+    let dir = fresh_dir("shard_flag");
+    let track = opening_mouth(&dir);
+    let whole = dir.join("whole");
+    let mut one = config(&track, &methods, "0..10", &whole);
+    one.frames = None;
+    one.options.outputs.targets.push(OutputTarget::Glb);
+    let one = run(&one, RunControl::default(), &mut |_| {}).expect("one run");
+    let shards: Vec<PathBuf> = (0..3)
+        .map(|index| {
+            let out = dir.join(format!("shard_{index}"));
+            let mut c = config(&track, &methods, "0..10", &out);
+            c.frames = None;
+            c.options.outputs.targets.push(OutputTarget::Glb);
+            c.options.shard = ShardOptions {
+                shard: Some(ShardSpec::Given(Shard::new(index, 3).expect("shard"))),
+                shard_count: None,
+            };
+            let r = run(&c, RunControl::default(), &mut |_| {}).expect("shard run");
+            let expected = [0..3, 3..6, 6..10][index].clone().collect::<Vec<_>>();
+            assert_eq!(r.frames, expected, "shard {index}/3");
+            out
+        })
+        .collect();
+    // Two of three shards: the missing one is named, and nothing is written.
+    let refused_dir = dir.join("incomplete");
+    let e = merge(&shards[..2], &refused_dir, false).expect_err("incomplete");
+    assert!(
+        matches!(&e, PipelineError::Merge { problem, .. } if problem.contains("missing: 2/3")),
+        "{e}"
+    );
+    assert!(
+        !refused_dir.exists(),
+        "a refused merge wrote its output folder"
+    );
+    let merged_dir = dir.join("merged");
+    let merged = merge(&shards, &merged_dir, false).expect("merge");
+    assert_eq!(without_timings(&merged), without_timings(&one));
+    for m in methods {
+        for f in 0..10 {
+            let file = format!("{}/frame_{f:06}.ply", m.name());
+            let a = std::fs::read(whole.join(&file)).expect("one run's frame");
+            let b = std::fs::read(merged_dir.join(&file)).expect("merged frame");
+            assert!(a == b, "{file} differs from one run");
+        }
+        let glb = format!("{}.glb", m.name());
+        let a = std::fs::read(whole.join(&glb)).expect("one run's glb");
+        let b = std::fs::read(merged_dir.join(&glb)).expect("merged glb");
+        assert!(a == b, "{glb} differs from one run");
     }
 }

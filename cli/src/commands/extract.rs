@@ -154,6 +154,16 @@ impl ExtractArgs {
             .into());
         }
         let mut options = self.options;
+        // `--shard auto` resolved now, so that the journal records the shard itself and a
+        // resumed task with other variables is refused.
+        let shard = options
+            .shard
+            .resolve(&|name| std::env::var(name).ok())
+            .map_err(super::UsageError)?;
+        options.shard = trisplat_pipeline::ShardOptions {
+            shard: shard.map(trisplat_pipeline::ShardSpec::Given),
+            shard_count: None,
+        };
         let (template, gaussians) = match (self.avatar, self.template) {
             (Some(dir), _) => avatar_files(&dir, self.gaussians.as_deref(), &mut options)?,
             (None, Some(t)) if t.is_dir() => {

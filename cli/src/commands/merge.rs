@@ -9,13 +9,15 @@ use super::extract::{fail_on_failed_frames, print_summary};
 /// Arguments of `trisplat merge`.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = "\
-Joins shards of one extract job, each run into its own folder with its own --frames A..B (on \
-one machine or many: a Slurm array or a Kubernetes indexed job runs shard i with --frames \
-i*N..(i+1)*N, then one merge), into DIR: every shard's frame files (hard links where possible), \
+Joins shards of one extract job, each run into its own folder with its own --shard I/N or \
+--frames A..B (on one machine or many: each task of a Slurm array or pod of a Kubernetes indexed \
+job runs --shard auto, then one merge), into DIR: every shard's frame files (hard links where possible), \
 one animated glTF per method assembled from them, and report.json, report.md, report.html and \
 error_vs_time.svg/.png over all frames (report.html with the thumbnails of the shard whose \
 pictured frame is nearest the middle). The shards must be the same job (same inputs, options and version; only \
---frames differs) and no frame may be in two shards. Frame files and glTF are then \
+--frames or --shard differs), every shard of a --shard split must be there once, and every frame \
+of the job must be in exactly one shard; a shard still running is refused, and a refused merge \
+writes nothing. Frame files and glTF are then \
 byte-identical to one run over all frames (at the default --hop-threshold 0); the report \
 differs only in the timings. See docs/shards.md.")]
 pub struct MergeArgs {
@@ -35,12 +37,6 @@ pub struct MergeArgs {
 /// # Errors
 /// Shards that are not one job, overlap or miss files (named); write errors.
 pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
-    std::fs::create_dir_all(&args.output).map_err(|e| {
-        anyhow::anyhow!(
-            "{}: cannot create the output folder: {e}",
-            args.output.display()
-        )
-    })?;
     let spinner = ctx
         .progress
         .spinner("merge: linking frames, writing sequences and report");

@@ -8,7 +8,8 @@
 //! - `tsdf`: the tsdf method's rig, depth maps and fusion ([`TsdfOptions`]);
 //! - `points`: the point methods ([`DelaunayOptions`], [`AlphaOptions`]) and the rule of which
 //!   Gaussians they mesh ([`VisibilityRule`]);
-//! - `report`: metrics ([`MetricOptions`]), outputs ([`OutputOptions`]) and [`Limits`].
+//! - `report`: metrics ([`MetricOptions`]), outputs ([`OutputOptions`]) and [`Limits`];
+//! - `shard`: the part of the frames a run takes ([`ShardOptions`], [`Shard`]).
 //!
 //! This module composes them ([`ExtractOptions`], [`ExtractConfig`], [`RunControl`]); the
 //! stage files import nothing from it or from the modules that read them.
@@ -21,6 +22,7 @@ mod input;
 mod method;
 mod points;
 mod report;
+mod shard;
 mod tsdf;
 
 pub use input::{
@@ -36,6 +38,7 @@ pub use report::{
     DEFAULT_MAX_SAMPLES, DEFAULT_MAX_VIEWS, DEFAULT_MAX_VOXELS, DEFAULT_SAMPLES, DEFAULT_TAU,
     DEFAULT_TAU_FRACTION, Limits, MetricOptions, OutputOptions, OutputTarget,
 };
+pub use shard::{KUBERNETES_INDEX, SLURM_VARIABLES, Shard, ShardOptions, ShardSpec};
 pub use tsdf::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_FOV_DEG, DEFAULT_RESOLUTION, DEFAULT_VIEWS,
     DEFAULT_VOXELS_PER_RADIUS, DepthKind, RENDERED_ALPHA_MIN, SplatDepthRule, TsdfOptions,
@@ -116,6 +119,9 @@ pub struct ExtractOptions {
     /// Resource limits.
     #[cfg_attr(feature = "cli", command(flatten))]
     pub limits: Limits,
+    /// Which part of the frames the run takes when the track is split over machines.
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub shard: ShardOptions,
 }
 
 /// How a run treats an output folder that already holds a run, and frames that fail.

@@ -10,7 +10,7 @@ use trisplat_geometry::metrics::Relation;
 
 use crate::config::Method;
 use crate::records::{
-    DelaunayFrame, FailedFrame, FrameMetrics, FrameRecord, GaussiansUsed, Resolved,
+    DelaunayFrame, FailedFrame, FrameMetrics, FrameRecord, GaussiansUsed, Resolved, ShardRecord,
 };
 
 /// The incremental Delaunay's work over the frames (delaunay only).
@@ -263,6 +263,9 @@ pub struct Report {
     /// includes waiting for the cores the others held).
     #[serde(default)]
     pub serial_methods: bool,
+    /// The shard of a track this run was (`--shard`); absent for a whole run and a merged one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<ShardRecord>,
     /// One entry per method, by name.
     pub methods: BTreeMap<String, MethodReport>,
     /// Thumbnails of one frame's meshes, shown in report.html (absent when that frame
@@ -475,6 +478,7 @@ mod tests {
             },
             gaussians_used: None,
             serial_methods: false,
+            shard: None,
             methods: BTreeMap::from([
                 ("delaunay".to_owned(), method(Method::Delaunay, Some(d))),
                 ("alpha".to_owned(), method(Method::Alpha, None)),

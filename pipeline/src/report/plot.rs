@@ -642,6 +642,7 @@ pub(crate) mod tests {
             },
             gaussians_used: None,
             serial_methods: false,
+            shard: None,
             methods: BTreeMap::from([
                 (
                     "tsdf".to_owned(),

@@ -23,6 +23,8 @@ use crate::config::OutputTarget;
 use crate::error::PipelineError;
 use crate::lock::FolderLock;
 use crate::output::{FrameFilesByMethod, frame_file, refuse_used_output, write_outputs};
+mod checks;
+
 use crate::report::{
     DelaunayStats, MethodReport, REPORT_JSON, Report, Summary, THUMBNAIL_DIR, Thumbnails,
 };
@@ -31,10 +33,12 @@ use crate::report::{
 /// merged report. `force`: start over in an output folder that holds a run.
 ///
 /// # Errors
-/// [`PipelineError::Merge`] naming the shard for a missing or unreadable report, a shard of
-/// another job (and the field that differs), a frame in two shards, a missing frame file, the
-/// output folder being a shard; [`PipelineError::UsedOutput`] for an output folder holding a
-/// run (without `force`); write errors.
+/// [`PipelineError::Merge`] naming the shard for a missing or unreadable report, a shard still
+/// running (its lock held), a folder given twice, a shard of another job (and the field that
+/// differs), `--shard` runs of different splits or a shard missing or given twice, a frame in
+/// two shards or in none, a missing frame file, the output folder being a shard;
+/// [`PipelineError::UsedOutput`] for an output folder holding a run (without `force`); write
+/// errors. Nothing is written when the shards are refused.
 pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, PipelineError> {
     let bad = |path: &Path, problem: String| PipelineError::Merge {
         path: path.to_path_buf(),
@@ -43,11 +47,20 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
     if shards.is_empty() {
         return Err(bad(out, "no shard folders to merge".to_owned()));
     }
+    // Held until the merge returns: a shard cannot start running meanwhile.
+    let mut _shard_locks = Vec::with_capacity(shards.len());
     let mut reports = Vec::with_capacity(shards.len());
-    for shard in shards {
+    for (i, shard) in shards.iter().enumerate() {
         if same_folder(shard, out) {
             return Err(bad(shard, "is also the output folder".to_owned()));
         }
+        if let Some(other) = shards[..i].iter().find(|s| same_folder(s, shard)) {
+            return Err(bad(
+                shard,
+                format!("is given twice (also as {})", other.display()),
+            ));
+        }
+        _shard_locks.push(checks::not_running(shard)?);
         let path = shard.join(REPORT_JSON);
         let text = std::fs::read_to_string(&path).map_err(|e| {
             bad(
@@ -59,36 +72,8 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
             .map_err(|e| bad(&path, format!("not a trisplat report: {e}")))?;
         reports.push((shard.as_path(), report));
     }
-    let (first_shard, first) = (reports[0].0, &reports[0].1);
-    for (shard, r) in &reports[1..] {
-        if let Some(field) = job_difference(first, r) {
-            return Err(bad(
-                shard,
-                format!(
-                    "is another job than {}: its {field} differs (shards must differ only in \
-                     --frames)",
-                    first_shard.display()
-                ),
-            ));
-        }
-    }
-    // Every frame once, in order, with the shard that made it.
-    let mut owner: BTreeMap<usize, usize> = BTreeMap::new();
-    for (i, (shard, r)) in reports.iter().enumerate() {
-        for &f in r
-            .frames
-            .iter()
-            .chain(r.failed_frames.iter().map(|x| &x.frame))
-        {
-            if let Some(&j) = owner.get(&f) {
-                return Err(bad(
-                    shard,
-                    format!("frame {f} is also in shard {}", reports[j].0.display()),
-                ));
-            }
-            owner.insert(f, i);
-        }
-    }
+    checks::one_job(&reports)?;
+    let owner = checks::frame_owners(&reports)?;
     std::fs::create_dir_all(out).map_err(|cause| PipelineError::OutputDir {
         path: out.to_path_buf(),
         cause,
@@ -168,39 +153,6 @@ fn link_thumbnails(
     Ok(Some(t.clone()))
 }
 
-/// The first field (by report name) in which two shard reports are not the same job.
-fn job_difference(a: &Report, b: &Report) -> Option<&'static str> {
-    let fields: [(&'static str, bool); 15] = [
-        ("version", a.version == b.version),
-        ("template", a.template == b.template),
-        (
-            "template_vertices",
-            a.template_vertices == b.template_vertices,
-        ),
-        ("welded_vertices", a.welded_vertices == b.welded_vertices),
-        ("animation", a.animation == b.animation),
-        ("gaussians", a.gaussians == b.gaussians),
-        ("gaussian_count", a.gaussian_count == b.gaussian_count),
-        ("mode", a.mode == b.mode),
-        ("ground_truth", a.ground_truth == b.ground_truth),
-        ("samples", a.samples == b.samples),
-        ("tau", a.tau == b.tau),
-        ("tau_fraction", a.tau_fraction == b.tau_fraction),
-        ("resolved", a.resolved == b.resolved),
-        ("gaussians_used", a.gaussians_used == b.gaussians_used),
-        (
-            "methods",
-            a.methods.len() == b.methods.len()
-                && a.methods.iter().all(|(name, m)| {
-                    b.methods
-                        .get(name)
-                        .is_some_and(|n| n.parameters == m.parameters)
-                }),
-        ),
-    ];
-    fields.iter().find(|(_, same)| !same).map(|(name, _)| *name)
-}
-
 /// One report over the frames of all shards, in frame order.
 fn merged_report(reports: &[(&Path, Report)]) -> Report {
     let mut rows: Vec<(usize, f64, f64, usize)> = reports
@@ -222,6 +174,7 @@ fn merged_report(reports: &[(&Path, Report)]) -> Report {
         .collect();
     rows.sort_by_key(|row| row.0);
     let mut merged = reports[0].1.clone();
+    merged.shard = None;
     merged.frames = rows.iter().map(|r| r.0).collect();
     merged.frame_times = rows.iter().map(|r| r.1).collect();
     merged.deform_ms = rows.iter().map(|r| r.2).collect();
