@@ -290,3 +290,56 @@ fn scores_do_not_depend_on_the_origin() {
         assert_eq!(t["fscore"].as_f64(), Some(1.0), "{t}");
     }
 }
+
+/// `--gaussians`: render consistency of a mesh against Gaussians, with or without a ground
+/// truth; the numbers of the reference fixture (tests/reference/ref_consistency.py); a point
+/// cloud as prediction, a file that is not Gaussians, and neither GT nor --gaussians refused.
+#[test]
+fn render_consistency_against_gaussians() {
+    let dir = trisplat_fixtures::path("reference/consistency");
+    let (mesh, gaussians, cameras) = (
+        dir.join("mesh.ply"),
+        dir.join("gaussians.spz"),
+        dir.join("cameras.json"),
+    );
+    let want: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("consistency.json")).expect("reference"),
+    )
+    .expect("json");
+    let alone = eval_json(&[
+        s(&mesh),
+        "--gaussians",
+        s(&gaussians),
+        "--cameras",
+        s(&cameras),
+    ]);
+    let c = &alone["render_consistency"];
+    let iou = c["iou"].as_f64().expect("iou");
+    assert!(
+        (iou - want["iou"].as_f64().expect("iou")).abs() < 2e-4,
+        "{c}"
+    );
+    assert!(alone.get("chamfer_l1").is_none(), "{alone}");
+    // With a ground truth: the usual keys, and the default held-out rig of 16 views.
+    let both = eval_json(&[
+        s(&mesh),
+        s(&mesh),
+        "--gaussians",
+        s(&gaussians),
+        "--views",
+        "4",
+    ]);
+    assert!(both["chamfer_l1"].as_f64().is_some(), "{both}");
+    assert_eq!(both["render_consistency"]["views"], 4);
+
+    let out_dir = fresh_dir("eval_consistency");
+    let points = out_dir.join("points.ply");
+    let cloud = PointCloud::new_unchecked(vec![Vec3::ZERO, Vec3::X, Vec3::Y]);
+    write_points(&points, &cloud, WriteOptions::default()).expect("points");
+    let line = one_error_line(&run(&["eval", s(&points), "--gaussians", s(&gaussians)]));
+    assert!(line.contains("needs a mesh"), "{line}");
+    let line = one_error_line(&run(&["eval", s(&mesh), "--gaussians", s(&mesh)]));
+    assert!(line.contains("mesh.ply"), "{line}");
+    let usage = run(&["eval", s(&mesh)]);
+    assert_eq!(usage.status.code(), Some(2));
+}

@@ -366,6 +366,12 @@ pub enum PipelineError {
         /// What is wrong, naming the values.
         problem: String,
     },
+    /// Render consistency that cannot be measured.
+    #[error("render consistency: {problem}")]
+    Consistency {
+        /// What went wrong.
+        problem: String,
+    },
     /// Shards that cannot be merged.
     #[error("{path}: cannot merge: {problem}")]
     Merge {

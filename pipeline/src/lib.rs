@@ -68,6 +68,7 @@
 // below.
 pub mod avatar;
 pub mod config;
+pub mod consistency;
 pub mod eval;
 pub mod fit;
 pub mod input;

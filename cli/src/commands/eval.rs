@@ -1,14 +1,19 @@
 //! `trisplat eval`: geometry metrics of a prediction against a ground truth (docs/conventions.md §8, §10).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::bail;
+use anyhow::{Context as _, bail};
+use trisplat_geometry::io::read_mesh;
 use trisplat_geometry::mesh_stats::MeshStats;
 use trisplat_geometry::metrics::{Relation, SELF_CONSISTENCY_MIN_SHARED};
 use trisplat_pipeline::eval::{self, EvalError, EvalInput, EvalOptions, EvalReport};
 
-use super::Context;
+use super::gaussian_io::{GaussianFormatArgs, parse_axes, read_gaussian_file};
+use super::{Context, MAX_IMAGE_PIXELS, read_camera_file};
 use trisplat_pipeline::config::DEFAULT_MAX_SAMPLES;
+use trisplat_pipeline::consistency::{
+    CONSISTENCY_RESOLUTION, CONSISTENCY_VIEWS, GaussianViews, RenderConsistency, held_out_rig,
+};
 
 /// Samples drawn on each mesh input unless `--samples` says otherwise.
 pub const DEFAULT_SAMPLES: usize = eval::DEFAULT_SAMPLES;
@@ -66,8 +71,28 @@ drops distances above 20 mm.")]
 pub struct EvalArgs {
     /// Prediction: mesh (.ply/.obj/.gltf/.glb) or point cloud (.ply without faces).
     pub pred: PathBuf,
-    /// Ground truth: mesh or point cloud.
-    pub gt: PathBuf,
+    /// Ground truth: mesh or point cloud (not needed with --gaussians alone).
+    #[arg(required_unless_present = "gaussians")]
+    pub gt: Option<PathBuf>,
+    /// Render consistency against these Gaussians (world space: .ply, .spz, .glb, .gltf): the
+    /// mesh seen from --cameras (or a held-out sphere rig) against the Gaussians' alpha, median
+    /// depth and normals.
+    #[arg(long, value_name = "G")]
+    pub gaussians: Option<PathBuf>,
+    /// Cameras of the render consistency (3DGS cameras.json or NeRF transforms.json)
+    /// [default: a sphere rig of --views views at --resolution, turned away from the
+    /// extraction rig].
+    #[arg(long, value_name = "C.json", requires = "gaussians")]
+    pub cameras: Option<PathBuf>,
+    /// Views of the default render-consistency rig.
+    #[arg(long, value_name = "N", default_value_t = CONSISTENCY_VIEWS,
+          value_parser = parse_samples, requires = "gaussians", conflicts_with = "cameras")]
+    pub views: usize,
+    /// Width and height of the default render-consistency rig's images, pixels.
+    #[arg(long, value_name = "PX", default_value_t = CONSISTENCY_RESOLUTION,
+          value_parser = clap::value_parser!(u32).range(8..=4096), requires = "gaussians",
+          conflicts_with = "cameras")]
+    pub resolution: u32,
     /// Points sampled on each mesh input.
     #[arg(long, default_value_t = DEFAULT_SAMPLES, value_name = "N",
           value_parser = parse_samples)]
@@ -111,6 +136,20 @@ fn parse_tau(s: &str) -> Result<f64, String> {
 /// Unreadable inputs, empty inputs (no points or zero area), `--surface` with no mesh input,
 /// coordinates beyond 1e18.
 pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
+    let consistency = match &args.gaussians {
+        Some(g) => Some(render_consistency(&args, g, ctx)?),
+        None => None,
+    };
+    let Some(gt_path) = args.gt.clone() else {
+        let c = consistency
+            .ok_or_else(|| anyhow::anyhow!("a ground truth or --gaussians is needed"))?;
+        if ctx.json {
+            ctx.emit("eval", serde_json::json!({ "render_consistency": c }))?;
+        } else {
+            print_consistency(&args, &c);
+        }
+        return Ok(());
+    };
     if args.samples > args.max_samples {
         bail!(
             "--samples {}: over the limit of {} samples per mesh (raise it with --max-samples)",
@@ -119,7 +158,7 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
         );
     }
     let spinner = ctx.progress.spinner("eval: loading");
-    let (pred, gt) = rayon::join(|| EvalInput::read(&args.pred), || EvalInput::read(&args.gt));
+    let (pred, gt) = rayon::join(|| EvalInput::read(&args.pred), || EvalInput::read(&gt_path));
     let (pred, gt) = (pred?, gt?);
     spinner.set_message("eval: computing");
     let options = EvalOptions {
@@ -131,7 +170,7 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     let names = (
         args.pred.display().to_string(),
-        args.gt.display().to_string(),
+        gt_path.display().to_string(),
     );
     let done = eval::evaluate(pred, gt, (&names.0, &names.1), &options).map_err(|e| match e {
         // The command's own option names.
@@ -148,11 +187,82 @@ pub fn run(args: EvalArgs, ctx: &Context) -> anyhow::Result<()> {
     })?;
     spinner.finish_and_clear();
     if ctx.json {
-        ctx.emit("eval", serde_json::to_value(&done.report)?)?;
+        let mut value = serde_json::to_value(&done.report)?;
+        if let (Some(c), Some(object)) = (consistency, value.as_object_mut()) {
+            object.insert("render_consistency".to_owned(), serde_json::to_value(c)?);
+        }
+        ctx.emit("eval", value)?;
     } else {
-        print_table(&args, &done.pred, &done.gt, &done.report);
+        print_table(&args, &gt_path, &done.pred, &done.gt, &done.report);
+        if let Some(c) = consistency {
+            println!();
+            print_consistency(&args, &c);
+        }
     }
     Ok(())
+}
+
+/// `--gaussians`: the prediction's render consistency against them.
+fn render_consistency(
+    args: &EvalArgs,
+    gaussians: &Path,
+    ctx: &Context,
+) -> anyhow::Result<RenderConsistency> {
+    let spinner = ctx.progress.spinner("eval: render consistency");
+    // SPZ in the 3DGS training frame, as `render` reads it by default.
+    let format = GaussianFormatArgs {
+        axes: parse_axes("rdf").map_err(anyhow::Error::msg)?,
+        spz_version: 3,
+    };
+    let set = read_gaussian_file(gaussians, &format)?.set;
+    let cameras = match &args.cameras {
+        Some(path) => read_camera_file(path, None, MAX_IMAGE_PIXELS)?,
+        None => held_out_rig(&set, args.views, args.resolution)
+            .with_context(|| format!("{}", gaussians.display()))?,
+    };
+    let views = GaussianViews::render(&set, &cameras)
+        .with_context(|| format!("{}", gaussians.display()))?;
+    let mesh = read_mesh(&args.pred)?;
+    if mesh.triangles().is_empty() {
+        bail!(
+            "{}: render consistency (--gaussians) needs a mesh, a file with faces",
+            args.pred.display()
+        );
+    }
+    let c = views
+        .score(&mesh)
+        .with_context(|| format!("{}", args.pred.display()))?;
+    spinner.finish_and_clear();
+    Ok(c)
+}
+
+/// The render-consistency lines of the table.
+fn print_consistency(args: &EvalArgs, c: &RenderConsistency) {
+    let mm = |v: Option<f64>| {
+        v.map_or_else(
+            || "n/a (no pixel covered by both)".to_owned(),
+            |x| format!("{x:.6e}"),
+        )
+    };
+    println!(
+        "render consistency of {} against {} ({} views)",
+        args.pred.display(),
+        args.gaussians
+            .as_deref()
+            .map_or_else(String::new, |g| g.display().to_string()),
+        c.views
+    );
+    println!(
+        "silhouette IoU      {:.4}  (mesh {} px, Gaussians {} px, both {} px)",
+        c.iou, c.mesh_pixels, c.gaussian_pixels, c.both_pixels
+    );
+    println!("depth error median  {}", mm(c.depth_error_median));
+    println!("depth error p90     {}", mm(c.depth_error_p90));
+    println!(
+        "normal angle median {}",
+        c.normal_angle_deg
+            .map_or_else(|| "n/a".to_owned(), |a| format!("{a:.2} deg"))
+    );
 }
 
 fn describe(input: &EvalInput) -> &'static str {
@@ -163,7 +273,7 @@ fn describe(input: &EvalInput) -> &'static str {
     }
 }
 
-fn print_table(args: &EvalArgs, pred: &EvalInput, gt: &EvalInput, r: &EvalReport) {
+fn print_table(args: &EvalArgs, gt_path: &Path, pred: &EvalInput, gt: &EvalInput, r: &EvalReport) {
     let m = &r.metrics;
     let mode = if args.surface {
         "surface (exact distance to mesh triangles)"
@@ -178,7 +288,7 @@ fn print_table(args: &EvalArgs, pred: &EvalInput, gt: &EvalInput, r: &EvalReport
     );
     println!(
         "truth       {}  ({}, {} points)",
-        args.gt.display(),
+        gt_path.display(),
         describe(gt),
         m.n_gt
     );

@@ -19,7 +19,8 @@ pictured frame is nearest the middle). The shards must be the same job (same inp
 of the job must be in exactly one shard; a shard still running is refused, and a refused merge \
 writes nothing. Frame files and glTF are then \
 byte-identical to one run over all frames (at the default --hop-threshold 0); the report \
-differs only in the timings. See docs/shards.md.")]
+differs in the timings, the incremental Delaunay statistics and the thumbnails' frame. See \
+docs/shards.md.")]
 pub struct MergeArgs {
     /// Shard folders (finished `extract` runs).
     #[arg(required = true, value_name = "SHARD")]

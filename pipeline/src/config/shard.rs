@@ -180,7 +180,12 @@ fn auto_shard(count: Option<usize>, env: &dyn Fn(&str) -> Option<String>) -> Res
                  SLURM_ARRAY_TASK_COUNT={slurm_count}): {why}"
             )
         };
-        if id < min || (id - min) % step != 0 {
+        if id < min {
+            return Err(inconsistent(
+                "the task id is below the array's first".to_owned(),
+            ));
+        }
+        if (id - min) % step != 0 {
             return Err(inconsistent(
                 "the task id is not on the array's steps".to_owned(),
             ));

@@ -12,7 +12,8 @@
 //! of the shard whose pictured frame is nearest the middle of all frames. Frame files, and
 //! hence the glTF, are byte-identical to one run's at the default `--hop-threshold 0` (each
 //! shard's incremental Delaunay starts with a rebuild, which equals the incremental update
-//! there); the report differs only in the timings.
+//! there); the report differs in the timings, the incremental Delaunay statistics and the
+//! thumbnails' frame.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
