@@ -197,6 +197,7 @@ impl Prepared {
             faces: mesh.triangle_count(),
             watertight: is_watertight(mesh),
             metrics,
+            consistency: None,
         })
     }
 

@@ -19,6 +19,7 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderOptions, render};
 
 use crate::error::PipelineError;
+pub use crate::records::RenderConsistency;
 
 /// Views of the default consistency rig.
 pub const CONSISTENCY_VIEWS: usize = 16;
@@ -31,30 +32,6 @@ pub const COVERED_ALPHA: f32 = 0.5;
 /// The rotation of the consistency rig's lattice about the axis (1, 1, 1), degrees, so that its
 /// views fall between those of the extraction's sphere rig (an unrelated angle).
 pub const HELD_OUT_ROTATION_DEG: f64 = 37.0;
-
-/// Render consistency of one mesh against Gaussians (see the module docs).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct RenderConsistency {
-    /// Silhouette IoU of the mesh against the Gaussians' alpha > 0.5 (1 when neither covers a
-    /// pixel).
-    pub iou: f64,
-    /// Median |mesh depth − Gaussians' median depth| over pixels both cover (model units;
-    /// `None` when no pixel is covered by both).
-    pub depth_error_median: Option<f64>,
-    /// Its 90th percentile.
-    pub depth_error_p90: Option<f64>,
-    /// Median angle between the mesh's and the Gaussians' normals over pixels both cover,
-    /// degrees.
-    pub normal_angle_deg: Option<f64>,
-    /// Views rendered.
-    pub views: usize,
-    /// Pixels the Gaussians cover, over all views.
-    pub gaussian_pixels: usize,
-    /// Pixels the mesh covers, over all views.
-    pub mesh_pixels: usize,
-    /// Pixels both cover.
-    pub both_pixels: usize,
-}
 
 /// The consistency rig around `set`: [`CONSISTENCY_VIEWS`]-style Fibonacci sphere of `views`
 /// cameras of `resolution`² pixels framing the bounding sphere of the Gaussians' means, the

@@ -32,7 +32,7 @@ pub enum Event {
         /// The method.
         method: Method,
         /// Its record of the frame.
-        record: FrameRecord,
+        record: Box<FrameRecord>,
     },
     /// One frame done, by this run or (`resumed`) by the run it resumes.
     FrameDone {

@@ -25,6 +25,8 @@ pub enum Stage {
     Mesh(Method),
     /// Chamfer, normal consistency and F-score against the ground truth.
     Metrics,
+    /// Each mesh against the frame's own Gaussians from held-out views.
+    Consistency,
     /// Per-frame PLY files and one animated glTF per method.
     Write,
     /// report.json, report.md, report.html (with thumbnails/), error_vs_time.svg and .png.
@@ -40,6 +42,7 @@ impl fmt::Display for Stage {
             Self::Render => f.write_str("render"),
             Self::Mesh(m) => write!(f, "mesh:{m}"),
             Self::Metrics => f.write_str("metrics"),
+            Self::Consistency => f.write_str("consistency"),
             Self::Write => f.write_str("write"),
             Self::Report => f.write_str("report"),
         }
@@ -248,6 +251,22 @@ impl Plan {
             }
         }
 
+        let views = o.metrics.consistency_views;
+        push(
+            Stage::Consistency,
+            views > 0 && !methods.is_empty(),
+            if methods.is_empty() {
+                "no method: no mesh to compare".to_owned()
+            } else if views == 0 {
+                "--consistency-views 0".to_owned()
+            } else {
+                format!(
+                    "each mesh against the frame's Gaussians from {views} held-out views of                      {px}x{px} px (silhouette IoU, depth error, normal angle; docs/conventions.md                      §8), the Gaussians rendered once per frame for all methods",
+                    px = o.metrics.consistency_resolution
+                )
+            },
+        );
+
         let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
         let out = config.output.display();
         let (meshes, glb) = (
@@ -388,6 +407,7 @@ mod tests {
                 Stage::Mesh(Method::Delaunay),
                 Stage::Mesh(Method::Alpha),
                 Stage::Metrics,
+                Stage::Consistency,
                 Stage::Write,
                 Stage::Report,
             ]

@@ -58,6 +58,31 @@ pub struct FrameMetrics {
     pub structure: Option<MeshStats>,
 }
 
+/// Render consistency of one mesh against the Gaussians it came from
+/// ([`crate::consistency`], docs/conventions.md §8).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RenderConsistency {
+    /// Silhouette IoU of the mesh against the Gaussians' alpha > 0.5 (1 when neither covers a
+    /// pixel).
+    pub iou: f64,
+    /// Median |mesh depth − Gaussians' median depth| over pixels both cover (model units;
+    /// `None` when no pixel is covered by both).
+    pub depth_error_median: Option<f64>,
+    /// Its 90th percentile.
+    pub depth_error_p90: Option<f64>,
+    /// Median angle between the mesh's and the Gaussians' normals over pixels both cover,
+    /// degrees.
+    pub normal_angle_deg: Option<f64>,
+    /// Views rendered.
+    pub views: usize,
+    /// Pixels the Gaussians cover, over all views.
+    pub gaussian_pixels: usize,
+    /// Pixels the mesh covers, over all views.
+    pub mesh_pixels: usize,
+    /// Pixels both cover.
+    pub both_pixels: usize,
+}
+
 /// One method on one frame.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameRecord {
@@ -77,6 +102,10 @@ pub struct FrameRecord {
     pub watertight: bool,
     /// Against the ground truth (`None` without --gt or for an empty mesh).
     pub metrics: Option<FrameMetrics>,
+    /// Against the frame's Gaussians from held-out views (`None` when not measured:
+    /// `--consistency-views 0`, or reports of older versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub consistency: Option<RenderConsistency>,
 }
 
 /// What the incremental Delaunay update did on one frame (its `FrameStats`).

@@ -113,7 +113,10 @@ pub fn run(
                 Ok((entry, results)) => {
                     journal.frame(&entry)?;
                     for (method, record) in results {
-                        emit(Event::MethodDone { method, record });
+                        emit(Event::MethodDone {
+                            method,
+                            record: Box::new(record),
+                        });
                     }
                     emit(Event::FrameDone {
                         done,

@@ -41,6 +41,7 @@ use crate::config::{
     DEFAULT_RESOLUTION, DEFAULT_VIEWS, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
     ShardOptions,
 };
+use crate::consistency::{GaussianViews, RenderConsistency, held_out_rig};
 use crate::deform::{Engine, EngineInputs};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::event::Event;
@@ -87,6 +88,8 @@ pub struct MethodFrame {
     pub output: MethodOutput,
     /// Metrics against the ground truth (when the plan measures and the mesh has area).
     pub metrics: Option<FrameMetrics>,
+    /// Render consistency against the frame's Gaussians (when the plan measures it).
+    pub consistency: Option<RenderConsistency>,
 }
 
 impl MethodFrame {
@@ -104,6 +107,7 @@ impl MethodFrame {
             faces: self.output.mesh.triangle_count(),
             watertight: is_watertight(&self.output.mesh),
             metrics: self.metrics,
+            consistency: self.consistency,
         }
     }
 }
@@ -170,6 +174,8 @@ pub struct Session {
     serial_methods: bool,
     /// The shard of the track this run is (`--shard`), as its report records it.
     shard: Option<ShardRecord>,
+    /// Views and resolution of each frame's render consistency, when the plan measures it.
+    consistency_rig: Option<(usize, u32)>,
 }
 
 impl std::fmt::Debug for Session {
@@ -347,7 +353,13 @@ impl Session {
                 cause,
             })?;
         let resolved = Resolved::new(o, template, &rest_means)?;
-        let render_set = plan.runs(Stage::Render).then(|| geometry_only(&set));
+        // Rendered for the tsdf's depth maps and the meshes' render consistency.
+        let render_set = (plan.runs(Stage::Render) || plan.runs(Stage::Consistency))
+            .then(|| geometry_only(&set));
+        let consistency_rig = plan.runs(Stage::Consistency).then_some((
+            o.metrics.consistency_views,
+            o.metrics.consistency_resolution,
+        ));
         let gaussian_gt_triangles = match (&config.gt, plan.runs(Stage::Metrics)) {
             (Some(GroundTruth::Gaussians), true) => {
                 if !matches!(source, GaussianSource::Lam(_)) {
@@ -403,6 +415,7 @@ impl Session {
             executed,
             serial_methods: false,
             shard,
+            consistency_rig,
         };
         session.visibility = session.decide_visibility(o, &gaussians_path)?;
         let mut kept_rest_means = Vec::new();
@@ -884,6 +897,15 @@ impl Session {
             world: world.as_ref(),
         };
         let gt = frame_gt.as_ref().or(self.static_gt.as_ref());
+        // What the frame's Gaussians show from the held-out rig, rendered once for all methods
+        // (in the run's local frame, as the meshes before they are moved back by `origin`).
+        let gaussian_views = match (self.consistency_rig, world.as_ref()) {
+            (Some((views, resolution)), Some(world)) => {
+                let cameras = held_out_rig(world, views, resolution)?;
+                Some(GaussianViews::render(world, &cameras)?)
+            }
+            _ => None,
+        };
         let (samples, tau, origin) = (self.samples, self.tau, self.origin);
         let label = self.label.as_str();
         let gt_label = self
@@ -893,6 +915,12 @@ impl Session {
         let mesh_and_measure =
             |(method, mesher): &mut (Method, Mesher)| -> Result<MethodFrame, PipelineError> {
                 let mut output = mesher.mesh(&input).map_err(|e| e.on_vertices_of(label))?;
+                let consistency = match &gaussian_views {
+                    Some(views) if output.mesh.triangle_count() > 0 => {
+                        Some(views.score(&output.mesh)?)
+                    }
+                    _ => None,
+                };
                 output.mesh.translate(origin);
                 let metrics = match gt {
                     Some(gt) => measure_with(&output.mesh, gt, samples, tau).map_err(|source| {
@@ -909,6 +937,7 @@ impl Session {
                     method: *method,
                     output,
                     metrics,
+                    consistency,
                 })
             };
         // Side by side, each method's own parallel loops share the cores with the others';
@@ -931,6 +960,9 @@ impl Session {
             ran.push(Stage::Mesh(m.method));
             if gt.is_some() {
                 ran.push(Stage::Metrics);
+            }
+            if m.consistency.is_some() {
+                ran.push(Stage::Consistency);
             }
         }
         let measured = gt.is_some();

@@ -143,6 +143,18 @@ fn shard_flags_split_the_track_and_merge_refuses_an_incomplete_split() {
     one.frames = None;
     one.options.outputs.targets.push(OutputTarget::Glb);
     let one = run(&one, RunControl::default(), &mut |_| {}).expect("one run");
+    // Render consistency is measured by default, on every frame and method.
+    for m in one.methods.values() {
+        assert!(
+            m.frames.iter().all(|f| f.consistency.is_some()),
+            "{}",
+            m.method
+        );
+        let iou = m.mean.render_iou.expect("mean render IoU");
+        // The fixture's 952 Gaussians are sparse: its tsdf mesh covers a quarter of their
+        // silhouette (IoU 0.25), delaunay and alpha about 0.65.
+        assert!(iou > 0.2 && iou <= 1.0, "{}: {iou}", m.method);
+    }
     let shards: Vec<PathBuf> = (0..3)
         .map(|index| {
             let out = dir.join(format!("shard_{index}"));

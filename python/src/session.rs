@@ -265,6 +265,7 @@ impl Session {
                 } else {
                     tau_fraction.or(defaults.metrics.tau_fraction)
                 },
+                ..defaults.metrics
             },
             ..defaults
         };

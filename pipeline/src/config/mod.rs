@@ -35,8 +35,9 @@ pub use points::{
     DelaunayOptions, VisibilityRule,
 };
 pub use report::{
-    DEFAULT_MAX_SAMPLES, DEFAULT_MAX_VIEWS, DEFAULT_MAX_VOXELS, DEFAULT_SAMPLES, DEFAULT_TAU,
-    DEFAULT_TAU_FRACTION, Limits, MetricOptions, OutputOptions, OutputTarget,
+    DEFAULT_CONSISTENCY_RESOLUTION, DEFAULT_CONSISTENCY_VIEWS, DEFAULT_MAX_SAMPLES,
+    DEFAULT_MAX_VIEWS, DEFAULT_MAX_VOXELS, DEFAULT_SAMPLES, DEFAULT_TAU, DEFAULT_TAU_FRACTION,
+    Limits, MetricOptions, OutputOptions, OutputTarget,
 };
 pub use shard::{KUBERNETES_INDEX, SLURM_VARIABLES, Shard, ShardOptions, ShardSpec};
 pub use tsdf::{

@@ -47,7 +47,24 @@ pub struct MetricOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "T", default_value_t = DEFAULT_TAU,
         hide_default_value = true, conflicts_with = "tau_fraction"))]
     pub tau: f64,
+    /// Views of each frame's render consistency: every mesh against that frame's Gaussians
+    /// from a held-out sphere rig (silhouette IoU, depth error, normal angle; 0: not measured).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N",
+        default_value_t = DEFAULT_CONSISTENCY_VIEWS))]
+    pub consistency_views: usize,
+    /// Width and height of the render-consistency views, pixels.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "PX",
+        default_value_t = DEFAULT_CONSISTENCY_RESOLUTION,
+        value_parser = clap::value_parser!(u32).range(8..=4096)))]
+    pub consistency_resolution: u32,
 }
+
+/// Views of the main job's per-frame render consistency (`--consistency-views`): fewer and
+/// smaller than `trisplat eval`'s 16 of 384², so that a long run pays less for it (its cost
+/// and its agreement with eval's rig on the LAM avatar are in docs/benchmarks.md).
+pub const DEFAULT_CONSISTENCY_VIEWS: usize = 8;
+/// Pixels across of those views (`--consistency-resolution`).
+pub const DEFAULT_CONSISTENCY_RESOLUTION: u32 = 192;
 
 impl Default for MetricOptions {
     fn default() -> Self {
@@ -55,6 +72,8 @@ impl Default for MetricOptions {
             samples: DEFAULT_SAMPLES,
             tau_fraction: Some(DEFAULT_TAU_FRACTION),
             tau: DEFAULT_TAU,
+            consistency_views: DEFAULT_CONSISTENCY_VIEWS,
+            consistency_resolution: DEFAULT_CONSISTENCY_RESOLUTION,
         }
     }
 }

@@ -187,7 +187,7 @@ mod tests {
         let first = entry(0);
         builder.consume(&Event::MethodDone {
             method: Method::Tsdf,
-            record: first.methods["tsdf"].clone(),
+            record: Box::new(first.methods["tsdf"].clone()),
         });
         builder.consume(&Event::FrameDone {
             done: 3,

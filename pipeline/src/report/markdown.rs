@@ -146,6 +146,9 @@ impl Report {
             ("normal angle °", true),
             ("recall", true),
             ("F-score", true),
+            ("render IoU", true),
+            ("depth error", true),
+            ("depth p90", true),
         ]);
         for m in self.ordered() {
             let a = &m.mean;
@@ -167,6 +170,9 @@ impl Report {
                     fixed(a.normal_angle_deg, 2),
                     optf(a.recall),
                     optf(a.fscore),
+                    optf(a.render_iou),
+                    opt(a.render_depth_error_median, 3),
+                    opt(a.render_depth_error_p90, 3),
                 ]
                 .map(Cell::plain),
             );
@@ -198,6 +204,9 @@ impl Report {
             ("tau", true),
             ("recall", true),
             ("F-score", true),
+            ("render IoU", true),
+            ("depth error", true),
+            ("depth p90", true),
         ];
         // Delaunay adds what its update did.
         if m.delaunay.is_some() {
@@ -240,6 +249,9 @@ impl Report {
                     opt(mm.map(|m| m.tau), 3),
                     optf(mm.map(|m| m.recall)),
                     optf(mm.map(|m| m.fscore)),
+                    optf(r.consistency.map(|c| c.iou)),
+                    opt(r.consistency.and_then(|c| c.depth_error_median), 3),
+                    opt(r.consistency.and_then(|c| c.depth_error_p90), 3),
                 ]
                 .map(Cell::plain),
             );

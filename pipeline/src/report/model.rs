@@ -10,7 +10,8 @@ use trisplat_geometry::metrics::Relation;
 
 use crate::config::Method;
 use crate::records::{
-    DelaunayFrame, FailedFrame, FrameMetrics, FrameRecord, GaussiansUsed, Resolved, ShardRecord,
+    DelaunayFrame, FailedFrame, FrameMetrics, FrameRecord, GaussiansUsed, RenderConsistency,
+    Resolved, ShardRecord,
 };
 
 /// The incremental Delaunay's work over the frames (delaunay only).
@@ -109,6 +110,21 @@ pub struct Summary {
     /// truth's vertices).
     #[serde(default)]
     pub self_consistency_frames: usize,
+    /// Frames with render consistency (non-empty mesh, `--consistency-views` > 0).
+    #[serde(default)]
+    pub consistency_frames: usize,
+    /// Mean silhouette IoU against the frame's Gaussians over those frames.
+    #[serde(default)]
+    pub render_iou: Option<f64>,
+    /// Mean of the frames' median depth errors against the Gaussians.
+    #[serde(default)]
+    pub render_depth_error_median: Option<f64>,
+    /// Mean of the frames' 90th-percentile depth errors against the Gaussians.
+    #[serde(default)]
+    pub render_depth_error_p90: Option<f64>,
+    /// Mean of the frames' median normal angles against the Gaussians, degrees.
+    #[serde(default)]
+    pub render_normal_angle_deg: Option<f64>,
 }
 
 pub(super) fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
@@ -136,6 +152,10 @@ impl Summary {
         let structures: Vec<&MeshStats> = metrics
             .iter()
             .filter_map(|m| m.structure.as_ref())
+            .collect();
+        let consistency: Vec<&RenderConsistency> = records
+            .iter()
+            .filter_map(|r| r.consistency.as_ref())
             .collect();
         Self {
             frames: records.len(),
@@ -165,6 +185,13 @@ impl Summary {
                 .iter()
                 .filter(|m| m.relation == Relation::SelfConsistency)
                 .count(),
+            consistency_frames: consistency.len(),
+            render_iou: mean(consistency.iter().map(|c| c.iou)),
+            render_depth_error_median: mean(
+                consistency.iter().filter_map(|c| c.depth_error_median),
+            ),
+            render_depth_error_p90: mean(consistency.iter().filter_map(|c| c.depth_error_p90)),
+            render_normal_angle_deg: mean(consistency.iter().filter_map(|c| c.normal_angle_deg)),
         }
     }
 
@@ -339,6 +366,7 @@ mod tests {
             faces: 4,
             watertight: frame.is_multiple_of(2),
             metrics,
+            consistency: None,
         }
     }
 
@@ -487,11 +515,11 @@ mod tests {
         };
         let md = report.markdown();
         assert!(
-            md.contains("| F-score | hopped | charts redone | rebuilt |"),
+            md.contains("| depth p90 | hopped | charts redone | rebuilt |"),
             "{md}"
         );
-        assert!(md.contains("| - | 0 | 10 | yes |\n"), "{md}");
-        assert!(md.contains("| - | 6 | 3 | no |\n"), "{md}");
+        assert!(md.contains("| - | - | - | - | 0 | 10 | yes |\n"), "{md}");
+        assert!(md.contains("| - | - | - | - | 6 | 3 | no |\n"), "{md}");
         assert!(md.contains("Gaussians hopped 10.000% (of 40), charts redone 20.000% (of 10)"));
         assert_eq!(significant(0.006_035_319_638_385_869), "0.00603532");
         assert_eq!(significant(24.0), "24");

@@ -595,6 +595,7 @@ pub(crate) mod tests {
                         relation,
                         structure: None,
                     }),
+                    consistency: None,
                 })
                 .collect();
             let mean = Summary::of(&frames);
