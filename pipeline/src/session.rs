@@ -39,7 +39,6 @@ use crate::avatar::bind_lam;
 use crate::config::GaussianLayout;
 use crate::config::{
     DEFAULT_RESOLUTION, DEFAULT_VIEWS, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
-    ShardOptions,
 };
 use crate::consistency::{GaussianViews, RenderConsistency, held_out_rig};
 use crate::deform::{Engine, EngineInputs};
@@ -48,6 +47,7 @@ use crate::event::Event;
 use crate::input::{
     Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
     check_topology, deform_mode, open_template_and_animation, parse_frames, read_bound,
+    shard_frames,
 };
 use crate::methods::{FrameInput, Mesher, MethodOutput, parameters};
 use crate::metrics::{GtSamples, is_watertight, measure_with};
@@ -1146,29 +1146,6 @@ fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
         });
     }
     Ok(())
-}
-
-/// The frames this run meshes: `shard`'s part of the `selected` frames (all of them without
-/// `--shard`), and the shard as the report records it. `--shard auto` is read from the
-/// process's environment here when the caller did not resolve it.
-fn shard_frames(
-    shard: &ShardOptions,
-    selected: Range<usize>,
-) -> Result<(Range<usize>, Option<ShardRecord>), PipelineError> {
-    let refused = |problem| PipelineError::Shard { problem };
-    let Some(s) = shard
-        .resolve(&|name| std::env::var(name).ok())
-        .map_err(refused)?
-    else {
-        return Ok((selected, None));
-    };
-    let frames = s.frames(selected.clone()).map_err(refused)?;
-    let record = ShardRecord {
-        index: s.index,
-        count: s.count,
-        job_frames: [selected.start, selected.end],
-    };
-    Ok((frames, Some(record)))
 }
 
 /// Up to `count` frames of `frames`, evenly spaced from its first to its last (all of them

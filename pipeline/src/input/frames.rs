@@ -2,7 +2,9 @@
 
 use std::ops::Range;
 
+use crate::config::ShardOptions;
 use crate::error::PipelineError;
+use crate::records::ShardRecord;
 
 /// Parses `A..B` (B excluded), `A..=B`, `A..`, `..B` or `A` against `count` frames; `None` is
 /// every frame.
@@ -43,4 +45,27 @@ pub fn parse_frames(spec: Option<&str>, count: usize) -> Result<Range<usize>, Pi
         )));
     }
     Ok(range)
+}
+
+/// The frames this run meshes: `shard`'s part of the `selected` frames (all of them without
+/// `--shard`), and the shard as the report records it. `--shard auto` is read from the
+/// process's environment here when the caller did not resolve it.
+pub fn shard_frames(
+    shard: &ShardOptions,
+    selected: Range<usize>,
+) -> Result<(Range<usize>, Option<ShardRecord>), PipelineError> {
+    let refused = |problem| PipelineError::Shard { problem };
+    let Some(s) = shard
+        .resolve(&|name| std::env::var(name).ok())
+        .map_err(refused)?
+    else {
+        return Ok((selected, None));
+    };
+    let frames = s.frames(selected.clone()).map_err(refused)?;
+    let record = ShardRecord {
+        index: s.index,
+        count: s.count,
+        job_frames: [selected.start, selected.end],
+    };
+    Ok((frames, Some(record)))
 }
