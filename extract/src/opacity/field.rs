@@ -67,15 +67,20 @@ fn accumulate<const COLOR: bool>(
     color: &mut [f64; 3],
 ) -> f64 {
     let d = x - view.origin;
+    let z = hit.z;
     let (min_alpha, max_alpha) = (f64::from(rules.min_alpha), f64::from(rules.max_alpha));
     let mut transmittance = 1.0f64;
-    for &g in view.tile(hit.tile) {
-        let g = g as usize;
-        if view.zmin[g] > hit.z {
+    for &k in view.tile(hit.tile) {
+        let g = &view.packed[k as usize];
+        if f64::from(g.zmin) > z {
             break;
         }
-        let v = p.whitened(g, d);
-        let u = view.centre[g];
+        let m = &g.whiten;
+        let row = |r: usize| {
+            f64::from(m[r][0]) * d.x + f64::from(m[r][1]) * d.y + f64::from(m[r][2]) * d.z
+        };
+        let v = DVec3::new(row(0), row(1), row(2));
+        let u = DVec3::from_array(g.centre);
         let vv = v.length_squared();
         let t = if vv > 0.0 {
             (-u.dot(v) / vv).clamp(0.0, 1.0)
@@ -83,15 +88,15 @@ fn accumulate<const COLOR: bool>(
             1.0
         };
         let q = (u + v * t).length_squared();
-        if q > p.q_max[g] {
+        if q > f64::from(g.q_max) {
             continue;
         }
-        let alpha = (f64::from(p.opacity[g]) * (-0.5 * q).exp()).min(max_alpha);
+        let alpha = (f64::from(g.opacity) * (-0.5 * q).exp()).min(max_alpha);
         if alpha < min_alpha {
             continue;
         }
         if COLOR {
-            let c = p.colors[g];
+            let c = p.colors[g.index as usize];
             for k in 0..3 {
                 color[k] += f64::from(c[k]) * alpha * transmittance;
             }

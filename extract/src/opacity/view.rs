@@ -1,17 +1,36 @@
-//! One camera's view of the Gaussians: which Gaussians can touch the ray through each 8x8
+//! One camera's view of the Gaussians: which Gaussians can touch the ray through each 4x4
 //! pixel tile, in order of their nearest depth, and each Gaussian's whitened camera centre.
 //! The buffers are reused from view to view, so a run holds one view at a time.
 
 use glam::{DMat3, DVec3};
+use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
 use super::gaussians::Prepared;
 
 /// Side of a binning tile, pixels.
-pub(crate) const TILE: u32 = 8;
+pub(crate) const TILE: u32 = 4;
 /// Camera z below which a Gaussian's centre is culled and a point is not seen (the renderer's
 /// near plane, docs/conventions.md §5).
 pub(crate) const NEAR: f64 = 0.01;
+
+/// What the walk along a ray reads of one Gaussian, packed in one cache-line-sized record.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Packed {
+    /// Whitened camera centre `M (origin - mean)`.
+    pub centre: [f64; 3],
+    /// Whitening rows `R_k / s_k`.
+    pub whiten: [[f32; 3]; 3],
+    /// Smallest camera z of the reach box, rounded down to f32 (-inf when it reaches the near
+    /// plane).
+    pub zmin: f32,
+    /// Squared whitened reach (see [`Prepared::q_max`]).
+    pub q_max: f32,
+    /// Opacity.
+    pub opacity: f32,
+    /// Index among the kept Gaussians.
+    pub index: u32,
+}
 
 /// One view's bins (reused across views).
 #[derive(Debug, Default)]
@@ -27,16 +46,14 @@ pub(crate) struct ViewBins {
     width: u32,
     height: u32,
     tiles_x: u32,
-    /// Per Gaussian: its whitened camera centre `M (origin - mean)`.
-    pub centre: Vec<DVec3>,
-    /// Per Gaussian: the smallest camera z of its box (-inf when the box reaches the near
-    /// plane).
-    pub zmin: Vec<f64>,
-    /// Tile `t`'s Gaussians are `entries[offsets[t]..offsets[t + 1]]`, by (zmin, index).
+    /// The binned Gaussians by (zmin, index).
+    pub packed: Vec<Packed>,
+    /// Tile `t`'s Gaussians are `packed[entries[offsets[t]..offsets[t + 1]]]`.
     offsets: Vec<u32>,
     entries: Vec<u32>,
     order: Vec<u32>,
-    rects: Vec<[u32; 4]>,
+    /// Per Gaussian: smallest box depth and tile rectangle.
+    foot: Vec<(f64, [u32; 4])>,
 }
 
 /// Where a point falls in a view.
@@ -60,30 +77,52 @@ impl ViewBins {
         self.tiles_x = self.width.div_ceil(TILE);
         let tiles_y = self.height.div_ceil(TILE);
         let n = p.len();
-        self.centre.clear();
-        self.zmin.clear();
-        self.rects.clear();
+        let mut foot = std::mem::take(&mut self.foot);
+        foot.clear();
+        foot.par_extend(
+            (0..n)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(|g| self.footprint(p, g, tiles_y)),
+        );
+        self.foot = foot;
         self.order.clear();
-        for g in 0..n {
-            self.centre.push(p.whitened(g, self.origin - p.means[g]));
-            let (zmin, rect) = self.footprint(p, g, tiles_y);
-            self.zmin.push(zmin);
-            self.rects.push(rect);
-            if rect[0] < rect[1] && rect[2] < rect[3] {
-                self.order.push(g as u32);
-            }
-        }
-        let zmin = &self.zmin;
-        self.order.sort_unstable_by(|&a, &b| {
-            zmin[a as usize]
-                .total_cmp(&zmin[b as usize])
+        self.order.extend((0..n as u32).filter(|&g| {
+            let r = self.foot[g as usize].1;
+            r[0] < r[1] && r[2] < r[3]
+        }));
+        let foot = &self.foot;
+        self.order.par_sort_unstable_by(|&a, &b| {
+            foot[a as usize]
+                .0
+                .total_cmp(&foot[b as usize].0)
                 .then(a.cmp(&b))
         });
+        let origin = self.origin;
+        self.packed.clear();
+        self.packed
+            .par_extend(self.order.par_iter().with_min_len(1024).map(|&g| {
+                let g = g as usize;
+                let zmin = foot[g].0;
+                let mut z32 = zmin as f32;
+                if f64::from(z32) > zmin {
+                    z32 = z32.next_down();
+                }
+                Packed {
+                    centre: p.whitened(g, origin - p.means[g]).to_array(),
+                    whiten: p.whiten[g],
+                    zmin: z32,
+                    // Rounded up: the alpha test decides at the cut itself.
+                    q_max: (p.q_max[g] as f32).next_up(),
+                    opacity: p.opacity[g],
+                    index: g as u32,
+                }
+            }));
         let tiles = (self.tiles_x * tiles_y) as usize;
         self.offsets.clear();
         self.offsets.resize(tiles + 1, 0);
         for &g in &self.order {
-            let [x0, x1, y0, y1] = self.rects[g as usize];
+            let [x0, x1, y0, y1] = self.foot[g as usize].1;
             for ty in y0..y1 {
                 for tx in x0..x1 {
                     self.offsets[(ty * self.tiles_x + tx) as usize + 1] += 1;
@@ -96,12 +135,12 @@ impl ViewBins {
         self.entries.clear();
         self.entries.resize(self.offsets[tiles] as usize, 0);
         let mut fill: Vec<u32> = self.offsets[..tiles].to_vec();
-        for &g in &self.order {
-            let [x0, x1, y0, y1] = self.rects[g as usize];
+        for (k, &g) in self.order.iter().enumerate() {
+            let [x0, x1, y0, y1] = self.foot[g as usize].1;
             for ty in y0..y1 {
                 for tx in x0..x1 {
                     let t = (ty * self.tiles_x + tx) as usize;
-                    self.entries[fill[t] as usize] = g;
+                    self.entries[fill[t] as usize] = k as u32;
                     fill[t] += 1;
                 }
             }
@@ -171,7 +210,7 @@ impl ViewBins {
         })
     }
 
-    /// The Gaussians of `tile`, nearest first.
+    /// The Gaussians of `tile` (indices into [`Self::packed`]), nearest first.
     #[inline]
     pub fn tile(&self, tile: usize) -> &[u32] {
         &self.entries[self.offsets[tile] as usize..self.offsets[tile + 1] as usize]
