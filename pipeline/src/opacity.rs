@@ -27,14 +27,16 @@ pub fn opacity_gaussians(set: &GaussianSet) -> OpacityGaussians {
     }
 }
 
-/// The tsdf method's rig around `means`: `views` cameras of `resolution`² pixels, 40° field of
-/// view, on a Fibonacci sphere around the means' bounding sphere.
+/// The tsdf method's rig (`views` cameras of `resolution`² pixels, 40° field of view, on a
+/// Fibonacci sphere) around the bounding sphere of the points the opacity method
+/// tetrahedralises, each Gaussian's mean and the corners of its 3-sigma box, so that every one
+/// of them is in every image (non-finite corners are left to the field's checks).
 ///
 /// # Errors
-/// [`PipelineError::BadOption`] when the means have no finite bounding sphere or the rig is
-/// invalid (no views, empty images).
+/// [`PipelineError::BadOption`] when no point is finite or the rig is invalid (no views, empty
+/// images).
 pub fn opacity_rig(
-    means: &[Vec3],
+    set: &GaussianSet,
     views: usize,
     resolution: u32,
 ) -> Result<Vec<Camera>, PipelineError> {
@@ -43,7 +45,24 @@ pub fn opacity_rig(
         value: views as f64,
         expected,
     };
-    let (center, radius) = bounding_sphere(&[], means).ok_or(bad("Gaussians with finite means"))?;
+    let mut points: Vec<Vec3> = Vec::with_capacity(set.len() * 9);
+    for i in 0..set.len() {
+        let mean = set.means()[i].as_dvec3();
+        let r = set.rotation_matrix(i);
+        let s = set.scale(i).as_dvec3() * 3.0;
+        points.push(mean.as_vec3());
+        for corner in 0..8u32 {
+            let sign = |bit: u32| if corner >> bit & 1 == 0 { -1.0 } else { 1.0 };
+            let c = mean
+                + r.x_axis * (s.x * sign(0))
+                + r.y_axis * (s.y * sign(1))
+                + r.z_axis * (s.z * sign(2));
+            points.push(c.as_vec3());
+        }
+    }
+    points.retain(|p| p.is_finite());
+    let (center, radius) =
+        bounding_sphere(&[], &points).ok_or(bad("Gaussians with finite means"))?;
     sphere_rig(
         center,
         radius,

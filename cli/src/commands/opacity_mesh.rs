@@ -37,7 +37,7 @@ when that lies beyond it (alphas clamped at 0.999, those below 1/255 skipped: th
 rules); marching tetrahedra at --level with --steps bisection steps on every crossing edge; \
 vertex colours: the colours composited up to the vertex in the view where it is least covered. \
 Views: --cameras, or the tsdf method's rig (--views cameras of --resolution pixels, 40 degree \
-field of view, on a sphere around the means' bounding sphere). Views are streamed: memory does \
+field of view, on a sphere around the bounding sphere of the means and box corners). Views are streamed: memory does \
 not grow with their number.")]
 pub struct OpacityMeshArgs {
     /// World-space Gaussians (3DGS PLY).
@@ -102,7 +102,7 @@ pub fn run(args: OpacityMeshArgs, ctx: &Context) -> anyhow::Result<()> {
             refuse_to_overwrite(path, &args.output)?;
             read_camera_file(path, None, args.max_pixels)?
         }
-        None => opacity_rig(set.means(), args.views as usize, args.resolution)
+        None => opacity_rig(&set, args.views as usize, args.resolution)
             .with_context(|| format!("{}: no camera rig", args.gaussians.display()))?,
     };
     let options = OpacityOptions {
