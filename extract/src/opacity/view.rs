@@ -1,4 +1,4 @@
-//! One camera's view of the Gaussians: which Gaussians can touch the ray through each 4x4
+//! One camera's view of the Gaussians: which Gaussians can touch the ray through each 2x2
 //! pixel tile, in order of their nearest depth, and each Gaussian's whitened camera centre.
 //! The buffers are reused from view to view, so a run holds one view at a time.
 
@@ -9,7 +9,7 @@ use trisplat_geometry::Camera;
 use super::gaussians::Prepared;
 
 /// Side of a binning tile, pixels.
-pub(crate) const TILE: u32 = 4;
+pub(crate) const TILE: u32 = 2;
 /// Camera z below which a Gaussian's centre is culled and a point is not seen (the renderer's
 /// near plane, docs/conventions.md §5).
 pub(crate) const NEAR: f64 = 0.01;
