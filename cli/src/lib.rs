@@ -45,6 +45,8 @@ pub enum Command {
     AlphaShape(commands::alpha_shape::AlphaShapeArgs),
     /// Fuse depth maps into a mesh (TSDF on sparse voxel blocks + marching cubes).
     Tsdf(commands::tsdf::TsdfArgs),
+    /// Mesh the Gaussians' opacity field (GOF): Delaunay of centres and 3-sigma corners, marching tetrahedra.
+    OpacityMesh(commands::opacity_mesh::OpacityMeshArgs),
     /// Convert between PLY, OBJ, glTF and GLB.
     Convert(commands::convert::ConvertArgs),
     /// Sample points on a mesh surface.
@@ -164,6 +166,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(args) => commands::eval::run(args, &ctx),
         Command::AlphaShape(args) => commands::alpha_shape::run(args, &ctx),
         Command::Tsdf(args) => commands::tsdf::run(args, &ctx),
+        Command::OpacityMesh(args) => commands::opacity_mesh::run(args, &ctx),
         Command::Convert(args) => commands::convert::run(args, &ctx),
         Command::Sample(args) => commands::sample::run(args, &ctx),
         Command::Smooth(args) => commands::smooth::run(args, &ctx),

@@ -2,14 +2,15 @@
 //! cubes ([`tsdf`], [`marching_cubes()`]), incremental Delaunay meshing of triangle-bound
 //! Gaussians that only re-triangulates what moved ([`incremental_delaunay`]), alpha shapes over
 //! our own exact 3D Delaunay tetrahedralisation ([`delaunay3d`], [`alpha_shape`]), and visual
-//! hulls carved from silhouettes ([`carve`]).
+//! hulls carved from silhouettes ([`carve`]), and the Gaussians' opacity field meshed by
+//! marching tetrahedra ([`opacity`], Gaussian Opacity Fields).
 //!
 //! This crate takes depth images, cameras and point sets, never renderer types.
 //!
 //! # Public paths
 //! Each meshing method is a namespace of its own, addressed as such (`tsdf::fuse`,
 //! `alpha_shape::alpha_shape`, …): [`tsdf`], [`incremental_delaunay`], [`delaunay3d`],
-//! [`alpha_shape`] and [`carve`] each bring their options, their error type (two of them are
+//! [`alpha_shape`], [`carve`] and [`opacity`] each bring their options, their error type (two of them are
 //! called `DelaunayError`) and their entry points. The building blocks shared by several
 //! methods live in private modules and are re-exported here, at the root: the sparse voxel
 //! [`BlockGrid`] and [`marching_cubes()`] over it. Everything else (the case table of marching
@@ -23,6 +24,7 @@ mod image_file;
 pub mod incremental_delaunay;
 mod marching_cubes;
 mod mc_tables;
+pub mod opacity;
 pub mod tsdf;
 
 pub use crate::block_grid::BlockGrid;

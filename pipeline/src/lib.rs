@@ -74,6 +74,7 @@ pub mod fit;
 pub mod input;
 pub mod methods;
 pub mod metrics;
+pub mod opacity;
 pub mod output;
 pub mod records;
 pub mod refine;

@@ -15,6 +15,7 @@ pub mod gaussian_io;
 pub mod init;
 pub mod man;
 pub mod merge;
+pub mod opacity_mesh;
 pub mod prune;
 pub mod refine;
 pub mod render;

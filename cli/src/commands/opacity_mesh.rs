@@ -1,0 +1,149 @@
+//! `trisplat opacity-mesh GAUSSIANS.ply [--cameras C.json] -o MESH.ply [--views N]
+//! [--resolution R] [--keep-pieces all|largest]`: mesh the Gaussians' opacity field
+//! (docs/conventions.md §6).
+
+use std::path::PathBuf;
+
+use anyhow::{Context as _, bail};
+use trisplat_extract::opacity::{
+    DEFAULT_BISECTION_STEPS, DEFAULT_LEVEL, KeepPieces, OpacityOptions, opacity_mesh,
+};
+use trisplat_geometry::io::{WriteOptions, write_mesh};
+use trisplat_pipeline::config::{DEFAULT_RESOLUTION, DEFAULT_VIEWS};
+use trisplat_pipeline::opacity::{opacity_gaussians, opacity_rig};
+use trisplat_splat::ParameterSpace;
+use trisplat_splat::ply::read_gaussians;
+
+use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
+
+/// Which pieces of the surface `--keep-pieces` keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Pieces {
+    /// Every connected piece.
+    All,
+    /// The largest piece by area.
+    Largest,
+}
+
+/// Arguments of `trisplat opacity-mesh`.
+#[derive(Debug, clap::Args)]
+#[command(after_long_help = "\
+Mesh the opacity field of world-space Gaussians (Gaussian Opacity Fields): points at each \
+Gaussian's centre and the 8 corners of its 3-sigma box (Gaussians with opacity below 1/255 left \
+out), our exact 3D Delaunay over them; the opacity of a point is the smallest, over the views \
+that see it, of 1 - prod(1 - alpha_i) along the view's ray up to the point, each Gaussian's \
+alpha = opacity x its density at the ray's point of highest density, or at the point itself \
+when that lies beyond it (alphas clamped at 0.999, those below 1/255 skipped: the renderer's \
+rules); marching tetrahedra at --level with --steps bisection steps on every crossing edge; \
+vertex colours: the colours composited up to the vertex in the view where it is least covered. \
+Views: --cameras, or the tsdf method's rig (--views cameras of --resolution pixels, 40 degree \
+field of view, on a sphere around the bounding sphere of the means and box corners). Views are streamed: memory does \
+not grow with their number.")]
+pub struct OpacityMeshArgs {
+    /// World-space Gaussians (3DGS PLY).
+    pub gaussians: PathBuf,
+    /// Cameras: a 3DGS cameras.json or a NeRF transforms.json (default: the tsdf rig).
+    #[arg(long, conflicts_with_all = ["views", "resolution"])]
+    pub cameras: Option<PathBuf>,
+    /// Output mesh (.ply, .obj, .gltf, .glb).
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Cameras of the default rig.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_VIEWS as u32,
+        value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub views: u32,
+    /// Side of the default rig's square images, pixels (they bound which points a view sees).
+    #[arg(long, value_name = "PX", default_value_t = DEFAULT_RESOLUTION,
+        value_parser = clap::value_parser!(u32).range(8..=8192))]
+    pub resolution: u32,
+    /// Which connected pieces to keep: the largest by area, or all.
+    #[arg(long, value_enum, default_value_t = Pieces::Largest)]
+    pub keep_pieces: Pieces,
+    /// Level of the opacity field the surface lies at, in (0, 1).
+    #[arg(long, default_value_t = DEFAULT_LEVEL, value_parser = parse_level)]
+    pub level: f32,
+    /// Bisection steps on each crossing edge.
+    #[arg(long, default_value_t = DEFAULT_BISECTION_STEPS,
+        value_parser = clap::value_parser!(u32).range(0..=40))]
+    pub steps: u32,
+    /// No vertex colours.
+    #[arg(long)]
+    pub no_colors: bool,
+    /// Most pixels of one camera's image of --cameras.
+    #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
+    pub max_pixels: u64,
+}
+
+/// `--level`: in (0, 1).
+fn parse_level(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(a) if a > 0.0 && a < 1.0 => Ok(a),
+        _ => Err(format!("expected an opacity in (0, 1), got '{s}'")),
+    }
+}
+
+/// Runs `trisplat opacity-mesh`.
+///
+/// # Errors
+/// Unreadable Gaussians or cameras, Gaussians in a local (bound) frame, bad Gaussians (named),
+/// no camera seeing them, degenerate points, no surface, an output that is an input, a failed
+/// write.
+pub fn run(args: OpacityMeshArgs, ctx: &Context) -> anyhow::Result<()> {
+    refuse_to_overwrite(&args.gaussians, &args.output)?;
+    let set = read_gaussians(&args.gaussians)?;
+    if set.space() != ParameterSpace::World {
+        bail!(
+            "{}: the Gaussians are in their triangles' local frames; deform them to world space first (trisplat deform)",
+            args.gaussians.display()
+        );
+    }
+    let cameras = match &args.cameras {
+        Some(path) => {
+            refuse_to_overwrite(path, &args.output)?;
+            read_camera_file(path, None, args.max_pixels)?
+        }
+        None => opacity_rig(&set, args.views as usize, args.resolution)
+            .with_context(|| format!("{}: no camera rig", args.gaussians.display()))?,
+    };
+    let options = OpacityOptions {
+        level: args.level,
+        bisection_steps: args.steps,
+        keep: match args.keep_pieces {
+            Pieces::All => KeepPieces::All,
+            Pieces::Largest => KeepPieces::Largest,
+        },
+        colors: !args.no_colors,
+        ..OpacityOptions::default()
+    };
+    let spinner = ctx.progress.spinner("meshing the opacity field");
+    let out = opacity_mesh(&opacity_gaussians(&set), &cameras, &options)
+        .with_context(|| format!("{}: opacity mesh failed", args.gaussians.display()))?;
+    spinner.finish_and_clear();
+    let s = &out.stats;
+    if !ctx.quiet && s.pieces > 1 && options.keep == KeepPieces::Largest {
+        eprintln!(
+            "{}: the surface has {} pieces; kept the largest ({:.2}% of the area; --keep-pieces all keeps every piece)",
+            args.gaussians.display(),
+            s.pieces,
+            100.0 * s.kept_area_fraction
+        );
+    }
+    write_mesh(&args.output, &out.mesh, WriteOptions::default())?;
+    ctx.emit(
+        "opacity-mesh",
+        serde_json::json!({
+            "output": args.output,
+            "views": cameras.len(),
+            "gaussians": s.gaussians,
+            "points": s.points,
+            "points_seen": s.points_seen,
+            "tetrahedra": s.tetrahedra,
+            "crossing_edges": s.crossing_edges,
+            "vertices": out.mesh.vertex_count(),
+            "triangles": out.mesh.triangle_count(),
+            "pieces": s.pieces,
+            "kept_area_fraction": s.kept_area_fraction,
+            "ms": {"field": s.ms[0], "delaunay": s.ms[1], "march": s.ms[2], "colors": s.ms[3]},
+        }),
+    )
+}

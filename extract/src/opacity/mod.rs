@@ -1,0 +1,288 @@
+//! Meshing the Gaussians' opacity field (Gaussian Opacity Fields, Yu et al. 2024;
+//! docs/conventions.md §6): points at each kept Gaussian's centre and the corners of its
+//! 3-sigma box, our exact 3D Delaunay over them, the opacity field at every point (the smallest
+//! over views of the opacity accumulated along the view's ray up to the point, [`opacity_at`]),
+//! marching tetrahedra at `level` with bisection on every crossing edge, vertex colours from the
+//! Gaussians, and optionally only the largest piece by area.
+//!
+//! - **Input**: [`OpacityGaussians`], plain arrays (this crate never sees a renderer's set);
+//!   zero, negative or non-finite scales, non-finite means, zero rotations and opacities
+//!   outside [0, 1] are errors naming the Gaussian. Gaussians whose opacity is below
+//!   [`OpacityOptions::opacity_cut`] (and the alpha cut) are left out of points and field.
+//! - **Views** are streamed: one view's bins are held at a time, so memory does not grow with
+//!   their number.
+//! - **Determinism**: every point's value depends only on the views in order, never on the
+//!   thread count.
+
+mod error;
+mod field;
+mod gaussians;
+mod pieces;
+mod tets;
+mod view;
+
+use std::time::Instant;
+
+use glam::DVec3;
+use trisplat_geometry::{Camera, Rgba, TriMesh};
+
+use crate::delaunay3d::Delaunay3d;
+use field::{Mode, evaluate};
+
+pub use error::OpacityError;
+pub use field::AlphaRules;
+pub use gaussians::OpacityGaussians;
+
+use gaussians::{Prepared, tetra_points};
+
+/// Default level of the opacity field the surface is extracted at (GOF: 1/2).
+pub const DEFAULT_LEVEL: f32 = 0.5;
+/// Default number of bisection steps on each crossing edge (GOF: 8).
+pub const DEFAULT_BISECTION_STEPS: u32 = 8;
+/// Default opacity below which a Gaussian is left out (the renderer's alpha cut, 1/255: such a
+/// Gaussian never changes a pixel).
+pub const DEFAULT_OPACITY_CUT: f32 = 1.0 / 255.0;
+
+/// Which connected pieces of the surface are kept.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum KeepPieces {
+    /// Every piece.
+    All,
+    /// Only the largest by area (the default).
+    #[default]
+    Largest,
+}
+
+/// Options of [`opacity_mesh`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OpacityOptions {
+    /// Level of the field the surface lies at, in (0, 1).
+    pub level: f32,
+    /// Bisection steps on each crossing edge (0: edge midpoints).
+    pub bisection_steps: u32,
+    /// Gaussians with a smaller opacity are left out.
+    pub opacity_cut: f32,
+    /// Compositing rules.
+    pub rules: AlphaRules,
+    /// Pieces kept.
+    pub keep: KeepPieces,
+    /// Whether vertices get colours.
+    pub colors: bool,
+}
+
+impl Default for OpacityOptions {
+    fn default() -> Self {
+        Self {
+            level: DEFAULT_LEVEL,
+            bisection_steps: DEFAULT_BISECTION_STEPS,
+            opacity_cut: DEFAULT_OPACITY_CUT,
+            rules: AlphaRules::default(),
+            keep: KeepPieces::default(),
+            colors: true,
+        }
+    }
+}
+
+/// What [`opacity_mesh`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct OpacityStats {
+    /// Gaussians kept (opacity at or above the cut).
+    pub gaussians: usize,
+    /// Points (9 per kept Gaussian).
+    pub points: usize,
+    /// Of which some view sees (the others are left out).
+    pub points_seen: usize,
+    /// Finite tetrahedra.
+    pub tetrahedra: usize,
+    /// Edges crossing the level (= vertices before the piece selection).
+    pub crossing_edges: usize,
+    /// Connected pieces of the surface before the selection.
+    pub pieces: usize,
+    /// Share of the surface's area kept by the selection (1 with [`KeepPieces::All`]).
+    pub kept_area_fraction: f64,
+    /// Milliseconds per stage: field at the points, tetrahedralisation, marching and
+    /// bisection, colours.
+    pub ms: [f64; 4],
+}
+
+/// A mesh of the opacity field and what it took.
+#[derive(Clone, Debug)]
+pub struct OpacityMesh {
+    /// The surface, faces toward lower opacity, vertex colours unless turned off.
+    pub mesh: TriMesh,
+    /// Counts and timings.
+    pub stats: OpacityStats,
+}
+
+/// The opacity field of `gaussians` seen by `cameras` at `points` (1 where no camera sees a
+/// point, as GOF).
+///
+/// # Errors
+/// As [`opacity_mesh`] for bad Gaussians or no camera.
+pub fn opacity_at(
+    gaussians: &OpacityGaussians,
+    cameras: &[Camera],
+    points: &[DVec3],
+    options: &OpacityOptions,
+) -> Result<Vec<f32>, OpacityError> {
+    if cameras.is_empty() {
+        return Err(OpacityError::NoCameras);
+    }
+    let p = Prepared::new(gaussians, options.opacity_cut, options.rules.min_alpha)?;
+    let field = evaluate(&p, cameras, points, Mode::Exact, options.rules);
+    Ok(field.value.iter().map(|&v| v as f32).collect())
+}
+
+/// Meshes the opacity field of `gaussians` seen by `cameras` (see the module docs).
+///
+/// # Errors
+/// [`OpacityError`]: a bad Gaussian (named), every opacity below the cut, no camera, no point
+/// seen by any camera, degenerate (coplanar or coincident) points, or no crossing of the level.
+pub fn opacity_mesh(
+    gaussians: &OpacityGaussians,
+    cameras: &[Camera],
+    options: &OpacityOptions,
+) -> Result<OpacityMesh, OpacityError> {
+    if cameras.is_empty() {
+        return Err(OpacityError::NoCameras);
+    }
+    let level = f64::from(options.level);
+    let sign = Mode::Sign { level };
+    let p = Prepared::new(gaussians, options.opacity_cut, options.rules.min_alpha)?;
+    let mut stats = OpacityStats {
+        gaussians: p.len(),
+        ..OpacityStats::default()
+    };
+    let clock = Instant::now();
+    let all = tetra_points(&p);
+    stats.points = all.len();
+    let field = evaluate(&p, cameras, &all, sign, options.rules);
+    let (points, inside): (Vec<DVec3>, Vec<bool>) = all
+        .iter()
+        .zip(&field.value)
+        .zip(&field.seen)
+        .filter(|(_, seen)| **seen)
+        .map(|((&x, &v), _)| (x, v >= level))
+        .unzip();
+    stats.points_seen = points.len();
+    if points.is_empty() {
+        return Err(OpacityError::NotSeen { points: all.len() });
+    }
+    drop(all);
+    stats.ms[0] = ms(clock);
+
+    let clock = Instant::now();
+    let delaunay = Delaunay3d::from_f64(points.iter().map(|x| x.to_array()).collect())?;
+    if delaunay.dimension() < 3 {
+        return Err(OpacityError::Degenerate {
+            dimension: delaunay.dimension(),
+        });
+    }
+    stats.tetrahedra = delaunay.tetrahedra().len();
+    stats.ms[1] = ms(clock);
+
+    let clock = Instant::now();
+    let crossings = tets::march(&points, delaunay.tetrahedra(), &inside);
+    drop(delaunay);
+    if crossings.triangles.is_empty() {
+        return Err(OpacityError::NoSurface {
+            level: options.level,
+            inside: inside.iter().filter(|&&i| i).count(),
+            points: points.len(),
+        });
+    }
+    stats.crossing_edges = crossings.edges.len();
+    let mut lo: Vec<DVec3> = crossings
+        .edges
+        .iter()
+        .map(|e| points[e[0] as usize])
+        .collect();
+    let mut hi: Vec<DVec3> = crossings
+        .edges
+        .iter()
+        .map(|e| points[e[1] as usize])
+        .collect();
+    let mut mid: Vec<DVec3> = Vec::with_capacity(lo.len());
+    for _ in 0..options.bisection_steps {
+        mid.clear();
+        mid.extend(lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5));
+        let f = evaluate(&p, cameras, &mid, sign, options.rules);
+        for (k, m) in mid.iter().enumerate() {
+            if f.value[k] >= level {
+                lo[k] = *m;
+            } else {
+                hi[k] = *m;
+            }
+        }
+    }
+    let vertices: Vec<DVec3> = lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5).collect();
+    stats.ms[2] = ms(clock);
+
+    let clock = Instant::now();
+    let (piece, areas) = pieces::pieces(&vertices, &crossings.triangles);
+    stats.pieces = areas.len();
+    let total: f64 = areas.iter().sum();
+    let triangles: Vec<[u32; 3]> = match options.keep {
+        KeepPieces::All => {
+            stats.kept_area_fraction = 1.0;
+            crossings.triangles
+        }
+        KeepPieces::Largest => {
+            stats.kept_area_fraction = if total > 0.0 { areas[0] / total } else { 1.0 };
+            crossings
+                .triangles
+                .iter()
+                .zip(&piece)
+                .filter(|(_, p)| **p == 0)
+                .map(|(t, _)| *t)
+                .collect()
+        }
+    };
+    // Drop vertices no kept triangle uses, keeping their order.
+    let mut remap = vec![u32::MAX; vertices.len()];
+    let mut used = Vec::new();
+    for t in &triangles {
+        for &v in t {
+            if remap[v as usize] == u32::MAX {
+                remap[v as usize] = 0;
+            }
+        }
+    }
+    for (v, r) in remap.iter_mut().enumerate() {
+        if *r == 0 {
+            *r = used.len() as u32;
+            used.push(vertices[v]);
+        }
+    }
+    let triangles: Vec<[u32; 3]> = triangles
+        .iter()
+        .map(|t| t.map(|v| remap[v as usize]))
+        .collect();
+    let mut mesh = TriMesh::new(used, triangles);
+    if options.colors {
+        let colors = field::colors(&p, cameras, mesh.positions(), options.rules);
+        let rgba: Vec<Rgba> = colors
+            .iter()
+            .map(|c| {
+                [
+                    c[0].clamp(0.0, 1.0),
+                    c[1].clamp(0.0, 1.0),
+                    c[2].clamp(0.0, 1.0),
+                    1.0,
+                ]
+            })
+            .collect();
+        mesh = mesh
+            .with_colors(rgba)
+            .expect("one colour per vertex by construction");
+    }
+    stats.ms[3] = ms(clock);
+    Ok(OpacityMesh { mesh, stats })
+}
+
+fn ms(clock: Instant) -> f64 {
+    clock.elapsed().as_secs_f64() * 1000.0
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,210 @@
+//! Tests of the opacity field and its mesh against closed forms.
+
+use glam::{DVec3, Vec3};
+use trisplat_geometry::{Camera, sphere_rig};
+
+use super::*;
+
+fn gaussians(means: &[Vec3], scale: Vec3, opacity: f32) -> OpacityGaussians {
+    let n = means.len();
+    OpacityGaussians {
+        means: means.to_vec(),
+        scales: vec![scale; n],
+        rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        opacities: vec![opacity; n],
+        colors: vec![[0.2, 0.4, 0.6]; n],
+    }
+}
+
+fn rig(center: DVec3, radius: f64, views: usize) -> Vec<Camera> {
+    sphere_rig(center, radius, views, (64, 64), 40.0).expect("rig")
+}
+
+/// Every edge of a closed triangle mesh is shared by exactly two triangles, once each way.
+fn is_closed(triangles: &[[u32; 3]]) -> bool {
+    let mut edges: Vec<(u32, u32)> = triangles
+        .iter()
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .collect();
+    edges.sort_unstable();
+    let n = edges.len();
+    edges.dedup();
+    edges.len() == n
+        && edges
+            .iter()
+            .all(|&(a, b)| edges.binary_search(&(b, a)).is_ok())
+}
+
+/// One isotropic Gaussian: a point's smallest accumulated opacity over views that see it from
+/// its own side is `exp(-ρ²/2σ²)` (the ray's peak lies beyond the point), so the field is that.
+#[test]
+fn single_gaussian_field_is_its_density() {
+    let sigma = 0.1f32;
+    let g = gaussians(&[Vec3::new(0.3, -0.2, 0.1)], Vec3::splat(sigma), 1.0);
+    let cams = rig(DVec3::new(0.3, -0.2, 0.1), 0.5, 32);
+    let points: Vec<DVec3> = (0..40)
+        .map(|i| {
+            let dir = DVec3::new((i as f64 * 1.3).sin(), (i as f64 * 0.7).cos(), 0.5).normalize();
+            DVec3::new(0.3, -0.2, 0.1) + dir * (0.005 * i as f64)
+        })
+        .collect();
+    let values = opacity_at(&g, &cams, &points, &OpacityOptions::default()).expect("field");
+    for (i, (v, x)) in values.iter().zip(&points).enumerate() {
+        let rho = (*x - DVec3::new(0.3, -0.2, 0.1)).length();
+        let mut expected = (-rho * rho / (2.0 * 0.01)).exp().min(0.999);
+        if expected < 1.0 / 255.0 {
+            expected = 0.0;
+        }
+        assert!(
+            (f64::from(*v) - expected).abs() < 1e-5,
+            "point {i}: {v} vs {expected}"
+        );
+    }
+}
+
+/// Seen from one camera only, a point behind the Gaussian on the optical axis gets the ray's
+/// peak, the opacity itself (clamped at 0.999).
+#[test]
+fn behind_the_peak_the_ray_maximum_counts() {
+    let g = gaussians(&[Vec3::ZERO], Vec3::splat(0.1), 0.8);
+    let cam = Camera::look_at(
+        "c",
+        DVec3::new(0.0, 0.0, -2.0),
+        DVec3::ZERO,
+        DVec3::Y,
+        (64, 64),
+        40.0,
+    )
+    .expect("camera");
+    let v = opacity_at(
+        &g,
+        &[cam],
+        &[DVec3::new(0.0, 0.0, 0.15)],
+        &OpacityOptions::default(),
+    )
+    .expect("field");
+    assert!((v[0] - 0.8).abs() < 1e-6, "{}", v[0]);
+}
+
+/// The mesh of one isotropic Gaussian of opacity 1 is closed and lies on the sphere where
+/// `exp(-ρ²/2σ²) = 1/2`, ρ = σ √(2 ln 2), within the bisection's resolution (edge 3√3 σ / 2⁸,
+/// half of it for the midpoint: 0.011 σ).
+#[test]
+fn single_gaussian_mesh_is_the_level_sphere() {
+    let sigma = 0.1;
+    let centre = DVec3::new(1.0, 2.0, 3.0);
+    let g = gaussians(&[centre.as_vec3()], Vec3::splat(sigma as f32), 1.0);
+    let cams = rig(centre, 0.6, 24);
+    let out = opacity_mesh(&g, &cams, &OpacityOptions::default()).expect("mesh");
+    let rho = sigma * (2.0 * 2f64.ln()).sqrt();
+    assert!(out.mesh.vertex_count() >= 6, "{:?}", out.stats);
+    for p in out.mesh.positions() {
+        let r = (*p - centre).length();
+        assert!((r - rho).abs() < 0.011 * sigma, "radius {r} vs {rho}");
+    }
+    assert!(is_closed(out.mesh.triangles()));
+    // Faces toward lower opacity: the signed volume is positive.
+    assert!(out.mesh.signed_volume() > 0.0);
+    assert_eq!(out.stats.pieces, 1);
+    let colors = out.mesh.colors().expect("colours");
+    assert!(
+        colors
+            .iter()
+            .all(|c| (c[0] - 0.2).abs() < 1e-5 && (c[2] - 0.6).abs() < 1e-5)
+    );
+}
+
+/// A plane of flat Gaussians gives a thin closed slab: away from the rim every vertex lies
+/// within 3 thicknesses of the plane, on both sides.
+#[test]
+fn plane_of_flat_gaussians_gives_a_flat_sheet() {
+    let (s, thin) = (0.05f32, 0.002f32);
+    let means: Vec<Vec3> = (0..12)
+        .flat_map(|i| (0..12).map(move |j| Vec3::new(i as f32 * 0.06, j as f32 * 0.06, 0.0)))
+        .collect();
+    let g = gaussians(&means, Vec3::new(s, s, thin), 1.0);
+    let cams = rig(DVec3::new(0.33, 0.33, 0.0), 0.6, 24);
+    let out = opacity_mesh(&g, &cams, &OpacityOptions::default()).expect("mesh");
+    let mut sides = [0, 0];
+    for p in out.mesh.positions() {
+        if p.x > 0.1 && p.x < 0.56 && p.y > 0.1 && p.y < 0.56 {
+            assert!(p.z.abs() < 3.0 * f64::from(thin), "{p}");
+            sides[usize::from(p.z > 0.0)] += 1;
+        }
+    }
+    assert!(sides[0] > 10 && sides[1] > 10, "{sides:?}");
+    assert!(is_closed(out.mesh.triangles()));
+}
+
+#[test]
+fn bad_input_is_named() {
+    let cams = rig(DVec3::ZERO, 1.0, 8);
+    let opts = OpacityOptions::default();
+    let mut g = gaussians(&[Vec3::ZERO, Vec3::X], Vec3::splat(0.1), 1.0);
+    for bad in [0.0, -0.1, f32::NAN] {
+        g.scales[1] = Vec3::new(0.1, bad, 0.1);
+        let e = opacity_mesh(&g, &cams, &opts).expect_err("bad scale");
+        assert!(matches!(e, OpacityError::BadScale { index: 1, .. }), "{e}");
+    }
+    let g = gaussians(&[Vec3::ZERO, Vec3::X], Vec3::splat(0.1), 0.001);
+    assert!(matches!(
+        opacity_mesh(&g, &cams, &opts),
+        Err(OpacityError::AllBelowCut { count: 2, .. })
+    ));
+    // Coincident corners: scales far below the means' f64 resolution, coplanar means.
+    let g = gaussians(
+        &[
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(2.0, 1.0, 1.0),
+            Vec3::new(1.0, 2.0, 1.0),
+        ],
+        Vec3::splat(1e-20),
+        1.0,
+    );
+    let e = opacity_mesh(&g, &rig(DVec3::ONE, 2.0, 8), &opts).expect_err("coplanar");
+    assert!(matches!(e, OpacityError::Degenerate { .. }), "{e}");
+    // Cameras looking away.
+    let g = gaussians(&[Vec3::ZERO], Vec3::splat(0.1), 1.0);
+    let away = Camera::look_at(
+        "a",
+        DVec3::new(0.0, 0.0, -2.0),
+        DVec3::new(0.0, 0.0, -5.0),
+        DVec3::Y,
+        (64, 64),
+        40.0,
+    )
+    .expect("camera");
+    assert!(matches!(
+        opacity_mesh(&g, &[away], &opts),
+        Err(OpacityError::NotSeen { points: 9 })
+    ));
+    assert!(matches!(
+        opacity_mesh(&g, &[], &opts),
+        Err(OpacityError::NoCameras)
+    ));
+}
+
+/// Same vertices and triangles, bit for bit, on one thread and on three.
+#[test]
+fn deterministic_across_thread_counts() {
+    let means: Vec<Vec3> = (0..60)
+        .map(|i| {
+            let a = i as f32 * 0.7;
+            Vec3::new(a.sin() * 0.3, a.cos() * 0.3, (i as f32 * 0.37).sin() * 0.3)
+        })
+        .collect();
+    let g = gaussians(&means, Vec3::splat(0.06), 0.9);
+    let cams = rig(DVec3::ZERO, 0.6, 16);
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool")
+            .install(|| opacity_mesh(&g, &cams, &OpacityOptions::default()).expect("mesh"))
+    };
+    let (a, b) = (run(1), run(3));
+    assert!(a.mesh.triangle_count() > 0);
+    assert_eq!(a.mesh.positions(), b.mesh.positions());
+    assert_eq!(a.mesh.triangles(), b.mesh.triangles());
+    assert_eq!(a.mesh.colors(), b.mesh.colors());
+}

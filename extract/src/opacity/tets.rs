@@ -1,0 +1,85 @@
+//! Marching tetrahedra over the sign of the field: one vertex per crossing edge (welded: an
+//! edge is shared by every tetrahedron around it), one or two triangles per crossing
+//! tetrahedron, each facing from the inside (field at or above the level) to the outside.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// The crossing edges and the triangles over them.
+#[derive(Debug, Default)]
+pub(crate) struct Crossings {
+    /// Each crossing edge as (inside point, outside point), sorted.
+    pub edges: Vec<[u32; 2]>,
+    /// Triangles, as indices into `edges`, facing the outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Marching tetrahedra on `tets` over `points` whose side is `inside[i]`.
+pub(crate) fn march(points: &[DVec3], tets: &[[u32; 4]], inside: &[bool]) -> Crossings {
+    // Per tetrahedron: its triangles as point pairs, oriented.
+    let local: Vec<([[[u32; 2]; 3]; 2], u8)> = tets
+        .par_iter()
+        .with_min_len(4096)
+        .map(|tet| tet_triangles(points, tet, inside))
+        .collect();
+    let mut edges: Vec<[u32; 2]> = local
+        .iter()
+        .flat_map(|(tris, n)| tris[..usize::from(*n)].iter().flatten().copied())
+        .collect();
+    edges.par_sort_unstable();
+    edges.dedup();
+    let find = |e: [u32; 2]| edges.binary_search(&e).map_or(0, |i| i as u32);
+    let triangles = local
+        .iter()
+        .flat_map(|(tris, n)| tris[..usize::from(*n)].iter())
+        .map(|t| [find(t[0]), find(t[1]), find(t[2])])
+        .collect();
+    Crossings { edges, triangles }
+}
+
+/// The triangles of one tetrahedron (0, 1 or 2), each as three (inside, outside) edges, facing
+/// the outside points.
+fn tet_triangles(points: &[DVec3], tet: &[u32; 4], inside: &[bool]) -> ([[[u32; 2]; 3]; 2], u8) {
+    let mut ins = [0u32; 4];
+    let mut outs = [0u32; 4];
+    let (mut ni, mut no) = (0, 0);
+    for &v in tet {
+        if inside[v as usize] {
+            ins[ni] = v;
+            ni += 1;
+        } else {
+            outs[no] = v;
+            no += 1;
+        }
+    }
+    let mut tris = [[[0u32; 2]; 3]; 2];
+    let n = match ni {
+        1 => {
+            tris[0] = [[ins[0], outs[0]], [ins[0], outs[1]], [ins[0], outs[2]]];
+            1
+        }
+        3 => {
+            tris[0] = [[ins[0], outs[0]], [ins[1], outs[0]], [ins[2], outs[0]]];
+            1
+        }
+        2 => {
+            // The quad ac, ad, bd, bc (a, b inside; c, d outside), split along ac-bd.
+            let (a, b, c, d) = (ins[0], ins[1], outs[0], outs[1]);
+            tris[0] = [[a, c], [a, d], [b, d]];
+            tris[1] = [[a, c], [b, d], [b, c]];
+            2
+        }
+        _ => 0,
+    };
+    let centroid =
+        |vs: &[u32]| vs.iter().map(|&v| points[v as usize]).sum::<DVec3>() / vs.len() as f64;
+    let outward = centroid(&outs[..no]) - centroid(&ins[..ni]);
+    let mid = |e: [u32; 2]| (points[e[0] as usize] + points[e[1] as usize]) * 0.5;
+    for tri in &mut tris[..n] {
+        let [p0, p1, p2] = tri.map(mid);
+        if (p1 - p0).cross(p2 - p0).dot(outward) < 0.0 {
+            tri.swap(1, 2);
+        }
+    }
+    (tris, n as u8)
+}
