@@ -22,7 +22,7 @@ use rayon::prelude::*;
 use super::bvh::closest_point_on_triangle;
 use super::error::SpatialError;
 use super::limits::{check_dpoints, check_points};
-use super::morton::morton_order;
+use super::morton::{morton_order, morton_sorted};
 
 /// Triangles per leaf.
 pub const LEAF: usize = 8;
@@ -35,8 +35,9 @@ const PADDING: f64 = 1e-9;
 /// Queries answered one after another, each bounded by the previous answer.
 const RUN: usize = 256;
 
-/// Depth of the traversal stack: the tree halves `u32::MAX / LEAF` leaves in at most 30 levels.
-const STACK: usize = 64;
+/// Depth of the traversal stack: a split on a Morton bit leaves at most 63 levels, then
+/// halving at most 32 (`u32::MAX` triangles), and a search holds at most one entry a level.
+const STACK: usize = 96;
 
 /// A node: its padded box, and either its children (`left` is the next node, `right` given)
 /// or its triangles (`count > 0`: slots `first..first + count`).
@@ -108,7 +109,7 @@ impl SurfaceIndex {
                 ((a + b + c) / 3.0).as_vec3()
             })
             .collect();
-        let ids = morton_order(&centroids);
+        let (codes, ids): (Vec<u64>, Vec<u32>) = morton_sorted(&centroids).into_iter().unzip();
         let corners: Vec<[DVec3; 3]> = ids
             .par_iter()
             .with_min_len(4096)
@@ -122,7 +123,7 @@ impl SurfaceIndex {
             .map(|c| padded_box(c, pad))
             .collect();
         let mut nodes = Vec::with_capacity(2 * triangles.len().div_ceil(LEAF));
-        build(&mut nodes, &boxes, 0, corners.len());
+        build(&mut nodes, &boxes, &codes, 0, corners.len());
         Ok(Self {
             nodes,
             corners,
@@ -269,8 +270,9 @@ fn padded_box(c: &[DVec3; 3], pad: f64) -> [DVec3; 2] {
 }
 
 /// Appends the subtree over slots `first..end` (depth first, left child next), boxes from the
-/// triangles' `boxes`.
-fn build(nodes: &mut Vec<Node>, boxes: &[[DVec3; 2]], first: usize, end: usize) {
+/// triangles' `boxes`: split where the highest Morton bit that differs in the range flips
+/// (so a child is one cell of the Z-curve's octree, a tight box), else halved.
+fn build(nodes: &mut Vec<Node>, boxes: &[[DVec3; 2]], codes: &[u64], first: usize, end: usize) {
     let index = nodes.len();
     if end - first <= LEAF {
         let (lo, hi) = boxes[first..end]
@@ -292,12 +294,19 @@ fn build(nodes: &mut Vec<Node>, boxes: &[[DVec3; 2]], first: usize, end: usize) 
         first_or_right: 0,
         count: 0,
     });
-    // Halve the leaves (a multiple of LEAF on the left keeps the leaves full).
-    let leaves = (end - first).div_ceil(LEAF);
-    let mid = first + leaves.div_ceil(2) * LEAF;
-    build(nodes, boxes, first, mid);
+    let differ = codes[first] ^ codes[end - 1];
+    let mid = if differ == 0 {
+        // One cell: halve the leaves (a multiple of LEAF on the left keeps them full).
+        first + (end - first).div_ceil(LEAF).div_ceil(2) * LEAF
+    } else {
+        // The first code with the highest differing bit set (codes are sorted).
+        let bit = 63 - differ.leading_zeros();
+        let prefix = codes[first] >> bit;
+        first + codes[first..end].partition_point(|&c| c >> bit == prefix)
+    };
+    build(nodes, boxes, codes, first, mid);
     let right = nodes.len();
-    build(nodes, boxes, mid, end);
+    build(nodes, boxes, codes, mid, end);
     let (l, r) = (nodes[index + 1], nodes[right]);
     nodes[index] = Node {
         lo: l.lo.min(r.lo),
@@ -335,8 +344,11 @@ mod tests {
             let b = 3 * k as u32;
             t.push([b, b + 1, b + 2]);
         }
-        // A repeated triangle (ties go to the smaller id) and a degenerate one.
-        t.push(t[0]);
+        // A triangle repeated past a leaf (one Morton cell: ties go to the smaller id) and a
+        // degenerate one.
+        for _ in 0..2 * LEAF {
+            t.push(t[0]);
+        }
         t.push([0, 0, 1]);
         (p, t)
     }
