@@ -36,6 +36,7 @@ use crate::points::PointCloud;
 use crate::spatial::bvh::TriangleBvh;
 use crate::spatial::error::SpatialError;
 use crate::spatial::kdtree::PointIndex;
+use crate::spatial::surface::SurfaceIndex;
 
 /// Default F-score thresholds, in the input's length unit: 1, 2.5, 5 and 10 mm for inputs in
 /// metres (2.5 mm gives the common "Recall@2.5mm").
@@ -302,9 +303,11 @@ pub struct Shape<'a> {
     pub points: &'a PointCloud,
     /// The mesh, when the side is one: the target of surface-mode distances.
     pub mesh: Option<&'a TriMesh>,
-    /// A BVH already built over `mesh` (see [`Shape::indexed_mesh`]); `None`: surface mode
-    /// builds one per call.
+    /// A BVH already built over `mesh` (see [`Shape::indexed_mesh`]).
     pub bvh: Option<&'a TriangleBvh>,
+    /// A [`SurfaceIndex`] already built over `mesh` (see [`Shape::surface_indexed`]); with
+    /// neither index, surface mode builds a [`SurfaceIndex`] per call.
+    pub surface: Option<&'a SurfaceIndex>,
 }
 
 impl<'a> Shape<'a> {
@@ -315,6 +318,7 @@ impl<'a> Shape<'a> {
             points,
             mesh: None,
             bvh: None,
+            surface: None,
         }
     }
 
@@ -325,6 +329,7 @@ impl<'a> Shape<'a> {
             points: samples,
             mesh: Some(mesh),
             bvh: None,
+            surface: None,
         }
     }
 
@@ -336,6 +341,24 @@ impl<'a> Shape<'a> {
             points: samples,
             mesh: Some(mesh),
             bvh: Some(bvh),
+            surface: None,
+        }
+    }
+
+    /// A mesh, points sampled on it, and a [`SurfaceIndex`] over its triangles (built from
+    /// `mesh.positions()` and `mesh.triangles()`): a side measured against several others
+    /// builds its index once.
+    #[must_use]
+    pub fn surface_indexed(
+        mesh: &'a TriMesh,
+        samples: &'a PointCloud,
+        index: &'a SurfaceIndex,
+    ) -> Self {
+        Self {
+            points: samples,
+            mesh: Some(mesh),
+            bvh: None,
+            surface: Some(index),
         }
     }
 }
@@ -477,22 +500,33 @@ fn one_way(
     let spatial = |side: Side| move |source: SpatialError| MetricsError::Spatial { side, source };
     match (options.surface, to.mesh) {
         (true, Some(mesh)) if mesh.triangle_count() > 0 => {
-            let built;
-            let bvh = match to.bvh {
-                Some(bvh) => bvh,
-                None => {
-                    built = TriangleBvh::new(mesh).map_err(spatial(to_side))?;
-                    &built
+            // (distance, triangle) of every query: from the index given, else a fresh
+            // SurfaceIndex (cheaper to build than a TriangleBvh for one batch of queries).
+            let found: Vec<(f64, u32)> = match (to.surface, to.bvh) {
+                (Some(index), _) => surface_hits(index, queries, from_side)?,
+                (None, Some(bvh)) => bvh
+                    .closest_points(queries)
+                    .map_err(spatial(from_side))?
+                    .into_iter()
+                    .map(|c| (c.distance, c.triangle))
+                    .collect(),
+                (None, None) => {
+                    let index = SurfaceIndex::new(mesh.positions(), mesh.triangles())
+                        .map_err(spatial(to_side))?;
+                    surface_hits(&index, queries, from_side)?
                 }
             };
-            let found = &bvh.closest_points(queries).map_err(spatial(from_side))?;
-            let face_normals = query_normals.map(|_| mesh.face_normals());
+            let found = &found;
+            // The unit normal of each triangle found, as `TriMesh::face_normals` has it.
+            let face_normal = move |t: u32| {
+                mesh.triangle_cross(t as usize)
+                    .normalize_or_zero()
+                    .as_vec3()
+            };
             Ok(accumulate(
                 found.len(),
-                |i| found[i].distance,
-                query_normals
-                    .zip(face_normals.as_deref())
-                    .map(|(qn, fnrm)| move |i: usize| (qn[i], fnrm[found[i].triangle as usize])),
+                |i| found[i].0,
+                query_normals.map(|qn| move |i: usize| (qn[i], face_normal(found[i].1))),
                 &options.taus,
             ))
         }
@@ -514,6 +548,20 @@ fn one_way(
             ))
         }
     }
+}
+
+/// [`SurfaceIndex::closest_batch`] as `(distance, triangle)`, errors naming `side`.
+fn surface_hits(
+    index: &SurfaceIndex,
+    queries: &[Vec3],
+    side: Side,
+) -> Result<Vec<(f64, u32)>, MetricsError> {
+    Ok(index
+        .closest_batch(queries)
+        .map_err(|source| MetricsError::Spatial { side, source })?
+        .into_iter()
+        .map(|h| (h.distance, h.triangle))
+        .collect())
 }
 
 /// |cos| of the angle between two normals, normalised in f64 (0 when either is zero).

@@ -23,7 +23,7 @@ use trisplat_geometry::metrics::{
 };
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
-use trisplat_geometry::spatial::TriangleBvh;
+use trisplat_geometry::spatial::SurfaceIndex;
 use trisplat_geometry::topology::triangles_around_vertices;
 use trisplat_geometry::{PointCloud, TriMesh};
 
@@ -33,8 +33,8 @@ use crate::records::FrameMetrics;
 /// `trisplat eval`'s default.
 pub const SAMPLE_SEED: u64 = 0;
 
-/// A ground-truth mesh with its samples and its BVH (made once per frame, shared by the
-/// methods).
+/// A ground-truth mesh with its samples and its surface index (made once per frame, shared
+/// by the methods).
 #[derive(Debug)]
 pub struct GtSamples {
     /// The mesh.
@@ -47,9 +47,9 @@ pub struct GtSamples {
     origin: DVec3,
     /// Area-uniform samples of `local` with face normals.
     pub samples: PointCloud,
-    /// The BVH the predictions' samples are measured against; `None` when the mesh cannot
+    /// The index the predictions' samples are measured against; `None` when the mesh cannot
     /// be indexed (then [`measure`] reports the reason).
-    bvh: Option<TriangleBvh>,
+    index: Option<SurfaceIndex>,
     /// Diagonal of the bounding box of its vertices (relative thresholds scale with it).
     diagonal: f64,
     /// Its surface area (f64).
@@ -68,7 +68,7 @@ impl GtSamples {
         if points.is_empty() {
             return None;
         }
-        let bvh = TriangleBvh::new(&local).ok();
+        let index = SurfaceIndex::new(local.positions(), local.triangles()).ok();
         let diagonal = bounds.diagonal();
         let area = mesh.area();
         Some(Self {
@@ -76,7 +76,7 @@ impl GtSamples {
             local,
             origin,
             samples: points,
-            bvh,
+            index,
             diagonal,
             area,
         })
@@ -93,8 +93,8 @@ impl GtSamples {
     /// be indexed or `point` is not finite.
     #[must_use]
     pub fn distance(&self, point: DVec3) -> Option<f64> {
-        let bvh = self.bvh.as_ref()?;
-        bvh.closest_point(point - self.origin).map(|c| c.distance)
+        let index = self.index.as_ref()?;
+        index.closest(point - self.origin).map(|c| c.distance)
     }
 
     /// [`GtSamples::distance`] of every point, in parallel; `None` when the mesh could not be
@@ -110,8 +110,8 @@ impl GtSamples {
 
     /// The ground truth as one side of a comparison.
     fn shape(&self) -> Shape<'_> {
-        match &self.bvh {
-            Some(bvh) => Shape::indexed_mesh(&self.local, &self.samples, bvh),
+        match &self.index {
+            Some(index) => Shape::surface_indexed(&self.local, &self.samples, index),
             None => Shape::mesh(&self.local, &self.samples),
         }
     }

@@ -537,7 +537,10 @@ impl TriangleBvh {
 }
 
 /// Checks that every triangle names vertices below `vertex_count`.
-fn check_indices(vertex_count: usize, triangles: &[[u32; 3]]) -> Result<(), SpatialError> {
+pub(super) fn check_indices(
+    vertex_count: usize,
+    triangles: &[[u32; 3]],
+) -> Result<(), SpatialError> {
     match triangles
         .par_iter()
         .with_min_len(4096)

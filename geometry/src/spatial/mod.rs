@@ -10,6 +10,7 @@ pub(crate) mod error;
 pub mod kdtree;
 mod limits;
 mod morton;
+pub mod surface;
 
 pub use bvh::{
     Candidate, ClosestPoint, RayHit, TriangleBvh, box_distance_sq, closest_point_on_triangle,
@@ -17,3 +18,4 @@ pub use bvh::{
 pub use error::SpatialError;
 pub use kdtree::{Nearest, PointIndex, distance_f64};
 pub use limits::MAX_COORDINATE;
+pub use surface::{SurfaceHit, SurfaceIndex};

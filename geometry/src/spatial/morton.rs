@@ -19,6 +19,11 @@ fn spread_bits(v: u64) -> u64 {
 /// Indices of `points` (finite) sorted along a Morton (Z-order) curve over their bounds, ties by
 /// index: nearby queries end up next to each other, so tree searches reuse cached nodes.
 pub(crate) fn morton_order(points: &[Vec3]) -> Vec<u32> {
+    morton_sorted(points).into_iter().map(|(_, i)| i).collect()
+}
+
+/// `(Morton code, index)` of every point (finite), sorted (see [`morton_order`]).
+pub(crate) fn morton_sorted(points: &[Vec3]) -> Vec<(u64, u32)> {
     let Some(bounds) = Aabb::from_points(points) else {
         return Vec::new();
     };
@@ -42,7 +47,7 @@ pub(crate) fn morton_order(points: &[Vec3]) -> Vec<u32> {
         })
         .collect();
     keyed.par_sort_unstable();
-    keyed.into_iter().map(|(_, i)| i).collect()
+    keyed
 }
 
 #[cfg(test)]
