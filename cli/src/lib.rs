@@ -71,7 +71,7 @@ pub enum Command {
     Render(commands::render::RenderArgs),
     /// Write a camera rig (sphere or orbit) around a mesh as cameras.json.
     Cameras(commands::cameras::CamerasArgs),
-    /// The main job: per-frame meshes (tsdf, delaunay, alpha) of an animated avatar, report, plot.
+    /// The main job: per-frame meshes (tsdf, delaunay, alpha, opacity) of an animated avatar, report, plot.
     Extract(Box<commands::extract::ExtractArgs>),
     /// The main job on the bundled avatar fixture.
     Demo(commands::demo::DemoArgs),

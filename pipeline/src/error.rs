@@ -262,6 +262,14 @@ pub enum PipelineError {
         /// Why.
         cause: AlphaError,
     },
+    /// The opacity field could not be meshed.
+    #[error("frame {frame}: opacity: {cause}")]
+    Opacity {
+        /// Animation frame.
+        frame: usize,
+        /// Why.
+        cause: trisplat_extract::opacity::OpacityError,
+    },
     /// A meshing error ([`PipelineError::Delaunay`], [`PipelineError::Alpha`]) on the vertices
     /// of `input`: the template (when a mesher is built) or the animation (per frame).
     #[error("{input}: {cause}")]

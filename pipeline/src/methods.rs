@@ -1,4 +1,4 @@
-//! The three meshers, each turning one deformed frame into a mesh, and the scale-derived
+//! The four meshers, each turning one deformed frame into a mesh, and the scale-derived
 //! defaults of their parameters. Delaunay and alpha see only the means of the Gaussians
 //! [`crate::Visibility`] keeps; tsdf renders every Gaussian of the frame.
 //!
@@ -19,6 +19,9 @@
 //! - **alpha**: the alpha shape of the deformed means at `alpha` (default
 //!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
 //!   means), optionally only its largest edge-connected pieces (`alpha_keep_clusters`).
+//! - **opacity**: the opacity field of every deformed Gaussian (Gaussian Opacity Fields, the
+//!   extract crate's `opacity`) from the tsdf method's rig (`views`, `resolution`), framed
+//!   around the Gaussians and their 3-sigma boxes; the largest piece.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -26,6 +29,10 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use trisplat_extract::alpha_shape::alpha_shape;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, IncrementalDelaunay};
+use trisplat_extract::opacity::{
+    DEFAULT_BISECTION_STEPS as OPACITY_BISECTION_STEPS, DEFAULT_LEVEL as OPACITY_LEVEL,
+    OpacityOptions, opacity_mesh,
+};
 use trisplat_extract::tsdf::{ColorImage, DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
 use trisplat_geometry::TriMesh;
@@ -40,6 +47,7 @@ use crate::config::{
     DepthKind, ExtractOptions, Method, RENDERED_ALPHA_MIN, SplatDepthRule,
 };
 use crate::error::PipelineError;
+use crate::opacity::{opacity_gaussians, opacity_rig};
 use crate::records::Resolved;
 
 /// One deformed frame, as every mesher sees it.
@@ -117,6 +125,15 @@ pub fn parameters(
         Method::Alpha => {
             parameters.insert("alpha".to_owned(), resolved.alpha);
             parameters.insert("keep_clusters".to_owned(), o.alpha.keep_clusters as f64);
+        }
+        Method::Opacity => {
+            parameters.insert("views".to_owned(), o.tsdf.views as f64);
+            parameters.insert("resolution".to_owned(), f64::from(o.tsdf.resolution));
+            parameters.insert("level".to_owned(), f64::from(OPACITY_LEVEL));
+            parameters.insert(
+                "bisection_steps".to_owned(),
+                f64::from(OPACITY_BISECTION_STEPS),
+            );
         }
     }
     parameters
@@ -406,6 +423,14 @@ pub enum Mesher {
         /// Pieces kept (0: all).
         keep_clusters: usize,
     },
+    /// The opacity field of every deformed Gaussian from the tsdf's rig: `views` cameras of
+    /// `resolution`² pixels around the frame's Gaussians and their 3-sigma boxes.
+    Opacity {
+        /// Views of the rig.
+        views: usize,
+        /// Pixels across each view.
+        resolution: u32,
+    },
 }
 
 impl Mesher {
@@ -455,6 +480,10 @@ impl Mesher {
                 alpha: resolved.alpha,
                 keep_clusters: options.alpha.keep_clusters,
             },
+            Method::Opacity => Self::Opacity {
+                views: options.tsdf.views,
+                resolution: options.tsdf.resolution,
+            },
         })
     }
 
@@ -494,6 +523,25 @@ impl Mesher {
                     })?;
                 Ok(MethodOutput {
                     mesh: keep_largest_clusters(&shape.mesh, *keep_clusters),
+                    ms: start.elapsed().as_secs_f64() * 1e3,
+                    render_ms: None,
+                    delaunay: None,
+                })
+            }
+            Self::Opacity { views, resolution } => {
+                let start = Instant::now();
+                let world = input.world.ok_or(PipelineError::Internal {
+                    what: "the opacity method without the frame's deformed Gaussians",
+                })?;
+                let cameras = opacity_rig(world, *views, *resolution)?;
+                let meshed = opacity_mesh(
+                    &opacity_gaussians(world),
+                    &cameras,
+                    &OpacityOptions::default(),
+                )
+                .map_err(|cause| PipelineError::Opacity { frame, cause })?;
+                Ok(MethodOutput {
+                    mesh: meshed.mesh,
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
                     delaunay: None,

@@ -206,6 +206,12 @@ impl Plan {
                         "alpha = {DEFAULT_ALPHA_SPACINGS} x mean Gaussian spacing, on the deformed means"
                     ),
                 },
+                Method::Opacity => format!(
+                    "every Gaussian's centre and 3-sigma box corners tetrahedralised, the \
+                     opacity field the minimum over the tsdf rig's {} views of {}x{} px, \
+                     marching tetrahedra at 1/2 with 8 bisection steps, the largest piece",
+                    o.tsdf.views, o.tsdf.resolution, o.tsdf.resolution
+                ),
             };
             push(Stage::Mesh(m), true, why);
         }
@@ -406,6 +412,7 @@ mod tests {
                 Stage::Mesh(Method::Tsdf),
                 Stage::Mesh(Method::Delaunay),
                 Stage::Mesh(Method::Alpha),
+                Stage::Mesh(Method::Opacity),
                 Stage::Metrics,
                 Stage::Consistency,
                 Stage::Write,

@@ -353,9 +353,12 @@ impl Session {
                 cause,
             })?;
         let resolved = Resolved::new(o, template, &rest_means)?;
-        // Rendered for the tsdf's depth maps and the meshes' render consistency.
-        let render_set = (plan.runs(Stage::Render) || plan.runs(Stage::Consistency))
-            .then(|| geometry_only(&set));
+        // Rendered for the tsdf's depth maps and the meshes' render consistency; the opacity
+        // method evaluates its field from the same set.
+        let render_set = (plan.runs(Stage::Render)
+            || plan.runs(Stage::Consistency)
+            || plan.runs(Stage::Mesh(Method::Opacity)))
+        .then(|| geometry_only(&set));
         let consistency_rig = plan.runs(Stage::Consistency).then_some((
             o.metrics.consistency_views,
             o.metrics.consistency_resolution,

@@ -32,7 +32,7 @@ use crate::threads;
 /// ``template``: the template mesh (a glTF plays its own first clip unless ``animation`` is
 /// given); ``animation``: a glTF, a folder or pattern of OBJ/PLY frames, or a LAM/ARKit weights
 /// JSON; ``gaussians``: a bound Gaussian PLY (None: Gaussians are bound here,
-/// ``per_triangle`` per triangle); ``methods``: any of ``"tsdf"``, ``"delaunay"``, ``"alpha"``;
+/// ``per_triangle`` per triangle); ``methods``: any of ``"tsdf"``, ``"delaunay"``, ``"alpha"``, ``"opacity"``;
 /// ``frames``: ``"A..B"``, ``"A..=B"``, ``"A.."``, ``"..B"`` or ``"A"``; ``gt``: None (no
 /// metrics), ``"template"`` (each frame's deformed template), ``"gaussians"`` or a mesh file;
 /// ``mode``: ``"binding"``, ``"jacobian"`` or ``"lbs"``. ``template`` may be a LAM avatar

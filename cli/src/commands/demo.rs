@@ -67,7 +67,8 @@ pub fn run(args: DemoArgs, ctx: &Context) -> anyhow::Result<()> {
         template,
         animation: None,
         gaussians: None,
-        methods: Method::ALL.to_vec(),
+        // The three established methods; opacity is far slower per frame (docs/benchmarks.md).
+        methods: vec![Method::Tsdf, Method::Delaunay, Method::Alpha],
         output: args.output,
         frames: None,
         gt: Some(GroundTruth::Template),

@@ -1,4 +1,4 @@
-//! `trisplat extract --template T [--animation A] [--gaussians G] --method tsdf|delaunay|alpha[,...]
+//! `trisplat extract --template T [--animation A] [--gaussians G] --method tsdf|delaunay|alpha|opacity[,...]
 //! -o DIR [--frames A..B] [--gt GT] [--explain] [--rebuild-every N] [--hop-threshold T]`: the
 //! main job.
 

@@ -17,11 +17,15 @@ pub enum Method {
     Delaunay,
     /// Alpha shape of the deformed Gaussian means.
     Alpha,
+    /// The deformed Gaussians' opacity field (Gaussian Opacity Fields): centres and 3-sigma
+    /// box corners tetrahedralised, the field the minimum over the tsdf rig's views, marching
+    /// tetrahedra at 1/2.
+    Opacity,
 }
 
 impl Method {
     /// Every method, in report order.
-    pub const ALL: [Self; 3] = [Self::Tsdf, Self::Delaunay, Self::Alpha];
+    pub const ALL: [Self; 4] = [Self::Tsdf, Self::Delaunay, Self::Alpha, Self::Opacity];
 
     /// The method's name on the command line and in output file names.
     #[must_use]
@@ -30,6 +34,7 @@ impl Method {
             Self::Tsdf => "tsdf",
             Self::Delaunay => "delaunay",
             Self::Alpha => "alpha",
+            Self::Opacity => "opacity",
         }
     }
 }

@@ -54,6 +54,7 @@ pub fn color(method: Method) -> RGBColor {
         Method::Tsdf => RGBColor(31, 119, 180),
         Method::Delaunay => RGBColor(230, 110, 0),
         Method::Alpha => RGBColor(44, 160, 44),
+        Method::Opacity => RGBColor(148, 103, 189),
     }
 }
 
@@ -64,7 +65,8 @@ pub fn css_color(method: Method) -> String {
     format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
 }
 
-/// Draws `method`'s marker (a circle for tsdf, a triangle for delaunay, a square for alpha)
+/// Draws `method`'s marker (a circle for tsdf, a triangle for delaunay, a square for alpha, a
+/// cross for opacity)
 /// of `size` pixels (half-width) at each of `points` in `chart`'s coordinates.
 fn chart_marks<DB, CT>(
     chart: &mut ChartContext<'_, DB, CT>,
@@ -95,6 +97,11 @@ where
                 .iter()
                 .map(|p| at(p) + Rectangle::new([(-size, -size), (size, size)], style)),
         ),
+        Method::Opacity => chart.draw_series(
+            points
+                .iter()
+                .map(|p| at(p) + Cross::new((0, 0), size + size / 3, style)),
+        ),
     }
     .map(|_| ())
 }
@@ -114,6 +121,7 @@ fn legend_mark<DB: DrawingBackend>(
             area.draw(&(base + TriangleMarker::new((0, 0), size + size / 3, style)))
         }
         Method::Alpha => area.draw(&(base + Rectangle::new([(-size, -size), (size, size)], style))),
+        Method::Opacity => area.draw(&(base + Cross::new((0, 0), size + size / 3, style))),
     }
 }
 
