@@ -255,6 +255,13 @@ mod tests {
     use super::*;
 
     #[test]
+    fn an_empty_set_has_no_rig() {
+        let empty = GaussianSet::try_new(trisplat_splat::GaussianParts::default()).expect("empty");
+        let e = held_out_rig(&empty, 8, 64).expect_err("no Gaussian to frame");
+        assert!(e.to_string().contains("no finite Gaussian"), "{e}");
+    }
+
+    #[test]
     fn percentiles_interpolate_as_numpy() {
         let mut v = [4.0, 1.0, 3.0, 2.0];
         assert_eq!(percentile(&mut v, 0.5), Some(2.5));

@@ -49,7 +49,7 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
         return Err(bad(out, "no shard folders to merge".to_owned()));
     }
     // Held until the merge returns: a shard cannot start running meanwhile.
-    let mut _shard_locks = Vec::with_capacity(shards.len());
+    let mut shard_locks = Vec::with_capacity(shards.len());
     let mut reports = Vec::with_capacity(shards.len());
     for (i, shard) in shards.iter().enumerate() {
         if same_folder(shard, out) {
@@ -61,7 +61,7 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
                 format!("is given twice (also as {})", other.display()),
             ));
         }
-        _shard_locks.push(checks::not_running(shard)?);
+        shard_locks.push(checks::not_running(shard)?);
         let path = shard.join(REPORT_JSON);
         let text = std::fs::read_to_string(&path).map_err(|e| {
             bad(
