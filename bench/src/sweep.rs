@@ -198,6 +198,7 @@ impl Prepared {
             watertight: is_watertight(mesh),
             metrics,
             consistency: None,
+            topology: None,
         })
     }
 

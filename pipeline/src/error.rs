@@ -380,6 +380,20 @@ pub enum PipelineError {
         /// What went wrong.
         problem: String,
     },
+    /// A key mesh that cannot be carried (`--topology fixed|adaptive`).
+    #[error(
+        "frame {frame}, method {method}: the mesh of key frame {key} cannot be carried: {cause}"
+    )]
+    Carry {
+        /// Animation frame.
+        frame: usize,
+        /// The method.
+        method: Method,
+        /// The key frame.
+        key: usize,
+        /// Why.
+        cause: crate::carry::CarryError,
+    },
     /// Shards that cannot be merged.
     #[error("{path}: cannot merge: {problem}")]
     Merge {

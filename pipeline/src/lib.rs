@@ -80,6 +80,7 @@ pub mod records;
 pub mod refine;
 pub mod report;
 
+mod carry;
 mod deform;
 mod error;
 mod event;
@@ -87,14 +88,16 @@ mod journal;
 mod lock;
 mod memory;
 mod merge;
+mod option_checks;
 mod plan;
 mod run;
 mod session;
+mod topology;
 mod visibility;
 
 pub use config::{
     ExtractConfig, ExtractOptions, GroundTruth, Method, Mode, OutputTarget, RunControl, Shard,
-    ShardOptions, ShardSpec,
+    ShardOptions, ShardSpec, Topology, TopologyOptions,
 };
 pub use error::PipelineError;
 pub use event::Event;

@@ -106,6 +106,27 @@ pub struct FrameRecord {
     /// `--consistency-views 0`, or reports of older versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub consistency: Option<RenderConsistency>,
+    /// The carried mesh's key and drift (`None` with `--topology per-frame`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology: Option<TopologyFrame>,
+}
+
+/// One frame of a carried mesh (`--topology fixed|adaptive`): the key it was carried from
+/// and how far it had drifted from the frame's Gaussians (docs/conventions.md §10).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TopologyFrame {
+    /// The key frame whose mesh this frame is (this frame itself where a key starts).
+    pub key: usize,
+    /// Share of the probe Gaussians that hopped off the carried mesh (measured before a new
+    /// key replaced it; 0 on the track's first key).
+    pub hops: f64,
+    /// Share of the key mesh's area in triangles stretched or shrunk more than twofold.
+    pub stretched: f64,
+    /// Where a key starts: the largest distance from a key-mesh vertex to the Gaussian whose
+    /// triangle it was bound to (a vertex far from every Gaussian follows the template
+    /// loosely).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub farthest: Option<f64>,
 }
 
 /// What the incremental Delaunay update did on one frame (its `FrameStats`).

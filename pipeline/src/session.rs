@@ -39,6 +39,7 @@ use crate::avatar::bind_lam;
 use crate::config::GaussianLayout;
 use crate::config::{
     DEFAULT_RESOLUTION, DEFAULT_VIEWS, ExtractConfig, ExtractOptions, GroundTruth, Method, Mode,
+    TopologyOptions,
 };
 use crate::consistency::{GaussianViews, RenderConsistency, held_out_rig};
 use crate::deform::{Engine, EngineInputs};
@@ -51,9 +52,11 @@ use crate::input::{
 };
 use crate::methods::{FrameInput, Mesher, MethodOutput, parameters};
 use crate::metrics::{GtSamples, is_watertight, measure_with};
+use crate::option_checks::check_options;
 use crate::plan::{Plan, Stage};
-use crate::records::{FrameMetrics, FrameRecord, Resolved, ShardRecord};
+use crate::records::{FrameMetrics, FrameRecord, Resolved, ShardRecord, TopologyFrame};
 use crate::report::Report;
+use crate::topology::{Carrier, CarryContext, mean_edge};
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
@@ -90,6 +93,8 @@ pub struct MethodFrame {
     pub metrics: Option<FrameMetrics>,
     /// Render consistency against the frame's Gaussians (when the plan measures it).
     pub consistency: Option<RenderConsistency>,
+    /// The carried mesh's key and drift (`--topology fixed|adaptive`).
+    pub topology: Option<TopologyFrame>,
 }
 
 impl MethodFrame {
@@ -108,6 +113,7 @@ impl MethodFrame {
             watertight: is_watertight(&self.output.mesh),
             metrics: self.metrics,
             consistency: self.consistency,
+            topology: self.topology,
         }
     }
 }
@@ -152,7 +158,14 @@ pub struct Session {
     visibility: Visibility,
     /// The kept Gaussians' means of the current frame (when some are left out).
     kept_means: Vec<Vec3>,
-    meshers: Vec<(Method, Mesher)>,
+    /// Each method's mesher and the topology of its meshes through the track.
+    meshers: Vec<(Method, Mesher, Carrier)>,
+    /// `--topology` and its thresholds.
+    topology: TopologyOptions,
+    /// Each Gaussian's template triangle (what a carried mesh's vertices bind by).
+    gaussian_triangles: Vec<u32>,
+    /// The mean edge of the welded template at rest (the unit of `--hop-distance`).
+    mean_edge: f64,
     gt: Option<GroundTruth>,
     static_gt: Option<GtSamples>,
     /// `--gt-sequence`: the ground-truth mesh file of each animation frame.
@@ -405,6 +418,9 @@ impl Session {
             visibility: Visibility::all(0),
             kept_means: Vec::new(),
             meshers: Vec::new(),
+            topology: o.topology,
+            gaussian_triangles: Vec::new(),
+            mean_edge: 0.0,
             gt: config.gt.clone(),
             static_gt,
             gt_files,
@@ -436,8 +452,21 @@ impl Session {
                     session.frames.start,
                 )
                 .map_err(|e| e.on_vertices_of(&config.template.display().to_string()))?;
-                session.meshers.push((m, mesher));
+                session
+                    .meshers
+                    .push((m, mesher, Carrier::new(o.topology.topology)));
             }
+        }
+        if o.topology.topology.carries() {
+            let welded = &session.welded.mesh;
+            session.mean_edge = mean_edge(welded.positions(), welded.triangles());
+            session.gaussian_triangles = session
+                .set
+                .binding()
+                .map(|b| b.triangles.iter().map(|t| t.0).collect())
+                .ok_or(PipelineError::Internal {
+                    what: "the main job's Gaussians are bound to the template",
+                })?;
         }
         Ok(session)
     }
@@ -812,6 +841,55 @@ impl Session {
         })
     }
 
+    /// Shows each method's [`Carrier`] the frames it must see before `frame` (the track's
+    /// first key; `adaptive`, every frame since the last it saw), meshing only at keys.
+    fn replay(&mut self, frame: usize) -> Result<(), PipelineError> {
+        let ranges: Vec<Range<usize>> = self
+            .meshers
+            .iter()
+            .map(|(_, _, carrier)| carrier.history(frame))
+            .collect();
+        let Some(start) = ranges
+            .iter()
+            .filter(|r| !r.is_empty())
+            .map(|r| r.start)
+            .min()
+        else {
+            return Ok(());
+        };
+        for g in start..frame {
+            let deformed = self.deform_frame(g)?;
+            let means = if self.visibility.kept().is_some() {
+                self.visibility
+                    .gather(&self.scratch.means, &mut self.kept_means);
+                &self.kept_means
+            } else {
+                &self.scratch.means
+            };
+            let input = FrameInput {
+                frame: g,
+                positions: &deformed.positions,
+                means,
+                world: deformed.world.as_ref(),
+            };
+            let context = CarryContext {
+                options: &self.topology,
+                triangles: self.welded.mesh.triangles(),
+                gaussian_triangles: &self.gaussian_triangles,
+                all_means: &self.scratch.means,
+                mean_edge: self.mean_edge,
+            };
+            for ((method, mesher, carrier), range) in self.meshers.iter_mut().zip(&ranges) {
+                if range.contains(&g) {
+                    carrier
+                        .frame(*method, mesher, &input, &context, true)
+                        .map_err(|e| e.on_vertices_of(&self.label))?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Deforms and meshes animation frame `frame` with every method of the plan, and measures
     /// each mesh when the plan measures (the ground truth sampled and indexed once for all
     /// methods).
@@ -835,6 +913,7 @@ impl Session {
         after: impl FnOnce(&mut FrameResult, Option<&GtSamples>) -> T,
     ) -> Result<(FrameResult, T), PipelineError> {
         let time = self.frame_time(frame);
+        self.replay(frame)?;
         let DeformedFrame {
             positions,
             world,
@@ -915,9 +994,21 @@ impl Session {
             .gt
             .as_ref()
             .map_or_else(String::new, GroundTruth::label);
-        let mesh_and_measure =
-            |(method, mesher): &mut (Method, Mesher)| -> Result<MethodFrame, PipelineError> {
-                let mut output = mesher.mesh(&input).map_err(|e| e.on_vertices_of(label))?;
+        let context = CarryContext {
+            options: &self.topology,
+            triangles: self.welded.mesh.triangles(),
+            gaussian_triangles: &self.gaussian_triangles,
+            all_means: &self.scratch.means,
+            mean_edge: self.mean_edge,
+        };
+        let mesh_and_measure = |(method, mesher, carrier): &mut (Method, Mesher, Carrier)|
+         -> Result<MethodFrame, PipelineError> {
+                let (mut output, topology) = carrier
+                    .frame(*method, mesher, &input, &context, false)
+                    .map_err(|e| e.on_vertices_of(label))?
+                    .ok_or(PipelineError::Internal {
+                        what: "a carrier gives every frame it is not replaying",
+                    })?;
                 let consistency = match &gaussian_views {
                     Some(views) if output.mesh.triangle_count() > 0 => {
                         Some(views.score(&output.mesh)?)
@@ -941,6 +1032,7 @@ impl Session {
                     output,
                     metrics,
                     consistency,
+                    topology,
                 })
             };
         // Side by side, each method's own parallel loops share the cores with the others';
@@ -1047,108 +1139,6 @@ fn source_words(source: &GaussianSource) -> String {
         GaussianSource::Bound(n) => format!("bound here, {n} per triangle"),
         GaussianSource::Lam(path) => format!("LAM's, from {}", path.display()),
     }
-}
-
-/// Checks the options a session uses before any file is read.
-fn check_options(config: &ExtractConfig) -> Result<(), PipelineError> {
-    let o = &config.options;
-    if !(o.metrics.tau.is_finite() && o.metrics.tau > 0.0) {
-        return Err(PipelineError::BadOption {
-            name: "tau",
-            value: o.metrics.tau,
-            expected: "a finite positive distance",
-        });
-    }
-    if let Some(f) = o.metrics.tau_fraction
-        && !(f.is_finite() && f > 0.0)
-    {
-        return Err(PipelineError::BadOption {
-            name: "tau-fraction",
-            value: f,
-            expected: "a finite positive fraction of the ground truth's bounding-box diagonal",
-        });
-    }
-    if !(o.delaunay.hop_threshold.is_finite() && o.delaunay.hop_threshold >= 0.0) {
-        return Err(PipelineError::BadOption {
-            name: "hop-threshold",
-            value: o.delaunay.hop_threshold,
-            expected: "a finite number >= 0 (multiples of the mean template edge)",
-        });
-    }
-    if !(o.animation.fps.is_finite() && o.animation.fps > 0.0) {
-        return Err(PipelineError::BadOption {
-            name: "fps",
-            value: o.animation.fps,
-            expected: "a positive number of frames per second",
-        });
-    }
-    if !(o.tsdf.alpha_cut > 0.0 && o.tsdf.alpha_cut <= 1.0) {
-        return Err(PipelineError::BadOption {
-            name: "tsdf-alpha-cut",
-            value: f64::from(o.tsdf.alpha_cut),
-            expected: "a rendered alpha in (0, 1]",
-        });
-    }
-    if !(o.visibility.min_contribution >= 0.0 && o.visibility.min_contribution < 1.0) {
-        return Err(PipelineError::BadOption {
-            name: "min-contribution",
-            value: f64::from(o.visibility.min_contribution),
-            expected: "a blending weight in [0, 1) (0 keeps every Gaussian)",
-        });
-    }
-    if let Some(r) = o.visibility.floater_std_ratio
-        && !(r.is_finite() && r >= 0.0)
-    {
-        return Err(PipelineError::BadOption {
-            name: "floater-std-ratio",
-            value: r,
-            expected: "a finite number of standard deviations >= 0",
-        });
-    }
-    if o.visibility.floater_neighbors == 0 {
-        return Err(PipelineError::BadOption {
-            name: "floater-neighbors",
-            value: 0.0,
-            expected: "at least one neighbour",
-        });
-    }
-    if o.outputs.error_colors && config.gt.is_none() {
-        return Err(PipelineError::BadCombination {
-            problem: "--error-colors colours the meshes by their distance to the ground truth: \
-                      give --gt or --gt-sequence",
-        });
-    }
-    if o.outputs.error_colors && o.tsdf.colors {
-        return Err(PipelineError::BadCombination {
-            problem: "--error-colors and --tsdf-colors both colour the vertices: choose one",
-        });
-    }
-    if o.metrics.samples == 0 {
-        return Err(PipelineError::BadOption {
-            name: "samples",
-            value: 0.0,
-            expected: "at least one sample",
-        });
-    }
-    if o.metrics.samples > o.limits.max_samples {
-        return Err(PipelineError::OverLimit {
-            name: "samples",
-            value: o.metrics.samples as f64,
-            limit: o.limits.max_samples as f64,
-            what: "samples per mesh",
-            option: "max-samples",
-        });
-    }
-    if o.tsdf.views > o.limits.max_views {
-        return Err(PipelineError::OverLimit {
-            name: "views",
-            value: o.tsdf.views as f64,
-            limit: o.limits.max_views as f64,
-            what: "views per frame",
-            option: "max-views",
-        });
-    }
-    Ok(())
 }
 
 /// Up to `count` frames of `frames`, evenly spaced from its first to its last (all of them

@@ -9,7 +9,8 @@
 //! - `points`: the point methods ([`DelaunayOptions`], [`AlphaOptions`]) and the rule of which
 //!   Gaussians they mesh ([`VisibilityRule`]);
 //! - `report`: metrics ([`MetricOptions`]), outputs ([`OutputOptions`]) and [`Limits`];
-//! - `shard`: the part of the frames a run takes ([`ShardOptions`], [`Shard`]).
+//! - `shard`: the part of the frames a run takes ([`ShardOptions`], [`Shard`]);
+//! - `topology`: per-frame meshes or one carried through the track ([`TopologyOptions`]).
 //!
 //! This module composes them ([`ExtractOptions`], [`ExtractConfig`], [`RunControl`]); the
 //! stage files import nothing from it or from the modules that read them.
@@ -23,6 +24,7 @@ mod method;
 mod points;
 mod report;
 mod shard;
+mod topology;
 mod tsdf;
 
 pub use input::{
@@ -40,6 +42,9 @@ pub use report::{
     Limits, MetricOptions, OutputOptions, OutputTarget,
 };
 pub use shard::{KUBERNETES_INDEX, SLURM_VARIABLES, Shard, ShardOptions, ShardSpec};
+pub use topology::{
+    DEFAULT_HOP_DISTANCE, DEFAULT_KEY_HOPS, DEFAULT_KEY_STRETCH, Topology, TopologyOptions,
+};
 pub use tsdf::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_FOV_DEG, DEFAULT_RESOLUTION, DEFAULT_VIEWS,
     DEFAULT_VOXELS_PER_RADIUS, DepthKind, RENDERED_ALPHA_MIN, SplatDepthRule, TsdfOptions,
@@ -123,6 +128,9 @@ pub struct ExtractOptions {
     /// Which part of the frames the run takes when the track is split over machines.
     #[cfg_attr(feature = "cli", command(flatten))]
     pub shard: ShardOptions,
+    /// Whether each frame is meshed from scratch or one mesh is carried through the track.
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub topology: TopologyOptions,
 }
 
 /// How a run treats an output folder that already holds a run, and frames that fail.

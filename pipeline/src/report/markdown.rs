@@ -208,6 +208,11 @@ impl Report {
             ("depth error", true),
             ("depth p90", true),
         ];
+        // A carried mesh adds its key and drift.
+        let carried = m.frames.iter().any(|r| r.topology.is_some());
+        if carried {
+            columns.extend([("key", true), ("hops", true), ("stretched", true)]);
+        }
         // Delaunay adds what its update did.
         if m.delaunay.is_some() {
             columns.extend([
@@ -255,6 +260,17 @@ impl Report {
                 ]
                 .map(Cell::plain),
             );
+            if carried {
+                row.extend(
+                    [
+                        r.topology
+                            .map_or_else(|| "-".to_owned(), |t| t.key.to_string()),
+                        pct(r.topology.map(|t| t.hops)),
+                        pct(r.topology.map(|t| t.stretched)),
+                    ]
+                    .map(Cell::plain),
+                );
+            }
             match (&m.delaunay, stats.get(&r.frame)) {
                 (Some(_), Some(d)) => row.extend(
                     [
@@ -292,6 +308,20 @@ impl Report {
             params.join(", "),
             m.ply_dir,
         ));
+        if !m.mean.keys.is_empty() {
+            v.push(format!(
+                "topology: one mesh carried from {} key frame(s) ({}); most probe Gaussians \
+                 hopping off a carried mesh: {}",
+                m.mean.keys.len(),
+                m.mean
+                    .keys
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                pct(m.mean.max_hops)
+            ));
+        }
         match m.relation {
             Some(Relation::SelfConsistency) => v.push(self_consistency_note(m)),
             Some(Relation::Accuracy) => v.push(format!(

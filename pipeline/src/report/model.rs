@@ -125,6 +125,12 @@ pub struct Summary {
     /// Mean of the frames' median normal angles against the Gaussians, degrees.
     #[serde(default)]
     pub render_normal_angle_deg: Option<f64>,
+    /// The frames that started a key mesh (`--topology fixed|adaptive`; empty per frame).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub keys: Vec<usize>,
+    /// The largest share of probe Gaussians that hopped off a carried mesh.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_hops: Option<f64>,
 }
 
 pub(super) fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
@@ -192,6 +198,14 @@ impl Summary {
             ),
             render_depth_error_p90: mean(consistency.iter().filter_map(|c| c.depth_error_p90)),
             render_normal_angle_deg: mean(consistency.iter().filter_map(|c| c.normal_angle_deg)),
+            keys: records
+                .iter()
+                .filter_map(|r| r.topology.filter(|t| t.key == r.frame).map(|_| r.frame))
+                .collect(),
+            max_hops: records
+                .iter()
+                .filter_map(|r| r.topology.map(|t| t.hops))
+                .reduce(f64::max),
         }
     }
 
@@ -367,6 +381,7 @@ mod tests {
             watertight: frame.is_multiple_of(2),
             metrics,
             consistency: None,
+            topology: None,
         }
     }
 

@@ -604,6 +604,7 @@ pub(crate) mod tests {
                         structure: None,
                     }),
                     consistency: None,
+                    topology: None,
                 })
                 .collect();
             let mean = Summary::of(&frames);

@@ -1,0 +1,92 @@
+//! Whether each frame is meshed from scratch or one mesh is carried through the track
+//! (`--topology`), with the thresholds that start a new key mesh.
+
+use std::fmt;
+
+/// How the meshes of a track relate from frame to frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum Topology {
+    /// Every frame meshed from scratch: its own vertices and triangles.
+    #[default]
+    PerFrame,
+    /// The track's first frame meshed once (the key); every other frame is that mesh with its
+    /// vertices carried by the template's triangles.
+    Fixed,
+    /// As `fixed`, and a frame whose Gaussians have drifted off the carried mesh
+    /// (`--key-hops`) or whose carried triangles are stretched (`--key-stretch`) is meshed
+    /// again and starts a new key.
+    Adaptive,
+}
+
+impl Topology {
+    /// The name on the command line and in the report.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PerFrame => "per-frame",
+            Self::Fixed => "fixed",
+            Self::Adaptive => "adaptive",
+        }
+    }
+
+    /// Whether a mesh is carried from frame to frame.
+    #[must_use]
+    pub fn carries(self) -> bool {
+        self != Self::PerFrame
+    }
+}
+
+impl fmt::Display for Topology {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Default [`TopologyOptions::key_hops`]: a new key once 5% of the probe Gaussians hop.
+pub const DEFAULT_KEY_HOPS: f64 = 0.05;
+/// Default [`TopologyOptions::key_stretch`]: a new key once 2% of the key mesh's area sits in
+/// triangles stretched or shrunk more than twofold.
+pub const DEFAULT_KEY_STRETCH: f64 = 0.02;
+/// Default [`TopologyOptions::hop_distance`], in multiples of the mean template edge.
+pub const DEFAULT_HOP_DISTANCE: f64 = 0.1;
+
+/// The topology of a run's meshes and when `adaptive` starts a new key.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct TopologyOptions {
+    /// per-frame: mesh every frame from scratch; fixed: mesh the track's first frame and carry
+    /// that mesh through every frame (each vertex bound to the template triangle of its
+    /// nearest Gaussian: barycentric position and offset along the normal); adaptive: as
+    /// fixed, meshing again where the carried mesh drifts from the frame's Gaussians
+    /// (docs/conventions.md §10).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = Topology::PerFrame))]
+    pub topology: Topology,
+    /// adaptive: start a new key when more than this share of the probe Gaussians hop (move
+    /// more than --hop-distance off the carried mesh's triangle they were nearest at the key).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "SHARE",
+        default_value_t = DEFAULT_KEY_HOPS))]
+    pub key_hops: f64,
+    /// adaptive: start a new key when more than this share of the key mesh's area is in
+    /// triangles whose area grew or shrank more than twofold.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "SHARE",
+        default_value_t = DEFAULT_KEY_STRETCH))]
+    pub key_stretch: f64,
+    /// How far (multiples of the mean template edge) a Gaussian's distance to its carried
+    /// triangle may change before it counts as hopping.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "EDGES",
+        default_value_t = DEFAULT_HOP_DISTANCE))]
+    pub hop_distance: f64,
+}
+
+impl Default for TopologyOptions {
+    fn default() -> Self {
+        Self {
+            topology: Topology::PerFrame,
+            key_hops: DEFAULT_KEY_HOPS,
+            key_stretch: DEFAULT_KEY_STRETCH,
+            hop_distance: DEFAULT_HOP_DISTANCE,
+        }
+    }
+}

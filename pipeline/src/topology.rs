@@ -1,0 +1,202 @@
+//! One method's meshes through a track (`--topology`): meshed every frame, or a key mesh
+//! carried by the template ([`crate::carry`]) and, `adaptive`, meshed again where it drifts.
+//!
+//! Whatever a carrier decides is a function of the whole track: the first key is the track's
+//! first frame, and `adaptive` decides its keys frame by frame from there. A run that starts
+//! elsewhere (a shard, `--frames`, `--resume`) first replays the frames before its own
+//! ([`Carrier::history`]), meshing only at keys, so any split gives the same meshes.
+
+use std::ops::Range;
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+
+use crate::carry::{CarriedMesh, Drift};
+use crate::config::{Method, Topology, TopologyOptions};
+use crate::error::PipelineError;
+use crate::methods::{FrameInput, Mesher, MethodOutput};
+use crate::records::TopologyFrame;
+
+/// What every carrier of a run shares: the options and the template's and Gaussians'
+/// bindings.
+#[derive(Clone, Copy, Debug)]
+pub struct CarryContext<'a> {
+    /// `--topology` and its thresholds.
+    pub options: &'a TopologyOptions,
+    /// The (welded) template's triangles, which `FrameInput::positions` are the corners of.
+    pub triangles: &'a [[u32; 3]],
+    /// Each Gaussian's template triangle.
+    pub gaussian_triangles: &'a [u32],
+    /// Every Gaussian's deformed mean this frame (local, as the positions).
+    pub all_means: &'a [Vec3],
+    /// The mean template edge: the unit of `--hop-distance`, and how near the key mesh a
+    /// Gaussian must be to probe it.
+    pub mean_edge: f64,
+}
+
+/// One method's topology state.
+#[derive(Debug)]
+pub struct Carrier {
+    topology: Topology,
+    /// The current key frame and its mesh bound to the template.
+    key: Option<(usize, Box<CarriedMesh>)>,
+    /// The frame this carrier saw last.
+    last: Option<usize>,
+}
+
+impl Carrier {
+    /// A carrier of `topology` that has seen no frame.
+    #[must_use]
+    pub fn new(topology: Topology) -> Self {
+        Self {
+            topology,
+            key: None,
+            last: None,
+        }
+    }
+
+    /// The frames this carrier must see (in order, [`Carrier::frame`] with `replay`) before
+    /// it can give `frame`: none per frame; the track's first frame (the key) for `fixed`;
+    /// for `adaptive` every frame since the last it saw, or since the track's first.
+    #[must_use]
+    pub fn history(&self, frame: usize) -> Range<usize> {
+        match self.topology {
+            Topology::PerFrame => frame..frame,
+            Topology::Fixed if self.key.is_some() || frame == 0 => frame..frame,
+            Topology::Fixed => 0..1,
+            Topology::Adaptive => match self.last {
+                Some(l) if l < frame => l + 1..frame,
+                _ => 0..frame,
+            },
+        }
+    }
+
+    /// The mesh of `input.frame`: meshed by `mesher`, or the key mesh carried. `replay`:
+    /// the frame is only seen to decide keys (no mesh is returned unless one was made).
+    ///
+    /// # Errors
+    /// The mesher's; a key that cannot be bound ([`PipelineError::Carry`]).
+    pub fn frame(
+        &mut self,
+        method: Method,
+        mesher: &mut Mesher,
+        input: &FrameInput<'_>,
+        context: &CarryContext<'_>,
+        replay: bool,
+    ) -> Result<Option<(MethodOutput, Option<TopologyFrame>)>, PipelineError> {
+        let frame = input.frame;
+        if matches!(self.last, Some(l) if l >= frame) && self.topology == Topology::Adaptive {
+            // Going back (a frame asked again): start over from the track's first key.
+            self.key = None;
+        }
+        self.last = Some(frame);
+        if self.topology == Topology::PerFrame {
+            return Ok((!replay)
+                .then(|| mesher.mesh(input))
+                .transpose()?
+                .map(|o| (o, None)));
+        }
+        let start = Instant::now();
+        let Some((key, carried)) = &self.key else {
+            // The track's first key.
+            let output = mesher.mesh(input)?;
+            let carried = bind(method, frame, &output, input, context)?;
+            let record = TopologyFrame {
+                key: frame,
+                hops: 0.0,
+                stretched: 0.0,
+                farthest: Some(carried.farthest()),
+            };
+            self.key = Some((frame, Box::new(carried)));
+            return Ok(Some((output, Some(record))));
+        };
+        let key = *key;
+        if replay && self.topology == Topology::Fixed {
+            return Ok(None);
+        }
+        let mut vertices = Vec::new();
+        carried.place(input.positions, context.triangles, &mut vertices);
+        let tolerance = context.options.hop_distance * context.mean_edge;
+        let drift = carried.drift(&vertices, input.means, tolerance);
+        let options = context.options;
+        if self.topology == Topology::Adaptive
+            && (drift.hops > options.key_hops || drift.stretched > options.key_stretch)
+        {
+            let output = mesher.mesh(input)?;
+            let carried = bind(method, frame, &output, input, context)?;
+            let record = TopologyFrame {
+                farthest: Some(carried.farthest()),
+                ..record(frame, drift)
+            };
+            self.key = Some((frame, Box::new(carried)));
+            return Ok(Some((output, Some(record))));
+        }
+        if replay {
+            return Ok(None);
+        }
+        let mesh = carried
+            .mesh(vertices)
+            .map_err(|cause| PipelineError::Carry {
+                frame,
+                method,
+                key,
+                cause,
+            })?;
+        let output = MethodOutput {
+            mesh,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+            render_ms: None,
+            delaunay: None,
+        };
+        Ok(Some((output, Some(record(key, drift)))))
+    }
+}
+
+/// The record of a frame carried from `key` with `drift`.
+fn record(key: usize, drift: Drift) -> TopologyFrame {
+    TopologyFrame {
+        key,
+        hops: drift.hops,
+        stretched: drift.stretched,
+        farthest: None,
+    }
+}
+
+/// `output`'s mesh (of key frame `frame`) bound to the template of `input`.
+fn bind(
+    method: Method,
+    frame: usize,
+    output: &MethodOutput,
+    input: &FrameInput<'_>,
+    context: &CarryContext<'_>,
+) -> Result<CarriedMesh, PipelineError> {
+    CarriedMesh::bind(
+        output.mesh.clone(),
+        input.positions,
+        context.triangles,
+        context.all_means,
+        context.gaussian_triangles,
+        input.means,
+        context.mean_edge,
+    )
+    .map_err(|cause| PipelineError::Carry {
+        frame,
+        method,
+        key: frame,
+        cause,
+    })
+}
+
+/// The mean edge length of `triangles` over `positions` (each edge of each triangle counted,
+/// as the Delaunay hop threshold's unit); 0 without triangles.
+#[must_use]
+pub fn mean_edge(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
+    let (sum, n) = triangles.iter().fold((0.0, 0usize), |(s, n), t| {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        (
+            s + (b - a).length() + (c - b).length() + (a - c).length(),
+            n + 3,
+        )
+    });
+    if n > 0 { sum / n as f64 } else { 0.0 }
+}
