@@ -462,6 +462,91 @@ fn node_per_frame_on_request_for_a_fixed_topology() {
     check_node_roundtrip(&path, &frames, &times);
 }
 
+/// Runs of frames with one topology (a carried mesh between keys) become one node each,
+/// animated by morph targets within the run and shown by a scale track for its frames.
+#[test]
+fn runs_of_one_topology_share_a_node_with_morph_targets() {
+    let dir = out_dir();
+    let wave = wave_frames(4, true);
+    let moved = |m: &TriMesh, dz: f64| {
+        let p: Vec<DVec3> = m.positions().iter().map(|p| *p + DVec3::Z * dz).collect();
+        TriMesh::new(p, m.triangles().to_vec())
+    };
+    // Runs: wave 0..3 | strip 3..5 | empty 5 | strip 6 | wave 7..9.
+    let empty = TriMesh::new(Vec::<DVec3>::new(), Vec::new());
+    let frames = vec![
+        wave[0].clone(),
+        wave[1].clone(),
+        wave[2].clone(),
+        strip(3, 1),
+        moved(&strip(3, 1), 0.5),
+        empty,
+        strip(2, 3),
+        wave[3].clone(),
+        moved(&wave[3], 0.25),
+    ];
+    let times = times_at(10.0, frames.len());
+    for ext in ["glb", "gltf"] {
+        let path = dir.path().join(format!("runs.{ext}"));
+        write_mesh_sequence(&path, &frames, &times, SequenceLayout::Auto).expect("write");
+        let doc = check_structure(&path);
+        let children = doc["nodes"][0]["children"].as_array().expect("children");
+        assert_eq!(children.len(), 5, "one node per run");
+        let names: Vec<&str> = (1..=5)
+            .map(|n| doc["nodes"][n]["name"].as_str().expect("name"))
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "frame_000000",
+                "frame_000003",
+                "frame_000005",
+                "frame_000006",
+                "frame_000007"
+            ]
+        );
+        let targets = |n: usize| {
+            let mesh = doc["nodes"][n]["mesh"].as_u64().expect("mesh") as usize;
+            doc["meshes"][mesh]["primitives"][0]["targets"]
+                .as_array()
+                .map_or(0, Vec::len)
+        };
+        assert_eq!(
+            [targets(1), targets(2), targets(4), targets(5)],
+            [2, 1, 0, 1]
+        );
+        assert!(
+            doc["nodes"][3]["mesh"].is_null(),
+            "the empty frame has no mesh"
+        );
+        // Every frame's time shows that frame and only it.
+        let template = GltfTemplate::open(&path, &Clip::Index(0)).expect("template opens");
+        let runs = [0..3, 3..5, 5..6, 6..7, 7..9];
+        let mut starts = vec![0];
+        for r in &runs {
+            starts.push(starts.last().expect("start") + frames[r.start].vertex_count());
+        }
+        for (k, frame) in frames.iter().enumerate() {
+            let run = runs.iter().position(|r| r.contains(&k)).expect("run");
+            for t in probe_times(&times, k) {
+                let got = template.evaluate_at(t).expect("evaluates");
+                for (j, _) in runs.iter().enumerate() {
+                    let block = &got[starts[j]..starts[j + 1]];
+                    if j == run {
+                        let d = max_difference(block, frame.positions());
+                        assert!(d <= POSITION_TOLERANCE, "frame {k} at {t} s: off by {d}");
+                    } else {
+                        assert!(
+                            block.iter().all(|p| *p == DVec3::ZERO),
+                            "run {j} visible at {t} s (frame {k}'s time)"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn one_frame_and_empty_frames() {
     let dir = out_dir();

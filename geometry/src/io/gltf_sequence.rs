@@ -15,14 +15,19 @@
 //!   extracted sequence move nearly every vertex, where a sparse accessor (an index plus a
 //!   value per moved vertex) is larger. Targets are named `frame_000001`, ... in
 //!   `mesh.extras.targetNames`.
-//! - **One node per frame** (any topology): a root node `sequence` with one child node
-//!   `frame_000000`, ... per frame, each with its own mesh. Every child has a `scale` channel
-//!   with **STEP** interpolation that is 1 from its frame's time until the next frame's time
-//!   and 0 otherwise, so exactly one frame is visible at any time (before the first time the
-//!   first frame, after the last time the last frame). Each channel has at most three keys
-//!   (the first frame's time, its own, the next one's), so the animation data grows linearly
-//!   with the number of frames. In the static scene (no animation applied) frame 0 has scale
-//!   1 and the others 0. A frame without triangles is a child node without a mesh.
+//! - **One node per run** (any topology): a root node `sequence` with one child node per run
+//!   of consecutive frames that share a vertex count and triangles (a mesh carried between
+//!   keys), named by its first frame (`frame_000000`, ...). A run of one frame is a plain
+//!   mesh; a longer run is a mesh whose base is its first frame with one morph target per
+//!   later frame (as above, its own STEP `weights` channel keyed at its frames' times). Every
+//!   child has a `scale` channel with **STEP** interpolation that is 1 from its run's first
+//!   time until the next run's first time and 0 otherwise, so exactly one frame is visible at
+//!   any time (before the first time the first frame, after the last time the last frame).
+//!   Each scale channel has at most three keys (the first frame's time, its own, the next
+//!   run's), so for runs of one frame the animation data grows linearly with the number of
+//!   frames. In the static scene (no animation applied) the first run has scale 1 and the
+//!   others 0. A frame without triangles is a run of its own, a child node without a mesh.
+//!   [`SequenceLayout::NodePerFrame`] makes every frame a run of its own.
 //!
 //! **Streaming.** The writer takes its frames from a [`FrameSource`] one at a time: in memory
 //! ([`write_mesh_sequence`]) or read from one mesh file per frame ([`FrameFiles`],
@@ -69,6 +74,7 @@
 
 use std::borrow::Cow;
 use std::io::Write;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
@@ -90,14 +96,16 @@ const SEQUENCE_NAME: &str = "sequence";
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SequenceLayout {
     /// Morph targets when every frame has the first frame's vertex count and triangles (and
-    /// the first frame has triangles), else one node per frame.
+    /// the first frame has triangles), else one node per run of frames that share their
+    /// topology (morph targets within a run).
     #[default]
     Auto,
     /// One mesh: frame 0 as the base, one morph target per later frame, a STEP weights
     /// track. Every frame must have the vertex count and triangles of frame 0.
     MorphTargets,
     /// One mesh and node per frame under a root node, shown one at a time by STEP scale
-    /// tracks (scale 1 for the current frame, 0 for the others).
+    /// tracks (scale 1 for the current frame, 0 for the others). (`Auto` with frames of
+    /// several topologies gives one node per run of frames with the same topology instead.)
     NodePerFrame,
 }
 
@@ -187,22 +195,24 @@ pub fn write_sequence(
     }
     let keys = key_times(path, frames.frame_count(), frame_times)?;
     let survey = Survey::of(path, frames, layout)?;
-    write_surveyed(path, format, frames, &keys, &survey)
+    write_surveyed(path, format, frames, &keys, &survey, &survey.segments)
 }
 
-/// Writes `frames` at `keys` in the layout `survey` chose.
+/// Writes `frames` at `keys` in the layout `survey` chose, `segments` being its runs of one
+/// topology among `frames`.
 fn write_surveyed(
     path: &Path,
     format: Format,
     frames: &dyn FrameSource,
     keys: &[f32],
     survey: &Survey,
+    segments: &[Range<usize>],
 ) -> Result<(), IoError> {
     let build = |sink: &mut dyn Sink| -> Result<Document, IoError> {
         if survey.morph {
             build_morph_targets(path, frames, keys, survey.normals, sink)
         } else {
-            build_node_per_frame(frames, keys, sink)
+            build_segments(path, frames, keys, segments, survey.normals, sink)
         }
     };
     match format {
@@ -251,7 +261,7 @@ pub fn write_sequence_parts(
     let survey = Survey::of(path, frames, layout)?;
     let runs = split(path, &survey.sizes, max_bytes)?;
     if runs.len() == 1 {
-        write_surveyed(path, Format::Glb, frames, &keys, &survey)?;
+        write_surveyed(path, Format::Glb, frames, &keys, &survey, &survey.segments)?;
         return Ok(vec![path.to_path_buf()]);
     }
     let stem = path
@@ -261,12 +271,14 @@ pub fn write_sequence_parts(
     for (i, run) in runs.into_iter().enumerate() {
         let part = path.with_file_name(format!("{stem}_part{:03}.glb", i + 1));
         let part_keys = &keys[run.clone()];
+        let segments = survey.segments_in(&run);
         write_surveyed(
             &part,
             Format::Glb,
             &FrameRun { frames, run },
             part_keys,
             &survey,
+            &segments,
         )?;
         written.push(part);
     }
@@ -326,6 +338,10 @@ struct Survey {
     /// Per frame, an upper bound of the buffer bytes it adds in either layout (its vertex
     /// data, its own indices and its animation keys).
     sizes: Vec<u64>,
+    /// Runs of consecutive frames with one vertex count and the same triangles (a frame
+    /// without triangles is a run of its own; one run per frame for
+    /// [`SequenceLayout::NodePerFrame`]).
+    segments: Vec<Range<usize>>,
 }
 
 impl Survey {
@@ -334,6 +350,10 @@ impl Survey {
     fn of(path: &Path, frames: &dyn FrameSource, layout: SequenceLayout) -> Result<Self, IoError> {
         let base = frames.frame(0)?;
         let mut same = base.triangle_count() > 0;
+        let mut segments: Vec<Range<usize>> = Vec::new();
+        segments.push(0..1);
+        // The first frame of the current segment (frame 0 is `base`).
+        let mut segment_base: Option<TriMesh> = None;
         if layout == SequenceLayout::MorphTargets && !same {
             return Err(IoError::malformed(
                 path,
@@ -364,7 +384,21 @@ impl Survey {
             sizes.push(
                 (per_vertex * frame.vertex_count() + 12 * frame.triangle_count() + 64) as u64,
             );
-            if layout == SequenceLayout::NodePerFrame || !same || k == 0 {
+            if k == 0 {
+                continue;
+            }
+            let current = segment_base.as_ref().unwrap_or(&base);
+            let joins = layout != SequenceLayout::NodePerFrame
+                && current.triangle_count() > 0
+                && topology_difference(current, &frame).is_none();
+            match segments.last_mut() {
+                Some(segment) if joins => segment.end = k + 1,
+                _ => {
+                    segments.push(k..k + 1);
+                    segment_base = Some(frame.clone().into_owned());
+                }
+            }
+            if layout == SequenceLayout::NodePerFrame || !same {
                 continue;
             }
             if let Some(message) = topology_difference(&base, &frame) {
@@ -382,7 +416,17 @@ impl Survey {
             morph: layout != SequenceLayout::NodePerFrame && same,
             normals,
             sizes,
+            segments,
         })
+    }
+
+    /// The segments of frames `run`, cut to it and counted from its first frame.
+    fn segments_in(&self, run: &Range<usize>) -> Vec<Range<usize>> {
+        self.segments
+            .iter()
+            .filter(|s| s.start < run.end && s.end > run.start)
+            .map(|s| s.start.max(run.start) - run.start..s.end.min(run.end) - run.start)
+            .collect()
     }
 }
 
@@ -743,6 +787,80 @@ struct Document {
     buffers: Value,
 }
 
+/// The morph targets of frames `run` against `base` (their topology already checked): each
+/// frame's `POSITION` deltas (relative to the base as stored in f32, so base + delta is the
+/// frame), and `NORMAL` deltas when `base_normals` is given.
+fn morph_targets(
+    builder: &mut Builder<'_>,
+    path: &Path,
+    frames: &dyn FrameSource,
+    base: &TriMesh,
+    run: Range<usize>,
+    base_normals: Option<&[Vec3]>,
+) -> Result<Vec<Value>, IoError> {
+    let mut targets = Vec::with_capacity(run.len());
+    for k in run {
+        let frame = frames.frame(k)?;
+        let flat: Vec<f32> = frame
+            .positions()
+            .par_iter()
+            .zip(base.positions())
+            .flat_map_iter(|(p, q)| {
+                (0..3).map(move |c| {
+                    #[expect(
+                        clippy::cast_possible_truncation,
+                        reason = "f32 storage; overflow is checked below"
+                    )]
+                    let d = (p[c] - f64::from(q[c] as f32)) as f32;
+                    d
+                })
+            })
+            .collect();
+        if let Some(i) = flat.iter().position(|d| !d.is_finite()) {
+            return Err(IoError::malformed(
+                path,
+                format!("frame {k} vertex {}", i / 3),
+                "the offset from its base frame overflows f32",
+            ));
+        }
+        let mut target = Map::new();
+        let positions = builder.push(float_block(&flat, 3, Some(ARRAY_BUFFER), true))?;
+        target.insert("POSITION".into(), json!(positions));
+        if let (Some(n0), Some(nk)) = (base_normals, frame.normals()) {
+            let d: Vec<Vec3> = unit_normals(nk)
+                .iter()
+                .zip(n0)
+                .map(|(a, b)| *a - *b)
+                .collect();
+            let normals = builder.push(vec3_block(&d, Some(ARRAY_BUFFER), false))?;
+            target.insert("NORMAL".into(), json!(normals));
+        }
+        targets.push(Value::Object(target));
+    }
+    Ok(targets)
+}
+
+/// Gives `mesh` (whose primitive is `primitive`) the morph targets of frames `first + 1..`
+/// (`targets` of them), named by frame; returns the STEP weights of keys `first..`: all 0 at
+/// the first, then target `j - 1` alone at weight 1 at key `first + j`.
+fn with_targets(
+    mesh: &mut Value,
+    primitive: &mut Value,
+    targets: Vec<Value>,
+    first: usize,
+) -> Vec<f32> {
+    let n = targets.len();
+    primitive["targets"] = json!(targets);
+    mesh["weights"] = json!(vec![0.0f32; n]);
+    mesh["extras"] =
+        json!({"targetNames": (first + 1..=first + n).map(frame_name).collect::<Vec<_>>()});
+    let mut weights = vec![0.0f32; (n + 1) * n];
+    for j in 1..=n {
+        weights[j * n + (j - 1)] = 1.0;
+    }
+    weights
+}
+
 /// The morph-target layout (topology already checked), frame by frame.
 fn build_morph_targets(
     path: &Path,
@@ -760,63 +878,23 @@ fn build_morph_targets(
         None
     };
     let count = frames.frame_count();
-    let targets_n = count - 1;
-    let mut targets = Vec::with_capacity(targets_n);
-    for k in 1..count {
-        let frame = frames.frame(k)?;
-        let flat: Vec<f32> = frame
-            .positions()
-            .par_iter()
-            .zip(base.positions())
-            .flat_map_iter(|(p, q)| {
-                (0..3).map(move |c| {
-                    #[expect(
-                        clippy::cast_possible_truncation,
-                        reason = "f32 storage; overflow is checked below"
-                    )]
-                    // Relative to the base as stored (f32), so base + delta is the frame.
-                    let d = (p[c] - f64::from(q[c] as f32)) as f32;
-                    d
-                })
-            })
-            .collect();
-        if let Some(i) = flat.iter().position(|d| !d.is_finite()) {
-            return Err(IoError::malformed(
-                path,
-                format!("frame {k} vertex {}", i / 3),
-                "the offset from frame 0 overflows f32",
-            ));
-        }
-        let mut target = Map::new();
-        let positions = builder.push(float_block(&flat, 3, Some(ARRAY_BUFFER), true))?;
-        target.insert("POSITION".into(), json!(positions));
-        if let (Some(n0), Some(nk)) = (&base_normals, frame.normals()) {
-            let d: Vec<Vec3> = unit_normals(nk)
-                .iter()
-                .zip(n0)
-                .map(|(a, b)| *a - *b)
-                .collect();
-            let normals = builder.push(vec3_block(&d, Some(ARRAY_BUFFER), false))?;
-            target.insert("NORMAL".into(), json!(normals));
-        }
-        targets.push(Value::Object(target));
-    }
+    let targets = morph_targets(
+        &mut builder,
+        path,
+        frames,
+        &base,
+        1..count,
+        base_normals.as_deref(),
+    )?;
     let mut mesh = json!({"name": SEQUENCE_NAME});
-    let (sampler, channel) = if targets_n == 0 {
+    let (sampler, channel) = if targets.is_empty() {
         let sampler = builder.sampler(keys, &[1.0; 3], 3)?;
         (
             sampler,
             json!({"sampler": 0, "target": {"node": 0, "path": "scale"}}),
         )
     } else {
-        primitive["targets"] = json!(targets);
-        mesh["weights"] = json!(vec![0.0f32; targets_n]);
-        mesh["extras"] = json!({"targetNames": (1..count).map(frame_name).collect::<Vec<_>>()});
-        // Key k: target k - 1 at weight 1, all others 0.
-        let mut weights = vec![0.0f32; keys.len() * targets_n];
-        for k in 1..keys.len() {
-            weights[k * targets_n + (k - 1)] = 1.0;
-        }
+        let weights = with_targets(&mut mesh, &mut primitive, targets, 0);
         let sampler = builder.sampler(keys, &weights, 1)?;
         (
             sampler,
@@ -828,53 +906,92 @@ fn build_morph_targets(
     Ok(builder.document(vec![node], vec![mesh], vec![sampler], vec![channel]))
 }
 
-/// The node-per-frame layout, frame by frame.
-fn build_node_per_frame(
+/// The node-per-segment layout (one node per frame when every segment is one frame), segment
+/// by segment.
+fn build_segments(
+    path: &Path,
     frames: &dyn FrameSource,
     keys: &[f32],
+    segments: &[Range<usize>],
+    with_normals: bool,
     sink: &mut dyn Sink,
 ) -> Result<Document, IoError> {
-    let n = frames.frame_count();
     let mut builder = Builder::new(sink);
-    let mut nodes = vec![json!({"name": SEQUENCE_NAME, "children": (1..=n).collect::<Vec<_>>()})];
+    let mut nodes =
+        vec![json!({"name": SEQUENCE_NAME, "children": (1..=segments.len()).collect::<Vec<_>>()})];
     let mut meshes = Vec::new();
-    let mut samplers = Vec::with_capacity(n);
-    let mut channels = Vec::with_capacity(n);
-    // The index accessor of the last frame with a mesh, shared while the triangles repeat.
+    let mut samplers = Vec::with_capacity(segments.len());
+    let mut channels = Vec::with_capacity(segments.len());
+    // The index accessor of the last segment with a mesh, shared while the triangles repeat.
     let mut last_indices: Option<(Vec<[u32; 3]>, usize)> = None;
-    for k in 0..n {
-        let frame = frames.frame(k)?;
-        let mut node = json!({"name": frame_name(k)});
-        if frame.triangle_count() > 0 {
+    for (s, segment) in segments.iter().enumerate() {
+        let base = frames.frame(segment.start)?;
+        let mut node = json!({"name": frame_name(segment.start)});
+        let mut weights = None;
+        if base.triangle_count() > 0 {
             let shared = last_indices
                 .as_ref()
-                .filter(|(triangles, _)| triangles.as_slice() == frame.triangles())
+                .filter(|(triangles, _)| triangles.as_slice() == base.triangles())
                 .map(|(_, accessor)| *accessor);
-            let (primitive, indices) = builder.primitive(&frame, true, shared)?;
+            // A one-frame segment keeps its normals; a longer one only when every frame
+            // has them (its targets carry their deltas).
+            let normals = segment.len() == 1 || with_normals;
+            let (mut primitive, indices) = builder.primitive(&base, normals, shared)?;
             if shared.is_none() {
-                last_indices = Some((frame.triangles().to_vec(), indices));
+                last_indices = Some((base.triangles().to_vec(), indices));
             }
-            meshes.push(json!({"name": frame_name(k), "primitives": [primitive]}));
+            let mut mesh = json!({"name": frame_name(segment.start)});
+            if segment.len() > 1 {
+                let base_normals = if with_normals {
+                    base.normals().map(unit_normals)
+                } else {
+                    None
+                };
+                let targets = morph_targets(
+                    &mut builder,
+                    path,
+                    frames,
+                    &base,
+                    segment.start + 1..segment.end,
+                    base_normals.as_deref(),
+                )?;
+                weights = Some(with_targets(
+                    &mut mesh,
+                    &mut primitive,
+                    targets,
+                    segment.start,
+                ));
+            }
+            mesh["primitives"] = json!([primitive]);
+            meshes.push(mesh);
             node["mesh"] = json!(meshes.len() - 1);
         }
-        let shown = if k == 0 { 1.0f32 } else { 0.0 };
+        let shown = if s == 0 { 1.0f32 } else { 0.0 };
         node["scale"] = json!([shown, shown, shown]);
         nodes.push(node);
-        // Visible (1) from its own key to the next frame's key, hidden (0) elsewhere.
+        // Visible (1) from its first key to the next segment's, hidden (0) elsewhere.
         let mut times = Vec::with_capacity(3);
         let mut scales: Vec<f32> = Vec::with_capacity(9);
-        if k > 0 {
+        if segment.start > 0 {
             times.push(keys[0]);
             scales.extend([0.0; 3]);
         }
-        times.push(keys[k]);
+        times.push(keys[segment.start]);
         scales.extend([1.0; 3]);
-        if let Some(&next) = keys.get(k + 1) {
+        if let Some(&next) = keys.get(segment.end) {
             times.push(next);
             scales.extend([0.0; 3]);
         }
         samplers.push(builder.sampler(&times, &scales, 3)?);
-        channels.push(json!({"sampler": k, "target": {"node": k + 1, "path": "scale"}}));
+        channels.push(
+            json!({"sampler": samplers.len() - 1, "target": {"node": s + 1, "path": "scale"}}),
+        );
+        if let Some(weights) = weights {
+            samplers.push(builder.sampler(&keys[segment.clone()], &weights, 1)?);
+            channels.push(
+                json!({"sampler": samplers.len() - 1, "target": {"node": s + 1, "path": "weights"}}),
+            );
+        }
     }
     Ok(builder.document(nodes, meshes, samplers, channels))
 }
