@@ -7,7 +7,7 @@ use crate::config::GaussianLayout;
 
 use crate::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig,
-    GroundTruth, Method, Mode, OutputTarget,
+    GroundTruth, Method, Mode, OutputTarget, Topology,
 };
 
 /// A stage of the main job (docs/conventions.md §1), in the order they run.
@@ -211,6 +211,21 @@ impl Plan {
                      opacity field the minimum over the tsdf rig's {} views of {}x{} px, \
                      marching tetrahedra at 1/2 with 8 bisection steps, the largest piece",
                     o.tsdf.views, o.tsdf.resolution, o.tsdf.resolution
+                ),
+            };
+            let t = &o.topology;
+            let why = match t.topology {
+                Topology::PerFrame => why,
+                Topology::Fixed => format!(
+                    "{why}; --topology fixed: only the track's first frame, its mesh carried \
+                     through the others"
+                ),
+                Topology::Adaptive => format!(
+                    "{why}; --topology adaptive: the track's first frame and each frame where \
+                     over {} of the probe Gaussians move {} mean template edges off the carried \
+                     mesh (or {} of its area stretches twofold) start a key, the mesh carried \
+                     between keys",
+                    t.key_hops, t.hop_distance, t.key_stretch
                 ),
             };
             push(Stage::Mesh(m), true, why);
