@@ -6,7 +6,8 @@ Usage:
 
 `points`: cKDTree(workers=-1) both ways, then accuracy, completeness, chamfer L1/L2, normal
 consistency/angle and precision/recall/F-score per tau (the same definitions as trisplat).
-Timed: tree builds, queries and metric arithmetic; not file loading.
+Timed: tree builds, queries and metric arithmetic; not file loading (Open3D's reader, or
+plyfile's where Open3D does not import).
 
 `surface`: trimesh.proximity.closest_point for the first N points against the mesh (exact
 point-to-triangle distances). Timed: the call, including trimesh's lazy acceleration structure.
@@ -23,11 +24,27 @@ import numpy as np
 
 
 def read_points(path):
-    import open3d as o3d
-
+    """Positions and normals (or None) as float64, by Open3D, else by plyfile (PLY only)."""
+    try:
+        import open3d as o3d
+    except ImportError:
+        return read_points_plyfile(path)
     pcd = o3d.io.read_point_cloud(path)
     pts = np.asarray(pcd.points, dtype=np.float64)
     nrm = np.asarray(pcd.normals, dtype=np.float64) if pcd.has_normals() else None
+    return pts, nrm
+
+
+def read_points_plyfile(path):
+    """The vertex element's x y z (and nx ny nz) of a PLY, for machines without Open3D."""
+    from plyfile import PlyData
+
+    v = PlyData.read(path)["vertex"].data
+    names = v.dtype.names
+    pts = np.stack([v[c] for c in ("x", "y", "z")], axis=1).astype(np.float64)
+    nrm = None
+    if all(c in names for c in ("nx", "ny", "nz")):
+        nrm = np.stack([v[c] for c in ("nx", "ny", "nz")], axis=1).astype(np.float64)
     return pts, nrm
 
 

@@ -88,6 +88,9 @@ pub fn run(args: &EvalBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
     let index = index?;
     let (query, _) = time_best(1, || index.nearest_batch(pred.positions()));
     println!("  breakdown: one k-d tree build {build:.3} s, one 1M-query sweep {query:.3} s");
+    let pred_index = PointIndex::new(pred.positions())?;
+    let (sweep, _) = time_best(1, || index.nearest_to_points_of(&pred_index));
+    println!("  the same sweep in the queries' own tree order (as `eval` runs it) {sweep:.3} s");
     let row = format!("point metrics {}k <-> {}k", n / 1000, n / 1000);
     let path_str = |p: &std::path::Path| -> anyhow::Result<String> {
         Ok(p.to_str()

@@ -35,7 +35,7 @@ use crate::mesh::{Aabb, TriMesh};
 use crate::points::PointCloud;
 use crate::spatial::bvh::TriangleBvh;
 use crate::spatial::error::SpatialError;
-use crate::spatial::kdtree::PointIndex;
+use crate::spatial::kdtree::{Nearest, PointIndex};
 use crate::spatial::surface::SurfaceIndex;
 
 /// Default F-score thresholds, in the input's length unit: 1, 2.5, 5 and 10 mm for inputs in
@@ -421,12 +421,15 @@ pub fn evaluate(
         return Err(MetricsError::Empty(Side::GroundTruth));
     }
     let with_normals = pred.points.normals().is_some() && gt.points.normals().is_some();
-    let (forward, backward) = rayon::join(
-        || one_way(pred, gt, Side::GroundTruth, options, with_normals),
-        || one_way(gt, pred, Side::Prediction, options, with_normals),
-    );
-    let forward = forward?;
-    let backward = backward?;
+    let (forward, backward) = if point_to_point(gt, options) && point_to_point(pred, options) {
+        point_sums(pred, gt, options, with_normals)?
+    } else {
+        let (forward, backward) = rayon::join(
+            || one_way(pred, gt, Side::GroundTruth, options, with_normals),
+            || one_way(gt, pred, Side::Prediction, options, with_normals),
+        );
+        (forward?, backward?)
+    };
     let n_p = pred.points.len() as f64;
     let n_g = gt.points.len() as f64;
     let accuracy = forward.sum_d / n_p;
@@ -477,6 +480,48 @@ struct Sums {
     below: Vec<u64>,
     /// Sum of |cos| and of the angle in radians, when normals are used.
     normals: Option<(f64, f64)>,
+}
+
+/// Whether distances to `to` are to its points (point mode, or a side without triangles).
+fn point_to_point(to: Shape<'_>, options: &MetricsOptions) -> bool {
+    !(options.surface && to.mesh.is_some_and(|m| m.triangle_count() > 0))
+}
+
+/// Both directions in point mode: one k-d tree per side, built side by side, and each
+/// side's points asked of the other's tree in that side's own tree order (spatially coherent,
+/// so no sort of the queries).
+fn point_sums(
+    pred: Shape<'_>,
+    gt: Shape<'_>,
+    options: &MetricsOptions,
+    with_normals: bool,
+) -> Result<(Sums, Sums), MetricsError> {
+    let index = |side: Side, shape: Shape<'_>| {
+        PointIndex::new(shape.points.positions())
+            .map_err(|source| MetricsError::Spatial { side, source })
+    };
+    let (pred_index, gt_index) = rayon::join(
+        || index(Side::Prediction, pred),
+        || index(Side::GroundTruth, gt),
+    );
+    let (pred_index, gt_index) = (pred_index?, gt_index?);
+    let sums = |from: Shape<'_>, to: Shape<'_>, found: &[Nearest]| {
+        let normals = if with_normals {
+            from.points.normals().zip(to.points.normals())
+        } else {
+            None
+        };
+        accumulate(
+            found.len(),
+            |i| found[i].distance,
+            normals.map(|(qn, tn)| move |i: usize| (qn[i], tn[found[i].index as usize])),
+            &options.taus,
+        )
+    };
+    Ok(rayon::join(
+        || sums(pred, gt, &gt_index.nearest_to_points_of(&pred_index)),
+        || sums(gt, pred, &pred_index.nearest_to_points_of(&gt_index)),
+    ))
 }
 
 /// Distances (and neighbour normals) from `from`'s points to `to`, summed.

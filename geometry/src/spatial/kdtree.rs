@@ -1,40 +1,34 @@
-//! Nearest-neighbour queries over a fixed point set: a kiddo 6 `ImmutableKdTree<f32, 3>`.
+//! Nearest-neighbour queries over a fixed point set: an exact k-d tree ([`super::point_tree`]).
 //!
-//! The tree searches with f32 squared distances (kiddo's `SquaredEuclidean<f32>`); every
-//! distance this module returns is recomputed in f64 from the f32 coordinates of the point the
-//! tree found, so a distance agrees with scipy's float64 `cKDTree` to rounding (about 1e-16
-//! relative) whenever both pick the same point.
+//! The tree ranks candidates by their f64 squared distance computed from the f32 coordinates
+//! (`dx * dx + dy * dy + dz * dz`, the expression of [`distance_f64`]) and then by index, so
+//! `nearest` returns what a brute-force scan returns, ties included: the smallest index among
+//! the points at the least distance, and its distance to the bit. `k_nearest` likewise returns
+//! the first `k` of the points sorted by distance then index. A distance agrees with scipy's
+//! float64 `cKDTree` to rounding (about 1e-16 relative); with ties the index (and so, in the
+//! metrics, the neighbour's normal) may differ from scipy's choice.
 //!
-//! # Ties
-//! When several points are (nearly) equidistant from a query, any of them may be returned:
-//! the distance is the same, but the index (and so, in the metrics, the neighbour's normal) may
-//! differ from scipy's choice. "Nearly" means within the f32 rounding of the tree's squared
-//! distances, about 3e-7 relative. Distance-only metrics are unaffected beyond that rounding.
+//! Points at the same position are indexed once: the tree holds the distinct positions, each
+//! standing for its copies (the smallest index answers `nearest`; `k_nearest` lists the
+//! copies), so 200k copies of one point are one tree item. Only sets with copies pay for
+//! finding them: a set of more than 2,048 points whose evenly spaced sample of 1,024 holds no
+//! copy is indexed as it is (a set with a few copies then has a few equal leaf entries, which
+//! costs nothing measurable).
 //!
-//! The mutable kiddo tree is never used: it fails once more than a bucket of points share a
-//! coordinate (planes, grids). The immutable tree handles duplicates correctly but searches
-//! them in quadratic time (200k copies of one point: 29 s for `eval` of the set against
-//! itself), so points at the same position are indexed once: the tree holds the distinct
-//! positions, each standing for its copies (the smallest index answers `nearest`; `k_nearest`
-//! lists the copies). Only sets with copies pay for finding them: a set of more than 2,048
-//! points whose evenly spaced sample of 1,024 holds no copy is indexed as it is (the slow case
-//! needs thousands of copies of one position, which the sample sees).
-//!
-//! Likewise a set flat along a coordinate axis (a line along x, a plane z = 0) makes every
-//! query search both sides of the splits on that axis; it is indexed turned by a fixed
-//! rotation, queries turned alike. Distances are still those of the original coordinates;
-//! only which of two points tied within f32 rounding answers may change.
+//! The tree splits along the widest axis of each node's points, so sets flat along an axis (a
+//! line along x, a plane z = 0) are split along the axes they extend in: no rotation is needed
+//! (kiddo's tree, used before, cycled through the axes and searched both sides of every split
+//! on a flat one).
 
 use std::cmp::Ordering;
-use std::num::NonZeroUsize;
 
 use glam::Vec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 use super::error::SpatialError;
 use super::limits::{MAX_COORDINATE, check_points};
 use super::morton::morton_order;
+use super::point_tree::{Cursor, PointTree};
 
 /// A nearest point: its index in the indexed set and its Euclidean distance (f64).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,31 +41,34 @@ pub struct Nearest {
 
 /// A k-d tree over a fixed set of points (at least one, all finite and bounded).
 pub struct PointIndex {
-    /// Over the distinct positions (all points when there are no copies), rotated by `turn`
-    /// when there is one.
-    tree: ImmutableKdTree<f32, 3>,
-    /// For a set flat along an axis ([`flat_along_an_axis`]): the rotation its coordinates
-    /// (and every query) take in the tree.
-    turn: Option<glam::DMat3>,
+    /// Over the distinct positions (all points when there are no copies); a tree item's id is
+    /// the smallest index of the points at its position.
+    tree: PointTree,
     points: Vec<Vec3>,
-    /// Copies, when there are any: the points of tree item `u` are
-    /// `members[offsets[u]..offsets[u + 1]]`, ascending.
+    /// Copies, when there are any.
     copies: Option<Copies>,
 }
 
 /// Points looked at to decide whether a large set has copies (see [`Copies::of`]).
 const COPY_SAMPLE: usize = 1024;
 
+/// Queries answered one after the other, each starting from the previous one's answer, in a
+/// batch (consecutive queries in a spatially coherent order).
+const QUERY_CHUNK: usize = 1024;
+
 /// The points of each distinct position (see [`PointIndex`]).
 struct Copies {
+    /// The points of group `g` are `members[offsets[g]..offsets[g + 1]]`, ascending.
     offsets: Vec<u32>,
     members: Vec<u32>,
+    /// The group of each point.
+    group: Vec<u32>,
 }
 
 impl Copies {
     /// Groups equal positions (`-0.0` equals `0.0`); `None` when all are distinct. Returns the
-    /// distinct positions in tree order with the groups.
-    fn of(points: &[Vec3]) -> Option<(Vec<[f32; 3]>, Self)> {
+    /// distinct positions with their smallest indices, and the groups.
+    fn of(points: &[Vec3]) -> Option<(Vec<[f32; 3]>, Vec<u32>, Self)> {
         let key = |p: Vec3| (p + Vec3::ZERO).to_array().map(f32::to_bits);
         // The search is slow only with thousands of copies of one position, which an evenly
         // spaced sample sees: a set whose sample holds no copy is indexed as it is (sorting
@@ -97,22 +94,34 @@ impl Copies {
             return None;
         }
         let mut distinct = Vec::new();
+        let mut ids = Vec::new();
         let mut offsets = Vec::new();
+        let mut group = vec![0u32; points.len()];
         for (k, &(bits, i)) in order.iter().enumerate() {
             if k == 0 || order[k - 1].0 != bits {
                 offsets.push(k as u32);
                 distinct.push(points[i as usize].to_array());
+                ids.push(i);
             }
+            group[i as usize] = (offsets.len() - 1) as u32;
         }
         offsets.push(order.len() as u32);
         let members = order.into_iter().map(|(_, i)| i).collect();
-        Some((distinct, Self { offsets, members }))
+        Some((
+            distinct,
+            ids,
+            Self {
+                offsets,
+                members,
+                group,
+            },
+        ))
     }
 
-    /// The points at tree item `u`, ascending.
-    fn of_item(&self, u: u32) -> &[u32] {
-        let u = u as usize;
-        &self.members[self.offsets[u] as usize..self.offsets[u + 1] as usize]
+    /// The points at the position of point `index`, ascending.
+    fn of_point(&self, index: u32) -> &[u32] {
+        let g = self.group[index as usize] as usize;
+        &self.members[self.offsets[g] as usize..self.offsets[g + 1] as usize]
     }
 }
 
@@ -122,36 +131,6 @@ impl std::fmt::Debug for PointIndex {
             .field("len", &self.points.len())
             .finish_non_exhaustive()
     }
-}
-
-/// An axis whose extent is at most this fraction of the largest makes a set flat
-/// ([`flat_along_an_axis`]).
-const FLAT_AXIS_REL: f64 = 1e-3;
-
-/// Whether the points are collinear or coplanar along a coordinate axis (some axis's extent
-/// at most [`FLAT_AXIS_REL`] of the largest, e.g. a line along x or a plane z = 0). The tree
-/// splits every axis in turn; along a flat one every query is near the split and searches
-/// both sides, so queries grow linear in the set (500k points on a line: `eval` 21 s). Such
-/// sets are indexed turned by [`generic_rotation`], where no axis is flat.
-fn flat_along_an_axis(points: &[Vec3]) -> bool {
-    let (lo, hi) = points.iter().fold(
-        (glam::DVec3::INFINITY, glam::DVec3::NEG_INFINITY),
-        |(lo, hi), p| (lo.min(p.as_dvec3()), hi.max(p.as_dvec3())),
-    );
-    let extent = hi - lo;
-    points.len() > 1 && extent.min_element() <= FLAT_AXIS_REL * extent.max_element()
-}
-
-/// A fixed rotation that leaves no coordinate axis parallel to another axis, line or plane of
-/// small rational direction (the unit quaternion (3, 5, 7, 11) normalised).
-fn generic_rotation() -> glam::DMat3 {
-    glam::DMat3::from_quat(glam::DQuat::from_xyzw(5.0, 7.0, 11.0, 3.0).normalize())
-}
-
-/// `p` rotated by `r`, in f64, stored as f32.
-#[inline]
-fn turned(r: glam::DMat3, p: Vec3) -> [f32; 3] {
-    (r * p.as_dvec3()).as_vec3().to_array()
 }
 
 /// Exact f64 Euclidean distance between two f32 points.
@@ -178,36 +157,19 @@ impl PointIndex {
                 count: points.len(),
             });
         }
-        let (mut coords, copies) = match Copies::of(points) {
-            Some((distinct, copies)) => (distinct, Some(copies)),
-            None => (points.iter().map(|p| p.to_array()).collect(), None),
+        let (tree, copies) = match Copies::of(points) {
+            Some((distinct, ids, copies)) => (PointTree::new(&distinct, &ids), Some(copies)),
+            None => {
+                let coords: Vec<[f32; 3]> = points.par_iter().map(|p| p.to_array()).collect();
+                let ids: Vec<u32> = (0..points.len() as u32).collect();
+                (PointTree::new(&coords, &ids), None)
+            }
         };
-        let turn = flat_along_an_axis(points).then(generic_rotation);
-        if let Some(r) = turn {
-            for c in &mut coords {
-                *c = turned(r, Vec3::from(*c));
-            }
-        }
-        let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&coords).map_err(|e| {
-            SpatialError::Build {
-                message: e.to_string(),
-            }
-        })?;
         Ok(Self {
             tree,
-            turn,
             points: points.to_vec(),
             copies,
         })
-    }
-
-    /// The point a tree item stands for: the smallest index at its position.
-    #[inline]
-    fn representative(&self, item: u32) -> u32 {
-        match &self.copies {
-            Some(c) => c.of_item(item)[0],
-            None => item,
-        }
     }
 
     /// The indexed points, in their original order.
@@ -228,39 +190,18 @@ impl PointIndex {
         self.points.is_empty()
     }
 
-    /// The nearest indexed point to `query`, or `None` when `query` is not finite or exceeds
-    /// [`MAX_COORDINATE`].
+    /// The nearest indexed point to `query` (the smallest index among the nearest), or `None`
+    /// when `query` is not finite or exceeds [`MAX_COORDINATE`].
     #[must_use]
     pub fn nearest(&self, query: Vec3) -> Option<Nearest> {
         if !query_ok(query) {
             return None;
         }
-        Some(self.nearest_unchecked(query))
-    }
-
-    /// `query` as the tree holds it.
-    #[inline]
-    fn tree_query(&self, query: Vec3) -> [f32; 3] {
-        match self.turn {
-            Some(r) => turned(r, query),
-            None => query.to_array(),
-        }
-    }
-
-    #[inline]
-    fn nearest_unchecked(&self, query: Vec3) -> Nearest {
-        let q = self.tree_query(query);
-        let found = self
-            .tree
-            .query(&q)
-            .nearest_one::<SquaredEuclidean<f32>>()
-            .execute();
-        let index = self.representative(found.item);
-        let p = self.points.get(index as usize).copied().unwrap_or(query);
-        Nearest {
-            index,
-            distance: distance_f64(query, p),
-        }
+        let best = self.tree.nearest(query.as_dvec3());
+        Some(Nearest {
+            index: best.id,
+            distance: best.dist_sq.sqrt(),
+        })
     }
 
     /// The `k` nearest indexed points (fewer when the set is smaller), closest first, sorted by
@@ -268,35 +209,27 @@ impl PointIndex {
     /// [`PointIndex::nearest`]).
     #[must_use]
     pub fn k_nearest(&self, query: Vec3, k: usize) -> Vec<Nearest> {
-        let Some(k) = NonZeroUsize::new(k.min(self.points.len())) else {
-            return Vec::new();
-        };
-        if !query_ok(query) {
+        let k = k.min(self.points.len());
+        if k == 0 || !query_ok(query) {
             return Vec::new();
         }
-        let q = self.tree_query(query);
-        let found = self
-            .tree
-            .query(&q)
-            .nearest_n::<SquaredEuclidean<f32>>(k)
-            .execute();
+        let found = self.tree.k_nearest(query.as_dvec3(), k);
         // Each distinct position found stands for all its copies (at one distance): the `k`
         // nearest points are among them.
         let mut out: Vec<Nearest> = found
             .into_iter()
-            .flat_map(|r| {
-                let (copies, single): (&[u32], Option<u32>) = match &self.copies {
-                    Some(c) => (c.of_item(r.item), None),
-                    None => (&[], Some(r.item)),
+            .flat_map(|(dist_sq, id, _)| {
+                let distance = dist_sq.sqrt();
+                let copies: &[u32] = match &self.copies {
+                    Some(c) => c.of_point(id),
+                    None => &[],
                 };
-                copies.iter().copied().chain(single)
-            })
-            .filter_map(|index| {
-                let p = self.points.get(index as usize)?;
-                Some(Nearest {
-                    index,
-                    distance: distance_f64(query, *p),
-                })
+                let single = self.copies.is_none().then_some(id);
+                copies
+                    .iter()
+                    .copied()
+                    .chain(single)
+                    .map(move |index| Nearest { index, distance })
             })
             .collect();
         out.sort_by(|a, b| {
@@ -305,43 +238,41 @@ impl PointIndex {
                 .unwrap_or(Ordering::Equal)
                 .then(a.index.cmp(&b.index))
         });
-        out.truncate(k.get());
+        out.truncate(k);
         out
     }
 
     /// [`PointIndex::nearest`] for every query, in parallel; `result[i]` answers `queries[i]`.
-    /// Queries are processed in Morton (Z-curve) order for cache locality; the result does not
-    /// depend on the thread count.
+    /// Queries are processed in Morton (Z-curve) order, each starting from the previous
+    /// answer; the result does not depend on the thread count (every answer is exact).
     ///
     /// # Errors
     /// [`SpatialError::NonFinite`] or [`SpatialError::TooLarge`] naming the first bad query.
     pub fn nearest_batch(&self, queries: &[Vec3]) -> Result<Vec<Nearest>, SpatialError> {
         check_points(queries)?;
         let order = morton_order(queries);
-        let coords: Vec<[f32; 3]> = order
-            .par_iter()
-            .map(|&i| self.tree_query(queries[i as usize]))
-            .collect();
-        // kiddo's batch query (parallel, results indexed like `coords`) was 25-35% faster than
-        // one `query` per point on 1M Morton-sorted queries.
-        let found = self
-            .tree
-            .query_batch(&coords)
-            .nearest_one::<SquaredEuclidean<f32>>()
-            .execute();
-        let sorted: Vec<Nearest> = found
-            .par_iter()
-            .zip(order.par_iter())
-            .map(|(f, &i)| {
-                let q = queries[i as usize];
-                let index = self.representative(f.item);
-                let p = self.points.get(index as usize).copied().unwrap_or(q);
-                Nearest {
-                    index,
-                    distance: distance_f64(q, p),
+        let mut sorted = vec![
+            Nearest {
+                index: 0,
+                distance: 0.0
+            };
+            queries.len()
+        ];
+        sorted
+            .par_chunks_mut(QUERY_CHUNK)
+            .zip(order.par_chunks(QUERY_CHUNK))
+            .for_each(|(out, ids)| {
+                let mut cursor = Cursor::default();
+                for (o, &i) in out.iter_mut().zip(ids) {
+                    let best = self
+                        .tree
+                        .nearest_after(queries[i as usize].as_dvec3(), &mut cursor);
+                    *o = Nearest {
+                        index: best.id,
+                        distance: best.dist_sq.sqrt(),
+                    };
                 }
-            })
-            .collect();
+            });
         let mut out = vec![
             Nearest {
                 index: 0,
@@ -353,6 +284,56 @@ impl PointIndex {
             out[i as usize] = *n;
         }
         Ok(out)
+    }
+
+    /// [`PointIndex::nearest`] for every point of `other`, the set another index was built
+    /// over: `result[i]` answers `other.points()[i]`. The queries go in `other`'s tree order
+    /// (spatially coherent, no sorting needed), each starting from the previous answer, and
+    /// each distinct position of `other` is searched once for all its copies. Equal to
+    /// `self.nearest_batch(other.points())`.
+    #[must_use]
+    pub fn nearest_to_points_of(&self, other: &Self) -> Vec<Nearest> {
+        let slots = other.tree.len();
+        let mut by_slot = vec![
+            Nearest {
+                index: 0,
+                distance: 0.0
+            };
+            slots
+        ];
+        by_slot
+            .par_chunks_mut(QUERY_CHUNK)
+            .enumerate()
+            .for_each(|(c, out)| {
+                let mut cursor = Cursor::default();
+                for (j, o) in out.iter_mut().enumerate() {
+                    let q = other.tree.point(c * QUERY_CHUNK + j).as_dvec3();
+                    let best = self.tree.nearest_after(q, &mut cursor);
+                    *o = Nearest {
+                        index: best.id,
+                        distance: best.dist_sq.sqrt(),
+                    };
+                }
+            });
+        let mut out = vec![
+            Nearest {
+                index: 0,
+                distance: 0.0
+            };
+            other.len()
+        ];
+        for (slot, n) in by_slot.iter().enumerate() {
+            let id = other.tree.id(slot);
+            match &other.copies {
+                Some(c) => {
+                    for &i in c.of_point(id) {
+                        out[i as usize] = *n;
+                    }
+                }
+                None => out[id as usize] = *n,
+            }
+        }
+        out
     }
 
     /// [`PointIndex::k_nearest`] for every query, in parallel.
@@ -390,6 +371,21 @@ mod tests {
             .collect()
     }
 
+    /// The least (distance, index) over `points`, as a scan finds it.
+    fn brute_with_index(points: &[Vec3], q: Vec3) -> (f64, u32) {
+        points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (distance_f64(q, p), i as u32))
+            .fold((f64::INFINITY, u32::MAX), |a, b| {
+                if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            })
+    }
+
     fn brute(points: &[Vec3], q: Vec3) -> f64 {
         points
             .iter()
@@ -412,10 +408,9 @@ mod tests {
     }
 
     #[test]
-    fn flat_sets_are_turned_and_still_exact() {
+    fn flat_sets_are_exact() {
         let mut rng = Rng::new(11);
-        // A line along x, a plane z = 0 (a grid: many ties) and a thin slab: turned; a cube:
-        // not.
+        // A line along x, a plane z = 0 (a grid: many ties), a thin slab and a cube.
         let line: Vec<Vec3> = (0..3000)
             .map(|i| Vec3::new(i as f32 * 1e-3, 0.0, 0.0))
             .collect();
@@ -431,14 +426,13 @@ mod tests {
                 )
             })
             .collect();
-        for (name, points, flat) in [
-            ("line", &line, true),
-            ("plane", &plane, true),
-            ("slab", &slab, true),
-            ("cube", &random_points(3000, 12), false),
+        for (name, points) in [
+            ("line", &line),
+            ("plane", &plane),
+            ("slab", &slab),
+            ("cube", &random_points(3000, 12)),
         ] {
             let index = PointIndex::new(points).expect("valid points");
-            assert_eq!(index.turn.is_some(), flat, "{name}");
             let queries: Vec<Vec3> = (0..200)
                 .map(|_| {
                     Vec3::new(
@@ -450,19 +444,85 @@ mod tests {
                 .collect();
             let batch = index.nearest_batch(&queries).expect("valid queries");
             for (q, got) in queries.iter().zip(&batch) {
-                // The distance is the true nearest one (to f32 tie rounding: 3e-7 relative).
-                let want = brute(points, *q);
-                assert!(
-                    (got.distance - want).abs() <= 3e-7 * want.max(1e-30),
-                    "{name}: {} vs {want}",
-                    got.distance
-                );
-                assert_eq!(distance_f64(*q, points[got.index as usize]), got.distance);
-                assert_eq!(index.nearest(*q).map(|n| n.distance), Some(got.distance));
+                let (want, at) = brute_with_index(points, *q);
+                assert_eq!((got.distance, got.index), (want, at), "{name}");
+                assert_eq!(index.nearest(*q), Some(*got));
                 let k = index.k_nearest(*q, 3);
                 assert_eq!(k.len(), 3);
-                assert!((k[0].distance - want).abs() <= 3e-7 * want.max(1e-30));
+                assert_eq!((k[0].distance, k[0].index), (want, at), "{name}");
             }
+        }
+    }
+
+    /// Awkward sets against a brute-force scan: every answer (distance and index, ties
+    /// included) of `nearest`, `nearest_batch`, `nearest_to_points_of` and the first of
+    /// `k_nearest` must be the scan's.
+    #[test]
+    fn awkward_sets_match_brute_force_exactly() {
+        let mut rng = Rng::new(21);
+        let mut u = || rng.uniform_f32();
+        let cube: Vec<Vec3> = (0..3000).map(|_| Vec3::new(u(), u(), u())).collect();
+        // Copies: few (not seen by the sample), many of a few positions, all coincident.
+        let mut few_copies = cube.clone();
+        for i in 0..50 {
+            few_copies[2000 + i] = few_copies[i];
+        }
+        let many_copies: Vec<Vec3> = (0..5000).map(|i| cube[i % 7]).collect();
+        let coincident = vec![Vec3::new(0.3, -0.2, 0.9); 2500];
+        // A line along x (ties between the two neighbours of a query), a diagonal line, a
+        // grid plane (four-way ties), integer lattice points (exact ties everywhere).
+        let line: Vec<Vec3> = (0..3000)
+            .map(|i| Vec3::new(i as f32 * 1e-3, 0.0, 0.0))
+            .collect();
+        let diagonal: Vec<Vec3> = (0..3000).map(|i| Vec3::splat(i as f32 * 1e-3)).collect();
+        let grid: Vec<Vec3> = (0..3600)
+            .map(|i| Vec3::new((i % 60) as f32 * 0.25, (i / 60) as f32 * 0.25, 0.0))
+            .collect();
+        let lattice: Vec<Vec3> = (0..4096)
+            .map(|i| Vec3::new((i % 16) as f32, (i / 16 % 16) as f32, (i / 256) as f32))
+            .collect();
+        // Clusters: tight blobs far apart, and one far outlier.
+        let mut clustered: Vec<Vec3> = (0..4000)
+            .map(|i| {
+                let centre = Vec3::new((i % 5) as f32 * 10.0, (i % 3) as f32 * -7.0, 0.0);
+                centre + 1e-3 * Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5)
+            })
+            .collect();
+        clustered.push(Vec3::new(1e6, 1e6, -1e6));
+        let sets: [(&str, &Vec<Vec3>); 9] = [
+            ("cube", &cube),
+            ("few copies", &few_copies),
+            ("many copies", &many_copies),
+            ("coincident", &coincident),
+            ("line", &line),
+            ("diagonal", &diagonal),
+            ("grid", &grid),
+            ("lattice", &lattice),
+            ("clustered", &clustered),
+        ];
+        for (name, points) in sets {
+            let index = PointIndex::new(points).expect("valid points");
+            // Queries: the set's own points (distance 0, ties among copies), points between
+            // them (ties), random points around them, and the points of every other set.
+            let mut queries: Vec<Vec3> = points.iter().step_by(7).copied().collect();
+            queries.extend(points.windows(2).step_by(11).map(|w| (w[0] + w[1]) * 0.5));
+            queries.extend((0..300).map(|_| Vec3::new(u() * 16.0, u() * 16.0, u() * 2.0 - 1.0)));
+            for (_, other) in sets {
+                queries.extend(other.iter().step_by(97));
+            }
+            let want: Vec<(f64, u32)> = queries
+                .iter()
+                .map(|&q| brute_with_index(points, q))
+                .collect();
+            let batch = index.nearest_batch(&queries).expect("valid queries");
+            for ((q, got), w) in queries.iter().zip(&batch).zip(&want) {
+                assert_eq!((got.distance, got.index), *w, "{name}: batch, query {q}");
+                assert_eq!(index.nearest(*q), Some(*got), "{name}: one, query {q}");
+                let k = index.k_nearest(*q, 4);
+                assert_eq!((k[0].distance, k[0].index), *w, "{name}: k, query {q}");
+            }
+            let as_index = PointIndex::new(&queries).expect("valid queries");
+            assert_eq!(index.nearest_to_points_of(&as_index), batch, "{name}");
         }
     }
 

@@ -1,7 +1,8 @@
-//! Spatial indexes: a k-d tree over points ([`PointIndex`], kiddo's immutable tree) and a BVH
+//! Spatial indexes: an exact k-d tree over points ([`PointIndex`], `point_tree`) and a BVH
 //! over a mesh's triangles ([`TriangleBvh`], obvhs) with exact closest-point and ray queries.
 //!
-//! Both search in f32 and report distances recomputed in f64 from the f32 input coordinates.
+//! The k-d tree ranks candidates by f64 distances from the f32 coordinates (exact, ties by
+//! index); the BVH searches in f32 and reports distances recomputed in f64.
 //! Coordinates must be finite and at most [`MAX_COORDINATE`] in magnitude (f32 squared distances
 //! overflow beyond that); both constructors check it and return a [`SpatialError`].
 
@@ -10,6 +11,7 @@ pub(crate) mod error;
 pub mod kdtree;
 mod limits;
 mod morton;
+mod point_tree;
 pub mod surface;
 
 pub use bvh::{
