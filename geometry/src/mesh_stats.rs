@@ -26,10 +26,8 @@
 //!   coordinates (a zero-area triangle adds 0); the largest component's share is its area
 //!   over the total, `None` when the total is 0.
 
-use rayon::slice::ParallelSliceMut;
-
 use crate::mesh::TriMesh;
-use crate::topology::TriangleClusters;
+use crate::topology::{EdgeUse, TriangleClusters, for_each_edge, join_edge};
 
 /// The structural summary of one mesh (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -56,17 +54,29 @@ pub struct MeshStats {
 }
 
 impl MeshStats {
-    /// The summary of `mesh`: one sort of its `3 x triangles` edge uses and one clustering
-    /// pass ([`TriangleClusters`]). Any mesh is accepted (empty, degenerate triangles,
-    /// repeated indices); no value is NaN.
+    /// The summary of `mesh`: one pass over its edges ([`for_each_edge`]: one counting sort of
+    /// its `3 x triangles` sides) counts their uses and joins the triangles into components, as
+    /// [`TriangleClusters`] does; the triangle areas are computed once for the total and the
+    /// components. Any mesh is accepted (empty, degenerate triangles, repeated indices); no
+    /// value is NaN.
     #[must_use]
     pub fn of(mesh: &TriMesh) -> Self {
         let triangles = mesh.triangles();
-        let (edges, (area, clusters)) = rayon::join(
-            || EdgeCounts::of(triangles),
-            // `+ 0.0`: an empty f64 sum is -0.0.
-            || (mesh.area() + 0.0, TriangleClusters::of(mesh)),
+        let (areas, (edges, mut parent)) = rayon::join(
+            || mesh.triangle_areas(),
+            || {
+                let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
+                let mut edges = EdgeCounts::default();
+                for_each_edge(mesh.vertex_count(), triangles, |low, uses| {
+                    edges.add(low, uses);
+                    join_edge(&mut parent, low, uses);
+                });
+                (edges, parent)
+            },
         );
+        // As `TriMesh::area`; `+ 0.0`: an empty f64 sum is -0.0.
+        let area = areas.iter().sum::<f64>() + 0.0;
+        let clusters = TriangleClusters::labelled(&mut parent, &areas);
         let largest = clusters.areas.iter().copied().fold(0.0f64, f64::max);
         let nonempty = !triangles.is_empty();
         Self {
@@ -95,33 +105,21 @@ struct EdgeCounts {
 }
 
 impl EdgeCounts {
-    fn of(triangles: &[[u32; 3]]) -> Self {
-        // Each side as (undirected edge key `low << 32 | high`, whether it runs low -> high):
-        // sorted, the uses of one edge are next to each other.
-        let mut uses: Vec<(u64, bool)> = Vec::with_capacity(triangles.len() * 3);
-        for &[a, b, c] in triangles {
-            for (x, y) in [(a, b), (b, c), (c, a)] {
-                let (lo, hi) = if x <= y { (x, y) } else { (y, x) };
-                uses.push(((u64::from(lo) << 32) | u64::from(hi), x <= y));
-            }
-        }
-        uses.par_sort_unstable();
-        let mut counts = Self::default();
-        for run in uses.chunk_by(|p, q| p.0 == q.0) {
-            match run {
-                [_] => counts.boundary += 1,
-                [(key, first), (_, second)] => {
-                    // A side whose ends coincide reads the same both ways (trimesh compares
-                    // the first use's end with the second use's start).
-                    let degenerate = (key >> 32) == (key & 0xFFFF_FFFF);
-                    if first == second && !degenerate {
-                        counts.misoriented_pairs += 1;
-                    }
+    /// Counts the edge `{low, high}` with its `uses`.
+    #[inline]
+    fn add(&mut self, low: u32, uses: &[EdgeUse]) {
+        match uses {
+            [_] => self.boundary += 1,
+            [first, second] => {
+                // A side whose ends coincide reads the same both ways (trimesh compares the
+                // first use's end with the second use's start).
+                let degenerate = first.high == low;
+                if first.forward == second.forward && !degenerate {
+                    self.misoriented_pairs += 1;
                 }
-                _ => counts.non_manifold += 1,
             }
+            _ => self.non_manifold += 1,
         }
-        counts
     }
 }
 
@@ -155,6 +153,156 @@ mod tests {
                 .filter(|u| u.len() == 2)
                 .all(|u| u[0].1 == u[1].0);
         (boundary, non_manifold, watertight, winding)
+    }
+
+    /// The implementation before the single edge pass: a parallel sort of every edge use
+    /// (`(low << 32 | high, forward)`) for the counts, components by looking for each
+    /// triangle's edges among the triangles around its vertices, `TriMesh::area` for the
+    /// total. The new one must agree with it on every field, bit for bit.
+    fn old_of(mesh: &TriMesh) -> MeshStats {
+        let t = mesh.triangles();
+        let mut uses: Vec<(u64, bool)> = Vec::new();
+        for &[a, b, c] in t {
+            for (x, y) in [(a, b), (b, c), (c, a)] {
+                let (lo, hi) = if x <= y { (x, y) } else { (y, x) };
+                uses.push(((u64::from(lo) << 32) | u64::from(hi), x <= y));
+            }
+        }
+        uses.sort_unstable();
+        let (mut boundary, mut non_manifold, mut misoriented) = (0, 0, 0);
+        for run in uses.chunk_by(|p, q| p.0 == q.0) {
+            match run {
+                [_] => boundary += 1,
+                [(key, first), (_, second)] => {
+                    let degenerate = (key >> 32) == (key & 0xFFFF_FFFF);
+                    if first == second && !degenerate {
+                        misoriented += 1;
+                    }
+                }
+                _ => non_manifold += 1,
+            }
+        }
+        fn find(parent: &mut [u32], mut x: u32) -> u32 {
+            while parent[x as usize] != x {
+                parent[x as usize] = parent[parent[x as usize] as usize];
+                x = parent[x as usize];
+            }
+            x
+        }
+        let (offsets, around) = crate::topology::triangles_around_vertices(mesh.vertex_count(), t);
+        let mut parent: Vec<u32> = (0..t.len() as u32).collect();
+        for (i, &tri) in t.iter().enumerate() {
+            for (a, b) in crate::topology::triangle_edges(tri) {
+                for &u in &around[offsets[a as usize] as usize..offsets[a as usize + 1] as usize] {
+                    if u > i as u32 && t[u as usize].contains(&b) {
+                        let (ra, rb) = (find(&mut parent, i as u32), find(&mut parent, u));
+                        parent[ra.max(rb) as usize] = ra.min(rb);
+                    }
+                }
+            }
+        }
+        let mut label = vec![u32::MAX; t.len()];
+        let mut areas: Vec<f64> = Vec::new();
+        for (i, &a) in mesh.triangle_areas().iter().enumerate() {
+            let root = find(&mut parent, i as u32) as usize;
+            if label[root] == u32::MAX {
+                label[root] = areas.len() as u32;
+                areas.push(0.0);
+            }
+            areas[label[root] as usize] += a;
+        }
+        let area = mesh.area() + 0.0;
+        let largest = areas.iter().copied().fold(0.0f64, f64::max);
+        let nonempty = !t.is_empty();
+        MeshStats {
+            vertices: mesh.vertex_count(),
+            triangles: t.len(),
+            area,
+            components: areas.len(),
+            largest_component_area_fraction: (area > 0.0).then(|| (largest / area).min(1.0)),
+            boundary_edges: boundary,
+            non_manifold_edges: non_manifold,
+            watertight: nonempty && boundary == 0 && non_manifold == 0,
+            winding_consistent: nonempty && misoriented == 0,
+        }
+    }
+
+    #[test]
+    fn equals_the_previous_implementation_on_awkward_meshes() {
+        let mut rng = crate::rng::Rng::new(23);
+        let mut meshes = vec![
+            TriMesh::default(),
+            // Vertices and no triangles; one triangle among isolated vertices.
+            TriMesh::new_unchecked(vec![Vec3::ZERO, Vec3::X, Vec3::Y], Vec::new()),
+            TriMesh::new_unchecked(
+                vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE],
+                vec![[1, 3, 4]],
+            ),
+            // Degenerate triangles only: all corners equal, two equal, collinear.
+            TriMesh::new_unchecked(
+                vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0],
+                vec![[0, 0, 0], [1, 1, 2], [2, 1, 1], [0, 1, 2], [1, 0, 1]],
+            ),
+            // A fin: three triangles on one edge, plus a copy of a face reversed.
+            TriMesh::new_unchecked(
+                vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::NEG_Y],
+                vec![[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 0]],
+            ),
+        ];
+        // A 40 x 40 grid of quads with holes punched, faces flipped and duplicated, a
+        // non-manifold fin and unreferenced vertices: the shape of a TSDF mesh, edited.
+        let n = 41u32;
+        let mut grid_positions: Vec<Vec3> = (0..n * n)
+            .map(|k| Vec3::new((k % n) as f32, (k / n) as f32, rng.uniform_f32()))
+            .collect();
+        grid_positions.extend((0..50).map(|_| Vec3::splat(rng.uniform_f32())));
+        let mut grid = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let v = y * n + x;
+                match rng.below(40) {
+                    0 => {}
+                    1 => grid.push([v, v + 1, v + n + 1]),
+                    2 => {
+                        grid.push([v + 1, v, v + n + 1]);
+                        grid.push([v, v + n + 1, v + n]);
+                    }
+                    3 => {
+                        grid.extend([[v, v + 1, v + n + 1]; 2]);
+                        grid.push([v, v + n + 1, v + n]);
+                    }
+                    _ => {
+                        grid.push([v, v + 1, v + n + 1]);
+                        grid.push([v, v + n + 1, v + n]);
+                    }
+                }
+            }
+        }
+        grid.push([0, 1, n * n + 3]);
+        grid.push([5, 5, 6]);
+        meshes.push(TriMesh::new_unchecked(grid_positions, grid));
+        // Random soups: few vertices, many triangles, every kind of repetition.
+        for case in 0..400u32 {
+            let vertices = 1 + case % 30;
+            let p: Vec<Vec3> = (0..vertices)
+                .map(|_| Vec3::new(rng.uniform_f32(), rng.uniform_f32(), rng.uniform_f32()))
+                .collect();
+            let t: Vec<[u32; 3]> = (0..case % 70)
+                .map(|_| [0; 3].map(|_: u32| rng.below(vertices)))
+                .collect();
+            meshes.push(TriMesh::new_unchecked(p, t));
+        }
+        for (i, mesh) in meshes.iter().enumerate() {
+            let (new, old) = (MeshStats::of(mesh), old_of(mesh));
+            assert_eq!(new, old, "mesh {i}: {:?}", mesh.triangles());
+            assert_eq!(new.area.to_bits(), old.area.to_bits(), "mesh {i}");
+            assert_eq!(
+                new.largest_component_area_fraction.map(f64::to_bits),
+                old.largest_component_area_fraction.map(f64::to_bits),
+                "mesh {i}"
+            );
+        }
+        assert!(meshes[5].triangle_count() > 2500);
     }
 
     #[test]
