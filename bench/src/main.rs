@@ -13,6 +13,7 @@ mod delaunay;
 mod eval;
 mod harness;
 mod render;
+mod score;
 mod smooth;
 mod sweep;
 mod tsdf;
@@ -50,6 +51,8 @@ enum Bench {
     Eval(eval::EvalBenchArgs),
     /// 3DGS CPU rendering of a 75k-Gaussian avatar at 512x512 (1 and 2 threads, stage split).
     Render(render::RenderBenchArgs),
+    /// What scoring one frame of `extract --gt gaussians` costs, stage by stage (LAM).
+    Score(score::ScoreArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
     Smooth,
     /// The main job's three methods on real animated templates: Chamfer against ms per frame.
@@ -67,6 +70,7 @@ fn main() -> anyhow::Result<()> {
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Render(a) => render::run(&a),
+        Bench::Score(a) => score::run(&a),
         Bench::Smooth => smooth::run(python),
         Bench::Sweep(a) => sweep::run(&a),
         Bench::Tsdf(a) => tsdf::run(&a, python),
