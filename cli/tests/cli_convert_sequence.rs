@@ -158,7 +158,7 @@ fn a_frame_of_another_topology_fails_naming_its_file() {
 }
 
 #[test]
-fn frames_of_any_topology_with_the_flag_become_one_node_per_frame() {
+fn frames_of_any_topology_with_the_flag_become_one_node_per_run() {
     let dir = fresh_dir("seq_any");
     let frames_dir = dir.join("frames");
     let files = write_frames(&frames_dir, 4, |k| format!("f{k}.ply"));
@@ -178,17 +178,23 @@ fn frames_of_any_topology_with_the_flag_become_one_node_per_frame() {
     assert_eq!(&bytes[..4], b"glTF");
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
     let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).expect("json");
+    // One mesh per run of frames with one topology: frames 0-1 (frame 1 a morph target of
+    // frame 0), frame 2, frame 3.
     let meshes = doc["meshes"].as_array().expect("meshes");
-    assert_eq!(meshes.len(), 4, "one mesh per frame");
-    for (k, file) in files.iter().enumerate() {
-        let want = read_mesh(file).expect("frame");
-        let indices = meshes[k]["primitives"][0]["indices"]
-            .as_u64()
-            .expect("indices");
+    assert_eq!(meshes.len(), 3, "one mesh per run of one topology");
+    for (mesh, k, targets) in [(0, 0, 1), (1, 2, 0), (2, 3, 0)] {
+        let want = read_mesh(&files[k]).expect("frame");
+        let primitive = &meshes[mesh]["primitives"][0];
+        let indices = primitive["indices"].as_u64().expect("indices");
         let count = doc["accessors"][indices as usize]["count"]
             .as_u64()
             .expect("count");
         assert_eq!(count as usize, 3 * want.triangle_count(), "frame {k}");
+        assert_eq!(
+            primitive["targets"].as_array().map_or(0, Vec::len),
+            targets,
+            "frame {k}"
+        );
     }
     // Frames that share the first's topology still become morph targets.
     let same_dir = dir.join("same");

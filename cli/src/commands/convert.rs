@@ -30,7 +30,8 @@ use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
     glTF: every frame must have the vertex count and triangles of the first; frame 0 is the \
     base mesh, each later frame a morph target, and a STEP weights track shows frame k at \
     k / FPS seconds (--fps, default 30). With --any-topology the frames may differ (one node \
-    per frame, each shown by a STEP scale track at its time).\n\n\
+    per run of frames with one topology, morph-animated within it, each shown by a STEP scale \
+    track at its times).\n\n\
     Gaussians: an .spz input or output, a .glb/.gltf input with KHR_gaussian_splatting \
     primitives, or a 3DGS PLY (vertex properties x, opacity, f_dc_0, scale_0, rot_0) converted \
     to .spz/.glb/.gltf converts Gaussians between INRIA PLY (lossless), Niantic SPZ (quantised: \
@@ -59,8 +60,9 @@ pub struct ConvertArgs {
     #[arg(long, value_name = "F", value_parser = parse_fps)]
     pub fps: Option<f64>,
     /// Frames may differ in vertices and triangles (TSDF or alpha-shape meshes of a sequence):
-    /// one node per frame shown by STEP scale tracks, as extract's sequences; frames that all
-    /// share the first's topology still become morph targets.
+    /// one node per run of frames with one topology (morph targets within a run) shown by
+    /// STEP scale tracks, as extract's sequences; frames that all share the first's topology
+    /// become one morph-target mesh.
     #[arg(long)]
     pub any_topology: bool,
     /// Gaussian formats.
@@ -218,7 +220,7 @@ fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
 
 /// `convert` of a folder or pattern of frames to one animated glTF/GLB, frame k at k / fps
 /// seconds: morph targets (the frames share the first's topology), or with `--any-topology`
-/// one node per frame where they do not.
+/// one node per run of one topology where they do not.
 fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     let input = args.input.display();
     if args.clip.is_some() || args.time.is_some() {
