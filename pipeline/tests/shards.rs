@@ -4,6 +4,8 @@
 //! frames and wide open for the last three (exposing Gaussians the closed mouth hides), over
 //! several splits.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use trisplat_pipeline::avatar::AvatarFolder;
@@ -12,27 +14,6 @@ use trisplat_pipeline::{
     ExtractConfig, ExtractOptions, Method, PipelineError, Report, RunControl, Shard, ShardOptions,
     ShardSpec, merge, run,
 };
-
-/// A 10-frame weights track for the fixture's targets: the mouth closed in frames 0..7, the
-/// jaw open and the tongue out in frames 7..10.
-fn opening_mouth(dir: &Path) -> PathBuf {
-    let frames: Vec<String> = (0..10)
-        .map(|i| {
-            let open = if i < 7 { 0 } else { 1 };
-            format!(
-                r#"{{"weights": [{open}, 0, 0, {open}], "time": {}, "rotation": []}}"#,
-                f64::from(i) / 30.0
-            )
-        })
-        .collect();
-    let text = format!(
-        r#"{{"names": ["jawOpen", "mouthSmileLeft", "eyeBlinkLeft", "tongueOut"], "frames": [{}]}}"#,
-        frames.join(", ")
-    );
-    let path = dir.join("opening_mouth.json");
-    std::fs::write(&path, text).expect("track");
-    path
-}
 
 /// The LAM fixture driven by `track` (10 frames), meshed by `methods` over `frames` into
 /// `out`: frame files and report only.
@@ -65,21 +46,11 @@ fn extract(track: &Path, methods: &[Method], frames: &str, out: &Path) -> Report
     run(&config, RunControl::default(), &mut |_| {}).expect("run")
 }
 
-/// A fresh folder under the target directory.
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("shards")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("dir");
-    dir
-}
-
 #[test]
 fn any_split_of_the_track_merges_to_one_run() {
     let methods = [Method::Delaunay, Method::Alpha];
-    let dir = fresh_dir("lam");
-    let track = opening_mouth(&dir);
+    let dir = common::fresh_dir("shards", "lam");
+    let track = common::opening_mouth(&dir);
     let whole = dir.join("whole");
     let one = extract(&track, &methods, "0..10", &whole);
     assert_eq!(one.frames, (0..10).collect::<Vec<_>>());
@@ -136,8 +107,8 @@ fn without_timings(report: &Report) -> serde_json::Value {
 #[test]
 fn shard_flags_split_the_track_and_merge_refuses_an_incomplete_split() {
     let methods = [Method::Tsdf, Method::Delaunay, Method::Alpha];
-    let dir = fresh_dir("shard_flag");
-    let track = opening_mouth(&dir);
+    let dir = common::fresh_dir("shards", "shard_flag");
+    let track = common::opening_mouth(&dir);
     let whole = dir.join("whole");
     let mut one = config(&track, &methods, "0..10", &whole);
     one.frames = None;

@@ -4,7 +4,9 @@
 //! because keys are decided from the track's first frame on. On the LAM fixture driven by a
 //! track whose mouth is closed for seven frames and wide open for the last three.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 
 use trisplat_geometry::io::read_mesh;
 use trisplat_pipeline::avatar::AvatarFolder;
@@ -16,27 +18,6 @@ use trisplat_pipeline::{
 };
 
 const METHODS: [Method; 3] = [Method::Tsdf, Method::Delaunay, Method::Alpha];
-
-/// A 10-frame weights track: the mouth closed in frames 0..7, the jaw open and the tongue
-/// out in frames 7..10.
-fn opening_mouth(dir: &Path) -> PathBuf {
-    let frames: Vec<String> = (0..10)
-        .map(|i| {
-            let open = if i < 7 { 0 } else { 1 };
-            format!(
-                r#"{{"weights": [{open}, 0, 0, {open}], "time": {}, "rotation": []}}"#,
-                f64::from(i) / 30.0
-            )
-        })
-        .collect();
-    let text = format!(
-        r#"{{"names": ["jawOpen", "mouthSmileLeft", "eyeBlinkLeft", "tongueOut"], "frames": [{}]}}"#,
-        frames.join(", ")
-    );
-    let path = dir.join("opening_mouth.json");
-    std::fs::write(&path, text).expect("track");
-    path
-}
 
 /// The LAM fixture meshed with `topology` over `frames` into `out` (frame files, report).
 fn config(track: &Path, topology: Topology, frames: &str, out: &Path) -> ExtractConfig {
@@ -80,24 +61,14 @@ fn extract(track: &Path, topology: Topology, frames: &str, out: &Path) -> Report
     .expect("run")
 }
 
-/// A fresh folder under the target directory.
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("topology")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("dir");
-    dir
-}
-
 fn frame_bytes(out: &Path, m: Method, f: usize) -> Vec<u8> {
     std::fs::read(out.join(m.name()).join(format!("frame_{f:06}.ply"))).expect("frame file")
 }
 
 #[test]
 fn a_fixed_topology_carries_the_first_frame_through_the_track() {
-    let dir = fresh_dir("fixed");
-    let track = opening_mouth(&dir);
+    let dir = common::fresh_dir("topology", "fixed");
+    let track = common::opening_mouth(&dir);
     let per_frame = extract(&track, Topology::PerFrame, "0..10", &dir.join("per_frame"));
     assert!(
         per_frame.methods.values().all(|m| m.mean.keys.is_empty()),
@@ -148,8 +119,8 @@ fn a_fixed_topology_carries_the_first_frame_through_the_track() {
 
 #[test]
 fn adaptive_keys_do_not_depend_on_where_a_run_starts() {
-    let dir = fresh_dir("adaptive");
-    let track = opening_mouth(&dir);
+    let dir = common::fresh_dir("topology", "adaptive");
+    let track = common::opening_mouth(&dir);
     let whole = dir.join("whole");
     let one = extract(&track, Topology::Adaptive, "0..10", &whole);
     // The mouth opening at frame 7 moves Gaussians off the closed mouth's mesh: a new key.

@@ -1,0 +1,34 @@
+//! What the LAM-fixture tests share: a track that opens the mouth, and fresh folders.
+
+use std::path::{Path, PathBuf};
+
+/// A 10-frame weights track for the fixture's targets: the mouth closed in frames 0..7, the
+/// jaw open and the tongue out in frames 7..10.
+pub fn opening_mouth(dir: &Path) -> PathBuf {
+    let frames: Vec<String> = (0..10)
+        .map(|i| {
+            let open = if i < 7 { 0 } else { 1 };
+            format!(
+                r#"{{"weights": [{open}, 0, 0, {open}], "time": {}, "rotation": []}}"#,
+                f64::from(i) / 30.0
+            )
+        })
+        .collect();
+    let text = format!(
+        r#"{{"names": ["jawOpen", "mouthSmileLeft", "eyeBlinkLeft", "tongueOut"], "frames": [{}]}}"#,
+        frames.join(", ")
+    );
+    let path = dir.join("opening_mouth.json");
+    std::fs::write(&path, text).expect("track");
+    path
+}
+
+/// A fresh folder `group/name` under the target directory.
+pub fn fresh_dir(group: &str, name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(group)
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    dir
+}
