@@ -536,7 +536,7 @@ fn targets_choose_the_outputs() {
     ]);
     let plan = String::from_utf8_lossy(&explained.stdout);
     assert!(
-        plan.contains("--targets names neither meshes nor glb"),
+        plan.contains("--targets names neither meshes, glb nor usd"),
         "{plan}"
     );
 }

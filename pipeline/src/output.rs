@@ -6,7 +6,9 @@ use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
-use trisplat_geometry::io::{FrameFiles, GLB_PART_LIMIT, SequenceLayout, write_sequence_parts};
+use trisplat_geometry::io::{
+    FrameFiles, GLB_PART_LIMIT, SequenceLayout, write_sequence_parts, write_usd_sequence,
+};
 
 use crate::config::{ExtractConfig, Method, OutputTarget};
 use crate::error::{PipelineError, first_error_in_order};
@@ -148,7 +150,7 @@ pub fn refuse_used_output(out: &Path, force: bool) -> Result<(), PipelineError> 
 pub fn remove_stale_temporaries(out: &Path) {
     let folders = [out.to_path_buf(), out.join(THUMBNAIL_DIR)]
         .into_iter()
-        .chain([Method::Tsdf, Method::Delaunay, Method::Alpha].map(|m| out.join(m.name())));
+        .chain(Method::ALL.map(|m| out.join(m.name())));
     for dir in folders {
         let Ok(listing) = std::fs::read_dir(&dir) else {
             continue;
@@ -183,7 +185,7 @@ fn remove_previous_outputs(out: &Path) {
             }
         }
     }
-    for m in [Method::Tsdf, Method::Delaunay, Method::Alpha] {
+    for m in Method::ALL {
         let dir = out.join(m.name());
         if let Ok(listing) = std::fs::read_dir(&dir) {
             for e in listing.flatten() {
@@ -194,6 +196,7 @@ fn remove_previous_outputs(out: &Path) {
             }
         }
         let _ = std::fs::remove_file(out.join(format!("{}.glb", m.name())));
+        let _ = std::fs::remove_file(out.join(format!("{}.usda", m.name())));
         if let Ok(listing) = std::fs::read_dir(out) {
             let prefix = format!("{}_part", m.name());
             for e in listing.flatten() {
@@ -221,6 +224,7 @@ pub fn check_outputs(
             inputs.check(&dir.join(frame_file(f)))?;
         }
         inputs.check(&out.join(format!("{}.glb", m.name())))?;
+        inputs.check(&out.join(format!("{}.usda", m.name())))?;
     }
     for name in [REPORT_JSON, REPORT_MD, REPORT_HTML, PLOT_SVG, PLOT_PNG] {
         inputs.check(&out.join(name))?;
@@ -236,7 +240,8 @@ pub fn check_outputs(
 }
 
 /// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
-/// report), the report files (JSON, Markdown, HTML) and the plot (SVG, PNG).
+/// report), one USD mesh cache per method when asked (`<method>.usda`), the report files
+/// (JSON, Markdown, HTML) and the plot (SVG, PNG).
 pub fn write_outputs(
     out: &Path,
     report: &mut Report,
@@ -266,6 +271,13 @@ pub fn write_outputs(
                     .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
                     .collect();
             }
+        }
+    }
+    if targets.contains(&OutputTarget::Usd) {
+        // One method at a time: the writer formats each frame's points in parallel.
+        for (m, files) in frame_files {
+            let usda = out.join(format!("{}.usda", m.name()));
+            write_usd_sequence(&usda, &FrameFiles(files), &report.frame_times)?;
         }
     }
     if targets.contains(&OutputTarget::Report) {

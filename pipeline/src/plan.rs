@@ -290,28 +290,34 @@ impl Plan {
 
         let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
         let out = config.output.display();
-        let (meshes, glb) = (
-            o.outputs.writes(OutputTarget::Meshes),
-            o.outputs.writes(OutputTarget::Glb),
-        );
+        let meshes = o.outputs.writes(OutputTarget::Meshes);
+        let mut files = Vec::new();
+        if meshes {
+            files.push(format!("{out}/<method>/frame_NNNNNN.ply"));
+        }
+        if o.outputs.writes(OutputTarget::Glb) {
+            files.push(format!("{out}/<method>.glb"));
+        }
+        if o.outputs.writes(OutputTarget::Usd) {
+            files.push(format!("{out}/<method>.usda"));
+        }
+        let assembled_only = !meshes && o.outputs.writes_frame_files();
         push(
             Stage::Write,
-            meshes || glb,
-            match (meshes, glb) {
-                (true, true) => format!(
-                    "{out}/<method>/frame_NNNNNN.ply and {out}/<method>.glb for {}",
-                    names.join(", ")
-                ),
-                (true, false) => format!(
-                    "{out}/<method>/frame_NNNNNN.ply for {} (--targets without glb)",
-                    names.join(", ")
-                ),
-                (false, true) => format!(
-                    "{out}/<method>.glb for {} (its frame files are removed once it is assembled: \
-                     --targets without meshes)",
-                    names.join(", ")
-                ),
-                (false, false) => "--targets names neither meshes nor glb".to_owned(),
+            !files.is_empty(),
+            if files.is_empty() {
+                "--targets names neither meshes, glb nor usd".to_owned()
+            } else {
+                format!(
+                    "{} for {}{}",
+                    files.join(" and "),
+                    names.join(", "),
+                    if assembled_only {
+                        " (the frame files are removed once assembled: --targets without meshes)"
+                    } else {
+                        ""
+                    }
+                )
             },
         );
         let plot = if config.gt.is_some() {

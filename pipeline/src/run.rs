@@ -79,9 +79,8 @@ pub fn run(
         )));
     }
     emit(session.started(config, total));
-    // The frame files: asked for, or the glTF is assembled from them.
-    let frame_files_wanted =
-        o.outputs.writes(OutputTarget::Meshes) || o.outputs.writes(OutputTarget::Glb);
+    // The frame files: asked for, or the glTF or USD cache is assembled from them.
+    let frame_files_wanted = o.outputs.writes_frame_files();
     // report.html shows the meshes of the middle frame.
     let thumbnail_frame = frames.start + frames.len().saturating_sub(1) / 2;
     let extras = |f: usize| FrameExtras {
@@ -161,8 +160,8 @@ pub fn run(
     }
     let frame_files = frame_files(out, &report);
     write_outputs(out, &mut report, &frame_files, &o.outputs.targets)?;
-    if o.outputs.writes(OutputTarget::Glb) && !o.outputs.writes(OutputTarget::Meshes) {
-        // Written only to assemble the glTF.
+    if o.outputs.writes_frame_files() && !o.outputs.writes(OutputTarget::Meshes) {
+        // Written only to assemble the glTF or the USD cache.
         remove_frame_files(&frame_files);
     }
     Ok(report)

@@ -44,7 +44,8 @@ use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
 pub struct ConvertArgs {
     /// Input mesh (.ply, .obj, .gltf, .glb), or a folder or pattern of OBJ/PLY frames.
     pub input: PathBuf,
-    /// Output mesh (.ply, .obj, .gltf, .glb); .glb or .gltf for frames.
+    /// Output mesh (.ply, .obj, .gltf, .glb); .glb or .gltf for frames, or .usda (a USD mesh
+    /// cache: points at every frame, topology where it changes).
     pub output: PathBuf,
     /// Write PLY as ascii instead of binary little-endian.
     #[arg(long)]
@@ -229,13 +230,19 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         ))
         .into());
     }
-    if !matches!(
-        Format::from_path(&args.output),
-        Ok(Format::Glb | Format::Gltf)
-    ) {
+    let usda = args
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("usda"));
+    if !usda
+        && !matches!(
+            Format::from_path(&args.output),
+            Ok(Format::Glb | Format::Gltf)
+        )
+    {
         return Err(UsageError(format!(
             "{input} is a folder or pattern of frames, which converts to one animated .glb or \
-             .gltf, not {}; to convert one frame, name its file",
+             .gltf, or a .usda mesh cache, not {}; to convert one frame, name its file",
             args.output.display()
         ))
         .into());
@@ -283,16 +290,20 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     let spinner = ctx
         .progress
         .spinner(&format!("writing {}", args.output.display()));
-    let result = io::write_sequence(
-        &args.output,
-        &io::FrameFiles(files),
-        &times,
-        if args.any_topology {
-            SequenceLayout::Auto
-        } else {
-            SequenceLayout::MorphTargets
-        },
-    );
+    let result = if usda {
+        io::write_usd_sequence(&args.output, &io::FrameFiles(files), &times).map(|_| ())
+    } else {
+        io::write_sequence(
+            &args.output,
+            &io::FrameFiles(files),
+            &times,
+            if args.any_topology {
+                SequenceLayout::Auto
+            } else {
+                SequenceLayout::MorphTargets
+            },
+        )
+    };
     spinner.finish_and_clear();
     result?;
     Ok(())

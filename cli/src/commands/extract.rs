@@ -382,6 +382,9 @@ fn written_files(targets: &[OutputTarget], journal: bool) -> Vec<&'static str> {
     if targets.contains(&OutputTarget::Glb) {
         written.push("<method>.glb");
     }
+    if targets.contains(&OutputTarget::Usd) {
+        written.push("<method>.usda");
+    }
     if targets.contains(&OutputTarget::Report) {
         written.extend([
             "report.json",

@@ -21,6 +21,7 @@ pub mod gltf_sequence;
 mod npy;
 pub mod obj;
 pub mod ply;
+mod usd_sequence;
 
 pub use atomic::{abandon_writes, write_atomically};
 pub use error::IoError;
@@ -37,3 +38,4 @@ pub use gltf_sequence::{
 pub use npy::{NpyArray, parse_npy, read_npy, write_npy};
 pub use obj::ObjVertices;
 pub use ply::{PlyEncoding, PlyExtras};
+pub use usd_sequence::{UsdCacheSummary, write_usd_sequence};

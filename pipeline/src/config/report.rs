@@ -99,11 +99,20 @@ pub enum OutputTarget {
     /// `report.json`, `report.md`, `report.html` with `thumbnails/`, `error_vs_time.svg` and
     /// `error_vs_time.png`.
     Report,
+    /// `<method>.usda`, the sequence as a USD mesh cache (not in the default: text, large).
+    Usd,
 }
 
 impl OutputTarget {
-    /// Every output, the default.
+    /// The default outputs (every one but the USD cache).
     pub const ALL: [Self; 3] = [Self::Meshes, Self::Glb, Self::Report];
+
+    /// Whether this output is assembled from the frame files (written for it, then removed
+    /// unless [`OutputTarget::Meshes`] is asked too).
+    #[must_use]
+    pub fn assembled_from_frames(self) -> bool {
+        matches!(self, Self::Glb | Self::Usd)
+    }
 }
 
 impl std::fmt::Display for OutputTarget {
@@ -112,6 +121,7 @@ impl std::fmt::Display for OutputTarget {
             Self::Meshes => "meshes",
             Self::Glb => "glb",
             Self::Report => "report",
+            Self::Usd => "usd",
         })
     }
 }
@@ -135,7 +145,8 @@ pub struct OutputOptions {
     /// What to write, comma-separated: meshes (per-frame PLYs), glb (the animated sequence;
     /// its frames are written to assemble it and removed after unless meshes is asked too),
     /// report (report.json, report.md, report.html with its thumbnails, the plot as SVG and
-    /// PNG). The run journal is always written.
+    /// PNG), usd (<method>.usda, a USD mesh cache; not in the default; its frames are written
+    /// and removed as for glb). The run journal is always written.
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_delimiter = ',', value_name = "LIST",
         num_args = 1.., default_values_t = OutputTarget::ALL))]
     pub targets: Vec<OutputTarget>,
@@ -156,6 +167,14 @@ impl OutputOptions {
     #[must_use]
     pub fn writes(&self, target: OutputTarget) -> bool {
         self.targets.contains(&target)
+    }
+
+    /// Whether the frame files are written: asked for, or an output is assembled from them.
+    #[must_use]
+    pub fn writes_frame_files(&self) -> bool {
+        self.targets
+            .iter()
+            .any(|t| *t == OutputTarget::Meshes || t.assembled_from_frames())
     }
 }
 
