@@ -15,7 +15,7 @@ opencv-python-headless==4.14.0.94.
    2^e truncated), then read back by OpenCV: those texels are what both sides shade with.
 2. Shading of 96 seeded records (normal, view, albedo, roughness, F0) under that map turned by
    ROTATION_DEG about +Y and scaled by INTENSITY, as conventions §5 defines it:
-   - irradiance: SH projection to bands 0..2 (a real orthonormal basis written here) with each
+   - irradiance: SH projection (of the map downsampled to at most 128 wide) to bands 0..2 (a real orthonormal basis written here) with each
      texel's exact solid angle, E(n)/pi = sum_l (A_l / pi) L_lm Y_lm(n), A = (pi, 2pi/3, pi/4);
    - specular chain: level 0 the map itself (at most 512 wide), level k = 1..4 (roughness
      k/4) a map LEVEL_WIDTHS[k] wide whose texel towards R is the D(R.h) max(R.l, 0) dOmega
@@ -45,6 +45,7 @@ LEVELS = 5
 LEVEL_WIDTHS = [512, 64, 32, 32, 32]
 SOURCE_WIDTHS = [512, 128, 64, 32, 32]
 TABLE_SIZE = 32
+IRRADIANCE_WIDTH = 128
 TABLE_SAMPLES = 1024
 
 
@@ -244,7 +245,7 @@ def main():
     write_rle_hdr(hdr_path, small)
     texels = read_hdr(hdr_path)
     env = texels * INTENSITY
-    coeffs = irradiance_coeffs(env)
+    coeffs = irradiance_coeffs(downsample(env, IRRADIANCE_WIDTH))
     levels = [downsample(env, LEVEL_WIDTHS[0])]
     for k in range(1, LEVELS):
         src = downsample(env, SOURCE_WIDTHS[k])

@@ -66,13 +66,26 @@ pub fn parse_hdr(path: &Path, bytes: &[u8]) -> Result<HdrImage, IoError> {
         ));
     }
     let w = width as usize;
+    let scale: Vec<f32> = (0..256u32)
+        .map(|e| {
+            if e == 0 {
+                0.0
+            } else {
+                (f64::from(e) - 136.0).exp2() as f32
+            }
+        })
+        .collect();
     let mut rgb = Vec::with_capacity(w * height as usize);
     let mut line = vec![[0u8; 4]; w];
     let mut at = 0usize;
     for row in 0..height as usize {
         at = read_scanline(body, at, &mut line)
             .map_err(|message| IoError::malformed(path, format!("scanline {row}"), message))?;
-        rgb.extend(line.iter().map(|&p| rgbe_to_rgb(p)));
+        // c · 2^(e - 136) is exact in f32 for every byte pair: the same values as `rgbe_to_rgb`.
+        rgb.extend(line.iter().map(|&[r, g, b, e]| {
+            let f = scale[usize::from(e)];
+            [f32::from(r) * f, f32::from(g) * f, f32::from(b) * f]
+        }));
     }
     Ok(HdrImage { width, height, rgb })
 }

@@ -17,6 +17,8 @@
 
 use std::f64::consts::PI;
 
+use rayon::prelude::*;
+
 /// Grid points per axis of the table.
 pub const BRDF_TABLE_SIZE: usize = 32;
 
@@ -42,15 +44,20 @@ impl BrdfTable {
     #[must_use]
     pub fn new(size: usize, samples: u32) -> Self {
         let size = size.max(2);
-        let mut ab = Vec::with_capacity(size * size);
-        for j in 0..size {
-            let r = (j as f64 + 0.5) / size as f64;
-            for i in 0..size {
-                let n_dot_v = (i as f64 + 0.5) / size as f64;
-                let (a, b) = integrate(n_dot_v, r, samples);
-                ab.push([a as f32, b as f32]);
-            }
-        }
+        let hammersley: Vec<(f64, f64, f64)> = (0..samples)
+            .map(|s| {
+                let phi = 2.0 * PI * f64::from(s) / f64::from(samples);
+                (phi.cos(), phi.sin(), radical_inverse(s))
+            })
+            .collect();
+        let ab = (0..size)
+            .into_par_iter()
+            .flat_map_iter(|j| {
+                let r = (j as f64 + 0.5) / size as f64;
+                let row = integrate_row(size, r, &hammersley);
+                row.into_iter()
+            })
+            .collect();
         Self { size, ab }
     }
 
@@ -73,6 +80,13 @@ impl BrdfTable {
     /// centres.
     #[must_use]
     pub fn lookup(&self, n_dot_v: f32, r: f32) -> [f32; 2] {
+        self.lookup_with_dr(n_dot_v, r).0
+    }
+
+    /// [`BrdfTable::lookup`] and its derivative in `r` (0 where `r` or its grid coordinate is
+    /// clamped; one-sided at grid centres, where the bilinear lookup has a kink).
+    #[must_use]
+    pub fn lookup_with_dr(&self, n_dot_v: f32, r: f32) -> ([f32; 2], [f32; 2]) {
         let s = self.size;
         let coord = |x: f32| {
             let t = (x.clamp(0.0, 1.0) * s as f32 - 0.5).clamp(0.0, (s - 1) as f32);
@@ -85,11 +99,19 @@ impl BrdfTable {
         let b = self.at(i0 + 1, j0);
         let c = self.at(i0, j0 + 1);
         let d = self.at(i0 + 1, j0 + 1);
-        std::array::from_fn(|k| {
+        let t = r * s as f32 - 0.5;
+        let inside = (0.0..=1.0).contains(&r) && t > 0.0 && t < (s - 1) as f32;
+        let mut value = [0.0; 2];
+        let mut dr = [0.0; 2];
+        for k in 0..2 {
             let top = a[k] + (b[k] - a[k]) * fx;
             let bottom = c[k] + (d[k] - c[k]) * fx;
-            top + (bottom - top) * fy
-        })
+            value[k] = top + (bottom - top) * fy;
+            if inside {
+                dr[k] = (bottom - top) * s as f32;
+            }
+        }
+        (value, dr)
     }
 }
 
@@ -98,34 +120,43 @@ fn radical_inverse(k: u32) -> f64 {
     f64::from(k.reverse_bits()) / 4_294_967_296.0
 }
 
-/// `(A, B)` at one `n·v` and roughness by the sum of the module documentation.
-fn integrate(n_dot_v: f64, r: f64, samples: u32) -> (f64, f64) {
+/// One row of the table (roughness `r`, every `n·v` of the grid) by the sums of the module
+/// documentation; `hammersley` holds `(cos φ, sin φ, ξ₂)` of each sample.
+fn integrate_row(size: usize, r: f64, hammersley: &[(f64, f64, f64)]) -> Vec<[f32; 2]> {
     let alpha = r * r;
     let a2 = alpha * alpha;
     let k = alpha / 2.0;
     let g1 = |x: f64| x / (x * (1.0 - k) + k);
-    let v = [(1.0 - n_dot_v * n_dot_v).max(0.0).sqrt(), 0.0, n_dot_v];
-    let (mut sum_a, mut sum_b) = (0.0, 0.0);
-    for s in 0..samples {
-        let (xi1, xi2) = (f64::from(s) / f64::from(samples), radical_inverse(s));
-        let phi = 2.0 * PI * xi1;
-        let cos_t = ((1.0 - xi2) / (1.0 + (a2 - 1.0) * xi2)).sqrt();
-        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-        let h = [sin_t * phi.cos(), sin_t * phi.sin(), cos_t];
-        let v_dot_h = v[0] * h[0] + v[1] * h[1] + v[2] * h[2];
-        let n_dot_l = 2.0 * v_dot_h * h[2] - v[2];
-        if n_dot_l > 0.0 {
-            let n_dot_h = h[2];
-            let v_dot_h = v_dot_h.max(0.0);
-            let g = g1(n_dot_v) * g1(n_dot_l);
-            let g_vis = g * v_dot_h / (n_dot_h * n_dot_v);
-            let fc = (1.0 - v_dot_h).powi(5);
-            sum_a += (1.0 - fc) * g_vis;
-            sum_b += fc * g_vis;
-        }
-    }
-    let n = f64::from(samples);
-    (sum_a / n, sum_b / n)
+    // Half vectors of this roughness, once for the row.
+    let halves: Vec<[f64; 3]> = hammersley
+        .iter()
+        .map(|&(cp, sp, xi2)| {
+            let cos_t = ((1.0 - xi2) / (1.0 + (a2 - 1.0) * xi2)).sqrt();
+            let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+            [sin_t * cp, sin_t * sp, cos_t]
+        })
+        .collect();
+    let n = hammersley.len().max(1) as f64;
+    (0..size)
+        .map(|i| {
+            let n_dot_v = (i as f64 + 0.5) / size as f64;
+            let v = [(1.0 - n_dot_v * n_dot_v).max(0.0).sqrt(), 0.0, n_dot_v];
+            let g1v = g1(n_dot_v);
+            let (mut sum_a, mut sum_b) = (0.0, 0.0);
+            for h in &halves {
+                let v_dot_h = v[0] * h[0] + v[2] * h[2];
+                let n_dot_l = 2.0 * v_dot_h * h[2] - v[2];
+                if n_dot_l > 0.0 {
+                    let v_dot_h = v_dot_h.max(0.0);
+                    let g_vis = g1v * g1(n_dot_l) * v_dot_h / (h[2] * n_dot_v);
+                    let fc = (1.0 - v_dot_h).powi(5);
+                    sum_a += (1.0 - fc) * g_vis;
+                    sum_b += fc * g_vis;
+                }
+            }
+            [(sum_a / n) as f32, (sum_b / n) as f32]
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -24,7 +24,7 @@ pub use irradiance::Irradiance;
 pub use maps::{MATERIAL_KINDS, material_image_files, write_material_maps};
 pub use prefilter::{LEVEL_WIDTHS, LEVELS, MIRROR_WIDTH, SOURCE_WIDTHS, SpecularChain, prefilter};
 pub use relight::{
-    MaterialEdits, MaterialMaps, Relit, RelitRender, effective_material, render_relit,
-    shade_gaussians, with_colors,
+    MaterialEdits, MaterialGrads, MaterialMaps, Relit, RelitRender, effective_material,
+    material_grads, render_relit, shade_gaussians, with_colors,
 };
-pub use shade::{EnvOptions, Environment, Shading};
+pub use shade::{EnvOptions, Environment, IRRADIANCE_WIDTH, Shading, ShadingGrad};

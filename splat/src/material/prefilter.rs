@@ -60,65 +60,123 @@ impl SpecularChain {
     /// Prefiltered radiance towards `r` (unit) for `roughness` (clamped to 0..=1).
     #[must_use]
     pub fn lookup(&self, r: DVec3, roughness: f32) -> [f32; 3] {
+        self.lookup_with_dr(r, roughness).0
+    }
+
+    /// [`SpecularChain::lookup`] and its derivative in `roughness` (0 outside 0..1; one-sided at
+    /// the levels' roughnesses, where the linear interpolation has a kink).
+    #[must_use]
+    pub fn lookup_with_dr(&self, r: DVec3, roughness: f32) -> ([f32; 3], [f32; 3]) {
         let t = roughness.clamp(0.0, 1.0) * (LEVELS - 1) as f32;
         let k0 = (t as usize).min(LEVELS - 2);
         let f = t - k0 as f32;
         let a = self.levels[k0].bilinear(r);
-        if f == 0.0 {
-            return a;
-        }
         let b = self.levels[k0 + 1].bilinear(r);
-        std::array::from_fn(|c| a[c] + (b[c] - a[c]) * f)
+        let inside = roughness > 0.0 && roughness < 1.0;
+        let scale = (LEVELS - 1) as f32;
+        (
+            std::array::from_fn(|c| a[c] + (b[c] - a[c]) * f),
+            std::array::from_fn(|c| if inside { (b[c] - a[c]) * scale } else { 0.0 }),
+        )
     }
 }
 
 /// `source` prefiltered for roughness `r` on a `width`-wide map (module documentation).
+///
+/// When the source width is a multiple of `width` the weight of a source texel depends only on
+/// the two rows and the column offset, so each pair of rows evaluates it once per offset and
+/// the sum over columns is a circular convolution; otherwise every pair of texels is summed.
+/// Both give the sum of the module documentation (up to the order of additions).
 #[must_use]
 pub fn prefilter(source: &EnvMap, width: u32, r: f64) -> EnvMap {
     let height = width / 2;
     let a2 = (r * r) * (r * r);
-    // Source texels: direction and solid angle, once.
-    let (sw, sh) = (source.width(), source.height());
-    let dirs: Vec<(DVec3, f64, [f64; 3])> = (0..sh)
-        .flat_map(|j| {
-            let omega = source.row_solid_angle(j);
-            (0..sw).map(move |i| (j, i, omega))
-        })
-        .map(|(j, i, omega)| {
-            let t = source.texels()[(j * sw + i) as usize];
-            (source.texel_direction(i, j), omega, t.map(f64::from))
-        })
-        .collect();
-    let texels: Vec<[f32; 3]> = (0..width * height)
-        .into_par_iter()
-        .map(|k| {
-            let rdir = EnvMap::direction(
-                (f64::from(k % width) + 0.5) / f64::from(width),
-                (f64::from(k / width) + 0.5) / f64::from(height),
-            );
-            let (mut sum, mut weight) = ([0.0f64; 3], 0.0f64);
-            for &(l, omega, t) in &dirs {
-                let r_dot_l = rdir.dot(l);
-                if r_dot_l <= 0.0 {
-                    continue;
+    let (sw, sh) = (source.width() as usize, source.height() as usize);
+    let weight = move |r_dot_l: f64, omega: f64| {
+        if r_dot_l <= 0.0 {
+            return 0.0;
+        }
+        // h = normalize(R + l): R·h = √((1 + R·l) / 2).
+        let x2 = 0.5 * (1.0 + r_dot_l);
+        let denom = (a2 - 1.0) * x2 + 1.0;
+        a2 / (std::f64::consts::PI * denom * denom) * r_dot_l * omega
+    };
+    let texels: Vec<[f64; 3]> = source.texels().iter().map(|t| t.map(f64::from)).collect();
+    let (w, h) = (width as usize, height as usize);
+    let out: Vec<[f32; 3]> = if sw % w == 0 {
+        let m = sw / w;
+        (0..h)
+            .into_par_iter()
+            .flat_map_iter(|jo| {
+                let (so, co) = (std::f64::consts::PI * (jo as f64 + 0.5) / h as f64).sin_cos();
+                let mut sum = vec![[0.0f64; 3]; w];
+                let mut total = 0.0f64;
+                let mut kernel = vec![0.0f64; sw];
+                for js in 0..sh {
+                    let (ss, cs) = (std::f64::consts::PI * (js as f64 + 0.5) / sh as f64).sin_cos();
+                    let omega = source.row_solid_angle(js as u32);
+                    for (d, k) in kernel.iter_mut().enumerate() {
+                        let dphi = 2.0 * std::f64::consts::PI * (d as f64 + 0.5 * (m as f64 - 1.0))
+                            / sw as f64;
+                        *k = weight(so * ss * dphi.cos() + co * cs, omega);
+                    }
+                    total += kernel.iter().sum::<f64>();
+                    let row = &texels[js * sw..(js + 1) * sw];
+                    for (i, acc) in sum.iter_mut().enumerate() {
+                        let base = m * i;
+                        // d = (base - p) mod sw, split where it wraps.
+                        for (p, t) in row.iter().enumerate() {
+                            let d = if p <= base { base - p } else { base + sw - p };
+                            let k = kernel[d];
+                            acc[0] += k * t[0];
+                            acc[1] += k * t[1];
+                            acc[2] += k * t[2];
+                        }
+                    }
                 }
-                // h = normalize(R + l): R·h = √((1 + R·l) / 2).
-                let x2 = 0.5 * (1.0 + r_dot_l);
-                let denom = (a2 - 1.0) * x2 + 1.0;
-                let w = a2 / (std::f64::consts::PI * denom * denom) * r_dot_l * omega;
-                for c in 0..3 {
-                    sum[c] += t[c] * w;
+                sum.into_iter().map(move |s| {
+                    if total > 0.0 {
+                        s.map(|v| (v / total) as f32)
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+            })
+            .collect()
+    } else {
+        let sources: Vec<(DVec3, f64)> = (0..sh)
+            .flat_map(|j| (0..sw).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                (
+                    source.texel_direction(i as u32, j as u32),
+                    source.row_solid_angle(j as u32),
+                )
+            })
+            .collect();
+        (0..w * h)
+            .into_par_iter()
+            .map(|k| {
+                let rdir = EnvMap::direction(
+                    ((k % w) as f64 + 0.5) / w as f64,
+                    ((k / w) as f64 + 0.5) / h as f64,
+                );
+                let (mut sum, mut total) = ([0.0f64; 3], 0.0f64);
+                for (&(l, omega), t) in sources.iter().zip(&texels) {
+                    let wt = weight(rdir.dot(l), omega);
+                    for c in 0..3 {
+                        sum[c] += t[c] * wt;
+                    }
+                    total += wt;
                 }
-                weight += w;
-            }
-            if weight > 0.0 {
-                sum.map(|v| (v / weight) as f32)
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
-    EnvMap::try_new(width, height, texels).unwrap_or_else(|_| source.clone())
+                if total > 0.0 {
+                    sum.map(|v| (v / total) as f32)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect()
+    };
+    EnvMap::try_new(width, height, out).unwrap_or_else(|_| source.clone())
 }
 
 #[cfg(test)]
@@ -142,6 +200,40 @@ mod tests {
         let sharp = chain.lookup(side, 0.0)[0];
         let rough = chain.lookup(side, 1.0)[0];
         assert!(sharp < 1e-6 && rough > 0.05, "{sharp} {rough}");
+        // The convolution (64 over 64) and the direct sum (48 over 64) agree where they meet:
+        // texel centres of the 48-wide map are not those of the 64-wide one, so compare each
+        // against a brute-force sum at its own centres.
+        let source = EnvMap::try_new(
+            w,
+            h,
+            (0..w * h)
+                .map(|k| [((k * 7919) % 101) as f32 / 10.0; 3])
+                .collect(),
+        )
+        .unwrap();
+        for width in [32u32, 48, 64] {
+            let fast = prefilter(&source, width, 0.6);
+            for (k, t) in fast.texels().iter().enumerate().step_by(37) {
+                let k = k as u32;
+                let rdir = fast.texel_direction(k % width, k / width);
+                let (mut s, mut tot) = (0.0f64, 0.0f64);
+                let a2 = 0.6f64.powi(4);
+                for j in 0..h {
+                    for i in 0..w {
+                        let c = rdir.dot(source.texel_direction(i, j));
+                        if c <= 0.0 {
+                            continue;
+                        }
+                        let den = (a2 - 1.0) * 0.5 * (1.0 + c) + 1.0;
+                        let wt =
+                            a2 / (std::f64::consts::PI * den * den) * c * source.row_solid_angle(j);
+                        s += f64::from(source.texels()[(j * w + i) as usize][0]) * wt;
+                        tot += wt;
+                    }
+                }
+                assert!((f64::from(t[0]) - s / tot).abs() < 1e-5, "{width} {k}");
+            }
+        }
         let up = chain.lookup(DVec3::Y, 1.0)[0];
         assert!(up < chain.lookup(DVec3::Y, 0.0)[0] && up > rough);
     }

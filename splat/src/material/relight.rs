@@ -11,7 +11,7 @@ use super::attributes::{DEFAULT_F0, DEFAULT_ROUGHNESS, Material};
 use super::shade::Environment;
 use crate::densify::shortest_axis;
 use crate::gaussians::{GaussianParts, GaussianSet};
-use crate::render::{Outputs, RenderError, RenderOptions, RenderOutput, render};
+use crate::render::{Outputs, RenderError, RenderOptions, RenderOutput, check_inputs, render};
 use crate::sh::{SH_C0, rgb_to_dc};
 
 /// Changes to the materials before shading (`trisplat render --albedo-scale --roughness --f0`).
@@ -118,10 +118,7 @@ pub fn shade_gaussians(
     let (colors, specular) = (0..set.len())
         .into_par_iter()
         .map(|i| {
-            let to_eye = eye - set.means()[i].as_dvec3();
-            let v = to_eye.try_normalize().unwrap_or(DVec3::Z);
-            let axis = shortest_axis(set, i);
-            let n = if axis.dot(v) < 0.0 { -axis } else { axis };
+            let (n, v) = normal_and_view(set, i, eye);
             let s = env.shade(
                 n,
                 v,
@@ -133,6 +130,73 @@ pub fn shade_gaussians(
         })
         .unzip();
     Relit { colors, specular }
+}
+
+/// Gradients of a loss with respect to every Gaussian's material.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MaterialGrads {
+    /// `∂L/∂albedo` per Gaussian.
+    pub albedo: Vec<[f32; 3]>,
+    /// `∂L/∂roughness` per Gaussian.
+    pub roughness: Vec<f32>,
+    /// `∂L/∂F0` per Gaussian.
+    pub f0: Vec<f32>,
+}
+
+/// The material gradients of a loss whose gradient with respect to each Gaussian's relit
+/// colour (as [`shade_gaussians`] computes it, from `eye`) is `d_colors`. From the
+/// differentiable renderer run on [`with_colors`]'s degree-0 set, `d_colors = ∂L/∂f_dc / SH_C0`
+/// (where the colour is not clamped at 0). Normals and views are held fixed (not done: the
+/// gradient through the normal's rotation and scale).
+///
+/// # Panics
+/// If `material` or `d_colors` does not have one entry per Gaussian.
+#[must_use]
+pub fn material_grads(
+    set: &GaussianSet,
+    material: &Material,
+    eye: DVec3,
+    env: &Environment,
+    d_colors: &[[f32; 3]],
+) -> MaterialGrads {
+    assert_eq!(
+        material.albedo.len(),
+        set.len(),
+        "one material per Gaussian"
+    );
+    assert_eq!(
+        d_colors.len(),
+        set.len(),
+        "one colour gradient per Gaussian"
+    );
+    let grads: Vec<_> = (0..set.len())
+        .into_par_iter()
+        .map(|i| {
+            let (n, v) = normal_and_view(set, i, eye);
+            env.shade_grad(
+                n,
+                v,
+                material.albedo[i],
+                material.roughness[i],
+                material.f0[i],
+                d_colors[i],
+            )
+        })
+        .collect();
+    MaterialGrads {
+        albedo: grads.iter().map(|g| g.albedo).collect(),
+        roughness: grads.iter().map(|g| g.roughness).collect(),
+        f0: grads.iter().map(|g| g.f0).collect(),
+    }
+}
+
+/// Gaussian `i`'s shading normal (shortest axis facing `eye`) and view vector (mean to `eye`).
+fn normal_and_view(set: &GaussianSet, i: usize, eye: DVec3) -> (DVec3, DVec3) {
+    let to_eye = eye - set.means()[i].as_dvec3();
+    let v = to_eye.try_normalize().unwrap_or(DVec3::Z);
+    let axis = shortest_axis(set, i);
+    let n = if axis.dot(v) < 0.0 { -axis } else { axis };
+    (n, v)
 }
 
 /// `set` with its colour replaced by `colors` (SH degree 0, `f_dc = (c − ½) / SH_C0`); the
@@ -201,6 +265,7 @@ pub fn render_relit(
     options: &RenderOptions,
     maps: MaterialMaps,
 ) -> Result<RelitRender, RenderError> {
+    check_inputs(set, camera, options)?;
     let relit = shade_gaussians(set, material, camera.position(), env);
     let output = render(&with_colors(set, &relit.colors), camera, options)?;
     let map_options = RenderOptions {
@@ -236,4 +301,81 @@ pub fn render_relit(
         roughness,
         specular,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use trisplat_geometry::envmap::EnvMap;
+
+    use crate::material::shade::EnvOptions;
+
+    /// `material_grads` against central differences of `Σ g · colour` over a few Gaussians.
+    #[test]
+    fn material_grads_match_finite_differences() {
+        let n = 5;
+        let set = GaussianSet::try_new(GaussianParts {
+            means: (0..n)
+                .map(|i| glam::Vec3::new(i as f32 * 0.1, 0.0, 0.0))
+                .collect(),
+            log_scales: vec![glam::Vec3::new(-2.0, -2.5, -5.0); n],
+            rotations: (0..n).map(|i| [1.0, 0.1 * i as f32, 0.2, -0.1]).collect(),
+            opacity_logits: vec![0.0; n],
+            sh: vec![0.0; 3 * n],
+            ..GaussianParts::default()
+        })
+        .unwrap();
+        let texels = (0..32 * 16)
+            .map(|k| [(k % 7) as f32 * 0.3, (k % 5) as f32 * 0.2, 1.0])
+            .collect();
+        let env = Environment::new(
+            &EnvMap::try_new(32, 16, texels).unwrap(),
+            EnvOptions::default(),
+        )
+        .unwrap();
+        let material = Material {
+            albedo: (0..n).map(|i| [0.2, 0.1 * i as f32 + 0.3, 0.7]).collect(),
+            roughness: (0..n).map(|i| 0.12 + 0.17 * i as f32).collect(),
+            f0: (0..n).map(|i| 0.05 + 0.2 * i as f32).collect(),
+        };
+        let eye = DVec3::new(0.3, 0.4, 2.0);
+        let g: Vec<[f32; 3]> = (0..n).map(|i| [0.5, -0.3, 0.1 * i as f32]).collect();
+        let loss = |m: &Material| -> f64 {
+            let relit = shade_gaussians(&set, m, eye, &env);
+            relit
+                .colors
+                .iter()
+                .zip(&g)
+                .map(|(c, g)| (0..3).map(|k| f64::from(c[k] * g[k])).sum::<f64>())
+                .sum()
+        };
+        let grads = material_grads(&set, &material, eye, &env, &g);
+        let h = 1e-3f32;
+        for i in 0..n {
+            let mut up = material.clone();
+            let mut down = material.clone();
+            up.f0[i] += h;
+            down.f0[i] -= h;
+            let fd = (loss(&up) - loss(&down)) / (2.0 * f64::from(h));
+            assert!((f64::from(grads.f0[i]) - fd).abs() < 1e-3, "F0 {i}: {fd}");
+            let mut up = material.clone();
+            let mut down = material.clone();
+            up.roughness[i] += h;
+            down.roughness[i] -= h;
+            let fd = (loss(&up) - loss(&down)) / (2.0 * f64::from(h));
+            assert!(
+                (f64::from(grads.roughness[i]) - fd).abs() < 2e-2 * fd.abs().max(0.1),
+                "r {i}: {fd}"
+            );
+            let mut up = material.clone();
+            let mut down = material.clone();
+            up.albedo[i][2] += h;
+            down.albedo[i][2] -= h;
+            let fd = (loss(&up) - loss(&down)) / (2.0 * f64::from(h));
+            assert!(
+                (f64::from(grads.albedo[i][2]) - fd).abs() < 1e-3,
+                "albedo {i}: {fd}"
+            );
+        }
+    }
 }

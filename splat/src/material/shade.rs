@@ -7,7 +7,8 @@
 //!
 //! - `k_s = F0 A + B` with `[A, B]` = [`BrdfTable::lookup`]`(n·v, roughness)`;
 //! - specular `s = k_s L_spec(R, roughness)` ([`SpecularChain::lookup`]);
-//! - diffuse `d = (1 − k_s) albedo E(n) / π` ([`Irradiance::eval`]): the light the specular lobe
+//! - diffuse `d = (1 − k_s) albedo E(n) / π` ([`Irradiance::eval`], projected from the map
+//!   downsampled to [`IRRADIANCE_WIDTH`]): the light the specular lobe
 //!   reflects is not also scattered diffusely;
 //! - colour `c = d + s`.
 //!
@@ -20,6 +21,10 @@ use trisplat_geometry::envmap::EnvMap;
 use super::brdf::BrdfTable;
 use super::irradiance::Irradiance;
 use super::prefilter::SpecularChain;
+
+/// Width of the map the irradiance is projected from (the map downsampled to it at most):
+/// three SH bands vary far more slowly than its texels.
+pub const IRRADIANCE_WIDTH: u32 = 128;
 
 /// How the environment is placed and scaled.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,6 +52,18 @@ pub struct Shading {
     pub color: [f32; 3],
     /// Its specular part `k_s L_spec`.
     pub specular: [f32; 3],
+}
+
+/// Gradients of a loss through [`Environment::shade`] with respect to the material, for a
+/// given gradient of the colour (the normal and view are held fixed).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ShadingGrad {
+    /// `∂L/∂albedo = ∂L/∂c ⊙ (1 − k_s) E/π`.
+    pub albedo: [f32; 3],
+    /// `∂L/∂r = Σ_c ∂L/∂c_c (k_s'(r) (L_spec − albedo E/π)_c + k_s ∂L_spec,c/∂r)`.
+    pub roughness: f32,
+    /// `∂L/∂F0 = Σ_c ∂L/∂c_c A (L_spec − albedo E/π)_c`.
+    pub f0: f32,
 }
 
 /// An environment map ready for split-sum shading.
@@ -77,7 +94,7 @@ impl Environment {
             &scaled
         };
         Ok(Self {
-            irradiance: Irradiance::project(map),
+            irradiance: Irradiance::project(&map.downsampled(IRRADIANCE_WIDTH)),
             specular: SpecularChain::new(map),
             brdf: BrdfTable::default(),
             to_map: DMat3::from_rotation_y(-options.rotation_deg.to_radians()),
@@ -112,9 +129,109 @@ impl Environment {
     }
 }
 
+impl Environment {
+    /// The gradient of a loss through [`Environment::shade`] given `d_color = ∂L/∂c`
+    /// (see [`ShadingGrad`]; the lookups are piecewise linear in roughness, so the roughness
+    /// derivative is one-sided at the table's and the chain's grid roughnesses).
+    #[must_use]
+    pub fn shade_grad(
+        &self,
+        n: DVec3,
+        v: DVec3,
+        albedo: [f32; 3],
+        roughness: f32,
+        f0: f32,
+        d_color: [f32; 3],
+    ) -> ShadingGrad {
+        let n_dot_v = n.dot(v).clamp(0.0, 1.0);
+        let r = 2.0 * n_dot_v * n - v;
+        let ([a, b], [da, db]) = self.brdf.lookup_with_dr(n_dot_v as f32, roughness);
+        let ks = f0 * a + b;
+        let dks = f0 * da + db;
+        let irradiance = self.irradiance.eval(self.to_map * n);
+        let (radiance, d_radiance) = self.specular.lookup_with_dr(self.to_map * r, roughness);
+        let mut grad = ShadingGrad::default();
+        for c in 0..3 {
+            let g = d_color[c];
+            let diffuse = albedo[c] * irradiance[c];
+            grad.albedo[c] = g * (1.0 - ks) * irradiance[c];
+            grad.f0 += g * a * (radiance[c] - diffuse);
+            grad.roughness += g * (dks * (radiance[c] - diffuse) + ks * d_radiance[c]);
+        }
+        grad
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The material gradient against central differences in f64 of the f32 shading, away from
+    /// the roughness grid's kinks.
+    #[test]
+    fn material_gradient_matches_finite_differences() {
+        let (w, h) = (64u32, 32u32);
+        let texels = (0..w * h)
+            .map(|k| {
+                let (i, j) = (k % w, k / w);
+                [
+                    1.0 + (i as f32 * 0.3).sin(),
+                    0.5 + 0.4 * (j as f32 * 0.5).cos(),
+                    (0.05 * (i + j) as f32).fract() * 3.0,
+                ]
+            })
+            .collect();
+        let env = Environment::new(
+            &EnvMap::try_new(w, h, texels).unwrap(),
+            EnvOptions::default(),
+        )
+        .unwrap();
+        let mut rng = trisplat_geometry::rng::Rng::new(3);
+        let mut u = move || f64::from(rng.uniform_f32());
+        for case in 0..40 {
+            let n = DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize();
+            let t = n.any_orthonormal_vector();
+            let v = (n + t * (1.5 * u())).normalize();
+            let albedo = [u() as f32, u() as f32, u() as f32];
+            // Roughness between grid kinks: table centres (j + ½)/32, chain levels k/4.
+            let r = ((case % 29) as f32 + 0.25) / 29.0 * 0.98 + 0.01;
+            let r = if ((r * 32.0 - 0.5).fract() - 0.5).abs() > 0.45 {
+                r + 0.007
+            } else {
+                r
+            };
+            let f0 = u() as f32;
+            let g = [u() as f32 - 0.5, u() as f32 - 0.5, u() as f32 - 0.5];
+            let loss = |albedo: [f32; 3], r: f32, f0: f32| -> f64 {
+                let c = env.shade(n, v, albedo, r, f0).color;
+                (0..3).map(|k| f64::from(g[k]) * f64::from(c[k])).sum()
+            };
+            let grad = env.shade_grad(n, v, albedo, r, f0, g);
+            let step = 1e-3f32;
+            let fd_f0 = (loss(albedo, r, f0 + step) - loss(albedo, r, f0 - step)) / (2e-3);
+            let fd_r = (loss(albedo, r + step, f0) - loss(albedo, r - step, f0)) / (2e-3);
+            let mut a1 = albedo;
+            a1[1] += step;
+            let mut a0 = albedo;
+            a0[1] -= step;
+            let fd_a = (loss(a1, r, f0) - loss(a0, r, f0)) / (2e-3);
+            let tol = |x: f64| 2e-3 * x.abs().max(0.1);
+            assert!(
+                (f64::from(grad.f0) - fd_f0).abs() < tol(fd_f0),
+                "{case}: F0 {} vs {fd_f0}",
+                grad.f0
+            );
+            assert!(
+                (f64::from(grad.albedo[1]) - fd_a).abs() < tol(fd_a),
+                "{case}: albedo"
+            );
+            assert!(
+                (f64::from(grad.roughness) - fd_r).abs() < 2e-2 * fd_r.abs().max(0.1),
+                "{case}: roughness {} vs {fd_r} (r {r})",
+                grad.roughness
+            );
+        }
+    }
 
     #[test]
     fn rotation_turns_the_environment_about_up() {
