@@ -16,7 +16,8 @@
 //! - [`metrics`]: Chamfer, F-score and normal metrics; [`mesh_stats`]: mesh structure;
 //! - [`sampling`], [`smoothing`]: surface sampling and mesh smoothing with their defaults;
 //! - [`topology`], [`cleanup`], [`subdivide`], [`outliers`]: connectivity and repairs;
-//! - [`base_color`], [`texture`]: glTF base colours and their textures;
+//! - [`base_color`], [`texture`]: glTF base colours and their textures; [`envmap`]:
+//!   equirectangular environment maps (read from Radiance `.hdr` by [`io::hdr`]);
 //! - [`mesh_render`]: depth, normal and mask maps of a mesh by ray casting;
 //! - [`rng`]: the deterministic random streams.
 //!
@@ -31,6 +32,7 @@ pub mod base_color;
 mod camera;
 pub mod cleanup;
 mod color;
+pub mod envmap;
 mod ids;
 pub mod io;
 mod mesh;

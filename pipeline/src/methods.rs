@@ -569,6 +569,7 @@ mod tests {
             sh_degree: 0,
             sh: Vec::new(),
             binding: None,
+            material: None,
             space: ParameterSpace::World,
             extras: Vec::new(),
             property_order: None,

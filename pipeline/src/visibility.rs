@@ -252,6 +252,7 @@ mod tests {
             sh_degree: 0,
             sh: vec![0.0; 3 * m],
             binding: None,
+            material: None,
             space: ParameterSpace::World,
             extras: Vec::new(),
             property_order: None,

@@ -36,6 +36,7 @@ use crate::threads;
 struct Kept {
     encoding: BindingEncoding,
     extras: Vec<ExtraProperty>,
+    material: Option<trisplat::splat::material::Material>,
     property_order: Option<Vec<String>>,
 }
 
@@ -196,6 +197,7 @@ impl Gaussians {
             } else {
                 ParameterSpace::World
             },
+            material: self.kept.material.clone(),
             extras: self.kept.extras.clone(),
             property_order: self.kept.property_order.clone(),
         };
@@ -230,6 +232,7 @@ impl Gaussians {
             kept: Kept {
                 encoding,
                 extras: parts.extras,
+                material: parts.material,
                 property_order: parts.property_order,
             },
         }

@@ -119,6 +119,7 @@ impl WorldGeometry {
             sh_degree: set.sh_degree(),
             sh: set.sh().to_vec(),
             binding: None,
+            material: set.material().cloned(),
             space: ParameterSpace::World,
             extras: set.extras().to_vec(),
             property_order: set.property_order().map(<[String]>::to_vec),

@@ -12,6 +12,8 @@ use std::fmt;
 use glam::{DMat3, DQuat, Vec3};
 use trisplat_geometry::TriId;
 
+use crate::material::attributes::Material;
+
 /// Highest spherical-harmonics degree of the 3DGS files.
 pub const SH_MAX_DEGREE: u8 = 3;
 
@@ -142,6 +144,16 @@ pub enum GaussianError {
     /// Local parameters without a binding cannot be placed in the world.
     #[error("parameters are in local triangle frames but there is no binding")]
     LocalWithoutBinding,
+    /// A material attribute (albedo, roughness, F0) that is not finite or outside `0..=1`.
+    #[error("Gaussian {index}: {field} {value} is not in 0..=1")]
+    MaterialOutOfRange {
+        /// Gaussian index.
+        index: usize,
+        /// Which attribute.
+        field: &'static str,
+        /// The value.
+        value: f32,
+    },
     /// SH degree above 3.
     #[error("SH degree {degree} is above {SH_MAX_DEGREE}")]
     ShDegree {
@@ -207,6 +219,8 @@ pub struct GaussianParts {
     pub sh: Vec<f32>,
     /// Parent triangles, if bound.
     pub binding: Option<Binding>,
+    /// Physically based material attributes (HRAvatar), if any.
+    pub material: Option<Material>,
     /// The frame the parameters are in.
     pub space: ParameterSpace,
     /// Extra per-Gaussian properties, in file order.
@@ -281,6 +295,11 @@ impl GaussianSet {
         if let Some(b) = &p.binding {
             lengths.push(("binding", b.triangles.len(), n));
         }
+        if let Some(m) = &p.material {
+            lengths.push(("albedo", m.albedo.len(), n));
+            lengths.push(("roughness", m.roughness.len(), n));
+            lengths.push(("reflectance", m.f0.len(), n));
+        }
         for e in &p.extras {
             lengths.push(("extra property", e.values.len(), n));
         }
@@ -345,6 +364,13 @@ impl GaussianSet {
                     field: "SH coefficient",
                 });
             }
+            if let Some((field, value)) = p.material.as_ref().and_then(|m| m.out_of_range_at(i)) {
+                r.push(GaussianError::MaterialOutOfRange {
+                    index: i,
+                    field,
+                    value,
+                });
+            }
             if let (Some(b), Some(count)) = (&p.binding, triangle_count) {
                 let t = b.triangles[i];
                 if t.index() >= count {
@@ -383,6 +409,7 @@ impl GaussianSet {
                 triangles: indices.iter().map(|&i| b.triangles[i]).collect(),
                 encoding: b.encoding,
             }),
+            material: p.material.as_ref().map(|m| m.select(indices)),
             space: p.space,
             extras: p
                 .extras
@@ -465,6 +492,45 @@ impl GaussianSet {
     #[must_use]
     pub fn binding(&self) -> Option<&Binding> {
         self.parts.binding.as_ref()
+    }
+
+    /// The material attributes, if any.
+    #[must_use]
+    pub fn material(&self) -> Option<&Material> {
+        self.parts.material.as_ref()
+    }
+
+    /// The set with `material` in place of its own (`None` removes it).
+    ///
+    /// # Errors
+    /// [`GaussianError::LengthMismatch`] or [`GaussianError::MaterialOutOfRange`]; the set is
+    /// then unchanged.
+    pub fn set_material(&mut self, material: Option<Material>) -> Result<(), GaussianError> {
+        if let Some(m) = &material {
+            let n = self.len();
+            for (field, len) in [
+                ("albedo", m.albedo.len()),
+                ("roughness", m.roughness.len()),
+                ("reflectance", m.f0.len()),
+            ] {
+                if len != n {
+                    return Err(GaussianError::LengthMismatch {
+                        field,
+                        len,
+                        expected: n,
+                    });
+                }
+            }
+            if let Some((index, field, value)) = m.first_out_of_range() {
+                return Err(GaussianError::MaterialOutOfRange {
+                    index,
+                    field,
+                    value,
+                });
+            }
+        }
+        self.parts.material = material;
+        Ok(())
     }
 
     /// The frame the parameters are in.

@@ -3,7 +3,9 @@
 //! Reading finds properties by name in any order: `x y z`, `scale_0..2` (or only `scale_0..1`:
 //! a 2DGS file), `rot_0..3` (w first), `opacity`, `f_dc_0..2` and `f_rest_*` (0, 9, 24 or 45 of
 //! them: SH degree 0..3). A GaussianAvatars `binding_0` float property, or an integer `binding`,
-//! becomes the [`Binding`] and marks the parameters as local. Every other vertex property is kept
+//! becomes the [`Binding`] and marks the parameters as local. HRAvatar's material attributes
+//! `albedo_0..2`, `roughness` and `reflectance` (all five or none) become the set's
+//! [`Material`] (values in 0..=1, checked). Every other vertex property is kept
 //! by name, in its stored type, and written back. The standard properties are stored as `f32`;
 //! when a file stores them in another type they are converted (exactly for `float`).
 //!
@@ -36,6 +38,7 @@ use crate::gaussians::{
     Binding, BindingEncoding, ExtraProperty, GaussianError, GaussianParts, GaussianSet,
     ParameterSpace, PropertyValues, ScalarType, ScaleDims, sh_coeffs_per_channel,
 };
+use crate::material::attributes::{Material, PLY_ALBEDO, PLY_REFLECTANCE, PLY_ROUGHNESS};
 
 /// Largest triangle index a `float` `binding_0` can hold exactly (2²⁴).
 pub const MAX_FLOAT_BINDING: u32 = 1 << 24;
@@ -136,6 +139,8 @@ struct Layout {
     sh: Vec<usize>,
     sh_degree: u8,
     binding: Option<(usize, BindingEncoding)>,
+    /// `albedo_0..2`, `roughness`, `reflectance`, when the file has them.
+    material: Option<[usize; 5]>,
     extras: Vec<usize>,
 }
 
@@ -206,6 +211,28 @@ fn find_layout(props: &[PlyProperty], path: &Path) -> Result<Layout, PlyError> {
         },
         (None, None) => None,
     };
+    let material_names = [
+        PLY_ALBEDO[0],
+        PLY_ALBEDO[1],
+        PLY_ALBEDO[2],
+        PLY_ROUGHNESS,
+        PLY_REFLECTANCE,
+    ];
+    let material_found = material_names.map(find);
+    let material = if material_found.iter().all(Option::is_some) {
+        Some(material_found.map(|i| i.unwrap_or(0)))
+    } else if let Some(k) = material_found.iter().position(Option::is_some) {
+        let missing = material_names[material_found.iter().position(Option::is_none).unwrap_or(0)];
+        return Err(bad(
+            material_names[k],
+            &format!(
+                "material attributes come together (albedo_0..2, roughness, reflectance); \
+                 `{missing}` is missing"
+            ),
+        ));
+    } else {
+        None
+    };
     let mut used = vec![false; props.len()];
     for &i in mean
         .iter()
@@ -219,6 +246,9 @@ fn find_layout(props: &[PlyProperty], path: &Path) -> Result<Layout, PlyError> {
     if let Some((i, _)) = binding {
         used[i] = true;
     }
+    for &i in material.iter().flatten() {
+        used[i] = true;
+    }
     let extras = (0..props.len()).filter(|&i| !used[i]).collect();
     Ok(Layout {
         mean,
@@ -228,6 +258,7 @@ fn find_layout(props: &[PlyProperty], path: &Path) -> Result<Layout, PlyError> {
         sh,
         sh_degree,
         binding,
+        material,
         extras,
     })
 }
@@ -342,7 +373,19 @@ pub fn gaussians_from_document(
             PropertyData::List { values, .. } => values,
         })
         .collect();
-    let standard = standard_from_columns(&mut columns, &layout, n);
+    let mut standard = standard_from_columns(&mut columns, &layout, n);
+    standard.material = layout.material.map(|[r, g, b, rough, f0]| {
+        let (r, g, b) = (
+            take_f32(&mut columns, r),
+            take_f32(&mut columns, g),
+            take_f32(&mut columns, b),
+        );
+        Material {
+            albedo: (0..n).map(|i| [r[i], g[i], b[i]]).collect(),
+            roughness: take_f32(&mut columns, rough),
+            f0: take_f32(&mut columns, f0),
+        }
+    });
     assemble(columns, standard, property_order, n, &layout, path)
 }
 
@@ -362,6 +405,7 @@ struct Standard {
     rotations: Vec<[f32; 4]>,
     opacity_logits: Vec<f32>,
     sh: Vec<f32>,
+    material: Option<Material>,
 }
 
 /// Gathers the standard parameters from their columns (each `n` long), which are consumed.
@@ -395,6 +439,7 @@ fn standard_from_columns(columns: &mut [PropertyValues], layout: &Layout, n: usi
         rotations,
         opacity_logits,
         sh,
+        material: None,
     }
 }
 
@@ -417,6 +462,7 @@ fn assemble(
         rotations,
         opacity_logits,
         sh,
+        material,
     } = standard;
     let binding = match layout.binding {
         None => None,
@@ -463,6 +509,7 @@ fn assemble(
         sh_degree: layout.sh_degree,
         sh,
         binding,
+        material,
         space,
         extras,
         property_order: Some(property_order),
@@ -483,6 +530,9 @@ enum Column<'a> {
     Rot(usize),
     Opacity,
     Sh(usize),
+    Albedo(usize),
+    Roughness,
+    Reflectance,
     BindingFloat,
     BindingInt(ScalarType),
     Extra(&'a PropertyValues),
@@ -506,6 +556,13 @@ fn columns_to_write(set: &GaussianSet) -> Vec<(String, Column<'_>)> {
     }
     for i in 0..4 {
         canonical.push((format!("rot_{i}"), Column::Rot(i)));
+    }
+    if set.material().is_some() {
+        for (c, name) in PLY_ALBEDO.iter().enumerate() {
+            canonical.push(((*name).to_string(), Column::Albedo(c)));
+        }
+        canonical.push((PLY_ROUGHNESS.into(), Column::Roughness));
+        canonical.push((PLY_REFLECTANCE.into(), Column::Reflectance));
     }
     for e in set.extras() {
         canonical.push((e.name.clone(), Column::Extra(&e.values)));
@@ -617,6 +674,9 @@ fn write_vertex_element(
         _ => None,
     });
     let rotations = set.rotations().as_flattened();
+    let (albedo, roughness, f0) = set.material().map_or((&[][..], &[][..], &[][..]), |m| {
+        (m.albedo.as_flattened(), &m.roughness[..], &m.f0[..])
+    });
     let properties: Vec<(&str, ColumnView<'_>)> = columns
         .iter()
         .map(|(name, column)| {
@@ -643,6 +703,21 @@ fn write_vertex_element(
                     values: set.sh(),
                     offset: a,
                     stride: sh_stride,
+                },
+                Column::Albedo(c) => ColumnView::StridedF32 {
+                    values: albedo,
+                    offset: c,
+                    stride: 3,
+                },
+                Column::Roughness => ColumnView::StridedF32 {
+                    values: roughness,
+                    offset: 0,
+                    stride: 1,
+                },
+                Column::Reflectance => ColumnView::StridedF32 {
+                    values: f0,
+                    offset: 0,
+                    stride: 1,
                 },
                 Column::BindingFloat | Column::BindingInt(_) => match &binding_column {
                     Some(c) => ColumnView::Column(c),

@@ -714,6 +714,7 @@ fn decode_values(path: &Path, p: &Packed) -> Result<GaussianSet, SpzError> {
         sh_degree: p.sh_degree,
         sh,
         binding: None,
+        material: None,
         space: ParameterSpace::World,
         extras: Vec::new(),
         property_order: None,

@@ -136,6 +136,13 @@ pub fn write_gaussian_file(
             path.display()
         );
     };
+    if set.material().is_some() && format != GaussianFormat::Ply {
+        eprintln!(
+            "warning: {}: SPZ and glTF have no place for the material attributes (albedo, \
+             roughness, reflectance); they are not written (write a .ply to keep them)",
+            path.display()
+        );
+    }
     match format {
         GaussianFormat::Ply => {
             let encoding = if ascii {

@@ -1,6 +1,8 @@
 //! `trisplat render GAUSSIANS.ply --cameras CAMS.json -o DIR [--mode 3dgs|2dgs|perspective]
 //! [--outputs rgb,alpha,depth,median_depth,normal] [--background r,g,b] [--compat-3dgs]
-//! [--antialiased] [--ray-depth]` and `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
+//! [--antialiased] [--ray-depth] [--env MAP.hdr [--env-rotation DEG] [--env-intensity X]
+//! [--albedo-scale X] [--roughness R] [--f0 F] [--material-maps LIST]]` and
+//! `trisplat render --mesh MESH --cameras CAMS.json -o DIR`.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -15,6 +17,13 @@ use trisplat_splat::render::{
     DEFAULT_FAR, Outputs, RenderImages, RenderMode, RenderOptions, SplatDepth, render,
 };
 use trisplat_splat::render::{file_stem, image_files};
+
+use trisplat_geometry::envmap::EnvMap;
+use trisplat_splat::GaussianSet;
+use trisplat_splat::material::{
+    EnvOptions, Environment, Material, MaterialEdits, MaterialMaps, effective_material,
+    material_image_files, render_relit, write_material_maps,
+};
 
 use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
 
@@ -53,7 +62,13 @@ pub enum FrameArg {
     rasterizer's rules (alpha clamp 0.99, strict stop test, integer pixel centres, near 0.2, one \
     3-sigma radius). Bound GaussianAvatars files (local parameters) must be baked to world space \
     first with `trisplat deform`.\n\n\
-    With --mesh the mesh is ray cast instead: depth, normal and alpha (the hit mask) maps."
+    With --mesh the mesh is ray cast instead: depth, normal and alpha (the hit mask) maps.\n\n\
+    With --env MAP.hdr (an equirectangular Radiance map, 2:1, +Y up) the Gaussians are relit: \
+    each Gaussian's material (albedo_0..2, roughness, reflectance in the PLY, as HRAvatar's; \
+    without them the SH colour as albedo, roughness 0.9, F0 0.04) shaded by the split sum \
+    (docs/conventions.md §5) per view replaces the SH colour. --material-maps writes \
+    DIR/<img_name>_albedo.npy [H,W,3], _roughness.npy [H,W], _specular.npy [H,W,3] (composited \
+    like the normal map: weighted sums, black where nothing), each with a PNG."
 )]
 pub struct RenderArgs {
     /// Gaussians: a 3DGS PLY in world space.
@@ -102,6 +117,29 @@ pub struct RenderArgs {
     /// Image size WxH for a transforms.json that does not give one.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub image_size: Option<(u32, u32)>,
+    /// Relight under this equirectangular environment map (Radiance .hdr, 2:1, +Y up)
+    /// instead of the SH colour.
+    #[arg(long, value_name = "MAP.hdr", conflicts_with = "mesh")]
+    pub env: Option<PathBuf>,
+    /// Turn of the environment about +Y, degrees (90 moves what was towards +X to -Z).
+    #[arg(long, value_name = "DEG", requires = "env", default_value_t = 0.0, allow_negative_numbers = true, value_parser = parse_finite)]
+    pub env_rotation: f64,
+    /// Factor on the environment's radiance.
+    #[arg(long, value_name = "X", requires = "env", default_value_t = 1.0, value_parser = parse_non_negative)]
+    pub env_intensity: f32,
+    /// Factor on every albedo (the product clamped to 0..1).
+    #[arg(long, value_name = "X", requires = "env", default_value_t = 1.0, value_parser = parse_non_negative)]
+    pub albedo_scale: f32,
+    /// Roughness of every Gaussian (0..1) in place of its own.
+    #[arg(long, value_name = "R", requires = "env", value_parser = parse_unit)]
+    pub roughness: Option<f32>,
+    /// Fresnel reflectance F0 of every Gaussian (0..1) in place of its own.
+    #[arg(long, value_name = "F", requires = "env", value_parser = parse_unit)]
+    pub f0: Option<f32>,
+    /// Material maps to write beside the images: comma-separated albedo, roughness, specular
+    /// (or all).
+    #[arg(long, value_name = "LIST", requires = "env", value_parser = parse_material_maps)]
+    pub material_maps: Option<MaterialMaps>,
     /// Most pixels of one camera's image (a limit checked before any image exists; at most
     /// 16384 x 16384).
     #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
@@ -132,6 +170,57 @@ pub(crate) fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
     Ok(rgb)
 }
 
+fn parse_finite(s: &str) -> Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("'{s}' is not a finite number"))
+}
+
+fn parse_non_negative(s: &str) -> Result<f32, String> {
+    s.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|v| v.is_finite() && *v >= 0.0)
+        .ok_or_else(|| format!("'{s}' is not a finite number >= 0"))
+}
+
+fn parse_unit(s: &str) -> Result<f32, String> {
+    s.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|v| (0.0..=1.0).contains(v))
+        .ok_or_else(|| format!("'{s}' is not a number in 0..1"))
+}
+
+fn parse_material_maps(s: &str) -> Result<MaterialMaps, String> {
+    let mut maps = MaterialMaps::default();
+    for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        match name {
+            "albedo" => maps.albedo = true,
+            "roughness" => maps.roughness = true,
+            "specular" => maps.specular = true,
+            "all" => {
+                maps = MaterialMaps {
+                    albedo: true,
+                    roughness: true,
+                    specular: true,
+                };
+            }
+            other => {
+                return Err(format!(
+                    "unknown material map '{other}' (albedo, roughness, specular, all)"
+                ));
+            }
+        }
+    }
+    if maps == MaterialMaps::default() {
+        return Err("no material map named".into());
+    }
+    Ok(maps)
+}
+
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
@@ -155,7 +244,13 @@ pub fn run(args: RenderArgs, ctx: &Context) -> anyhow::Result<()> {
     // wrote are removed (nothing half-done is left behind).
     let files: Vec<PathBuf> = cameras
         .iter()
-        .flat_map(|c| image_files(&args.output, &c.name))
+        .flat_map(|c| {
+            let mut files = image_files(&args.output, &c.name);
+            if args.material_maps.is_some() {
+                files.extend(material_image_files(&args.output, &c.name));
+            }
+            files
+        })
         .collect();
     let existed: HashSet<PathBuf> = files.iter().filter(|p| p.exists()).cloned().collect();
     let result = render_all(&args, &cameras, ctx);
@@ -277,6 +372,26 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     }
     options.far = args.far;
     options.normal_frame = frame;
+    if let Some(env_path) = &args.env {
+        let relight = Relight::open(args, env_path, &set)?;
+        for camera in cameras {
+            let camera = camera.translated(-origin);
+            let out = render_relit(
+                &set,
+                &relight.material,
+                &camera,
+                &relight.env,
+                &options,
+                args.material_maps.unwrap_or_default(),
+            )
+            .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
+            out.output.images.write(&args.output, &camera.name)?;
+            write_material_maps(&out, &args.output, &camera.name)?;
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        return Ok(());
+    }
     for camera in cameras {
         let out = render(&set, &camera.translated(-origin), &options)
             .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
@@ -285,4 +400,41 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     }
     bar.finish_and_clear();
     Ok(())
+}
+
+/// What `render --env` shades with: the environment, prepared once, and the edited materials.
+struct Relight {
+    env: Environment,
+    material: Material,
+}
+
+impl Relight {
+    /// Reads the map (errors name it), prepares it and applies the material edits.
+    fn open(args: &RenderArgs, env_path: &Path, set: &GaussianSet) -> anyhow::Result<Self> {
+        let map = EnvMap::read(env_path)?;
+        let env = Environment::new(
+            &map,
+            EnvOptions {
+                rotation_deg: args.env_rotation,
+                intensity: args.env_intensity,
+            },
+        )
+        .with_context(|| {
+            format!(
+                "{}: --env-intensity {}",
+                env_path.display(),
+                args.env_intensity
+            )
+        })?;
+        let edits = MaterialEdits {
+            albedo_scale: args.albedo_scale,
+            roughness: args.roughness,
+            f0: args.f0,
+        };
+        edits.check().map_err(anyhow::Error::msg)?;
+        Ok(Self {
+            env,
+            material: effective_material(set, &edits),
+        })
+    }
 }

@@ -1,4 +1,5 @@
-//! Mesh and point-cloud file formats: PLY (ascii, binary both endians), OBJ, glTF/GLB.
+//! Mesh and point-cloud file formats: PLY (ascii, binary both endians), OBJ, glTF/GLB; and
+//! Radiance `.hdr` images ([`hdr`], environment maps).
 //!
 //! The format is chosen from the file extension. Every reader validates what it reads (counts
 //! against the bytes present, indices in range, finite coordinates) and reports the file and
@@ -18,6 +19,7 @@ pub mod gltf_codes;
 pub(crate) mod gltf_data;
 pub mod gltf_material;
 pub mod gltf_sequence;
+pub mod hdr;
 mod npy;
 pub mod obj;
 pub mod ply;

@@ -293,6 +293,7 @@ pub fn to_set(bound: &BoundParams) -> GaussianSet {
                 .collect(),
             encoding: crate::gaussians::BindingEncoding::default(),
         }),
+        material: None,
         space: ParameterSpace::Local,
         extras: Vec::new(),
         property_order: None,

@@ -23,6 +23,7 @@ pub fn world_set(
         sh_degree: 0,
         sh: vec![0.0; 3 * n],
         binding: None,
+        material: None,
         space: ParameterSpace::World,
         extras: Vec::new(),
         property_order: None,
