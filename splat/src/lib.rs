@@ -12,6 +12,7 @@
 //! public only where users address a namespace as such:
 //! - [`render`], the renderer (its own items at `render::`, e.g. `render::RenderOptions`);
 //! - [`fit`], the fitting pieces, one namespace each (`fit::adam`, `fit::loss`, ...);
+//! - [`neural`], the hash-grid MLP appearance model (`neural::NeuralAppearance`, ...);
 //! - the file formats [`ply`], [`spz`] and [`gltf_splat`], whose readers and writers share
 //!   names and constants (`read_gaussians`, `OPAQUE_LOGIT`, ...).
 
@@ -28,6 +29,7 @@ mod gaussians;
 pub mod gltf_splat;
 mod lanes;
 mod lbs;
+pub mod neural;
 pub mod ply;
 pub mod render;
 mod sh;
