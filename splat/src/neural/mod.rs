@@ -9,12 +9,14 @@
 //! - [`dense`]: batched dense layers and their backward;
 //! - [`pass`]: forward and backward over many Gaussians (rayon, per-thread scratch);
 //! - [`adam`]: Adam, dense on the MLPs, lazy on the tables;
+//! - [`file`]: the weights as safetensors beside the PLY;
 //! - [`real`]: `f32` (production) or `f64` (finite-difference checks).
 
 pub mod adam;
 pub mod config;
 pub mod dense;
 pub mod error;
+pub mod file;
 pub mod grid;
 pub mod model;
 pub mod pass;
@@ -23,5 +25,6 @@ pub mod real;
 pub use adam::{NeuralAdam, NeuralLearningRates};
 pub use config::NeuralConfig;
 pub use error::NeuralError;
+pub use file::{read_weights, weights_path, write_weights};
 pub use model::{Aabb, Appearance, NeuralAppearance, NeuralInputs};
 pub use pass::{NeuralGrads, Workspace, backward, forward};
