@@ -9,10 +9,12 @@
 //! - [`dense`]: batched dense layers and their backward;
 //! - [`pass`]: forward and backward over many Gaussians (rayon, per-thread scratch);
 //! - [`adam`]: Adam, dense on the MLPs, lazy on the tables;
+//! - [`bake`]: the seam to the renderer (outputs as degree-0 SH and opacity logits, gradients back);
 //! - [`file`]: the weights as safetensors beside the PLY;
 //! - [`real`]: `f32` (production) or `f64` (finite-difference checks).
 
 pub mod adam;
+pub mod bake;
 pub mod config;
 pub mod dense;
 pub mod error;
@@ -23,6 +25,7 @@ pub mod pass;
 pub mod real;
 
 pub use adam::{NeuralAdam, NeuralLearningRates};
+pub use bake::{appearance_grads, bake_params, bake_set, inputs_from_params, inputs_from_set};
 pub use config::NeuralConfig;
 pub use error::NeuralError;
 pub use file::{read_weights, weights_path, write_weights};
