@@ -16,6 +16,7 @@ use trisplat_splat::render::{
 };
 use trisplat_splat::render::{file_stem, image_files};
 
+use super::render_neural::NeuralRender;
 use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
 
 /// Splatting models.
@@ -51,7 +52,10 @@ pub enum FrameArg {
     image's own depth range, near = red; normals as (n+1)/2).\n\n\
     3dgs mode follows gsplat 1.5.3 (docs/conventions.md §5); --compat-3dgs switches to the original 3DGS \
     rasterizer's rules (alpha clamp 0.99, strict stop test, integer pixel centres, near 0.2, one \
-    3-sigma radius). Bound GaussianAvatars files (local parameters) must be baked to world space \
+    3-sigma radius). With neural appearance weights (`fit --appearance mlp`: \
+    <name>.safetensors beside the PLY, or --weights FILE) each Gaussian's colour and opacity \
+    come from the model, per camera; a weights file that does not match the PLY is an error \
+    and nothing is written. Bound GaussianAvatars files (local parameters) must be baked to world space \
     first with `trisplat deform`.\n\n\
     With --mesh the mesh is ray cast instead: depth, normal and alpha (the hit mask) maps."
 )]
@@ -106,6 +110,10 @@ pub struct RenderArgs {
     /// 16384 x 16384).
     #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
     pub max_pixels: u64,
+    /// Neural appearance weights (safetensors, `fit --appearance mlp`); default:
+    /// <name>.safetensors beside the PLY when it exists.
+    #[arg(long, value_name = "FILE", conflicts_with = "mesh")]
+    pub weights: Option<PathBuf>,
 }
 
 fn parse_outputs(s: &str) -> Result<Outputs, String> {
@@ -254,6 +262,7 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     // Gaussians far from the world origin are stored relative to their local origin (f64
     // before f32), and the cameras moved with them.
     let (set, origin) = read_gaussians_local(input)?;
+    let mut neural = NeuralRender::open(args.weights.as_deref(), input, &set, origin)?;
     let mut options = if args.compat_3dgs {
         RenderOptions::original_3dgs()
     } else {
@@ -278,8 +287,13 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     options.far = args.far;
     options.normal_frame = frame;
     for camera in cameras {
-        let out = render(&set, &camera.translated(-origin), &options)
-            .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
+        let baked = neural.as_mut().map(|n| n.bake(&set, camera.position()));
+        let out = render(
+            baked.as_ref().unwrap_or(&set),
+            &camera.translated(-origin),
+            &options,
+        )
+        .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
         out.images.write(&args.output, &camera.name)?;
         bar.inc(1);
     }
