@@ -98,8 +98,8 @@ fn fit_mlp_then_render_with_its_weights() {
         cps[0]["eval_psnr"].as_f64().unwrap(),
         cps.last().unwrap()["eval_psnr"].as_f64().unwrap(),
     );
-    // Observed 13.07 -> 14.71 dB.
-    assert!(p1 > p0 + 1.0, "held-out PSNR {p0:.2} -> {p1:.2} dB");
+    // Observed 14.40 -> 16.21 dB.
+    assert!(p1 > p0 + 1.2, "held-out PSNR {p0:.2} -> {p1:.2} dB");
     let weights = dir.join("fitted.safetensors");
     assert!(weights.is_file() && out.is_file());
     assert_eq!(v["weights"].as_str().unwrap(), s(&weights));
@@ -154,11 +154,11 @@ fn fit_mlp_then_render_with_its_weights() {
     let p_given = render(&given, &["--weights", s(&weights)]);
     assert_eq!(p_beside, p_given);
     // Without weights the set's own SH colour, which the MLP fit left untouched: further from
-    // the targets (observed 14.39 dB against 14.71 after 60 iterations).
+    // the targets (observed 14.39 dB against 16.21 after 60 iterations).
     std::fs::remove_file(dir.join("world.safetensors")).unwrap();
     let p_plain = render(&plain, &[]);
     assert!(
-        p_beside > p_plain + 0.2,
+        p_beside > p_plain + 1.0,
         "mlp {p_beside:.2} dB, sh {p_plain:.2} dB"
     );
 

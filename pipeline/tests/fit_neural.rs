@@ -98,10 +98,11 @@ fn training_lowers_the_loss_and_raises_held_out_psnr() {
     .unwrap();
     assert_eq!(seen, [0, 50, 100, 150]);
     let c = &fitted.checkpoints;
-    // The training loss (mean over the 50 iterations before each checkpoint) falls.
+    // The training loss (mean over the 50 iterations before each checkpoint) falls: observed
+    // 0.293 -> 0.042.
     let (l50, l150) = (c[1].loss.unwrap(), c[3].loss.unwrap());
     assert!(l150 < 0.5 * l50, "loss {l50:.4} -> {l150:.4}");
-    // Held-out views (never trained on) follow: observed 9.8 -> 29.1 dB.
+    // Held-out views (never trained on) follow: observed 10.4 -> 31.5 dB.
     let (p0, p1) = (c[0].eval_psnr.unwrap(), c[3].eval_psnr.unwrap());
     assert!(p1 > p0 + 10.0, "held-out PSNR {p0:.2} -> {p1:.2} dB");
     assert!(c[3].eval_ssim.unwrap() > c[0].eval_ssim.unwrap() + 0.3);

@@ -9,9 +9,17 @@ pub const HASH_PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
 /// Inputs besides the hash encoding: the unit quaternion (4) and the log-scales (3).
 pub const ATTR_INPUTS: usize = 7;
 
-/// Log-scales are clamped to `±LOG_SCALE_CLAMP` before they enter the MLP (a surfel's flat axis
-/// is `−∞`).
-pub const LOG_SCALE_CLAMP: f64 = 20.0;
+/// Log-scales enter the MLP relative to the normalisation cube's side and in units of
+/// `LOG_SCALE_UNIT`, `(log s − ln side) / 5` (a Gaussian 1/150 of the cube enters as −1), so the
+/// inputs are of order 1 whatever the scene's units.
+pub const LOG_SCALE_UNIT: f64 = 5.0;
+
+/// The normalised log-scales are clamped to `±LOG_SCALE_CLAMP` (a surfel's flat axis, `−∞`,
+/// enters as −4).
+pub const LOG_SCALE_CLAMP: f64 = 4.0;
+
+/// The opacity output's initial bias: `logit(0.1)`, `bind`'s initial opacity.
+pub const INITIAL_OPACITY_LOGIT: f64 = -2.197_224_577_336_219_6;
 
 /// The model's shape. [`NeuralConfig::default`] is the static-head seed's: 4 levels of 8
 /// features, tables of 2^19 entries, base resolution 16, growth 2 (resolutions 16, 32, 64,

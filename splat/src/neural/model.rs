@@ -4,7 +4,10 @@
 use glam::DVec3;
 use trisplat_geometry::rng::Rng;
 
-use super::config::{ATTR_INPUTS, LOG_SCALE_CLAMP, LayerSlot, NeuralConfig, mlp_layout};
+use super::config::{
+    ATTR_INPUTS, INITIAL_OPACITY_LOGIT, LOG_SCALE_CLAMP, LOG_SCALE_UNIT, LayerSlot, NeuralConfig,
+    mlp_layout,
+};
 use super::error::NeuralError;
 use super::grid::HashGrid;
 use super::real::Real;
@@ -48,15 +51,20 @@ impl Aabb {
         Ok(Self { lo, hi })
     }
 
-    /// `p` in the unit cube around the box (clamped).
+    /// The side of the cube around the box (1 for a single point).
     #[must_use]
-    pub fn unit(&self, p: [f64; 3]) -> [f64; 3] {
+    pub fn side(&self) -> f64 {
         let mut side = 0.0f64;
         for a in 0..3 {
             side = side.max(self.hi[a] - self.lo[a]);
         }
-        // A single point (or a coincident set) gets a unit cube around it.
-        let side = if side > 0.0 { side } else { 1.0 };
+        if side > 0.0 { side } else { 1.0 }
+    }
+
+    /// `p` in the unit cube around the box (clamped).
+    #[must_use]
+    pub fn unit(&self, p: [f64; 3]) -> [f64; 3] {
+        let side = self.side();
         std::array::from_fn(|a| {
             let c = 0.5 * (self.lo[a] + self.hi[a]);
             ((p[a] - (c - 0.5 * side)) / side).clamp(0.0, 1.0)
@@ -78,7 +86,8 @@ pub struct NeuralAppearance<T: Real = f32> {
 impl<T: Real> NeuralAppearance<T> {
     /// A fresh model: tables uniform in ±[`TABLE_INIT`], hidden layers He-uniform
     /// (`±√(6 / inputs)`), output layers `±0.1 √(3 / inputs)`, biases 0 except the colour's,
-    /// 0.5 (grey), all drawn from `seed`.
+    /// 0.5 (grey), and the opacity's, [`INITIAL_OPACITY_LOGIT`] (`bind`'s opacity 0.1), all
+    /// drawn from `seed`.
     ///
     /// # Errors
     /// [`NeuralError::Config`] for a configuration out of range.
@@ -106,6 +115,7 @@ impl<T: Real> NeuralAppearance<T> {
         for b in &mut mlp[slots[5].biases..slots[5].biases + 3] {
             *b = T::from_f64(0.5);
         }
+        mlp[slots[2].biases] = T::from_f64(INITIAL_OPACITY_LOGIT);
         Ok(Self {
             config,
             grid,
@@ -194,12 +204,14 @@ impl<T: Real> NeuralAppearance<T> {
 }
 
 /// What the model reads of each Gaussian: its position in the unit cube, its unit rotation
-/// (sign chosen with `w ≥ 0`) and clamped log-scales, and its centre (for the view direction).
+/// (sign chosen with `w ≥ 0`), its log-scales relative to the cube's side in units of
+/// [`LOG_SCALE_UNIT`] (clamped to ±[`LOG_SCALE_CLAMP`]), and its centre (for the view
+/// direction).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct NeuralInputs {
     /// Positions in the unit cube ([`Aabb::unit`]).
     pub unit: Vec<[f64; 3]>,
-    /// `[w, x, y, z, log s0, log s1, log s2]`.
+    /// `[w, x, y, z, l0, l1, l2]`, `l = (log s − ln side) / LOG_SCALE_UNIT`.
     pub attrs: Vec<[f64; ATTR_INPUTS]>,
     /// World centres.
     pub centres: Vec<[f64; 3]>,
@@ -222,6 +234,7 @@ impl NeuralInputs {
         self.unit.clear();
         self.attrs.clear();
         self.centres.clear();
+        let ln_side = aabb.side().ln();
         for (i, ((m, q), s)) in means.iter().zip(rotations).zip(log_scales).enumerate() {
             let bad = |what: &str| NeuralError::Inputs(format!("Gaussian {i}: {what}"));
             if !m.iter().all(|v| v.is_finite()) {
@@ -236,7 +249,7 @@ impl NeuralInputs {
                 if v.is_nan() {
                     0.0
                 } else {
-                    v.clamp(-LOG_SCALE_CLAMP, LOG_SCALE_CLAMP)
+                    ((v - ln_side) / LOG_SCALE_UNIT).clamp(-LOG_SCALE_CLAMP, LOG_SCALE_CLAMP)
                 }
             });
             self.unit.push(aabb.unit(*m));
