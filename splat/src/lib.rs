@@ -13,6 +13,7 @@
 //! - [`render`], the renderer (its own items at `render::`, e.g. `render::RenderOptions`);
 //! - [`fit`], the fitting pieces, one namespace each (`fit::adam`, `fit::loss`, ...);
 //! - [`material`], relightable Gaussians (HRAvatar's material attributes, split-sum shading);
+//! - [`neural`], the hash-grid MLP appearance model (`neural::NeuralAppearance`, ...);
 //! - the file formats [`ply`], [`spz`] and [`gltf_splat`], whose readers and writers share
 //!   names and constants (`read_gaussians`, `OPAQUE_LOGIT`, ...).
 
@@ -30,6 +31,7 @@ pub mod gltf_splat;
 mod lanes;
 mod lbs;
 pub mod material;
+pub mod neural;
 pub mod ply;
 pub mod render;
 mod sh;

@@ -14,7 +14,7 @@ use trisplat_geometry::io::{Format, IoError, read_gltf_base_color};
 use trisplat_geometry::{Camera, TriMesh};
 use trisplat_pipeline::config::{ExtractConfig, ExtractOptions};
 use trisplat_pipeline::fit::{
-    Checkpoint, FitFrame, FitOptions, TargetColor, fit, mesh_targets, read_image_targets,
+    FitFrame, FitOptions, TargetColor, fit, mesh_targets, read_image_targets,
 };
 use trisplat_pipeline::input::{read_bound, read_template};
 use trisplat_pipeline::refine::{PruneCriteria, RefineOptions};
@@ -22,10 +22,12 @@ use trisplat_pipeline::{Session, SessionOptions};
 use trisplat_splat::fit::adam::LearningRates;
 use trisplat_splat::fit::density::{self, DensifyOptions};
 use trisplat_splat::fit::loss::DEFAULT_LAMBDA_DSSIM;
+use trisplat_splat::neural::NeuralLearningRates;
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 use trisplat_splat::render::SURFEL_NEAR;
 use trisplat_splat::render::{RenderMode, RenderOptions};
 
+use super::fit_neural::{MlpPaths, print_checkpoint, run_mlp};
 use super::render::parse_rgb;
 use super::{
     Context, MAX_IMAGE_PIXELS, UsageError, parse_max_pixels, read_camera_file, refuse_to_overwrite,
@@ -240,6 +242,26 @@ pub struct FitArgs {
     /// Raise the active SH degree by one every N iterations, from 0 (3DGS: 1000).
     #[arg(long, value_name = "N")]
     pub sh_up_every: Option<u64>,
+    /// Appearance fitted: sh (the set's SH colour and opacities, with its geometry) or mlp (a
+    /// hash-grid MLP's colour and opacity, geometry held fixed; the weights are written to
+    /// OUT.safetensors beside the output PLY, which `render` reads).
+    #[arg(long, value_enum, default_value_t = Appearance::Sh)]
+    pub appearance: Appearance,
+    /// --appearance mlp: Adam's learning rate of the MLP weights.
+    #[arg(long, value_name = "LR", default_value_t = NeuralLearningRates::default().mlp)]
+    pub mlp_lr: f64,
+    /// --appearance mlp: Adam's learning rate of the hash tables.
+    #[arg(long, value_name = "LR", default_value_t = NeuralLearningRates::default().tables)]
+    pub hash_lr: f64,
+}
+
+/// What `fit` optimises.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Appearance {
+    /// Spherical harmonics and opacities per Gaussian, with the geometry.
+    Sh,
+    /// A hash-grid MLP (docs/conventions.md §5 "Neural appearance"); geometry fixed.
+    Mlp,
 }
 
 /// The template mesh targets are rendered from: `template` with the base colour (materials,
@@ -461,6 +483,21 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
         sh_up_every: args.sh_up_every.map(usize::try_from).transpose()?,
         time_budget: args.time_budget,
     };
+    if args.appearance == Appearance::Mlp {
+        let paths = MlpPaths {
+            gaussians: &args.gaussians,
+            template: &args.template,
+            cameras: &args.cameras,
+            output: &args.output,
+        };
+        let lr = NeuralLearningRates {
+            mlp: args.mlp_lr,
+            tables: args.hash_lr,
+        };
+        return run_mlp(
+            &paths, lr, ctx, &set, &template, &frames, &held_out, &options, origin,
+        );
+    }
     let bar = ctx.progress.bar(args.iterations, "fitting");
     let json = ctx.json;
     let fitted = fit(&set, &template, &frames, &held_out, &options, |c| {
@@ -540,24 +577,6 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             "opacity_resets": fitted.opacity_resets,
         }),
     )
-}
-
-fn print_checkpoint(c: &Checkpoint) {
-    let opt = |v: Option<f64>, p: usize| v.map_or_else(|| "-".to_string(), |v| format!("{v:.p$}"));
-    println!(
-        "iteration {}: loss {}, train PSNR {} dB; held-out PSNR {} dB, SSIM {}, depth L1 {}, \
-         normal {}°; {} Gaussians, SH degree {}, {:.1} s",
-        c.iteration,
-        opt(c.loss, 5),
-        opt(c.train_psnr, 2),
-        opt(c.eval_psnr, 2),
-        opt(c.eval_ssim, 4),
-        opt(c.eval_depth_l1, 5),
-        opt(c.eval_normal_deg, 2),
-        c.gaussians,
-        c.sh_degree,
-        c.seconds
-    );
 }
 
 /// The splatting models `fit` can differentiate.

@@ -25,7 +25,10 @@ use trisplat_splat::material::{
     material_image_files, render_relit, write_material_maps,
 };
 
-use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refuse_to_overwrite};
+use super::render_neural::NeuralRender;
+use super::{
+    Context, MAX_IMAGE_PIXELS, UsageError, parse_max_pixels, read_camera_file, refuse_to_overwrite,
+};
 
 /// Splatting models.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -60,7 +63,10 @@ pub enum FrameArg {
     image's own depth range, near = red; normals as (n+1)/2).\n\n\
     3dgs mode follows gsplat 1.5.3 (docs/conventions.md §5); --compat-3dgs switches to the original 3DGS \
     rasterizer's rules (alpha clamp 0.99, strict stop test, integer pixel centres, near 0.2, one \
-    3-sigma radius). Bound GaussianAvatars files (local parameters) must be baked to world space \
+    3-sigma radius). With neural appearance weights (`fit --appearance mlp`: \
+    <name>.safetensors beside the PLY, or --weights FILE) each Gaussian's colour and opacity \
+    come from the model, per camera; a weights file that does not match the PLY is an error \
+    and nothing is written. Bound GaussianAvatars files (local parameters) must be baked to world space \
     first with `trisplat deform`.\n\n\
     With --mesh the mesh is ray cast instead: depth, normal and alpha (the hit mask) maps.\n\n\
     With --env MAP.hdr (an equirectangular Radiance map, 2:1, +Y up) the Gaussians are relit: \
@@ -144,6 +150,10 @@ pub struct RenderArgs {
     /// 16384 x 16384).
     #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
     pub max_pixels: u64,
+    /// Neural appearance weights (safetensors, `fit --appearance mlp`); default:
+    /// <name>.safetensors beside the PLY when it exists.
+    #[arg(long, value_name = "FILE", conflicts_with = "mesh")]
+    pub weights: Option<PathBuf>,
 }
 
 fn parse_outputs(s: &str) -> Result<Outputs, String> {
@@ -349,6 +359,7 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     // Gaussians far from the world origin are stored relative to their local origin (f64
     // before f32), and the cameras moved with them.
     let (set, origin) = read_gaussians_local(input)?;
+    let mut neural = NeuralRender::open(args.weights.as_deref(), input, &set, origin)?;
     let mut options = if args.compat_3dgs {
         RenderOptions::original_3dgs()
     } else {
@@ -373,6 +384,14 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
     options.far = args.far;
     options.normal_frame = frame;
     if let Some(env_path) = &args.env {
+        if let Some(weights) = neural.as_ref().map(NeuralRender::path) {
+            return Err(UsageError(format!(
+                "--env relights the Gaussians' materials (or their SH colour as albedo); it does \
+                 not take neural appearance weights ({})",
+                weights.display()
+            ))
+            .into());
+        }
         let relight = Relight::open(args, env_path, &set)?;
         for camera in cameras {
             let camera = camera.translated(-origin);
@@ -393,8 +412,13 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
         return Ok(());
     }
     for camera in cameras {
-        let out = render(&set, &camera.translated(-origin), &options)
-            .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
+        let baked = neural.as_mut().map(|n| n.bake(&set, camera.position()));
+        let out = render(
+            baked.as_ref().unwrap_or(&set),
+            &camera.translated(-origin),
+            &options,
+        )
+        .with_context(|| format!("{}: camera '{}'", input.display(), camera.name))?;
         out.images.write(&args.output, &camera.name)?;
         bar.inc(1);
     }
