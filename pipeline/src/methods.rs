@@ -21,7 +21,7 @@
 //!   means), optionally only its largest edge-connected pieces (`alpha_keep_clusters`).
 //! - **opacity**: the opacity field of every deformed Gaussian (Gaussian Opacity Fields, the
 //!   extract crate's `opacity`) from the tsdf method's rig (`views`, `resolution`), framed
-//!   around the Gaussians and their 3-sigma boxes; the largest piece.
+//!   around the Gaussians and their 3-sigma boxes; every piece.
 
 use std::collections::BTreeMap;
 use std::time::Instant;

@@ -1,12 +1,13 @@
 //! `trisplat opacity-mesh GAUSSIANS.ply [--cameras C.json] -o MESH.ply [--views N]
-//! [--resolution R] [--keep-pieces all|largest]`: mesh the Gaussians' opacity field
+//! [--resolution R] [--keep-pieces all|major|largest] [--field gof|peak]`: mesh the Gaussians' opacity field
 //! (docs/conventions.md §6).
 
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use trisplat_extract::opacity::{
-    DEFAULT_BISECTION_STEPS, DEFAULT_LEVEL, KeepPieces, OpacityOptions, opacity_mesh,
+    AlphaRules, DEFAULT_BISECTION_STEPS, DEFAULT_LEVEL, KeepPieces, OpacityOptions, RayModel,
+    opacity_mesh,
 };
 use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_pipeline::config::{DEFAULT_RESOLUTION, DEFAULT_VIEWS};
@@ -21,6 +22,8 @@ use super::{Context, MAX_IMAGE_PIXELS, parse_max_pixels, read_camera_file, refus
 pub enum Pieces {
     /// Every connected piece.
     All,
+    /// Every piece with at least 1% of the area.
+    Major,
     /// The largest piece by area.
     Largest,
 }
@@ -56,8 +59,8 @@ pub struct OpacityMeshArgs {
     #[arg(long, value_name = "PX", default_value_t = DEFAULT_RESOLUTION,
         value_parser = clap::value_parser!(u32).range(8..=8192))]
     pub resolution: u32,
-    /// Which connected pieces to keep: the largest by area, or all.
-    #[arg(long, value_enum, default_value_t = Pieces::Largest)]
+    /// Which connected pieces to keep: all, every piece with at least 1% of the area, or the largest.
+    #[arg(long, value_enum, default_value_t = Pieces::All)]
     pub keep_pieces: Pieces,
     /// Level of the opacity field the surface lies at, in (0, 1).
     #[arg(long, default_value_t = DEFAULT_LEVEL, value_parser = parse_level)]
@@ -66,12 +69,27 @@ pub struct OpacityMeshArgs {
     #[arg(long, default_value_t = DEFAULT_BISECTION_STEPS,
         value_parser = clap::value_parser!(u32).range(0..=40))]
     pub steps: u32,
+    /// What a Gaussian adds to the opacity along a ray before its peak: its density at the point
+    /// (`gof`: Gaussian Opacity Fields' ramp; the level set lies in front of the median depth) or
+    /// nothing (`peak`: the level set lies where the renderer's transmittance halves, but
+    /// one-layer parts have no inside and vanish).
+    #[arg(long, value_enum, default_value_t = FieldModel::Gof)]
+    pub field: FieldModel,
     /// No vertex colours.
     #[arg(long)]
     pub no_colors: bool,
     /// Most pixels of one camera's image of --cameras.
     #[arg(long, value_name = "N", default_value_t = MAX_IMAGE_PIXELS, value_parser = parse_max_pixels)]
     pub max_pixels: u64,
+}
+
+/// `--field`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FieldModel {
+    /// The density at the point before the peak (GOF's).
+    Gof,
+    /// Nothing before the peak (the renderer's median depth).
+    Peak,
 }
 
 /// `--level`: in (0, 1).
@@ -110,9 +128,17 @@ pub fn run(args: OpacityMeshArgs, ctx: &Context) -> anyhow::Result<()> {
         bisection_steps: args.steps,
         keep: match args.keep_pieces {
             Pieces::All => KeepPieces::All,
+            Pieces::Major => KeepPieces::Major,
             Pieces::Largest => KeepPieces::Largest,
         },
         colors: !args.no_colors,
+        rules: AlphaRules {
+            model: match args.field {
+                FieldModel::Peak => RayModel::Peak,
+                FieldModel::Gof => RayModel::Gof,
+            },
+            ..AlphaRules::default()
+        },
         ..OpacityOptions::default()
     };
     let spinner = ctx.progress.spinner("meshing the opacity field");
@@ -120,9 +146,9 @@ pub fn run(args: OpacityMeshArgs, ctx: &Context) -> anyhow::Result<()> {
         .with_context(|| format!("{}: opacity mesh failed", args.gaussians.display()))?;
     spinner.finish_and_clear();
     let s = &out.stats;
-    if !ctx.quiet && s.pieces > 1 && options.keep == KeepPieces::Largest {
+    if !ctx.quiet && s.pieces > 1 && options.keep != KeepPieces::All {
         eprintln!(
-            "{}: the surface has {} pieces; kept the largest ({:.2}% of the area; --keep-pieces all keeps every piece)",
+            "{}: the surface has {} pieces; kept {:.2}% of the area (--keep-pieces all keeps every piece)",
             args.gaussians.display(),
             s.pieces,
             100.0 * s.kept_area_fraction

@@ -1,7 +1,8 @@
-//! The opacity field (GOF's definition, docs/conventions.md §6): the opacity of a point is the
-//! smallest, over the views that see it, of the opacity accumulated along the view's ray from
-//! the camera up to the point, each Gaussian contributing its density at the ray's point of
-//! highest density, or at the point itself when that lies beyond it. Evaluated one view at a
+//! The opacity field (docs/conventions.md §6): the opacity of a point is the smallest, over the
+//! views that see it, of the opacity accumulated along the view's ray from the camera up to the
+//! point, each Gaussian contributing its density at the ray's point of highest density once
+//! the point lies beyond it, and before that nothing ([`RayModel::Peak`]) or its density at the
+//! point itself ([`RayModel::Gof`], GOF's definition). Evaluated one view at a
 //! time over all points in parallel, so memory does not grow with the number of views.
 
 use glam::DVec3;
@@ -9,7 +10,25 @@ use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
 use super::gaussians::Prepared;
+use super::order::z_order;
 use super::view::{Hit, ViewBins};
+
+/// How a Gaussian adds to the opacity accumulated along a ray up to a point (docs/conventions.md
+/// §6). Either way it adds its density at the ray's point of highest density (the peak) once
+/// the point lies beyond that peak.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RayModel {
+    /// GOF's (the default): before the peak, the density at the point itself, so opacity ramps
+    /// up through the front half of each Gaussian and the level set lies in front of the
+    /// median depth (by ~1.2 σ for one opaque Gaussian).
+    #[default]
+    Gof,
+    /// Nothing before the peak: the accumulated opacity steps up at each Gaussian's peak, so its
+    /// level 1/2 is the depth where the renderer's transmittance halves (the median depth with
+    /// ray-peak depths, §5). A single layer of Gaussians then has no inside (the smallest over
+    /// views of a step is a step seen from the front), so thin or one-layer parts vanish.
+    Peak,
+}
 
 /// Compositing rules (the renderer's, docs/conventions.md §5).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -18,6 +37,8 @@ pub struct AlphaRules {
     pub min_alpha: f32,
     /// Alphas are clamped to at most this (gsplat's 0.999).
     pub max_alpha: f32,
+    /// What a Gaussian adds before its peak.
+    pub model: RayModel,
 }
 
 impl Default for AlphaRules {
@@ -25,6 +46,7 @@ impl Default for AlphaRules {
         Self {
             min_alpha: 1.0 / 255.0,
             max_alpha: 0.999,
+            model: RayModel::default(),
         }
     }
 }
@@ -82,11 +104,11 @@ fn accumulate<const COLOR: bool>(
         let v = DVec3::new(row(0), row(1), row(2));
         let u = DVec3::from_array(g.centre);
         let vv = v.length_squared();
-        let t = if vv > 0.0 {
-            (-u.dot(v) / vv).clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
+        let peak = if vv > 0.0 { -u.dot(v) / vv } else { 0.0 };
+        if peak > 1.0 && rules.model == RayModel::Peak {
+            continue;
+        }
+        let t = peak.clamp(0.0, 1.0);
         let q = (u + v * t).length_squared();
         if q > f64::from(g.q_max) {
             continue;
@@ -109,7 +131,8 @@ fn accumulate<const COLOR: bool>(
     1.0 - transmittance
 }
 
-/// The field at `points`, views streamed one at a time.
+/// The field at `points`, views streamed one at a time. The points are walked in Z-order so
+/// that neighbours share their tiles' Gaussians in cache; the result is in input order.
 pub(crate) fn evaluate(
     p: &Prepared,
     cameras: &[Camera],
@@ -117,6 +140,7 @@ pub(crate) fn evaluate(
     mode: Mode,
     rules: AlphaRules,
 ) -> Field {
+    let order = z_order(points);
     let mut value = vec![1.0f64; points.len()];
     let mut seen = vec![false; points.len()];
     let mut view = ViewBins::default();
@@ -126,9 +150,10 @@ pub(crate) fn evaluate(
         value
             .par_iter_mut()
             .zip(seen.par_iter_mut())
-            .zip(points.par_iter())
+            .zip(order.par_iter())
             .with_min_len(512)
-            .for_each(|((value, seen), &x)| {
+            .for_each(|((value, seen), &i)| {
+                let x = points[i as usize];
                 let stop = match mode {
                     Mode::Exact => *value,
                     Mode::Sign { level } if *value < level => return,
@@ -140,7 +165,15 @@ pub(crate) fn evaluate(
                 *value = value.min(acc);
             });
     }
-    Field { value, seen }
+    let mut field = Field {
+        value: vec![1.0; points.len()],
+        seen: vec![false; points.len()],
+    };
+    for (k, &i) in order.iter().enumerate() {
+        field.value[i as usize] = value[k];
+        field.seen[i as usize] = seen[k];
+    }
+    field
 }
 
 /// Colours at `points`: in the view where the point's accumulated opacity is smallest, the
@@ -151,15 +184,17 @@ pub(crate) fn colors(
     points: &[DVec3],
     rules: AlphaRules,
 ) -> Vec<[f32; 3]> {
+    let order = z_order(points);
     let mut best = vec![(f64::INFINITY, [0.5f32; 3]); points.len()];
     let mut view = ViewBins::default();
     for camera in cameras {
         view.prepare(p, camera);
         let view = &view;
         best.par_iter_mut()
-            .zip(points.par_iter())
+            .zip(order.par_iter())
             .with_min_len(512)
-            .for_each(|(best, &x)| {
+            .for_each(|(best, &i)| {
+                let x = points[i as usize];
                 let Some(hit) = view.locate(x) else { return };
                 let mut c = [0.0f64; 3];
                 let acc = accumulate::<true>(p, view, hit, x, best.0, rules, &mut c);
@@ -173,5 +208,9 @@ pub(crate) fn colors(
                 }
             });
     }
-    best.into_iter().map(|(_, c)| c).collect()
+    let mut out = vec![[0.5f32; 3]; points.len()];
+    for (k, &i) in order.iter().enumerate() {
+        out[i as usize] = best[k].1;
+    }
+    out
 }

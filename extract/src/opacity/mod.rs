@@ -17,6 +17,7 @@
 mod error;
 mod field;
 mod gaussians;
+mod order;
 mod pieces;
 mod tets;
 mod view;
@@ -30,7 +31,7 @@ use crate::delaunay3d::Delaunay3d;
 use field::{Mode, evaluate};
 
 pub use error::OpacityError;
-pub use field::AlphaRules;
+pub use field::{AlphaRules, RayModel};
 pub use gaussians::OpacityGaussians;
 
 use gaussians::{Prepared, tetra_points};
@@ -43,13 +44,19 @@ pub const DEFAULT_BISECTION_STEPS: u32 = 8;
 /// Gaussian never changes a pixel).
 pub const DEFAULT_OPACITY_CUT: f32 = 1.0 / 255.0;
 
+/// Share of the surface's area a piece needs for [`KeepPieces::Major`].
+pub const MAJOR_PIECE_FRACTION: f64 = 0.01;
+
 /// Which connected pieces of the surface are kept.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum KeepPieces {
-    /// Every piece.
-    All,
-    /// Only the largest by area (the default).
+    /// Every piece (the default: on LAM the face is a piece of its own and the ~420 small
+    /// pieces are hair and fragments the renders show; every piece scores best).
     #[default]
+    All,
+    /// Every piece with at least [`MAJOR_PIECE_FRACTION`] of the area.
+    Major,
+    /// Only the largest by area.
     Largest,
 }
 
@@ -227,13 +234,26 @@ pub fn opacity_mesh(
             stats.kept_area_fraction = 1.0;
             crossings.triangles
         }
-        KeepPieces::Largest => {
-            stats.kept_area_fraction = if total > 0.0 { areas[0] / total } else { 1.0 };
+        KeepPieces::Largest | KeepPieces::Major => {
+            let kept = if options.keep == KeepPieces::Largest {
+                1
+            } else {
+                areas
+                    .iter()
+                    .take_while(|&&a| a >= MAJOR_PIECE_FRACTION * total)
+                    .count()
+                    .max(1)
+            };
+            stats.kept_area_fraction = if total > 0.0 {
+                areas[..kept].iter().sum::<f64>() / total
+            } else {
+                1.0
+            };
             crossings
                 .triangles
                 .iter()
                 .zip(&piece)
-                .filter(|(_, p)| **p == 0)
+                .filter(|(_, p)| (**p as usize) < kept)
                 .map(|(t, _)| *t)
                 .collect()
         }

@@ -52,8 +52,75 @@ pub(crate) struct ViewBins {
     offsets: Vec<u32>,
     entries: Vec<u32>,
     order: Vec<u32>,
-    /// Per Gaussian: smallest box depth and tile rectangle.
-    foot: Vec<(f64, [u32; 4])>,
+    /// Per Gaussian: its footprint.
+    foot: Vec<Footprint>,
+    /// (tile, rank in `packed`) pairs, sorted.
+    pairs: Vec<u64>,
+}
+
+/// Where one Gaussian's reach ellipsoid can meet the view's rays.
+#[derive(Clone, Copy, Debug)]
+struct Footprint {
+    /// Smallest camera z of the reach box.
+    zmin: f64,
+    /// Tiles `[x0, x1) x [y0, y1)` the projected box touches (empty when culled).
+    rect: [u32; 4],
+    /// The reach ellipsoid's silhouette on the image plane `z = 1`, `(x, y, 1) K (x, y, 1)ᵀ >= 0`,
+    /// as `[k00, k01, k11, k02, k12, k22]`; `None` when every tile of the box is kept.
+    conic: Option<[f64; 6]>,
+}
+
+const CULLED: Footprint = Footprint {
+    zmin: f64::INFINITY,
+    rect: [0, 0, 0, 0],
+    conic: None,
+};
+
+/// Pixels by which a tile is widened before its test against a silhouette, so that rounding
+/// never drops a Gaussian the exact test along a ray would keep.
+const TILE_MARGIN: f64 = 0.01;
+
+/// Whether a silhouette conic can be trusted: bounded, and its peak value at the centre far
+/// above the rounding of its entries, which is relative to `magnitude`, the size of the terms
+/// `b bᵀ` and `κ A` that cancel in them (a thin Gaussian cancels them to almost nothing).
+/// Untrusted conics keep every tile of the box; so does a Gaussian under ~0.4 px across at
+/// 256², whose box is a tile or two anyway.
+fn well_conditioned(k: &[f64; 6], magnitude: f64) -> bool {
+    let [k00, k01, k11, k02, k12, k22] = *k;
+    let det = k00 * k11 - k01 * k01;
+    if !(k00 < 0.0 && k11 < 0.0 && det > 0.0 && det.is_finite()) {
+        return false;
+    }
+    let xc = (k01 * k12 - k11 * k02) / det;
+    let yc = (k01 * k02 - k00 * k12) / det;
+    let peak =
+        k00 * xc * xc + 2.0 * k01 * xc * yc + k11 * yc * yc + 2.0 * k02 * xc + 2.0 * k12 * yc + k22;
+    peak.is_finite() && peak > 1e-6 * magnitude * (1.0 + xc * xc + yc * yc)
+}
+
+/// Whether the conic region `Q(x, y) >= 0` (bounded: negative definite quadratic part) meets
+/// the rectangle `[x0, x1] x [y0, y1]`. Conservative: `true` when the region is not bounded.
+fn conic_meets(k: &[f64; 6], x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
+    let [k00, k01, k11, k02, k12, k22] = *k;
+    let q = |x: f64, y: f64| {
+        k00 * x * x + 2.0 * k01 * x * y + k11 * y * y + 2.0 * k02 * x + 2.0 * k12 * y + k22
+    };
+    let det = k00 * k11 - k01 * k01;
+    if !(k00 < 0.0 && k11 < 0.0 && det > 0.0) {
+        return true;
+    }
+    // The maximum of the concave Q over the rectangle: its centre if inside, else on an edge.
+    let xc = (k01 * k12 - k11 * k02) / det;
+    let yc = (k01 * k02 - k00 * k12) / det;
+    if (x0..=x1).contains(&xc) && (y0..=y1).contains(&yc) {
+        return q(xc, yc) >= 0.0;
+    }
+    [y0, y1]
+        .iter()
+        .any(|&y| q((-(k01 * y + k02) / k00).clamp(x0, x1), y) >= 0.0)
+        || [x0, x1]
+            .iter()
+            .any(|&x| q(x, (-(k01 * x + k12) / k11).clamp(y0, y1)) >= 0.0)
 }
 
 /// Where a point falls in a view.
@@ -88,14 +155,14 @@ impl ViewBins {
         self.foot = foot;
         self.order.clear();
         self.order.extend((0..n as u32).filter(|&g| {
-            let r = self.foot[g as usize].1;
+            let r = self.foot[g as usize].rect;
             r[0] < r[1] && r[2] < r[3]
         }));
         let foot = &self.foot;
         self.order.par_sort_unstable_by(|&a, &b| {
             foot[a as usize]
-                .0
-                .total_cmp(&foot[b as usize].0)
+                .zmin
+                .total_cmp(&foot[b as usize].zmin)
                 .then(a.cmp(&b))
         });
         let origin = self.origin;
@@ -103,7 +170,7 @@ impl ViewBins {
         self.packed
             .par_extend(self.order.par_iter().with_min_len(1024).map(|&g| {
                 let g = g as usize;
-                let zmin = foot[g].0;
+                let zmin = foot[g].zmin;
                 let mut z32 = zmin as f32;
                 if f64::from(z32) > zmin {
                     z32 = z32.next_down();
@@ -118,42 +185,61 @@ impl ViewBins {
                     index: g as u32,
                 }
             }));
+        // (tile, rank) for every tile the Gaussian's silhouette meets, sorted: each tile's
+        // Gaussians by rank, that is by (zmin, index).
+        let (tiles_x, t) = (self.tiles_x, f64::from(TILE));
+        let (fx, fy, cx, cy) = (self.fx, self.fy, self.cx, self.cy);
+        let mut pairs = std::mem::take(&mut self.pairs);
+        pairs.clear();
+        pairs.par_extend(
+            self.order
+                .par_iter()
+                .enumerate()
+                .with_min_len(256)
+                .flat_map_iter(|(rank, &g)| {
+                    let f = foot[g as usize];
+                    let [x0, x1, y0, y1] = f.rect;
+                    (y0..y1).flat_map(move |ty| {
+                        (x0..x1).filter_map(move |tx| {
+                            let keep = f.conic.as_ref().is_none_or(|k| {
+                                let u0 = f64::from(tx) * t - TILE_MARGIN;
+                                let v0 = f64::from(ty) * t - TILE_MARGIN;
+                                let (u1, v1) =
+                                    (u0 + t + 2.0 * TILE_MARGIN, v0 + t + 2.0 * TILE_MARGIN);
+                                conic_meets(
+                                    k,
+                                    (u0 - cx) / fx,
+                                    (u1 - cx) / fx,
+                                    (v0 - cy) / fy,
+                                    (v1 - cy) / fy,
+                                )
+                            });
+                            keep.then(|| u64::from(ty * tiles_x + tx) << 32 | rank as u64)
+                        })
+                    })
+                }),
+        );
+        pairs.par_sort_unstable();
         let tiles = (self.tiles_x * tiles_y) as usize;
         self.offsets.clear();
         self.offsets.resize(tiles + 1, 0);
-        for &g in &self.order {
-            let [x0, x1, y0, y1] = self.foot[g as usize].1;
-            for ty in y0..y1 {
-                for tx in x0..x1 {
-                    self.offsets[(ty * self.tiles_x + tx) as usize + 1] += 1;
-                }
-            }
+        for &pair in &pairs {
+            self.offsets[(pair >> 32) as usize + 1] += 1;
         }
         for t in 0..tiles {
             self.offsets[t + 1] += self.offsets[t];
         }
         self.entries.clear();
-        self.entries.resize(self.offsets[tiles] as usize, 0);
-        let mut fill: Vec<u32> = self.offsets[..tiles].to_vec();
-        for (k, &g) in self.order.iter().enumerate() {
-            let [x0, x1, y0, y1] = self.foot[g as usize].1;
-            for ty in y0..y1 {
-                for tx in x0..x1 {
-                    let t = (ty * self.tiles_x + tx) as usize;
-                    self.entries[fill[t] as usize] = k as u32;
-                    fill[t] += 1;
-                }
-            }
-        }
+        self.entries.extend(pairs.iter().map(|&pair| pair as u32));
+        self.pairs = pairs;
     }
 
-    /// The smallest camera z of Gaussian `g`'s reach box and the tiles `[x0, x1) x [y0, y1)`
-    /// its projection touches (empty when culled).
-    fn footprint(&self, p: &Prepared, g: usize, tiles_y: u32) -> (f64, [u32; 4]) {
-        const EMPTY: [u32; 4] = [0, 0, 0, 0];
+    /// Gaussian `g`'s reach box's smallest camera z, the tiles its projection touches, and the
+    /// silhouette of its reach ellipsoid.
+    fn footprint(&self, p: &Prepared, g: usize, tiles_y: u32) -> Footprint {
         let c = self.rot * (p.means[g] - self.origin);
         if c.z <= NEAR || p.q_max[g] <= 0.0 {
-            return (f64::INFINITY, EMPTY);
+            return CULLED;
         }
         let r = p.q_max[g].sqrt();
         let a = p.axes[g].map(|axis| self.rot * axis * r);
@@ -175,7 +261,11 @@ impl ViewBins {
         let tiles_x = self.tiles_x;
         if zmin <= NEAR {
             // The box reaches the camera: any ray may cross it.
-            return (f64::NEG_INFINITY, [0, tiles_x, 0, tiles_y]);
+            return Footprint {
+                zmin: f64::NEG_INFINITY,
+                rect: [0, tiles_x, 0, tiles_y],
+                conic: None,
+            };
         }
         let t = f64::from(TILE);
         let range = |lo: f64, hi: f64, size: u32, tiles: u32| {
@@ -188,7 +278,32 @@ impl ViewBins {
         };
         let (x0, x1) = range(lo[0], hi[0], self.width, tiles_x);
         let (y0, y1) = range(lo[1], hi[1], self.height, tiles_y);
-        (zmin, [x0, x1, y0, y1])
+        // A ray `s d` (camera space) meets the ellipsoid `|N (X - c)|² <= q_max` (N = M Wᵀ)
+        // iff `(dᵀ A c)² >= (cᵀ A c - q_max) dᵀ A d`, A = NᵀN: the cone `dᵀ (b bᵀ - κ A) d >= 0`
+        // with `b = A c`, `κ = cᵀ A c - q_max` (> 0: the camera lies outside the box).
+        let m = DMat3::from_cols_array_2d(&p.whiten[g].map(|row| row.map(f64::from))).transpose();
+        let n = m * self.rot.transpose();
+        let am = n.transpose() * n;
+        let b = am * c;
+        let kappa = c.dot(b) - p.q_max[g];
+        // The terms cancel: rounding is relative to the largest before cancelling.
+        let magnitude = b.length_squared()
+            + kappa.abs()
+                * am.to_cols_array()
+                    .iter()
+                    .fold(0.0f64, |m, v| m.max(v.abs()))
+                * 3.0;
+        let conic = (kappa > 0.0)
+            .then(|| {
+                let k = |i: usize, j: usize| b[i] * b[j] - kappa * am.col(j)[i];
+                [k(0, 0), k(0, 1), k(1, 1), k(0, 2), k(1, 2), k(2, 2)]
+            })
+            .filter(|k| well_conditioned(k, magnitude));
+        Footprint {
+            zmin,
+            rect: [x0, x1, y0, y1],
+            conic,
+        }
     }
 
     /// Where world point `x` falls: `None` behind the near plane or outside the image.
