@@ -34,7 +34,8 @@ pub enum GltfCompression {
     Quantize,
     /// As `Quantize`, and every buffer view compressed with `EXT_meshopt_compression`
     /// (required; vertex and animation data in ATTRIBUTES mode, indices in TRIANGLES mode).
-    /// The default: three.js, Babylon.js, Blender (3.6 and later) and gltfpack read it.
+    /// The default: three.js, Babylon.js and gltfpack read it (for a reader without the
+    /// extension, such as Blender's importer, write `None`).
     #[default]
     Meshopt,
 }
