@@ -6,7 +6,8 @@
 // TOL x (frame k's bounding-box diagonal) of frame k's PLY (FRAMES_DIR/frame_*.ply in name
 // order). Frame times: --report report.json (its frame_times) or --fps F (k / F).
 //
-// usage: node check.mjs [--report report.json | --fps F] [--tolerance 1e-4] A.glb=A_frames ...
+// usage: node check.mjs [--report report.json | --fps F] [--tolerance 1e-4] [--only K,K,...]
+//        A.glb=A_frames ...   (--only: check those frames alone, for long tracks)
 // Prints one line per file and "N passed, M failed"; exits 1 on any failure.
 import fs from 'node:fs';
 import path from 'node:path';
@@ -17,12 +18,13 @@ import { PLYLoader } from 'three/examples/jsm/loaders/PLYLoader.js';
 import { MeshoptDecoder } from 'three/examples/jsm/libs/meshopt_decoder.module.js';
 
 function parseArgs(argv) {
-  const opts = { report: null, fps: null, tolerance: 1e-4, pairs: [] };
+  const opts = { report: null, fps: null, tolerance: 1e-4, only: null, pairs: [] };
   for (let i = 0; i < argv.length; i++) {
     const a = argv[i];
     if (a === '--report') opts.report = argv[++i];
     else if (a === '--fps') opts.fps = Number(argv[++i]);
     else if (a === '--tolerance') opts.tolerance = Number(argv[++i]);
+    else if (a === '--only') opts.only = new Set(argv[++i].split(',').map(Number));
     else if (a.includes('=')) {
       const [glb, frames] = a.split('=');
       opts.pairs.push({ glb, frames });
@@ -84,7 +86,7 @@ function visibleVertices(scene) {
   return out;
 }
 
-async function checkPair({ glb, frames }, times, tolerance) {
+async function checkPair({ glb, frames }, times, tolerance, only) {
   const problems = [];
   const v = await validate(glb);
   if (v.numErrors > 0) problems.push(`validator: ${v.numErrors} errors: ${v.shown.join('; ')}`);
@@ -105,6 +107,7 @@ async function checkPair({ glb, frames }, times, tolerance) {
   action.play();
   let worst = 0;
   for (let k = 0; k < files.length; k++) {
+    if (only && !only.has(k)) continue;
     mixer.setTime(times[k]);
     const got = visibleVertices(gltf.scene);
     const want = framePositions(files[k]);
@@ -147,7 +150,7 @@ async function main() {
     try {
       const count = fs.readdirSync(pair.frames).filter((f) => f.endsWith('.ply')).length;
       times ??= Array.from({ length: count }, (_, k) => k / opts.fps);
-      result = await checkPair(pair, times, opts.tolerance);
+      result = await checkPair(pair, times, opts.tolerance, opts.only);
     } catch (e) {
       result = { problems: [`${e.stack ?? e}`], v: null, worst: NaN };
     }
