@@ -350,7 +350,11 @@ fn diagonal(frames: &[TriMesh]) -> f64 {
 /// Every frame at its time: positions within the bound (and not exact: quantised), normals
 /// within a few degrees.
 fn check_frames(file: &Decoded, frames: &[TriMesh], times: &[f64]) {
-    let diag = diagonal(frames);
+    check_frames_of(file, frames, times, diagonal(frames));
+}
+
+/// [`check_frames`] for `frames` of a sequence whose diagonal is `diag`.
+fn check_frames_of(file: &Decoded, frames: &[TriMesh], times: &[f64], diag: f64) {
     let mut worst = 0.0f64;
     for (k, frame) in frames.iter().enumerate() {
         let (got, normals) = file.visible(times[k]);
@@ -500,4 +504,64 @@ fn small_meshes_index_with_u16_and_spot_positions_as_short() {
         (s * 16384.0 / diagonal(&frames) - 1.0).abs() < 1e-6,
         "step {s}"
     );
+}
+
+/// Compressed, a sequence whose plain size needs parts is first tried as one file: kept when its
+/// compressed buffer fits, else cut into parts by the plain sizes, each a complete file.
+#[test]
+fn compressed_parts_only_when_the_compressed_buffer_does_not_fit() {
+    use trisplat_geometry::io::write_sequence_parts_with;
+    let dir = tempfile::tempdir().expect("folder");
+    let frames = wave(24);
+    let times: Vec<f64> = (0..frames.len()).map(|k| k as f64 / 30.0).collect();
+    let options = SequenceOptions {
+        layout: SequenceLayout::Auto,
+        compression: GltfCompression::Meshopt,
+    };
+    // One frame's plain bound: positions, normals (24 bytes a vertex), indices, keys.
+    let frame_bytes = (24 * frames[0].vertex_count() + 12 * frames[0].triangle_count() + 64) as u64;
+    let path = dir.path().join("one.glb");
+    let written = write_sequence_parts_with(
+        &path,
+        &frames.as_slice(),
+        &times,
+        &options,
+        30 * frame_bytes,
+    )
+    .expect("one file");
+    assert_eq!(
+        written,
+        [path.clone()],
+        "the compressed sequence fits in one file"
+    );
+    check_frames(&decode(&path), &frames, &times);
+    let compressed = std::fs::metadata(&path).expect("size").len();
+    assert!(compressed < 30 * frame_bytes);
+    // A limit below the compressed size but above one frame: parts of the plain cut.
+    let limit = frame_bytes + frame_bytes / 2;
+    assert!(
+        compressed > limit,
+        "the test needs a sequence that compresses to over {limit}"
+    );
+    let path = dir.path().join("cut.glb");
+    let parts = write_sequence_parts_with(&path, &frames.as_slice(), &times, &options, limit)
+        .expect("parts");
+    assert!(parts.len() > 1, "{} parts under {limit} bytes", parts.len());
+    assert!(!path.exists(), "no whole file when it does not fit");
+    let mut first = 0;
+    for part in &parts {
+        let file = decode(part);
+        let count = file.json["animations"][0]["samplers"][0]["input"]
+            .as_u64()
+            .map(|a| {
+                file.json["accessors"][a as usize]["count"]
+                    .as_u64()
+                    .expect("count")
+            })
+            .expect("keys") as usize;
+        let run = first..first + count;
+        check_frames_of(&file, &frames[run.clone()], &times[run], diagonal(&frames));
+        first += count;
+    }
+    assert_eq!(first, frames.len(), "the parts hold every frame once");
 }
