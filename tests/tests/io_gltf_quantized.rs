@@ -531,7 +531,7 @@ fn compressed_parts_only_when_the_compressed_buffer_does_not_fit() {
     .expect("one file");
     assert_eq!(
         written,
-        [path.clone()],
+        std::slice::from_ref(&path),
         "the compressed sequence fits in one file"
     );
     check_frames(&decode(&path), &frames, &times);
