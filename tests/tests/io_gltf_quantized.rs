@@ -565,3 +565,67 @@ fn compressed_parts_only_when_the_compressed_buffer_does_not_fit() {
     }
     assert_eq!(first, frames.len(), "the parts hold every frame once");
 }
+
+/// Frames that change between the survey and the writing (a frame file rewritten meanwhile).
+struct Changing {
+    frames: Vec<TriMesh>,
+    reads: std::sync::atomic::AtomicUsize,
+}
+
+impl trisplat_geometry::io::FrameSource for Changing {
+    fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    fn frame(
+        &self,
+        k: usize,
+    ) -> Result<std::borrow::Cow<'_, TriMesh>, trisplat_geometry::io::IoError> {
+        let reads = self.reads.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        // After the survey's reading of every frame, frame 1 loses its last vertex.
+        if k == 1 && reads >= self.frames.len() {
+            let f = &self.frames[1];
+            let n = f.vertex_count() - 1;
+            let triangles: Vec<[u32; 3]> = f
+                .triangles()
+                .iter()
+                .filter(|t| t.iter().all(|&v| (v as usize) < n))
+                .copied()
+                .collect();
+            return Ok(std::borrow::Cow::Owned(TriMesh::new(
+                f.positions()[..n].to_vec(),
+                triangles,
+            )));
+        }
+        Ok(std::borrow::Cow::Borrowed(&self.frames[k]))
+    }
+}
+
+#[test]
+fn a_frame_changed_while_writing_is_an_error_and_nothing_is_left() {
+    let dir = tempfile::tempdir().expect("folder");
+    for compression in [GltfCompression::Quantize, GltfCompression::Meshopt] {
+        let source = Changing {
+            frames: wave(3),
+            reads: 0.into(),
+        };
+        let path = dir.path().join("changed.glb");
+        let options = SequenceOptions {
+            layout: SequenceLayout::Auto,
+            compression,
+        };
+        let err = write_sequence_with(&path, &source, &[0.0, 1.0, 2.0], &options)
+            .expect_err("a changed frame");
+        let message = err.to_string();
+        assert!(
+            message.contains("changed.glb") && message.contains("frame 1"),
+            "{compression:?}: {message}"
+        );
+        let left: Vec<_> = std::fs::read_dir(dir.path()).expect("list").collect();
+        assert!(
+            left.is_empty(),
+            "{compression:?}: {} files left",
+            left.len()
+        );
+    }
+}

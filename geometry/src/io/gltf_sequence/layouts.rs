@@ -45,6 +45,20 @@ fn morph_targets(
     let mut targets = Vec::with_capacity(run.len());
     for k in run {
         let frame = frames.frame(k)?;
+        if frame.vertex_count() != base.vertex_count() {
+            // The survey saw the base's count: the file changed since (a compressed file is
+            // written in one pass, with no second reading to compare).
+            return Err(IoError::malformed(
+                path,
+                format!("frame {k}"),
+                format!(
+                    "has {} vertices, {} when the sequence was surveyed \
+                     (a frame changed while the sequence was written)",
+                    frame.vertex_count(),
+                    base.vertex_count()
+                ),
+            ));
+        }
         let mut target = Map::new();
         let positions = match (grid, &primitive.steps) {
             (Some(grid), Some(base_steps)) => {
