@@ -60,8 +60,34 @@ fn folder_of_frames_to_glb_in_natural_order() {
     let files = write_frames(&frames_dir, 12, |k| format!("f{k}.ply"));
     std::fs::write(frames_dir.join("notes.txt"), "not a frame").expect("write");
     let output = dir.join("anim.glb");
-    run_ok(&["convert", s(&frames_dir), s(&output), "--fps", "12.5"]);
+    // Plain f32 storage: `GltfTemplate` (the gltf crate) reads it (quantised and compressed
+    // files: tests/tests/io_gltf_quantized.rs and the three.js check).
+    run_ok(&[
+        "convert",
+        s(&frames_dir),
+        s(&output),
+        "--fps",
+        "12.5",
+        "--gltf-compression",
+        "none",
+    ]);
     check_plays(&output, &files, 12.5);
+    // The default: quantised and meshopt-compressed, much smaller.
+    let packed = dir.join("packed.glb");
+    run_ok(&["convert", s(&frames_dir), s(&packed), "--fps", "12.5"]);
+    let bytes = std::fs::read(&packed).expect("glb");
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).expect("json");
+    assert_eq!(
+        doc["extensionsRequired"],
+        serde_json::json!(["EXT_meshopt_compression", "KHR_mesh_quantization"])
+    );
+    let plain = std::fs::metadata(&output).expect("size").len();
+    assert!(
+        (bytes.len() as u64) * 2 < plain,
+        "{} bytes compressed, {plain} plain",
+        bytes.len()
+    );
 }
 
 #[test]
@@ -76,7 +102,13 @@ fn patterns_of_frames_to_gltf_at_the_default_rate() {
         ("frame_*.obj", "glob.glb"),
     ] {
         let output = dir.join(name);
-        run_ok(&["convert", s(&frames_dir.join(pattern)), s(&output)]);
+        run_ok(&[
+            "convert",
+            s(&frames_dir.join(pattern)),
+            s(&output),
+            "--gltf-compression",
+            "none",
+        ]);
         check_plays(&output, &files, 30.0);
     }
 }
@@ -200,6 +232,13 @@ fn frames_of_any_topology_with_the_flag_become_one_node_per_run() {
     let same_dir = dir.join("same");
     let same = write_frames(&same_dir, 3, |k| format!("f{k}.obj"));
     let same_out = dir.join("same.glb");
-    run_ok(&["convert", s(&same_dir), s(&same_out), "--any-topology"]);
+    run_ok(&[
+        "convert",
+        s(&same_dir),
+        s(&same_out),
+        "--any-topology",
+        "--gltf-compression",
+        "none",
+    ]);
     check_plays(&same_out, &same, 30.0);
 }

@@ -507,7 +507,8 @@ fn targets_choose_the_outputs() {
     ] {
         let out = dir.join(targets.replace(',', "_"));
         let mut args = extract_args(&template, &frames, &out);
-        args.extend(["--targets", targets]);
+        // Plain f32 glTF, which the static reader reads (not the compressed default).
+        args.extend(["--targets", targets, "--gltf-compression", "none"]);
         run_ok(&args);
         assert_eq!(ply_count(&out) > 0, meshes, "{targets}: frame files");
         assert_eq!(out.join("delaunay.glb").is_file(), glb, "{targets}: glb");

@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 use trisplat_geometry::io::{
-    FrameFiles, GLB_PART_LIMIT, SequenceLayout, write_sequence_parts, write_usd_sequence,
+    FrameFiles, GLB_PART_LIMIT, GltfCompression, SequenceLayout, SequenceOptions,
+    write_sequence_parts_with, write_usd_sequence,
 };
 
 use crate::config::{ExtractConfig, Method, OutputTarget};
@@ -241,23 +242,29 @@ pub fn check_outputs(
 
 /// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
 /// report), one USD mesh cache per method when asked (`<method>.usda`), the report files
-/// (JSON, Markdown, HTML) and the plot (SVG, PNG).
+/// (JSON, Markdown, HTML) and the plot (SVG, PNG). `compression`: how the glTF stores its
+/// data.
 pub fn write_outputs(
     out: &Path,
     report: &mut Report,
     frame_files: &FrameFilesByMethod,
     targets: &[OutputTarget],
+    compression: GltfCompression,
 ) -> Result<(), PipelineError> {
     if targets.contains(&OutputTarget::Glb) {
         // One method per task: reading the frame files back is most of the work.
         let written: Vec<(Method, Vec<PathBuf>)> =
             first_error_in_order(frame_files.par_iter().map(|(m, files)| {
                 let glb = out.join(format!("{}.glb", m.name()));
-                write_sequence_parts(
+                let options = SequenceOptions {
+                    layout: SequenceLayout::Auto,
+                    compression,
+                };
+                write_sequence_parts_with(
                     &glb,
                     &FrameFiles(files),
                     &report.frame_times,
-                    SequenceLayout::Auto,
+                    &options,
                     GLB_PART_LIMIT,
                 )
                 .map(|parts| (*m, parts))

@@ -159,7 +159,13 @@ pub fn run(
         report.thumbnails = thumbnails_of(out, thumbnail_frame, &report);
     }
     let frame_files = frame_files(out, &report);
-    write_outputs(out, &mut report, &frame_files, &o.outputs.targets)?;
+    write_outputs(
+        out,
+        &mut report,
+        &frame_files,
+        &o.outputs.targets,
+        o.outputs.gltf_compression,
+    )?;
     if o.outputs.writes_frame_files() && !o.outputs.writes(OutputTarget::Meshes) {
         // Written only to assemble the glTF or the USD cache.
         remove_frame_files(&frame_files);

@@ -66,6 +66,12 @@ pub struct ConvertArgs {
     /// become one morph-target mesh.
     #[arg(long)]
     pub any_topology: bool,
+    /// How a frame sequence's glTF stores its data: meshopt (default; 16-bit positions and
+    /// morph deltas within 5.3e-5 of the sequence's bounding-box diagonal, byte normals,
+    /// KHR_mesh_quantization + EXT_meshopt_compression), quantize (the integers,
+    /// uncompressed), none (plain f32 glTF 2.0, every reader; largest).
+    #[arg(long, value_enum, value_name = "KIND", default_value_t = io::GltfCompression::Meshopt)]
+    pub gltf_compression: io::GltfCompression,
     /// Gaussian formats.
     #[command(flatten)]
     pub gaussian: GaussianFormatArgs,
@@ -293,16 +299,15 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     let result = if usda {
         io::write_usd_sequence(&args.output, &io::FrameFiles(files), &times).map(|_| ())
     } else {
-        io::write_sequence(
-            &args.output,
-            &io::FrameFiles(files),
-            &times,
-            if args.any_topology {
+        let options = io::SequenceOptions {
+            layout: if args.any_topology {
                 SequenceLayout::Auto
             } else {
                 SequenceLayout::MorphTargets
             },
-        )
+            compression: args.gltf_compression,
+        };
+        io::write_sequence_with(&args.output, &io::FrameFiles(files), &times, &options)
     };
     spinner.finish_and_clear();
     result?;

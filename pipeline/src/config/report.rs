@@ -1,6 +1,7 @@
 //! Options of the metrics and of what a run writes, with their defaults and the resource
 //! limits checked before anything is allocated.
 
+use trisplat_geometry::io::GltfCompression;
 use trisplat_geometry::metrics::Tau;
 
 /// Default points sampled on each mesh for the metrics.
@@ -150,6 +151,14 @@ pub struct OutputOptions {
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_delimiter = ',', value_name = "LIST",
         num_args = 1.., default_values_t = OutputTarget::ALL))]
     pub targets: Vec<OutputTarget>,
+    /// How the glb stores its data: meshopt (the default: positions and morph deltas as
+    /// 16-bit integers within 5.3e-5 of the sequence's bounding-box diagonal, normals as
+    /// bytes, KHR_mesh_quantization, and every buffer compressed with EXT_meshopt_compression;
+    /// three.js and Babylon.js read it), quantize (the integers, uncompressed),
+    /// none (plain f32 glTF that every reader plays, about 10-50x larger).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, value_name = "KIND",
+        default_value_t = GltfCompression::Meshopt))]
+    pub gltf_compression: GltfCompression,
 }
 
 impl Default for OutputOptions {
@@ -158,6 +167,7 @@ impl Default for OutputOptions {
             error_colors: false,
             view_axes: trisplat_splat::Axes::Luf,
             targets: OutputTarget::ALL.to_vec(),
+            gltf_compression: GltfCompression::default(),
         }
     }
 }

@@ -18,7 +18,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use trisplat_geometry::io::IoError;
+use trisplat_geometry::io::{GltfCompression, IoError};
 
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
@@ -110,7 +110,14 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
         }
     }
     merged.thumbnails = link_thumbnails(&reports, out, &merged.frames)?;
-    write_outputs(out, &mut merged, &frame_files, &OutputTarget::ALL)?;
+    // The shards' own glTF storage is not recorded in their reports: the default.
+    write_outputs(
+        out,
+        &mut merged,
+        &frame_files,
+        &OutputTarget::ALL,
+        GltfCompression::default(),
+    )?;
     Ok(merged)
 }
 
