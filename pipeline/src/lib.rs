@@ -103,7 +103,7 @@ pub use error::PipelineError;
 pub use event::Event;
 pub use journal::JOURNAL;
 pub use lock::FolderLock;
-pub use merge::merge;
+pub use merge::{MergeOutputs, merge, merge_with};
 pub use plan::{Plan, Stage, StagePlan};
 pub use report::Report;
 pub use run::run;

@@ -8,11 +8,12 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
+use trisplat_geometry::io::GltfCompression;
 use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::config::{BindOptions, GaussianLayout, OutputOptions, OutputTarget};
 use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, Method, PipelineError, Report, RunControl, Shard, ShardOptions,
-    ShardSpec, merge, run,
+    ExtractConfig, ExtractOptions, MergeOutputs, Method, PipelineError, Report, RunControl, Shard,
+    ShardOptions, ShardSpec, merge, merge_with, run,
 };
 
 /// The LAM fixture driven by `track` (10 frames), meshed by `methods` over `frames` into
@@ -168,4 +169,43 @@ fn shard_flags_split_the_track_and_merge_refuses_an_incomplete_split() {
         let b = std::fs::read(merged_dir.join(&glb)).expect("merged glb");
         assert!(a == b, "{glb} differs from one run");
     }
+    // The job's outputs given to the merge: plain glTF and a USD cache, no frame files.
+    let outputs = MergeOutputs {
+        targets: vec![OutputTarget::Glb, OutputTarget::Usd],
+        gltf_compression: GltfCompression::None,
+    };
+    let plain_dir = dir.join("merged_plain");
+    merge_with(&shards, &plain_dir, false, &outputs).expect("merge with outputs");
+    for m in methods {
+        let glb = std::fs::read(plain_dir.join(format!("{}.glb", m.name()))).expect("glb");
+        let json_length = u32::from_le_bytes(glb[12..16].try_into().expect("4 bytes")) as usize;
+        let json = String::from_utf8_lossy(&glb[20..20 + json_length]);
+        assert!(
+            !json.contains("EXT_meshopt_compression"),
+            "{}: {json}",
+            m.name()
+        );
+        let meshopt = std::fs::read(merged_dir.join(format!("{}.glb", m.name()))).expect("glb");
+        assert!(
+            glb.len() > meshopt.len(),
+            "{}: plain is not larger",
+            m.name()
+        );
+        let usda =
+            std::fs::read_to_string(plain_dir.join(format!("{}.usda", m.name()))).expect("usda");
+        assert!(usda.contains("endTimeCode = 9\n"), "{}", m.name());
+        assert!(
+            !plain_dir.join(m.name()).join("frame_000000.ply").exists(),
+            "{}: frame files kept without the meshes target",
+            m.name()
+        );
+    }
+    assert!(
+        !plain_dir.join("report.json").exists(),
+        "report without the report target"
+    );
+    assert!(
+        !plain_dir.join("thumbnails").exists(),
+        "thumbnails without the report target"
+    );
 }

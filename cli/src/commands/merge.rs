@@ -1,7 +1,10 @@
-//! `trisplat merge SHARD... -o DIR [--force]`: joins `extract` runs over disjoint frame ranges
+//! `trisplat merge SHARD... -o DIR [--force] [--targets LIST] [--gltf-compression KIND]`: joins `extract` runs over disjoint frame ranges
 //! into one run folder.
 
 use std::path::PathBuf;
+
+use trisplat_geometry::io::GltfCompression;
+use trisplat_pipeline::{MergeOutputs, OutputTarget};
 
 use super::Context;
 use super::extract::{fail_on_failed_frames, print_summary};
@@ -31,6 +34,16 @@ pub struct MergeArgs {
     /// Start over in an output folder that holds a run (its outputs are removed).
     #[arg(long)]
     pub force: bool,
+    /// What to write, as extract's --targets: meshes (the frame files), glb, report, usd
+    /// (<method>.usda); without meshes the linked frame files are removed once the glb and
+    /// USD cache are assembled. The shards' own --targets are not recorded: give the job's.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "LIST", num_args = 1..,
+        default_values_t = OutputTarget::ALL)]
+    pub targets: Vec<OutputTarget>,
+    /// How the glb stores its data, as extract's --gltf-compression (the shards' own choice
+    /// is not recorded: give the job's).
+    #[arg(long, value_enum, value_name = "KIND", default_value_t = GltfCompression::Meshopt)]
+    pub gltf_compression: GltfCompression,
 }
 
 /// Runs `trisplat merge`.
@@ -41,16 +54,14 @@ pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
     let spinner = ctx
         .progress
         .spinner("merge: linking frames, writing sequences and report");
-    let result = trisplat_pipeline::merge(&args.shards, &args.output, args.force);
+    let outputs = MergeOutputs {
+        targets: args.targets.clone(),
+        gltf_compression: args.gltf_compression,
+    };
+    let result = trisplat_pipeline::merge_with(&args.shards, &args.output, args.force, &outputs);
     spinner.finish_and_clear();
     let report = result?;
     // No journal: the shards keep theirs.
-    print_summary(
-        &report,
-        &args.output,
-        &trisplat_pipeline::OutputTarget::ALL,
-        false,
-        ("merge", ctx),
-    )?;
+    print_summary(&report, &args.output, &args.targets, false, ("merge", ctx))?;
     fail_on_failed_frames(&report)
 }

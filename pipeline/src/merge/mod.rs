@@ -23,7 +23,9 @@ use trisplat_geometry::io::{GltfCompression, IoError};
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
 use crate::lock::FolderLock;
-use crate::output::{FrameFilesByMethod, frame_file, refuse_used_output, write_outputs};
+use crate::output::{
+    FrameFilesByMethod, frame_file, refuse_used_output, remove_frame_files, write_outputs,
+};
 mod checks;
 
 use crate::report::{
@@ -41,6 +43,40 @@ use crate::report::{
 /// [`PipelineError::UsedOutput`] for an output folder holding a run (without `force`); write
 /// errors. Nothing is written when the shards are refused.
 pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, PipelineError> {
+    merge_with(shards, out, force, &MergeOutputs::default())
+}
+
+/// What a merge writes: `extract`'s `--targets` and `--gltf-compression` (the shards' reports
+/// do not record theirs).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MergeOutputs {
+    /// The outputs; without [`OutputTarget::Meshes`] the linked frame files are removed once
+    /// the glTF and USD cache are assembled.
+    pub targets: Vec<OutputTarget>,
+    /// How the glTF stores its data.
+    pub gltf_compression: GltfCompression,
+}
+
+impl Default for MergeOutputs {
+    /// `extract`'s defaults.
+    fn default() -> Self {
+        Self {
+            targets: OutputTarget::ALL.to_vec(),
+            gltf_compression: GltfCompression::default(),
+        }
+    }
+}
+
+/// [`merge`] writing `outputs`.
+///
+/// # Errors
+/// As [`merge`].
+pub fn merge_with(
+    shards: &[PathBuf],
+    out: &Path,
+    force: bool,
+    outputs: &MergeOutputs,
+) -> Result<Report, PipelineError> {
     let bad = |path: &Path, problem: String| PipelineError::Merge {
         path: path.to_path_buf(),
         problem,
@@ -109,15 +145,22 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
             frame_files.entry(m.method).or_default().push(dst);
         }
     }
-    merged.thumbnails = link_thumbnails(&reports, out, &merged.frames)?;
-    // The shards' own glTF storage is not recorded in their reports: the default.
+    merged.thumbnails = if outputs.targets.contains(&OutputTarget::Report) {
+        link_thumbnails(&reports, out, &merged.frames)?
+    } else {
+        None
+    };
     write_outputs(
         out,
         &mut merged,
         &frame_files,
-        &OutputTarget::ALL,
-        GltfCompression::default(),
+        &outputs.targets,
+        outputs.gltf_compression,
     )?;
+    if !outputs.targets.contains(&OutputTarget::Meshes) {
+        // Linked only to assemble the glTF or the USD cache.
+        remove_frame_files(&frame_files);
+    }
     Ok(merged)
 }
 
