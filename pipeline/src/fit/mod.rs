@@ -44,7 +44,7 @@ use trisplat_splat::fit::bound::{
 use trisplat_splat::fit::density::{
     DensityStats, RESET_OPACITY, camera_extent, densify_and_prune, reset_opacity,
 };
-use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, DepthNormal, Ssim, l1, masked_l1, psnr};
+use trisplat_splat::fit::loss::{DEFAULT_LAMBDA_DSSIM, DepthNormal, l1, masked_l1, psnr};
 use trisplat_splat::fit::sh_schedule::{active_degree, expand_sh_grads, truncate_sh};
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, ImageGrads, RenderMode, RenderOptions, backward_into,
@@ -57,12 +57,14 @@ use crate::refine::{RefineOptions, refine};
 mod checkpoint;
 mod inputs;
 mod neural;
+mod photometric;
 mod score;
 mod targets;
 
 pub use checkpoint::Checkpoint;
 pub use inputs::{FitError, FitFrame, Target};
 pub use neural::{CommonOptions, NeuralFitOptions, NeuralFitted, fit_neural};
+use photometric::{SsimCache, photometric_loss};
 use score::evaluate;
 pub use targets::{TargetColor, mesh_targets, read_image_targets};
 pub use trisplat_splat::fit::density::DensifyOptions;
@@ -391,7 +393,7 @@ pub fn fit(
     let mut g_local = GaussianGrads::default();
     let mut buffers = Buffers::default();
     // One SSIM workspace, remade when the image size changes.
-    let mut ssim: Option<((usize, usize), Ssim)> = None;
+    let mut ssim = SsimCache::default();
     let mut checkpoints = Vec::new();
     let mut refines = Vec::new();
     let mut train_s = 0.0;
@@ -466,22 +468,18 @@ pub fn fit(
         let fwd =
             render_with_grad::<f32, _>(&world, camera, &options.render).map_err(render_err)?;
         tick(&mut stage.render);
-        let px = camera.width as usize * camera.height as usize;
         let b = &mut buffers;
-        reset(&mut b.g_rgb, 3 * px);
-        let lam = options.lambda_dssim;
-        let l1v = l1(&fwd.rgb, &target.rgb, 1.0 - lam, &mut b.g_rgb);
-        let key = (camera.width as usize, camera.height as usize);
-        if ssim.as_ref().is_some_and(|(k, _)| *k != key) {
-            ssim = None;
-        }
-        let ssim = &mut ssim.get_or_insert_with(|| (key, Ssim::new(key.0, key.1))).1;
-        let s = if lam > 0.0 {
-            ssim.ssim(&fwd.rgb, &target.rgb, 3, -lam, Some(&mut b.g_rgb))
-        } else {
-            1.0
-        };
-        let mut loss = (1.0 - lam) * l1v + lam * (1.0 - s);
+        let size = (camera.width as usize, camera.height as usize);
+        let px = size.0 * size.1;
+        let photometric = photometric_loss(
+            &fwd.rgb,
+            &target.rgb,
+            size,
+            options.lambda_dssim,
+            &mut ssim,
+            &mut b.g_rgb,
+        );
+        let mut loss = photometric.loss;
         // Each term adds its gradient into its image's buffer; the buffers are lent to the
         // backward pass once all are made.
         let depth_term = options.depth_weight > 0.0;
@@ -553,7 +551,7 @@ pub fn fit(
         adam.step(&mut bound.local, &g_local);
         tick(&mut stage.step);
         acc_loss += loss;
-        acc_l1 += l1v;
+        acc_l1 += photometric.l1;
         acc_psnr += psnr(&fwd.rgb, &target.rgb);
         acc_n += 1;
         train_s += start.elapsed().as_secs_f64();

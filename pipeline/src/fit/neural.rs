@@ -31,6 +31,7 @@ use trisplat_splat::{GaussianSet, ScaleDims};
 
 use super::checkpoint::Checkpoint;
 use super::inputs::{FitError, FitFrame};
+use super::photometric::{SsimCache, photometric_loss};
 
 /// What the neural fit needs besides the common options (`FitOptions`).
 #[derive(Clone, Debug)]
@@ -231,7 +232,7 @@ pub fn fit_neural(
     let mut grads = NeuralGrads::new(&model);
     let mut b = Buffers::default();
     let mut rng = Rng::new(options.seed);
-    let mut ssim: Option<((usize, usize), Ssim)> = None;
+    let mut ssim = SsimCache::default();
     let (mut acc_loss, mut acc_l1, mut acc_psnr, mut acc_n) = (0.0, 0.0, 0.0, 0usize);
     let mut train_s = 0.0;
     let mut checkpoints = Vec::new();
@@ -302,22 +303,17 @@ pub fn fit_neural(
         };
         let fwd =
             render_with_grad::<f32, _>(&b.world, camera, &options.render).map_err(render_err)?;
-        let px = camera.width as usize * camera.height as usize;
-        let lam = options.lambda_dssim;
-        b.g_rgb.clear();
-        b.g_rgb.resize(3 * px, 0.0);
-        let l1v = l1(&fwd.rgb, &target.rgb, 1.0 - lam, &mut b.g_rgb);
-        let key = (camera.width as usize, camera.height as usize);
-        if ssim.as_ref().is_some_and(|(k, _)| *k != key) {
-            ssim = None;
-        }
-        let ssim = &mut ssim.get_or_insert_with(|| (key, Ssim::new(key.0, key.1))).1;
-        let s = if lam > 0.0 {
-            ssim.ssim(&fwd.rgb, &target.rgb, 3, -lam, Some(&mut b.g_rgb))
-        } else {
-            1.0
-        };
-        let mut loss = (1.0 - lam) * l1v + lam * (1.0 - s);
+        let size = (camera.width as usize, camera.height as usize);
+        let px = size.0 * size.1;
+        let photometric = photometric_loss(
+            &fwd.rgb,
+            &target.rgb,
+            size,
+            options.lambda_dssim,
+            &mut ssim,
+            &mut b.g_rgb,
+        );
+        let mut loss = photometric.loss;
         let alpha_term = options.alpha_weight > 0.0;
         if alpha_term && let Some(a) = &target.alpha {
             b.g_alpha.clear();
@@ -356,7 +352,7 @@ pub fn fit_neural(
         adam.step(&mut model, &grads);
         grads.clear(model.config().features_per_level);
         acc_loss += loss;
-        acc_l1 += l1v;
+        acc_l1 += photometric.l1;
         acc_psnr += psnr(&fwd.rgb, &target.rgb);
         acc_n += 1;
         train_s += start.elapsed().as_secs_f64();
