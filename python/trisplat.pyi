@@ -209,6 +209,7 @@ class Session:
         min_contribution: Optional[float] = None,
         floater_std_ratio: Optional[float] = None,
         floater_neighbors: Optional[int] = None,
+        topology: Literal["per-frame", "fixed", "adaptive"] = "adaptive",
     ) -> "Session": ...
     @property
     def unused_channels(self) -> List[str]: ...

@@ -492,6 +492,9 @@ fn hop_threshold_is_recorded_with_the_delaunay_statistics() {
         "0..3",
         "--hop-threshold",
         "0.1",
+        // The incremental Delaunay's statistics are per meshed frame.
+        "--topology",
+        "per-frame",
         "-o",
         s(&out),
     ];

@@ -843,7 +843,7 @@ impl Session {
 
     /// Shows each method's [`Carrier`] the frames it must see before `frame` (the track's
     /// first key; `adaptive`, every frame since the last it saw), meshing only at keys.
-    fn replay(&mut self, frame: usize) -> Result<(), PipelineError> {
+    fn replay(&mut self, frame: usize) {
         let ranges: Vec<Range<usize>> = self
             .meshers
             .iter()
@@ -855,10 +855,15 @@ impl Session {
             .map(|r| r.start)
             .min()
         else {
-            return Ok(());
+            return;
         };
         for g in start..frame {
-            let deformed = self.deform_frame(g)?;
+            // A frame that cannot be deformed failed on its own (the run went on without it):
+            // it is left out of the key decisions here as it was there, so that a split run
+            // decides as one run does.
+            let Ok(deformed) = self.deform_frame(g) else {
+                continue;
+            };
             let means = if self.visibility.kept().is_some() {
                 self.visibility
                     .gather(&self.scratch.means, &mut self.kept_means);
@@ -881,13 +886,12 @@ impl Session {
             };
             for ((method, mesher, carrier), range) in self.meshers.iter_mut().zip(&ranges) {
                 if range.contains(&g) {
-                    carrier
-                        .frame(*method, mesher, &input, &context, true)
-                        .map_err(|e| e.on_vertices_of(&self.label))?;
+                    // Likewise a frame whose meshing failed: the carrier has seen it (as the
+                    // run that met the failure had) and keeps its key.
+                    let _ = carrier.frame(*method, mesher, &input, &context, true);
                 }
             }
         }
-        Ok(())
     }
 
     /// Deforms and meshes animation frame `frame` with every method of the plan, and measures
@@ -913,7 +917,7 @@ impl Session {
         after: impl FnOnce(&mut FrameResult, Option<&GtSamples>) -> T,
     ) -> Result<(FrameResult, T), PipelineError> {
         let time = self.frame_time(frame);
-        self.replay(frame)?;
+        self.replay(frame);
         let DeformedFrame {
             positions,
             world,

@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 use std::sync::Mutex;
 use trisplat::pipeline::config::{
-    AlphaOptions, AnimationOptions, BindOptions, DelaunayOptions, MetricOptions, TsdfOptions,
-    VisibilityRule,
+    AlphaOptions, AnimationOptions, BindOptions, DelaunayOptions, MetricOptions, Topology,
+    TopologyOptions, TsdfOptions, VisibilityRule,
 };
 
 use pyo3::prelude::*;
@@ -136,6 +136,15 @@ fn tsdf_depth(name: &str) -> PyResult<DepthKind> {
     )
 }
 
+fn topology(name: &str) -> PyResult<Topology> {
+    by_name(
+        "topology",
+        name,
+        &[Topology::PerFrame, Topology::Fixed, Topology::Adaptive],
+        Topology::name,
+    )
+}
+
 fn tsdf_splat_depth(name: &str) -> PyResult<SplatDepthRule> {
     by_name(
         "tsdf_splat_depth",
@@ -148,7 +157,7 @@ fn tsdf_splat_depth(name: &str) -> PyResult<SplatDepthRule> {
 #[pymethods]
 impl Session {
     #[new]
-    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_splat_depth = "ray", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false, tsdf_alpha_cut = None, min_contribution = None, floater_std_ratio = None, floater_neighbors = None))]
+    #[pyo3(signature = (template, animation = None, gaussians = None, methods = vec!["delaunay".to_owned()], frames = None, gt = None, mode = "binding", per_triangle = None, voxel = None, views = None, resolution = None, alpha = None, hop_threshold = None, samples = None, tau_fraction = None, gt_sequence = None, clip = None, clip_from = None, fps = None, layout = "bound", tsdf_depth = "median", tsdf_splat_depth = "ray", tsdf_colors = false, alpha_keep_clusters = 0, rebuild_every = 0, tau = None, strict = false, tsdf_alpha_cut = None, min_contribution = None, floater_std_ratio = None, floater_neighbors = None, topology = "adaptive"))]
     #[expect(
         clippy::too_many_arguments,
         reason = "the command's options as keywords"
@@ -186,6 +195,7 @@ impl Session {
         min_contribution: Option<f32>,
         floater_std_ratio: Option<f64>,
         floater_neighbors: Option<usize>,
+        topology: &str,
     ) -> PyResult<Self> {
         if gt.is_some() && gt_sequence.is_some() {
             return Err(error::value("give gt or gt_sequence, not both"));
@@ -256,6 +266,10 @@ impl Session {
                 rebuild_every,
                 hop_threshold: hop_threshold.unwrap_or(defaults.delaunay.hop_threshold),
                 ..defaults.delaunay
+            },
+            topology: TopologyOptions {
+                topology: self::topology(topology)?,
+                ..defaults.topology
             },
             metrics: MetricOptions {
                 tau: tau.unwrap_or(defaults.metrics.tau),

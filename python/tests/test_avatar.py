@@ -91,7 +91,8 @@ def test_camera_round_trip():
 
 def test_session_frame_by_frame():
     session = trisplat.Session(
-        DATA / "anim" / "RiggedFigure.glb", methods=["delaunay", "alpha"], frames="0..2", gt="template"
+        DATA / "anim" / "RiggedFigure.glb", methods=["delaunay", "alpha"], frames="0..2", gt="template",
+        topology="per-frame",  # every frame meshed (the incremental Delaunay's record per frame)
     )
     assert session.frames == [0, 1]
     assert len(session.gaussians) > 0 and session.gaussians.local

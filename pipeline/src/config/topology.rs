@@ -9,14 +9,14 @@ use std::fmt;
 #[serde(rename_all = "kebab-case")]
 pub enum Topology {
     /// Every frame meshed from scratch: its own vertices and triangles.
-    #[default]
     PerFrame,
     /// The track's first frame meshed once (the key); every other frame is that mesh with its
     /// vertices carried by the template's triangles.
     Fixed,
     /// As `fixed`, and a frame whose Gaussians have drifted off the carried mesh
     /// (`--key-hops`) or whose carried triangles are stretched (`--key-stretch`) is meshed
-    /// again and starts a new key.
+    /// again and starts a new key. The default (docs/conventions.md §10 says why).
+    #[default]
     Adaptive,
 }
 
@@ -61,10 +61,10 @@ pub const DEFAULT_HOP_DISTANCE: f64 = 0.5;
 pub struct TopologyOptions {
     /// per-frame: mesh every frame from scratch; fixed: mesh the track's first frame and carry
     /// that mesh through every frame (each vertex bound to the template triangle of its
-    /// nearest Gaussian: barycentric position and offset along the normal); adaptive: as
-    /// fixed, meshing again where the carried mesh drifts from the frame's Gaussians
-    /// (docs/conventions.md §10).
-    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = Topology::PerFrame))]
+    /// nearest Gaussian: barycentric position and offset along the normal); adaptive (the
+    /// default): as fixed, meshing again where the carried mesh drifts from the frame's
+    /// Gaussians (docs/conventions.md §10).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = Topology::Adaptive))]
     pub topology: Topology,
     /// adaptive: start a new key when more than this share of the probe Gaussians hop (move
     /// more than --hop-distance off the carried mesh's triangle they were nearest at the key).
@@ -86,7 +86,7 @@ pub struct TopologyOptions {
 impl Default for TopologyOptions {
     fn default() -> Self {
         Self {
-            topology: Topology::PerFrame,
+            topology: Topology::Adaptive,
             key_hops: DEFAULT_KEY_HOPS,
             key_stretch: DEFAULT_KEY_STRETCH,
             hop_distance: DEFAULT_HOP_DISTANCE,
