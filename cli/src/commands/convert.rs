@@ -269,10 +269,6 @@ fn options_for(args: &ConvertArgs) -> WriteOptions {
 /// `KHR_gaussian_splatting`, or a 3DGS PLY to glTF/GLB (PLY to PLY keeps the mesh path, which
 /// keeps every property and element).
 fn is_gaussian_conversion(input: &Path, output: &Path) -> bool {
-    use trisplat_geometry::TriMesh;
-    use trisplat_geometry::simplify::{SimplifyOptions, SimplifyTarget, simplify};
-    use trisplat_pipeline::config::SimplifyBorder;
-
     use super::gaussian_io::GaussianFormat as F;
     let (i, o) = (F::from_path(input), F::from_path(output));
     matches!(i, Some(F::Spz))
