@@ -199,6 +199,7 @@ impl Prepared {
             metrics,
             consistency: None,
             topology: None,
+            simplify: None,
         })
     }
 

@@ -15,6 +15,7 @@
 //! - [`spatial`]: the k-d tree and the triangle BVH;
 //! - [`metrics`]: Chamfer, F-score and normal metrics; [`mesh_stats`]: mesh structure;
 //! - [`sampling`], [`smoothing`]: surface sampling and mesh smoothing with their defaults;
+//! - [`simplify`]: decimation through meshoptimizer, with the error it costs;
 //! - [`topology`], [`cleanup`], [`subdivide`], [`outliers`]: connectivity and repairs;
 //! - [`base_color`], [`texture`]: glTF base colours and their textures; [`envmap`]:
 //!   equirectangular environment maps (read from Radiance `.hdr` by [`io::hdr`]);
@@ -43,6 +44,7 @@ pub mod outliers;
 mod points;
 pub mod rng;
 pub mod sampling;
+pub mod simplify;
 pub mod smoothing;
 pub mod spatial;
 pub mod subdivide;

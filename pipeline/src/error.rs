@@ -270,6 +270,16 @@ pub enum PipelineError {
         /// Why.
         cause: trisplat_extract::opacity::OpacityError,
     },
+    /// A mesh could not be decimated.
+    #[error("frame {frame}, method {method}: decimating the mesh: {cause}")]
+    Simplify {
+        /// Animation frame.
+        frame: usize,
+        /// The method.
+        method: Method,
+        /// Why.
+        cause: trisplat_geometry::simplify::SimplifyError,
+    },
     /// A meshing error ([`PipelineError::Delaunay`], [`PipelineError::Alpha`]) on the vertices
     /// of `input`: the template (when a mesher is built) or the animation (per frame).
     #[error("{input}: {cause}")]

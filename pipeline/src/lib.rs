@@ -28,7 +28,10 @@
 //! 3. **deform**: every frame, `binding`, `jacobian` or `lbs` (as `trisplat deform`).
 //! 4. **render** (only for `tsdf`): median depth (`--tsdf-depth`; the depth where the
 //!    accumulated alpha reaches ½) of every Gaussian of the frame from a sphere rig around it.
-//! 5. **mesh**: `tsdf`, `delaunay` and/or `alpha` (module [`methods`] for their defaults).
+//! 5. **mesh**: `tsdf`, `delaunay` and/or `alpha` (module [`methods`] for their defaults);
+//!    each mesh (each key mesh when carried) decimated with `--faces` / `--simplify-error`
+//!    (geometry's `simplify`) and coloured from the Gaussians near its vertices unless
+//!    `--vertex-colors off`.
 //! 6. **metrics** (only with a ground truth): docs/conventions.md §8 in surface mode against each frame's
 //!    deformed template (`--gt template`) or one static mesh (`--gt FILE`).
 //! 7. **write**: `DIR/<method>/frame_NNNNNN.ply` (NNNNNN = animation frame index) and
@@ -84,6 +87,7 @@ mod carry;
 mod deform;
 mod error;
 mod event;
+mod finish;
 mod journal;
 mod lock;
 mod memory;
@@ -93,6 +97,7 @@ mod plan;
 mod run;
 mod session;
 mod topology;
+mod vertex_colors;
 mod visibility;
 
 pub use config::{

@@ -44,11 +44,12 @@ use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS,
-    DepthKind, ExtractOptions, Method, RENDERED_ALPHA_MIN, SplatDepthRule,
+    DepthKind, ExtractOptions, Method, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule,
+    VertexColors,
 };
 use crate::error::PipelineError;
 use crate::opacity::{opacity_gaussians, opacity_rig};
-use crate::records::Resolved;
+use crate::records::{Resolved, SimplifyFrame};
 
 /// One deformed frame, as every mesher sees it.
 #[derive(Clone, Copy, Debug)]
@@ -74,6 +75,8 @@ pub struct MethodOutput {
     pub render_ms: Option<f64>,
     /// What the incremental update did (delaunay only).
     pub delaunay: Option<FrameStats>,
+    /// What decimation cost (`--faces`, `--simplify-error`; set by the finishing step).
+    pub simplify: Option<SimplifyFrame>,
 }
 
 /// Mean distance from each point to its nearest other point (0 for a single point or only
@@ -89,8 +92,9 @@ pub fn mean_spacing(points: &[Vec3]) -> Option<f64> {
     Some(sum / points.len().max(1) as f64)
 }
 
-/// Method `method`'s parameters as the report records them (`voxel`, `views`, `alpha`, ...;
-/// flags as 0 or 1).
+/// Method `method`'s parameters as the report records them (`voxel`, `views`, `alpha`, ...,
+/// and every method's `faces` or `simplify_error`, `simplify_lock_border` and
+/// `vertex_colors`; flags as 0 or 1).
 #[must_use]
 pub fn parameters(
     method: Method,
@@ -136,6 +140,22 @@ pub fn parameters(
             );
         }
     }
+    if let Some(n) = o.finish.faces {
+        parameters.insert("faces".to_owned(), n as f64);
+    }
+    if let (None, Some(e)) = (o.finish.faces, o.finish.simplify_error) {
+        parameters.insert("simplify_error".to_owned(), e);
+    }
+    if o.finish.decimates() {
+        parameters.insert(
+            "simplify_lock_border".to_owned(),
+            f64::from(u8::from(o.finish.simplify_border == SimplifyBorder::Locked)),
+        );
+    }
+    parameters.insert(
+        "vertex_colors".to_owned(),
+        f64::from(u8::from(o.finish.vertex_colors != VertexColors::Off)),
+    );
     parameters
 }
 
@@ -353,6 +373,7 @@ impl TsdfMesher {
                 ms: start.elapsed().as_secs_f64() * 1e3,
                 render_ms: Some(0.0),
                 delaunay: None,
+                simplify: None,
             });
         };
         let cameras = sphere_rig(
@@ -404,6 +425,7 @@ impl TsdfMesher {
             ms: start.elapsed().as_secs_f64() * 1e3,
             render_ms: Some(render_ms),
             delaunay: None,
+            simplify: None,
         })
     }
 }
@@ -430,6 +452,9 @@ pub enum Mesher {
         views: usize,
         /// Pixels across each view.
         resolution: u32,
+        /// Whether vertices get the field's composited colours (not with
+        /// `--vertex-colors off`).
+        colors: bool,
     },
 }
 
@@ -483,6 +508,7 @@ impl Mesher {
             Method::Opacity => Self::Opacity {
                 views: options.tsdf.views,
                 resolution: options.tsdf.resolution,
+                colors: options.finish.vertex_colors != VertexColors::Off,
             },
         })
     }
@@ -509,6 +535,7 @@ impl Mesher {
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
                     delaunay: Some(stats),
+                    simplify: None,
                 })
             }
             Self::Alpha {
@@ -526,9 +553,14 @@ impl Mesher {
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
                     delaunay: None,
+                    simplify: None,
                 })
             }
-            Self::Opacity { views, resolution } => {
+            Self::Opacity {
+                views,
+                resolution,
+                colors,
+            } => {
                 let start = Instant::now();
                 let world = input.world.ok_or(PipelineError::Internal {
                     what: "the opacity method without the frame's deformed Gaussians",
@@ -537,7 +569,10 @@ impl Mesher {
                 let meshed = opacity_mesh(
                     &opacity_gaussians(world),
                     &cameras,
-                    &OpacityOptions::default(),
+                    &OpacityOptions {
+                        colors: *colors,
+                        ..OpacityOptions::default()
+                    },
                 )
                 .map_err(|cause| PipelineError::Opacity { frame, cause })?;
                 Ok(MethodOutput {
@@ -545,6 +580,7 @@ impl Mesher {
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     render_ms: None,
                     delaunay: None,
+                    simplify: None,
                 })
             }
         }

@@ -109,6 +109,28 @@ pub struct FrameRecord {
     /// The carried mesh's key and drift (`None` with `--topology per-frame`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology: Option<TopologyFrame>,
+    /// What decimation cost where this frame's mesh was simplified (`--faces`,
+    /// `--simplify-error`: every frame per frame, key frames when carried).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simplify: Option<SimplifyFrame>,
+}
+
+/// What decimating one mesh cost (docs/conventions.md §10); lengths in scene units.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SimplifyFrame {
+    /// Triangles the method made.
+    pub faces_before: usize,
+    /// Triangles after decimation.
+    pub faces_after: usize,
+    /// meshoptimizer's own error estimate (its relative error times its scale).
+    pub meshopt_error: f64,
+    /// The largest exact distance from the method's mesh (its vertices and triangle
+    /// centroids) to the decimated surface: a one-sided Hausdorff distance.
+    pub hausdorff: f64,
+    /// The mean of those distances: a one-sided Chamfer-L1.
+    pub mean_distance: f64,
+    /// Milliseconds decimating and measuring.
+    pub ms: f64,
 }
 
 /// One frame of a carried mesh (`--topology fixed|adaptive`): the key it was carried from

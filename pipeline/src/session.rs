@@ -45,6 +45,7 @@ use crate::consistency::{GaussianViews, RenderConsistency, held_out_rig};
 use crate::deform::{Engine, EngineInputs};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::event::Event;
+use crate::finish::Finish;
 use crate::input::{
     Animation, GaussianSource, WeldedTemplate, animation_label, bind_here, check_scale,
     check_topology, deform_mode, open_template_and_animation, parse_frames, read_bound,
@@ -114,6 +115,7 @@ impl MethodFrame {
             metrics: self.metrics,
             consistency: self.consistency,
             topology: self.topology,
+            simplify: self.output.simplify,
         }
     }
 }
@@ -162,6 +164,8 @@ pub struct Session {
     meshers: Vec<(Method, Mesher, Carrier)>,
     /// `--topology` and its thresholds.
     topology: TopologyOptions,
+    /// Decimation and vertex colours of every mesh made.
+    finish: Finish,
     /// Each Gaussian's template triangle (what a carried mesh's vertices bind by).
     gaussian_triangles: Vec<u32>,
     /// The mean edge of the welded template at rest (the unit of `--hop-distance`).
@@ -368,9 +372,12 @@ impl Session {
         let resolved = Resolved::new(o, template, &rest_means)?;
         // Rendered for the tsdf's depth maps and the meshes' render consistency; the opacity
         // method evaluates its field from the same set.
+        // Vertex colours weight the Gaussians by their deformed densities.
+        let finish = Finish::new(&o.finish);
         let render_set = (plan.runs(Stage::Render)
             || plan.runs(Stage::Consistency)
-            || plan.runs(Stage::Mesh(Method::Opacity)))
+            || plan.runs(Stage::Mesh(Method::Opacity))
+            || (finish.colors() && !config.methods.is_empty()))
         .then(|| geometry_only(&set));
         let consistency_rig = plan.runs(Stage::Consistency).then_some((
             o.metrics.consistency_views,
@@ -419,6 +426,7 @@ impl Session {
             kept_means: Vec::new(),
             meshers: Vec::new(),
             topology: o.topology,
+            finish,
             gaussian_triangles: Vec::new(),
             mean_edge: 0.0,
             gt: config.gt.clone(),
@@ -883,6 +891,7 @@ impl Session {
                 gaussian_triangles: &self.gaussian_triangles,
                 all_means: &self.scratch.means,
                 mean_edge: self.mean_edge,
+                finish: &self.finish,
             };
             for ((method, mesher, carrier), range) in self.meshers.iter_mut().zip(&ranges) {
                 if range.contains(&g) {
@@ -1004,6 +1013,7 @@ impl Session {
             gaussian_triangles: &self.gaussian_triangles,
             all_means: &self.scratch.means,
             mean_edge: self.mean_edge,
+            finish: &self.finish,
         };
         let mesh_and_measure = |(method, mesher, carrier): &mut (Method, Mesher, Carrier)|
          -> Result<MethodFrame, PipelineError> {

@@ -14,6 +14,7 @@ use glam::{DVec3, Vec3};
 use crate::carry::{CarriedMesh, Drift};
 use crate::config::{Method, Topology, TopologyOptions};
 use crate::error::PipelineError;
+use crate::finish::Finish;
 use crate::methods::{FrameInput, Mesher, MethodOutput};
 use crate::records::TopologyFrame;
 
@@ -32,6 +33,8 @@ pub struct CarryContext<'a> {
     /// The mean template edge: the unit of `--hop-distance`, and how near the key mesh a
     /// Gaussian must be to probe it.
     pub mean_edge: f64,
+    /// What is done to each mesh made (decimation, colours): before a key is bound.
+    pub finish: &'a Finish,
 }
 
 /// One method's topology state.
@@ -92,14 +95,14 @@ impl Carrier {
         self.last = Some(frame);
         if self.topology == Topology::PerFrame {
             return Ok((!replay)
-                .then(|| mesher.mesh(input))
+                .then(|| mesh(method, mesher, input, context))
                 .transpose()?
                 .map(|o| (o, None)));
         }
         let start = Instant::now();
         let Some((key, carried)) = &self.key else {
             // The track's first key.
-            let output = mesher.mesh(input)?;
+            let output = mesh(method, mesher, input, context)?;
             let carried = bind(method, frame, &output, input, context)?;
             let record = TopologyFrame {
                 key: frame,
@@ -122,7 +125,7 @@ impl Carrier {
         if self.topology == Topology::Adaptive
             && (drift.hops > options.key_hops || drift.stretched > options.key_stretch)
         {
-            let output = mesher.mesh(input)?;
+            let output = mesh(method, mesher, input, context)?;
             let carried = bind(method, frame, &output, input, context)?;
             let record = TopologyFrame {
                 farthest: Some(carried.farthest()),
@@ -147,9 +150,22 @@ impl Carrier {
             ms: start.elapsed().as_secs_f64() * 1e3,
             render_ms: None,
             delaunay: None,
+            simplify: None,
         };
         Ok(Some((output, Some(record(key, drift)))))
     }
+}
+
+/// `mesher`'s mesh of `input`, finished (decimated, coloured) as the run asks.
+fn mesh(
+    method: Method,
+    mesher: &mut Mesher,
+    input: &FrameInput<'_>,
+    context: &CarryContext<'_>,
+) -> Result<MethodOutput, PipelineError> {
+    let mut output = mesher.mesh(input)?;
+    context.finish.apply(method, &mut output, input)?;
+    Ok(output)
 }
 
 /// The record of a frame carried from `key` with `drift`.

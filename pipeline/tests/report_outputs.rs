@@ -245,19 +245,24 @@ fn plot_page_thumbnails_and_error_colours_of_a_measured_run() {
         }
     }
 
-    // Without --error-colors the frames carry no colours.
+    // Without --error-colors the frames carry the Gaussians' colours (the default), and none
+    // with --vertex-colors off.
     let plain = dir.path().join("plain");
-    run_ok(
-        &config(
-            &plain,
-            &[Method::Delaunay],
-            "0..1",
-            Some(GroundTruth::Template),
-            false,
-        ),
-        RunControl::default(),
+    let mut cfg = config(
+        &plain,
+        &[Method::Delaunay],
+        "0..1",
+        Some(GroundTruth::Template),
+        false,
     );
+    run_ok(&cfg, RunControl::default());
     let mesh = read_mesh(&plain.join("delaunay/frame_000000.ply")).expect("frame");
+    assert!(mesh.colors().is_some());
+    let off = dir.path().join("off");
+    cfg.output.clone_from(&off);
+    cfg.options.finish.vertex_colors = trisplat_pipeline::config::VertexColors::Off;
+    run_ok(&cfg, RunControl::default());
+    let mesh = read_mesh(&off.join("delaunay/frame_000000.ply")).expect("frame");
     assert!(mesh.colors().is_none());
 }
 

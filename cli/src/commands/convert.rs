@@ -13,6 +13,10 @@ use trisplat_geometry::io::{
     self, Format, ObjVertices, PlyEncoding, ReadOptions, SequenceLayout, WriteOptions,
 };
 
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::simplify::{SimplifyOptions, SimplifyTarget, simplify};
+use trisplat_pipeline::config::SimplifyBorder;
+
 use super::gaussian_io::{GaussianFormatArgs, read_gaussian_file, write_gaussian_file};
 use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
 
@@ -39,7 +43,13 @@ use super::{Context, UsageError, parse_clip, refuse_to_overwrite};
     rotations to 8 or 10 bits) and glTF with KHR_gaussian_splatting (float: means, rotations \
     and SH exact; scales and opacities through exp/sigmoid rounded once). SPZ stores RUB axes: \
     --axes names the axes of the other side (default rdf, the INRIA training frame). Only \
-    world-space Gaussians go to SPZ and glTF (bound ones: `trisplat deform` first)."
+    world-space Gaussians go to SPZ and glTF (bound ones: `trisplat deform` first).\n\n\
+    --faces N or --simplify-error E decimate one mesh (also a posed --time frame) through \
+    meshoptimizer's simplifier before it is written (docs/conventions.md §10): kept vertices \
+    stay in place with their attributes, an open mesh's border stays put unless \
+    --simplify-border free; --json gives the faces before and after, meshoptimizer's error \
+    estimate and the measured one-sided Hausdorff and mean distance from the input's vertices \
+    and triangle centroids to the result. Frame sequences and Gaussians are not decimated."
 )]
 pub struct ConvertArgs {
     /// Input mesh (.ply, .obj, .gltf, .glb), or a folder or pattern of OBJ/PLY frames.
@@ -75,6 +85,71 @@ pub struct ConvertArgs {
     /// Gaussian formats.
     #[command(flatten)]
     pub gaussian: GaussianFormatArgs,
+    /// Decimate the mesh to at most N triangles (meshoptimizer; a mesh with no more is
+    /// written as it is).
+    #[arg(long, value_name = "N", conflicts_with = "simplify_error", value_parser = parse_faces)]
+    pub faces: Option<usize>,
+    /// Decimate the mesh while meshoptimizer's error stays within E times its extent (the
+    /// largest side of its bounding box; 0.001 = 0.1%).
+    #[arg(long, value_name = "E", value_parser = parse_share)]
+    pub simplify_error: Option<f64>,
+    /// Decimation: whether an open mesh's border vertices stay in place.
+    #[arg(long, value_enum, value_name = "RULE", default_value_t = SimplifyBorder::Locked)]
+    pub simplify_border: SimplifyBorder,
+}
+
+/// A `--faces` value: a positive integer.
+fn parse_faces(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(format!("expected a face count of at least 1, got {s:?}")),
+    }
+}
+
+/// A `--simplify-error` value: finite and 0 or more.
+fn parse_share(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        _ => Err(format!(
+            "expected a finite share of the mesh's extent, 0 or more, got {s:?}"
+        )),
+    }
+}
+
+impl ConvertArgs {
+    /// The decimation asked for, if any.
+    fn simplify(&self) -> Option<SimplifyOptions> {
+        let target = match (self.faces, self.simplify_error) {
+            (Some(n), _) => SimplifyTarget::Faces(n),
+            (None, Some(e)) => SimplifyTarget::Error(e),
+            (None, None) => return None,
+        };
+        Some(SimplifyOptions {
+            target,
+            lock_border: self.simplify_border == SimplifyBorder::Locked,
+        })
+    }
+}
+
+/// `mesh` (read from `input`) decimated as `options` asks, with the JSON of what it cost.
+fn decimate(
+    mesh: TriMesh,
+    input: &Path,
+    options: Option<&SimplifyOptions>,
+) -> anyhow::Result<(TriMesh, Option<serde_json::Value>)> {
+    let Some(options) = options else {
+        return Ok((mesh, None));
+    };
+    let s = simplify(&mesh, options)
+        .map_err(|e| anyhow::anyhow!("{}: cannot decimate: {e}", input.display()))?;
+    let json = serde_json::json!({
+        "faces_before": s.faces_before,
+        "faces_after": s.faces_after,
+        "meshopt_error": s.error,
+        "hausdorff": s.hausdorff,
+        "mean_distance": s.mean_distance,
+    });
+    Ok((s.mesh, Some(json)))
 }
 
 /// A `--fps` value: finite and > 0.
@@ -103,19 +178,36 @@ fn is_sequence_input(input: &Path) -> bool {
 /// Unknown formats, unreadable or malformed input, an output equal to the input, a failed
 /// write, animation options on a non-glTF input or a glTF without that clip.
 pub fn run(args: ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
-    convert_any(&args, ctx)?;
+    let simplified = convert_any(&args, ctx)?;
     let bytes = std::fs::metadata(&args.output).map(|m| m.len()).ok();
-    ctx.emit(
-        "convert",
-        serde_json::json!({ "input": args.input, "output": args.output, "bytes": bytes }),
-    )
+    let mut json =
+        serde_json::json!({ "input": args.input, "output": args.output, "bytes": bytes });
+    if let Some(s) = simplified {
+        json["simplify"] = s;
+    }
+    ctx.emit("convert", json)
 }
 
 /// The conversion `args` asks for: a frame sequence to an animated glTF, Gaussians between
-/// their formats, a posed glTF frame, or a mesh between formats.
-fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
-    if is_sequence_input(&args.input) {
-        return convert_sequence(args, ctx);
+/// their formats, a posed glTF frame, or a mesh between formats; what decimation cost, if
+/// asked.
+fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<Option<serde_json::Value>> {
+    let simplify = args.simplify();
+    let sequence = is_sequence_input(&args.input);
+    if simplify.is_some() && (sequence || is_gaussian_conversion(&args.input, &args.output)) {
+        return Err(UsageError(format!(
+            "--faces/--simplify-error decimate one mesh; {} is {}",
+            args.input.display(),
+            if sequence {
+                "a frame sequence (trisplat extract decimates each frame or key)"
+            } else {
+                "Gaussians"
+            }
+        ))
+        .into());
+    }
+    if sequence {
+        return convert_sequence(args, ctx).map(|()| None);
     }
     if args.fps.is_some() {
         return Err(UsageError(format!(
@@ -125,10 +217,10 @@ fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
         .into());
     }
     if is_gaussian_conversion(&args.input, &args.output) {
-        return convert_gaussians(args, ctx);
+        return convert_gaussians(args, ctx).map(|()| None);
     }
     if args.clip.is_some() || args.time.is_some() {
-        return convert_animated(args, ctx);
+        return convert_animated(args, ctx, simplify.as_ref());
     }
     let in_format = Format::from_path(&args.input)?;
     let out_format = Format::from_path(&args.output)?;
@@ -137,7 +229,17 @@ fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     let spinner = ctx
         .progress
         .spinner(&format!("converting {}", args.input.display()));
-    let result = if in_format == Format::Ply && out_format == Format::Ply {
+    let result = if let Some(options) = &simplify {
+        // Decimated: per-vertex and per-face extras would no longer fit, so only the mesh.
+        let read = ReadOptions {
+            obj_vertices: ObjVertices::Auto,
+        };
+        let mesh = io::read_mesh_with(&args.input, read)?;
+        let (mesh, json) = decimate(mesh, &args.input, Some(options))?;
+        spinner.finish_and_clear();
+        io::write_mesh(&args.output, &mesh, options_for(args))?;
+        return Ok(json);
+    } else if in_format == Format::Ply && out_format == Format::Ply {
         // Keep unknown properties and elements.
         let (mesh, extras) = io::ply::read_ply_mesh(&args.input)?;
         let encoding = if args.ascii {
@@ -155,7 +257,12 @@ fn convert_any(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     };
     spinner.finish_and_clear();
     result?;
-    Ok(())
+    Ok(None)
+}
+
+/// The write options of `args`.
+fn options_for(args: &ConvertArgs) -> WriteOptions {
+    WriteOptions { ascii: args.ascii }
 }
 
 /// Whether `convert` moves Gaussians: SPZ on either side, a glTF/GLB input with
@@ -201,7 +308,11 @@ fn convert_gaussians(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
 
 /// `convert` of a glTF/GLB clip evaluated at `--time`: skins, morph targets and node
 /// animations applied, written as a static mesh.
-fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
+fn convert_animated(
+    args: &ConvertArgs,
+    ctx: &Context,
+    simplify: Option<&SimplifyOptions>,
+) -> anyhow::Result<Option<serde_json::Value>> {
     if !matches!(Format::from_path(&args.input)?, Format::Gltf | Format::Glb) {
         bail!(
             "{}: --clip/--time evaluate an animation, which only glTF/GLB input has",
@@ -221,8 +332,9 @@ fn convert_animated(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
     mesh.set_positions(positions)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     spinner.finish_and_clear();
-    io::write_mesh(&args.output, &mesh, WriteOptions { ascii: args.ascii })?;
-    Ok(())
+    let (mesh, json) = decimate(mesh, &args.input, simplify)?;
+    io::write_mesh(&args.output, &mesh, options_for(args))?;
+    Ok(json)
 }
 
 /// `convert` of a folder or pattern of frames to one animated glTF/GLB, frame k at k / fps

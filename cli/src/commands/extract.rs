@@ -81,6 +81,14 @@ truth; the pictures in thumbnails/). --error-colors colours the frame meshes' ve
 way. Times cover each method's \
 own work (rendering included for tsdf); deformation is reported separately.
 
+--faces N or --simplify-error E decimate every mesh (with --topology fixed|adaptive each key \
+mesh, before it is bound, so the carried frames are the decimated key deformed) through \
+meshoptimizer's simplifier; report.json gives per decimated mesh the faces before and after, \
+meshoptimizer's error estimate and the measured one-sided Hausdorff and mean distance from the \
+undecimated mesh. Vertices are coloured from the Gaussians near them (SH degree-0 colours \
+weighted by opacity times density; the opacity method composites its own) unless \
+--vertex-colors off (docs/conventions.md §6).
+
 --explain prints the plan and exits without reading or writing anything.
 
 Long runs: every file is written atomically, never over an input, and each frame's files as \

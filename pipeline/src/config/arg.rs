@@ -7,3 +7,11 @@ pub(crate) fn parse_positive(s: &str) -> Result<usize, String> {
         _ => Err(format!("expected a positive integer, got '{s}'")),
     }
 }
+
+/// Parses a finite number, 0 or more (a share).
+pub(crate) fn parse_share(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        _ => Err(format!("expected a finite number, 0 or more, got '{s}'")),
+    }
+}

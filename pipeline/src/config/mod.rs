@@ -10,7 +10,8 @@
 //!   Gaussians they mesh ([`VisibilityRule`]);
 //! - `report`: metrics ([`MetricOptions`]), outputs ([`OutputOptions`]) and [`Limits`];
 //! - `shard`: the part of the frames a run takes ([`ShardOptions`], [`Shard`]);
-//! - `topology`: per-frame meshes or one carried through the track ([`TopologyOptions`]).
+//! - `topology`: per-frame meshes or one carried through the track ([`TopologyOptions`]);
+//! - `finish`: decimation and vertex colours of every mesh ([`FinishOptions`]).
 //!
 //! This module composes them ([`ExtractOptions`], [`ExtractConfig`], [`RunControl`]); the
 //! stage files import nothing from it or from the modules that read them.
@@ -19,6 +20,7 @@ use std::path::PathBuf;
 
 #[cfg(feature = "cli")]
 mod arg;
+mod finish;
 mod input;
 mod method;
 mod points;
@@ -27,6 +29,7 @@ mod shard;
 mod topology;
 mod tsdf;
 
+pub use finish::{FinishOptions, SimplifyBorder, VertexColors};
 pub use input::{
     AnimationOptions, BIND_NORMAL_SCALE, BIND_OPACITY, BIND_TANGENT_SCALE, BindOptions,
     DEFAULT_PER_TRIANGLE, GaussianLayout, Mode,
@@ -131,6 +134,9 @@ pub struct ExtractOptions {
     /// Whether each frame is meshed from scratch or one mesh is carried through the track.
     #[cfg_attr(feature = "cli", command(flatten))]
     pub topology: TopologyOptions,
+    /// Decimation and vertex colours of every mesh.
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub finish: FinishOptions,
 }
 
 /// How a run treats an output folder that already holds a run, and frames that fail.

@@ -29,6 +29,29 @@ fn self_consistency_note(m: &MethodReport) -> String {
     )
 }
 
+/// The sentence on what decimation cost a method (`--faces`, `--simplify-error`), if it
+/// decimated.
+fn simplify_note(m: &MethodReport) -> Option<String> {
+    let d: Vec<_> = m.frames.iter().filter_map(|r| r.simplify).collect();
+    if d.is_empty() {
+        return None;
+    }
+    let n = d.len() as f64;
+    let before = d.iter().map(|d| d.faces_before as f64).sum::<f64>() / n;
+    let after = d.iter().map(|d| d.faces_after as f64).sum::<f64>() / n;
+    let worst = |f: fn(&crate::records::SimplifyFrame) -> f64| d.iter().map(f).fold(0.0, f64::max);
+    Some(format!(
+        "decimated {} mesh(es) (meshoptimizer): {before:.0} → {after:.0} faces on average; \
+         meshoptimizer's error estimate at most {}, measured from the undecimated mesh \
+         (vertices and triangle centroids, exact point-to-surface): Hausdorff at most {}, \
+         mean distance at most {} (scene units)",
+        d.len(),
+        opt(Some(worst(|d| d.meshopt_error)), 3),
+        opt(Some(worst(|d| d.hausdorff)), 3),
+        opt(Some(worst(|d| d.mean_distance)), 3),
+    ))
+}
+
 impl Report {
     /// The lines above the tables (template, animation, Gaussians, frames, timing, ground
     /// truth, failures, deformation), as Markdown list items without the leading `- `.
@@ -213,6 +236,16 @@ impl Report {
         if carried {
             columns.extend([("key", true), ("hops", true), ("stretched", true)]);
         }
+        // A decimated mesh adds what decimation cost.
+        let decimated = m.frames.iter().any(|r| r.simplify.is_some());
+        if decimated {
+            columns.extend([
+                ("faces before", true),
+                ("meshopt error", true),
+                ("Hausdorff", true),
+                ("mean distance", true),
+            ]);
+        }
         // Delaunay adds what its update did.
         if m.delaunay.is_some() {
             columns.extend([
@@ -271,6 +304,18 @@ impl Report {
                     .map(Cell::plain),
                 );
             }
+            if decimated {
+                let d = r.simplify;
+                row.extend(
+                    [
+                        d.map_or_else(|| "-".to_owned(), |d| d.faces_before.to_string()),
+                        opt(d.map(|d| d.meshopt_error), 4),
+                        opt(d.map(|d| d.hausdorff), 4),
+                        opt(d.map(|d| d.mean_distance), 4),
+                    ]
+                    .map(Cell::plain),
+                );
+            }
             match (&m.delaunay, stats.get(&r.frame)) {
                 (Some(_), Some(d)) => row.extend(
                     [
@@ -321,6 +366,9 @@ impl Report {
                     .join(", "),
                 pct(m.mean.max_hops)
             ));
+        }
+        if let Some(note) = simplify_note(m) {
+            v.push(note);
         }
         match m.relation {
             Some(Relation::SelfConsistency) => v.push(self_consistency_note(m)),

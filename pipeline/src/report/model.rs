@@ -382,6 +382,7 @@ mod tests {
             metrics,
             consistency: None,
             topology: None,
+            simplify: None,
         }
     }
 

@@ -605,6 +605,7 @@ pub(crate) mod tests {
                     }),
                     consistency: None,
                     topology: None,
+                    simplify: None,
                 })
                 .collect();
             let mean = Summary::of(&frames);
