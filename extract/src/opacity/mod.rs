@@ -21,6 +21,7 @@ mod order;
 mod pieces;
 mod tets;
 mod view;
+mod views;
 
 use std::time::Instant;
 
@@ -28,7 +29,9 @@ use glam::DVec3;
 use trisplat_geometry::{Camera, Rgba, TriMesh};
 
 use crate::delaunay3d::Delaunay3d;
-use field::{Mode, evaluate};
+use field::{Mode, NO_VIEW, evaluate};
+use order::z_order;
+use views::{HELD_BYTES, Views};
 
 pub use error::OpacityError;
 pub use field::{AlphaRules, RayModel};
@@ -136,7 +139,17 @@ pub fn opacity_at(
         return Err(OpacityError::NoCameras);
     }
     let p = Prepared::new(gaussians, options.opacity_cut, options.rules.min_alpha)?;
-    let field = evaluate(&p, cameras, points, Mode::Exact, options.rules);
+    let mut views = Views::new(&p, cameras, HELD_BYTES);
+    let order = z_order(points);
+    let field = evaluate(
+        &p,
+        &mut views,
+        points,
+        &order,
+        None,
+        Mode::Exact,
+        options.rules,
+    );
     Ok(field.value.iter().map(|&v| v as f32).collect())
 }
 
@@ -150,6 +163,16 @@ pub fn opacity_mesh(
     cameras: &[Camera],
     options: &OpacityOptions,
 ) -> Result<OpacityMesh, OpacityError> {
+    opacity_mesh_within(gaussians, cameras, options, HELD_BYTES)
+}
+
+/// [`opacity_mesh`], holding the views' bins when they fit in `budget` bytes.
+fn opacity_mesh_within(
+    gaussians: &OpacityGaussians,
+    cameras: &[Camera],
+    options: &OpacityOptions,
+    budget: usize,
+) -> Result<OpacityMesh, OpacityError> {
     if cameras.is_empty() {
         return Err(OpacityError::NoCameras);
     }
@@ -161,16 +184,21 @@ pub fn opacity_mesh(
         ..OpacityStats::default()
     };
     let clock = Instant::now();
+    let mut views = Views::new(&p, cameras, budget);
     let all = tetra_points(&p);
     stats.points = all.len();
-    let field = evaluate(&p, cameras, &all, sign, options.rules);
-    let (points, inside): (Vec<DVec3>, Vec<bool>) = all
-        .iter()
-        .zip(&field.value)
-        .zip(&field.seen)
-        .filter(|(_, seen)| **seen)
-        .map(|((&x, &v), _)| (x, v >= level))
-        .unzip();
+    let order = z_order(&all);
+    let field = evaluate(&p, &mut views, &all, &order, None, sign, options.rules);
+    let mut points = Vec::with_capacity(all.len());
+    let mut inside = Vec::with_capacity(all.len());
+    let mut decider = Vec::with_capacity(all.len());
+    for (k, &x) in all.iter().enumerate() {
+        if field.seen[k] {
+            points.push(x);
+            inside.push(field.value[k] >= level);
+            decider.push(field.decider[k]);
+        }
+    }
     stats.points_seen = points.len();
     if points.is_empty() {
         return Err(OpacityError::NotSeen { points: all.len() });
@@ -209,16 +237,37 @@ pub fn opacity_mesh(
         .iter()
         .map(|e| points[e[1] as usize])
         .collect();
-    let mut mid: Vec<DVec3> = Vec::with_capacity(lo.len());
-    for _ in 0..options.bisection_steps {
-        mid.clear();
-        mid.extend(lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5));
-        let f = evaluate(&p, cameras, &mid, sign, options.rules);
+    // Each edge first walks the view that put its outer end outside.
+    let mut hint: Vec<u16> = crossings
+        .edges
+        .iter()
+        .map(|e| decider[e[1] as usize])
+        .collect();
+    let mut mid: Vec<DVec3> = lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5).collect();
+    // The midpoints move by less than their edges: one Z-order serves every step.
+    let mid_order = z_order(&mid);
+    for step in 0..options.bisection_steps {
+        if step > 0 {
+            mid.clear();
+            mid.extend(lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5));
+        }
+        let f = evaluate(
+            &p,
+            &mut views,
+            &mid,
+            &mid_order,
+            Some(&hint),
+            sign,
+            options.rules,
+        );
         for (k, m) in mid.iter().enumerate() {
             if f.value[k] >= level {
                 lo[k] = *m;
             } else {
                 hi[k] = *m;
+                if f.decider[k] != NO_VIEW {
+                    hint[k] = f.decider[k];
+                }
             }
         }
     }
@@ -261,6 +310,7 @@ pub fn opacity_mesh(
     // Drop vertices no kept triangle uses, keeping their order.
     let mut remap = vec![u32::MAX; vertices.len()];
     let mut used = Vec::new();
+    let mut used_hint = Vec::new();
     for t in &triangles {
         for &v in t {
             if remap[v as usize] == u32::MAX {
@@ -272,6 +322,7 @@ pub fn opacity_mesh(
         if *r == 0 {
             *r = used.len() as u32;
             used.push(vertices[v]);
+            used_hint.push(hint[v]);
         }
     }
     let triangles: Vec<[u32; 3]> = triangles
@@ -280,7 +331,7 @@ pub fn opacity_mesh(
         .collect();
     let mut mesh = TriMesh::new(used, triangles);
     if options.colors {
-        let colors = field::colors(&p, cameras, mesh.positions(), options.rules);
+        let colors = field::colors(&p, &mut views, mesh.positions(), &used_hint, options.rules);
         let rgba: Vec<Rgba> = colors
             .iter()
             .map(|c| {

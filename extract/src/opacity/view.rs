@@ -306,6 +306,31 @@ impl ViewBins {
         }
     }
 
+    /// Bytes of what the walks read ([`Self::compact`]'s size).
+    pub fn held_bytes(&self) -> usize {
+        self.packed.len() * std::mem::size_of::<Packed>()
+            + (self.entries.len() + self.offsets.len()) * std::mem::size_of::<u32>()
+    }
+
+    /// A copy of what the walks read, without the scratch buffers of [`Self::prepare`].
+    pub fn compact(&self) -> Self {
+        Self {
+            origin: self.origin,
+            rot: self.rot,
+            fx: self.fx,
+            fy: self.fy,
+            cx: self.cx,
+            cy: self.cy,
+            width: self.width,
+            height: self.height,
+            tiles_x: self.tiles_x,
+            packed: self.packed.clone(),
+            offsets: self.offsets.clone(),
+            entries: self.entries.clone(),
+            ..Self::default()
+        }
+    }
+
     /// Where world point `x` falls: `None` behind the near plane or outside the image.
     #[inline]
     pub fn locate(&self, x: DVec3) -> Option<Hit> {
