@@ -42,6 +42,11 @@ pub struct AlphaRules {
     pub max_alpha: f32,
     /// What a Gaussian adds before its peak.
     pub model: RayModel,
+    /// With [`RayModel::Gof`], the squared whitened distance of a point before the peak is
+    /// that of the peak plus `sharpness` times its distance to the peak along the ray, squared
+    /// (1: GOF's, the density at the point itself; larger: a steeper ramp, the level set
+    /// closer to the Gaussians' centres).
+    pub sharpness: f32,
 }
 
 impl Default for AlphaRules {
@@ -50,6 +55,7 @@ impl Default for AlphaRules {
             min_alpha: 1.0 / 255.0,
             max_alpha: 0.999,
             model: RayModel::default(),
+            sharpness: 1.0,
         }
     }
 }
@@ -133,7 +139,10 @@ pub(crate) fn accumulate<const COLOR: bool>(
             continue;
         }
         let t = peak.clamp(0.0, 1.0);
-        let q = (u + v * t).length_squared();
+        let mut q = (u + v * t).length_squared();
+        if peak > 1.0 && rules.sharpness != 1.0 {
+            q += (f64::from(rules.sharpness) - 1.0) * vv * (peak - 1.0) * (peak - 1.0);
+        }
         if q > f64::from(g.q_max) {
             continue;
         }
@@ -197,6 +206,9 @@ pub(crate) fn evaluate(
                         };
                         let Some(hit) = view.locate(x) else { continue };
                         seen = true;
+                        if view.is_certain(hit) {
+                            continue;
+                        }
                         let acc = accumulate::<false>(p, view, hit, x, stop, rules, &mut [0.0; 3]);
                         value = value.min(acc);
                         if let Mode::Sign { level } = mode
@@ -237,6 +249,9 @@ pub(crate) fn evaluate(
                 };
                 let Some(hit) = view.locate(x) else { return };
                 *seen = true;
+                if view.is_certain(hit) {
+                    return;
+                }
                 let acc = accumulate::<false>(p, view, hit, x, stop, rules, &mut [0.0; 3]);
                 *value = value.min(acc);
                 if let Mode::Sign { level } = mode
@@ -267,8 +282,13 @@ pub(crate) fn colors(
 ) -> Vec<[f32; 3]> {
     let order = z_order(points);
     let mut out = vec![[0.5f32; 3]; points.len()];
+    // A view certain to be at or above the level cannot beat a smallest opacity below it.
+    let level = views.certified_level().unwrap_or(f64::NEG_INFINITY);
     let walk = |view: &ViewBins, x: DVec3, best: &mut (f64, [f32; 3])| {
         let Some(hit) = view.locate(x) else { return };
+        if best.0 < level && view.is_certain(hit) {
+            return;
+        }
         let mut c = [0.0f64; 3];
         let acc = accumulate::<true>(p, view, hit, x, best.0, rules, &mut c);
         if acc < best.0 {

@@ -9,8 +9,10 @@
 //!   zero, negative or non-finite scales, non-finite means, zero rotations and opacities
 //!   outside [0, 1] are errors naming the Gaussian. Gaussians whose opacity is below
 //!   [`OpacityOptions::opacity_cut`] (and the alpha cut) are left out of points and field.
-//! - **Views** are streamed: one view's bins are held at a time, so memory does not grow with
-//!   their number.
+//! - **Views**: every view's bins are built once and held when they fit in 1 GiB (each point
+//!   then walks the views from a hint, and certificates per tile skip sure walks); beyond that
+//!   they are streamed, one view's bins at a time, so memory does not grow with their number.
+//!   Either way the signs and the mesh are the same.
 //! - **Determinism**: every point's value depends only on the views in order, never on the
 //!   thread count.
 
@@ -31,6 +33,7 @@ use trisplat_geometry::{Camera, Rgba, TriMesh};
 use crate::delaunay3d::Delaunay3d;
 use field::{Mode, NO_VIEW, evaluate};
 use order::z_order;
+use view::CertifyAt;
 use views::{HELD_BYTES, Views};
 
 pub use error::OpacityError;
@@ -41,8 +44,10 @@ use gaussians::{Prepared, tetra_points};
 
 /// Default level of the opacity field the surface is extracted at (GOF: 1/2).
 pub const DEFAULT_LEVEL: f32 = 0.5;
-/// Default number of bisection steps on each crossing edge (GOF: 8).
-pub const DEFAULT_BISECTION_STEPS: u32 = 8;
+/// Default number of bisection steps on each crossing edge (GOF: 8; 4 puts every vertex
+/// within 1/32 of its edge of GOF's and changes LAM's render consistency by under 0.03 mm, at
+/// half the bisection's cost: docs/benchmarks.md).
+pub const DEFAULT_BISECTION_STEPS: u32 = 4;
 /// Default opacity below which a Gaussian is left out (the renderer's alpha cut, 1/255: such a
 /// Gaussian never changes a pixel).
 pub const DEFAULT_OPACITY_CUT: f32 = 1.0 / 255.0;
@@ -139,7 +144,7 @@ pub fn opacity_at(
         return Err(OpacityError::NoCameras);
     }
     let p = Prepared::new(gaussians, options.opacity_cut, options.rules.min_alpha)?;
-    let mut views = Views::new(&p, cameras, HELD_BYTES);
+    let mut views = Views::new(&p, cameras, HELD_BYTES, None);
     let order = z_order(points);
     let field = evaluate(
         &p,
@@ -184,7 +189,12 @@ fn opacity_mesh_within(
         ..OpacityStats::default()
     };
     let clock = Instant::now();
-    let mut views = Views::new(&p, cameras, budget);
+    let certify = CertifyAt {
+        level,
+        max_alpha: options.rules.max_alpha,
+        min_alpha: options.rules.min_alpha,
+    };
+    let mut views = Views::new(&p, cameras, budget, Some(certify));
     let all = tetra_points(&p);
     stats.points = all.len();
     let order = z_order(&all);

@@ -6,7 +6,7 @@
 use trisplat_geometry::Camera;
 
 use super::gaussians::Prepared;
-use super::view::ViewBins;
+use super::view::{CertifyAt, ViewBins};
 
 /// Most bytes of bins held at once (beyond it views are streamed).
 pub(crate) const HELD_BYTES: usize = 1 << 30;
@@ -19,20 +19,34 @@ pub(crate) struct Views<'a> {
     held: Vec<ViewBins>,
     /// The one view prepared at a time when streamed.
     scratch: ViewBins,
+    /// The level each view's tiles certify points at or above, and the rules.
+    certify: Option<CertifyAt>,
 }
 
 impl<'a> Views<'a> {
     /// Bins `cameras` over `p`, holding them all when their size (estimated from the first
-    /// view, times the number of views) is at most `budget` bytes.
-    pub fn new(p: &Prepared, cameras: &'a [Camera], budget: usize) -> Self {
+    /// view, times the number of views) is at most `budget` bytes. With `certify`, each view
+    /// also certifies the points at or above that level ([`ViewBins::certify`]).
+    pub fn new(
+        p: &Prepared,
+        cameras: &'a [Camera],
+        budget: usize,
+        certify: Option<CertifyAt>,
+    ) -> Self {
         let mut scratch = ViewBins::default();
         let mut held = Vec::new();
+        let prepare = |bins: &mut ViewBins, camera: &Camera| {
+            bins.prepare(p, camera);
+            if let Some(at) = certify {
+                bins.certify(at);
+            }
+        };
         if let Some(first) = cameras.first() {
-            scratch.prepare(p, first);
+            prepare(&mut scratch, first);
             if scratch.held_bytes().saturating_mul(cameras.len()) <= budget {
                 held.push(scratch.compact());
                 for camera in &cameras[1..] {
-                    scratch.prepare(p, camera);
+                    prepare(&mut scratch, camera);
                     held.push(scratch.compact());
                 }
                 scratch = ViewBins::default();
@@ -42,12 +56,18 @@ impl<'a> Views<'a> {
             cameras,
             held,
             scratch,
+            certify,
         }
     }
 
     /// Number of views.
     pub fn len(&self) -> usize {
         self.cameras.len()
+    }
+
+    /// The level the views certify points at or above, if they do.
+    pub fn certified_level(&self) -> Option<f64> {
+        self.certify.map(|at| at.level)
     }
 
     /// Every view's bins, when held.
@@ -59,6 +79,9 @@ impl<'a> Views<'a> {
     pub fn stream(&mut self, p: &Prepared, v: usize) -> &ViewBins {
         if self.held.is_empty() {
             self.scratch.prepare(p, &self.cameras[v]);
+            if let Some(at) = self.certify {
+                self.scratch.certify(at);
+            }
             &self.scratch
         } else {
             &self.held[v]
