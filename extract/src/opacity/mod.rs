@@ -9,8 +9,10 @@
 //!   zero, negative or non-finite scales, non-finite means, zero rotations and opacities
 //!   outside [0, 1] are errors naming the Gaussian. Gaussians whose opacity is below
 //!   [`OpacityOptions::opacity_cut`] (and the alpha cut) are left out of points and field.
-//! - **Views** are streamed: one view's bins are held at a time, so memory does not grow with
-//!   their number.
+//! - **Views**: every view's bins are built once and held when they fit in 1 GiB (each point
+//!   then walks the views from a hint, and certificates per tile skip sure walks); beyond that
+//!   they are streamed, one view's bins at a time, so memory does not grow with their number.
+//!   Either way the signs and the mesh are the same.
 //! - **Determinism**: every point's value depends only on the views in order, never on the
 //!   thread count.
 
@@ -21,6 +23,7 @@ mod order;
 mod pieces;
 mod tets;
 mod view;
+mod views;
 
 use std::time::Instant;
 
@@ -28,7 +31,10 @@ use glam::DVec3;
 use trisplat_geometry::{Camera, Rgba, TriMesh};
 
 use crate::delaunay3d::Delaunay3d;
-use field::{Mode, evaluate};
+use field::{Mode, NO_VIEW, evaluate};
+use order::z_order;
+use view::CertifyAt;
+use views::{HELD_BYTES, Views};
 
 pub use error::OpacityError;
 pub use field::{AlphaRules, RayModel};
@@ -38,8 +44,10 @@ use gaussians::{Prepared, tetra_points};
 
 /// Default level of the opacity field the surface is extracted at (GOF: 1/2).
 pub const DEFAULT_LEVEL: f32 = 0.5;
-/// Default number of bisection steps on each crossing edge (GOF: 8).
-pub const DEFAULT_BISECTION_STEPS: u32 = 8;
+/// Default number of bisection steps on each crossing edge (GOF: 8; 4 puts every vertex
+/// within 1/32 of its edge of GOF's and changes LAM's render consistency by under 0.03 mm, at
+/// half the bisection's cost: docs/benchmarks.md).
+pub const DEFAULT_BISECTION_STEPS: u32 = 4;
 /// Default opacity below which a Gaussian is left out (the renderer's alpha cut, 1/255: such a
 /// Gaussian never changes a pixel).
 pub const DEFAULT_OPACITY_CUT: f32 = 1.0 / 255.0;
@@ -136,7 +144,17 @@ pub fn opacity_at(
         return Err(OpacityError::NoCameras);
     }
     let p = Prepared::new(gaussians, options.opacity_cut, options.rules.min_alpha)?;
-    let field = evaluate(&p, cameras, points, Mode::Exact, options.rules);
+    let mut views = Views::new(&p, cameras, HELD_BYTES, None);
+    let order = z_order(points);
+    let field = evaluate(
+        &p,
+        &mut views,
+        points,
+        &order,
+        None,
+        Mode::Exact,
+        options.rules,
+    );
     Ok(field.value.iter().map(|&v| v as f32).collect())
 }
 
@@ -150,6 +168,16 @@ pub fn opacity_mesh(
     cameras: &[Camera],
     options: &OpacityOptions,
 ) -> Result<OpacityMesh, OpacityError> {
+    opacity_mesh_within(gaussians, cameras, options, HELD_BYTES)
+}
+
+/// [`opacity_mesh`], holding the views' bins when they fit in `budget` bytes.
+fn opacity_mesh_within(
+    gaussians: &OpacityGaussians,
+    cameras: &[Camera],
+    options: &OpacityOptions,
+    budget: usize,
+) -> Result<OpacityMesh, OpacityError> {
     if cameras.is_empty() {
         return Err(OpacityError::NoCameras);
     }
@@ -161,16 +189,26 @@ pub fn opacity_mesh(
         ..OpacityStats::default()
     };
     let clock = Instant::now();
+    let certify = CertifyAt {
+        level,
+        max_alpha: options.rules.max_alpha,
+        min_alpha: options.rules.min_alpha,
+    };
+    let mut views = Views::new(&p, cameras, budget, Some(certify));
     let all = tetra_points(&p);
     stats.points = all.len();
-    let field = evaluate(&p, cameras, &all, sign, options.rules);
-    let (points, inside): (Vec<DVec3>, Vec<bool>) = all
-        .iter()
-        .zip(&field.value)
-        .zip(&field.seen)
-        .filter(|(_, seen)| **seen)
-        .map(|((&x, &v), _)| (x, v >= level))
-        .unzip();
+    let order = z_order(&all);
+    let field = evaluate(&p, &mut views, &all, &order, None, sign, options.rules);
+    let mut points = Vec::with_capacity(all.len());
+    let mut inside = Vec::with_capacity(all.len());
+    let mut decider = Vec::with_capacity(all.len());
+    for (k, &x) in all.iter().enumerate() {
+        if field.seen[k] {
+            points.push(x);
+            inside.push(field.value[k] >= level);
+            decider.push(field.decider[k]);
+        }
+    }
     stats.points_seen = points.len();
     if points.is_empty() {
         return Err(OpacityError::NotSeen { points: all.len() });
@@ -209,16 +247,37 @@ pub fn opacity_mesh(
         .iter()
         .map(|e| points[e[1] as usize])
         .collect();
-    let mut mid: Vec<DVec3> = Vec::with_capacity(lo.len());
-    for _ in 0..options.bisection_steps {
-        mid.clear();
-        mid.extend(lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5));
-        let f = evaluate(&p, cameras, &mid, sign, options.rules);
+    // Each edge first walks the view that put its outer end outside.
+    let mut hint: Vec<u16> = crossings
+        .edges
+        .iter()
+        .map(|e| decider[e[1] as usize])
+        .collect();
+    let mut mid: Vec<DVec3> = lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5).collect();
+    // The midpoints move by less than their edges: one Z-order serves every step.
+    let mid_order = z_order(&mid);
+    for step in 0..options.bisection_steps {
+        if step > 0 {
+            mid.clear();
+            mid.extend(lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5));
+        }
+        let f = evaluate(
+            &p,
+            &mut views,
+            &mid,
+            &mid_order,
+            Some(&hint),
+            sign,
+            options.rules,
+        );
         for (k, m) in mid.iter().enumerate() {
             if f.value[k] >= level {
                 lo[k] = *m;
             } else {
                 hi[k] = *m;
+                if f.decider[k] != NO_VIEW {
+                    hint[k] = f.decider[k];
+                }
             }
         }
     }
@@ -261,6 +320,7 @@ pub fn opacity_mesh(
     // Drop vertices no kept triangle uses, keeping their order.
     let mut remap = vec![u32::MAX; vertices.len()];
     let mut used = Vec::new();
+    let mut used_hint = Vec::new();
     for t in &triangles {
         for &v in t {
             if remap[v as usize] == u32::MAX {
@@ -272,6 +332,7 @@ pub fn opacity_mesh(
         if *r == 0 {
             *r = used.len() as u32;
             used.push(vertices[v]);
+            used_hint.push(hint[v]);
         }
     }
     let triangles: Vec<[u32; 3]> = triangles
@@ -280,7 +341,7 @@ pub fn opacity_mesh(
         .collect();
     let mut mesh = TriMesh::new(used, triangles);
     if options.colors {
-        let colors = field::colors(&p, cameras, mesh.positions(), options.rules);
+        let colors = field::colors(&p, &mut views, mesh.positions(), &used_hint, options.rules);
         let rgba: Vec<Rgba> = colors
             .iter()
             .map(|c| {

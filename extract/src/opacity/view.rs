@@ -24,6 +24,8 @@ pub(crate) struct Packed {
     /// Smallest camera z of the reach box, rounded down to f32 (-inf when it reaches the near
     /// plane).
     pub zmin: f32,
+    /// Largest camera z of the reach box, rounded up to f32.
+    pub zmax: f32,
     /// Squared whitened reach (see [`Prepared::q_max`]).
     pub q_max: f32,
     /// Opacity.
@@ -56,6 +58,9 @@ pub(crate) struct ViewBins {
     foot: Vec<Footprint>,
     /// (tile, rank in `packed`) pairs, sorted.
     pairs: Vec<u64>,
+    /// Per tile, a depth beyond which every point of the tile is known to be at or above the
+    /// level (see [`Self::certify`]); empty when not computed.
+    certain: Vec<f32>,
 }
 
 /// Where one Gaussian's reach ellipsoid can meet the view's rays.
@@ -63,6 +68,8 @@ pub(crate) struct ViewBins {
 struct Footprint {
     /// Smallest camera z of the reach box.
     zmin: f64,
+    /// Largest camera z of the reach box.
+    zmax: f64,
     /// Tiles `[x0, x1) x [y0, y1)` the projected box touches (empty when culled).
     rect: [u32; 4],
     /// The reach ellipsoid's silhouette on the image plane `z = 1`, `(x, y, 1) K (x, y, 1)ᵀ >= 0`,
@@ -72,6 +79,7 @@ struct Footprint {
 
 const CULLED: Footprint = Footprint {
     zmin: f64::INFINITY,
+    zmax: f64::INFINITY,
     rect: [0, 0, 0, 0],
     conic: None,
 };
@@ -121,6 +129,17 @@ fn conic_meets(k: &[f64; 6], x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
         || [x0, x1]
             .iter()
             .any(|&x| q(x, (-(k01 * x + k12) / k11).clamp(y0, y1)) >= 0.0)
+}
+
+/// The level a view's tiles certify points at or above, and the alpha rules it is reached by.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct CertifyAt {
+    /// The level.
+    pub level: f64,
+    /// Alphas are clamped to at most this.
+    pub max_alpha: f32,
+    /// Alphas below this add nothing.
+    pub min_alpha: f32,
 }
 
 /// Where a point falls in a view.
@@ -175,10 +194,16 @@ impl ViewBins {
                 if f64::from(z32) > zmin {
                     z32 = z32.next_down();
                 }
+                let zmax = foot[g].zmax;
+                let mut zmax32 = zmax as f32;
+                if f64::from(zmax32) < zmax {
+                    zmax32 = zmax32.next_up();
+                }
                 Packed {
                     centre: p.whitened(g, origin - p.means[g]).to_array(),
                     whiten: p.whiten[g],
                     zmin: z32,
+                    zmax: zmax32,
                     // Rounded up: the alpha test decides at the cut itself.
                     q_max: (p.q_max[g] as f32).next_up(),
                     opacity: p.opacity[g],
@@ -232,6 +257,96 @@ impl ViewBins {
         self.entries.clear();
         self.entries.extend(pairs.iter().map(|&pair| pair as u32));
         self.pairs = pairs;
+        self.certain.clear();
+    }
+
+    /// Computes, per tile, a depth beyond which the opacity accumulated up to any point of the
+    /// tile is at least `level`: walking the tile's Gaussians in order, each contributes at
+    /// least its alpha at the worst of the tile's four corner rays' peaks (the rays' smallest
+    /// whitened distance is quasi-convex over the image plane: its sublevel sets are the
+    /// silhouette ellipses of the Gaussian's level ellipsoids, so its largest over the tile
+    /// is at a corner) once the point lies beyond its reach box (the peak then lies before the
+    /// point, where every ray model takes it). The depth is the farthest reach box of the
+    /// Gaussians needed to bring that lower bound to `level` (+1e-6 for rounding); infinite
+    /// when they do not. Gaussians whose whitened camera distance exceeds 1e4 (rounding of
+    /// their distances above 1e-8) count for nothing.
+    pub fn certify(&mut self, at: CertifyAt) {
+        /// Most Gaussians of a tile looked at.
+        const LOOK: usize = 256;
+        let tiles = self.offsets.len().saturating_sub(1);
+        let rot_t = self.rot.transpose();
+        let (fx, fy, cx, cy) = (self.fx, self.fy, self.cx, self.cy);
+        let t = f64::from(TILE);
+        let (level, max_alpha, min_alpha) =
+            (at.level, f64::from(at.max_alpha), f64::from(at.min_alpha));
+        let this = &*self;
+        let certain: Vec<f32> = (0..tiles)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|tile| {
+                let (tx, ty) = (tile as u32 % this.tiles_x, tile as u32 / this.tiles_x);
+                let corners: [DVec3; 4] = std::array::from_fn(|k| {
+                    let u = (f64::from(tx) + (k & 1) as f64) * t;
+                    let v = (f64::from(ty) + (k >> 1) as f64) * t;
+                    rot_t * DVec3::new((u - cx) / fx, (v - cy) / fy, 1.0)
+                });
+                let mut transmittance = 1.0f64;
+                let mut depth = f64::NEG_INFINITY;
+                for &k in this.tile(tile).iter().take(LOOK) {
+                    let g = &this.packed[k as usize];
+                    let u = DVec3::from_array(g.centre);
+                    let uu = u.length_squared();
+                    if g.zmin.is_nan() || g.zmin <= NEAR as f32 || uu.is_nan() || uu > 1e8 {
+                        continue;
+                    }
+                    let m = &g.whiten;
+                    let mut q_worst = 0.0f64;
+                    for d in &corners {
+                        let row = |r: usize| {
+                            f64::from(m[r][0]) * d.x
+                                + f64::from(m[r][1]) * d.y
+                                + f64::from(m[r][2]) * d.z
+                        };
+                        let v = DVec3::new(row(0), row(1), row(2));
+                        let vv = v.length_squared();
+                        let q = if vv > 0.0 {
+                            (u + v * (-u.dot(v) / vv)).length_squared()
+                        } else {
+                            f64::INFINITY
+                        };
+                        q_worst = q_worst.max(q);
+                    }
+                    let q_worst = q_worst + 1e-6;
+                    if q_worst.is_nan() || q_worst > f64::from(g.q_max) {
+                        continue;
+                    }
+                    let alpha = (f64::from(g.opacity) * (-0.5 * q_worst).exp()).min(max_alpha);
+                    if alpha < min_alpha {
+                        continue;
+                    }
+                    transmittance *= 1.0 - alpha;
+                    depth = depth.max(f64::from(g.zmax));
+                    if 1.0 - transmittance >= level + 1e-6 {
+                        let mut z = depth as f32;
+                        if f64::from(z) < depth {
+                            z = z.next_up();
+                        }
+                        return z;
+                    }
+                }
+                f32::INFINITY
+            })
+            .collect();
+        self.certain = certain;
+    }
+
+    /// Whether the point `hit` locates is known to be at or above the level of
+    /// [`Self::certify`] (never when that was not called).
+    #[inline]
+    pub fn is_certain(&self, hit: Hit) -> bool {
+        self.certain
+            .get(hit.tile)
+            .is_some_and(|&z| hit.z > f64::from(z))
     }
 
     /// Gaussian `g`'s reach box's smallest camera z, the tiles its projection touches, and the
@@ -244,11 +359,12 @@ impl ViewBins {
         let r = p.q_max[g].sqrt();
         let a = p.axes[g].map(|axis| self.rot * axis * r);
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        let mut zmin = f64::INFINITY;
+        let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
         for corner in 0..8u32 {
             let sign = |bit: u32| if corner >> bit & 1 == 0 { -1.0 } else { 1.0 };
             let q = c + a[0] * sign(0) + a[1] * sign(1) + a[2] * sign(2);
             zmin = zmin.min(q.z);
+            zmax = zmax.max(q.z);
             if q.z <= NEAR {
                 continue;
             }
@@ -263,6 +379,7 @@ impl ViewBins {
             // The box reaches the camera: any ray may cross it.
             return Footprint {
                 zmin: f64::NEG_INFINITY,
+                zmax,
                 rect: [0, tiles_x, 0, tiles_y],
                 conic: None,
             };
@@ -301,8 +418,36 @@ impl ViewBins {
             .filter(|k| well_conditioned(k, magnitude));
         Footprint {
             zmin,
+            zmax,
             rect: [x0, x1, y0, y1],
             conic,
+        }
+    }
+
+    /// Bytes of what the walks read ([`Self::compact`]'s size).
+    pub fn held_bytes(&self) -> usize {
+        self.packed.len() * std::mem::size_of::<Packed>()
+            + (self.entries.len() + self.offsets.len()) * std::mem::size_of::<u32>()
+            + self.certain.len() * std::mem::size_of::<f32>()
+    }
+
+    /// A copy of what the walks read, without the scratch buffers of [`Self::prepare`].
+    pub fn compact(&self) -> Self {
+        Self {
+            origin: self.origin,
+            rot: self.rot,
+            fx: self.fx,
+            fy: self.fy,
+            cx: self.cx,
+            cy: self.cy,
+            width: self.width,
+            height: self.height,
+            tiles_x: self.tiles_x,
+            packed: self.packed.clone(),
+            offsets: self.offsets.clone(),
+            entries: self.entries.clone(),
+            certain: self.certain.clone(),
+            ..Self::default()
         }
     }
 
