@@ -38,7 +38,7 @@ fn opacity_meshes_every_frame_closed_and_is_measured() {
     assert!(plan.runs(Stage::Mesh(Method::Opacity)));
     let report = run(&config, RunControl::default(), &mut |_| {}).expect("run");
     let opacity = &report.methods["opacity"];
-    assert_eq!(opacity.parameters["bisection_steps"], 4.0);
+    assert_eq!(opacity.parameters["bisection_steps"], 8.0);
     assert_eq!(opacity.frames.len(), 2);
     for f in &opacity.frames {
         // Marching tetrahedra over a closed tetrahedralisation: a closed surface.
