@@ -318,7 +318,7 @@ fn a_synthetic_avatar_is_fitted_back() {
 /// The benchmark of docs/benchmarks.md ("Relightable fit"):
 /// `cargo test --release -p trisplat-pipeline --test fit_brdf -- --ignored --nocapture`.
 #[test]
-#[ignore = "benchmark: a larger avatar, about a minute"]
+#[ignore = "benchmark: a larger avatar, about a minute of CPU"]
 fn benchmark_synthetic_avatar() {
-    report(&run(32, 2, 128, 24, 2000));
+    report(&run(24, 2, 96, 16, 1000));
 }
