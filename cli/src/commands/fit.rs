@@ -27,6 +27,7 @@ use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 use trisplat_splat::render::SURFEL_NEAR;
 use trisplat_splat::render::{RenderMode, RenderOptions};
 
+use super::fit_brdf::{BrdfArgs, open_environment, run_brdf};
 use super::fit_neural::{MlpPaths, print_checkpoint, run_mlp};
 use super::render::parse_rgb;
 use super::{
@@ -242,14 +243,19 @@ pub struct FitArgs {
     /// Raise the active SH degree by one every N iterations, from 0 (3DGS: 1000).
     #[arg(long, value_name = "N")]
     pub sh_up_every: Option<u64>,
-    /// Appearance fitted: sh (the set's SH colour and opacities, with its geometry) or mlp (a
+    /// Appearance fitted: sh (the set's SH colour and opacities, with its geometry), mlp (a
     /// hash-grid MLP's colour and opacity, geometry held fixed; the weights are written to
-    /// OUT.safetensors beside the output PLY, which `render` reads).
+    /// OUT.safetensors beside the output PLY, which `render` reads) or brdf (each Gaussian's
+    /// albedo, roughness and F0 under --env, written into the PLY; with --fit-normals also its
+    /// rotation and scales).
     #[arg(long, value_enum, default_value_t = Appearance::Sh)]
     pub appearance: Appearance,
     /// --appearance mlp: Adam's learning rate of the MLP weights.
     #[arg(long, value_name = "LR", default_value_t = NeuralLearningRates::default().mlp)]
     pub mlp_lr: f64,
+    /// --appearance brdf: the environment and the material fit's options.
+    #[command(flatten)]
+    pub brdf: BrdfArgs,
     /// --appearance mlp: Adam's learning rate of the hash tables.
     #[arg(long, value_name = "LR", default_value_t = NeuralLearningRates::default().tables)]
     pub hash_lr: f64,
@@ -262,6 +268,9 @@ pub enum Appearance {
     Sh,
     /// A hash-grid MLP (docs/conventions.md §5 "Neural appearance"); geometry fixed.
     Mlp,
+    /// Relightable materials (albedo, roughness, F0) under a known environment map
+    /// (docs/conventions.md §5 "Relighting"); geometry fixed unless --fit-normals.
+    Brdf,
 }
 
 /// The template mesh targets are rendered from: `template` with the base colour (materials,
@@ -316,6 +325,8 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
     if args.eval_cameras.is_none() && args.eval_images.is_some() {
         return Err(UsageError("--eval-images needs --eval-cameras".into()).into());
     }
+    // The environment of a brdf fit, read first: a bad map fails before any work.
+    let env = open_environment(&args.brdf, args.appearance == Appearance::Brdf)?;
     let started = std::time::Instant::now();
     // The template, the set and the frames' positions.
     let (template, set, positions, origin) = match &args.animation {
@@ -483,6 +494,17 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
         sh_up_every: args.sh_up_every.map(usize::try_from).transpose()?,
         time_budget: args.time_budget,
     };
+    if let Some(env) = &env {
+        let paths = MlpPaths {
+            gaussians: &args.gaussians,
+            template: &args.template,
+            cameras: &args.cameras,
+            output: &args.output,
+        };
+        return run_brdf(
+            &paths, &args.brdf, env, ctx, &set, &template, &frames, &held_out, &options,
+        );
+    }
     if args.appearance == Appearance::Mlp {
         let paths = MlpPaths {
             gaussians: &args.gaussians,

@@ -11,6 +11,7 @@ pub mod densify;
 pub mod eval;
 pub mod extract;
 pub mod fit;
+pub mod fit_brdf;
 pub mod fit_neural;
 pub mod gaussian_io;
 pub mod init;

@@ -54,6 +54,8 @@ use trisplat_splat::{GaussianSet, ScaleDims};
 
 use crate::refine::{RefineOptions, refine};
 
+mod brdf;
+mod brdf_score;
 mod checkpoint;
 mod inputs;
 mod neural;
@@ -61,6 +63,8 @@ mod photometric;
 mod score;
 mod targets;
 
+pub use brdf::{BrdfFitOptions, BrdfFitted, BrdfLearningRates, fit_brdf};
+pub use brdf_score::{LMSE_WINDOW, MaterialScores, lmse, material_scores};
 pub use checkpoint::Checkpoint;
 pub use inputs::{FitError, FitFrame, Target};
 pub use neural::{CommonOptions, NeuralFitOptions, NeuralFitted, fit_neural};

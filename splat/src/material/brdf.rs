@@ -87,11 +87,24 @@ impl BrdfTable {
     /// clamped; one-sided at grid centres, where the bilinear lookup has a kink).
     #[must_use]
     pub fn lookup_with_dr(&self, n_dot_v: f32, r: f32) -> ([f32; 2], [f32; 2]) {
+        let (value, dr, _) = self.lookup_with_grads(n_dot_v, r);
+        (value, dr)
+    }
+
+    /// [`BrdfTable::lookup`] and its derivatives in `r` and in `n·v` (each 0 where that
+    /// argument or its grid coordinate is clamped; one-sided at grid centres, where the
+    /// bilinear lookup has a kink).
+    #[must_use]
+    pub fn lookup_with_grads(&self, n_dot_v: f32, r: f32) -> ([f32; 2], [f32; 2], [f32; 2]) {
         let s = self.size;
         let coord = |x: f32| {
             let t = (x.clamp(0.0, 1.0) * s as f32 - 0.5).clamp(0.0, (s - 1) as f32);
             let i0 = (t as usize).min(s - 2);
             (i0, t - i0 as f32)
+        };
+        let inside = |x: f32| {
+            let t = x * s as f32 - 0.5;
+            (0.0..=1.0).contains(&x) && t > 0.0 && t < (s - 1) as f32
         };
         let (i0, fx) = coord(n_dot_v);
         let (j0, fy) = coord(r);
@@ -99,19 +112,22 @@ impl BrdfTable {
         let b = self.at(i0 + 1, j0);
         let c = self.at(i0, j0 + 1);
         let d = self.at(i0 + 1, j0 + 1);
-        let t = r * s as f32 - 0.5;
-        let inside = (0.0..=1.0).contains(&r) && t > 0.0 && t < (s - 1) as f32;
+        let (in_r, in_nv) = (inside(r), inside(n_dot_v));
         let mut value = [0.0; 2];
         let mut dr = [0.0; 2];
+        let mut dnv = [0.0; 2];
         for k in 0..2 {
             let top = a[k] + (b[k] - a[k]) * fx;
             let bottom = c[k] + (d[k] - c[k]) * fx;
             value[k] = top + (bottom - top) * fy;
-            if inside {
+            if in_r {
                 dr[k] = (bottom - top) * s as f32;
             }
+            if in_nv {
+                dnv[k] = ((b[k] - a[k]) * (1.0 - fy) + (d[k] - c[k]) * fy) * s as f32;
+            }
         }
-        (value, dr)
+        (value, dr, dnv)
     }
 }
 

@@ -13,6 +13,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_geometry::envmap::EnvMap;
 
+use crate::render::sh_basis_grad;
 use crate::sh::sh_basis;
 
 /// `E(n) / π` of an environment, as 9 SH coefficients per channel (see the module
@@ -74,6 +75,32 @@ impl Irradiance {
             let e: f64 = self.coeffs.iter().zip(&y).map(|(k, y)| k[c] * y).sum();
             e.max(0.0) as f32
         })
+    }
+
+    /// [`Irradiance::eval`] and, per channel, its gradient with respect to `n` (tangent to the
+    /// sphere: the basis is evaluated at `n / |n|`; zero where `E` is clamped at 0).
+    #[must_use]
+    pub fn eval_with_grad(&self, n: DVec3) -> ([f32; 3], [DVec3; 3]) {
+        let y = sh_basis(2, n);
+        let len = n.length();
+        let unit = if len > 0.0 { n / len } else { DVec3::Z };
+        let dy = sh_basis_grad(2, unit);
+        let mut value = [0.0f32; 3];
+        let mut grad = [DVec3::ZERO; 3];
+        for c in 0..3 {
+            let e: f64 = self.coeffs.iter().zip(&y).map(|(k, y)| k[c] * y).sum();
+            value[c] = e.max(0.0) as f32;
+            if e > 0.0 && len > 0.0 {
+                let g: DVec3 = self
+                    .coeffs
+                    .iter()
+                    .zip(&dy)
+                    .map(|(k, d)| DVec3::from_array(*d) * k[c])
+                    .sum();
+                grad[c] = (g - unit * unit.dot(g)) / len;
+            }
+        }
+        (value, grad)
     }
 }
 

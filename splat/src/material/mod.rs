@@ -5,12 +5,16 @@
 //! Files, from the callers down: `maps` (writing the material maps) ─► `relight` (materials
 //! edited, shaded per Gaussian per view, composited by [`crate::render`]) ─► `shade`
 //! ([`Environment`]: one point's split sum) ─► `irradiance` (9-coefficient SH), `prefilter`
-//! (GGX mip chain), `brdf` (the integration table). `attributes` is a leaf:
+//! (GGX mip chain), `brdf` (the integration table); `backward` differentiates the shading
+//! through each Gaussian's normal (quaternion) and view (mean), `lookup_grad` the map lookups
+//! by direction. `attributes` is a leaf:
 //! [`crate::GaussianSet`] holds a [`Material`].
 
 pub(crate) mod attributes;
+mod backward;
 mod brdf;
 mod irradiance;
+mod lookup_grad;
 mod maps;
 mod prefilter;
 mod relight;
@@ -19,6 +23,7 @@ mod shade;
 pub use attributes::{
     DEFAULT_F0, DEFAULT_ROUGHNESS, Material, PLY_ALBEDO, PLY_REFLECTANCE, PLY_ROUGHNESS,
 };
+pub use backward::{NormalTrace, color_grads_from_sh, normal_of, relit_backward, shade_params};
 pub use brdf::{BRDF_TABLE_SAMPLES, BRDF_TABLE_SIZE, BrdfTable};
 pub use irradiance::Irradiance;
 pub use maps::{MATERIAL_KINDS, material_image_files, write_material_maps};

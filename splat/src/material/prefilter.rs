@@ -19,6 +19,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_geometry::envmap::EnvMap;
 
+use super::lookup_grad::bilinear_with_grad;
+
 /// Number of prefiltered levels, roughness `k / (LEVELS − 1)`.
 pub const LEVELS: usize = 5;
 
@@ -77,6 +79,27 @@ impl SpecularChain {
         (
             std::array::from_fn(|c| a[c] + (b[c] - a[c]) * f),
             std::array::from_fn(|c| if inside { (b[c] - a[c]) * scale } else { 0.0 }),
+        )
+    }
+}
+
+impl SpecularChain {
+    /// [`SpecularChain::lookup_with_dr`] and, per channel, the gradient with respect to the
+    /// direction `r` (bilinear within each level, [`bilinear_with_grad`]; linear between levels).
+    #[must_use]
+    pub fn lookup_with_grads(&self, r: DVec3, roughness: f32) -> ([f32; 3], [f32; 3], [DVec3; 3]) {
+        let t = roughness.clamp(0.0, 1.0) * (LEVELS - 1) as f32;
+        let k0 = (t as usize).min(LEVELS - 2);
+        let f = t - k0 as f32;
+        let (a, ga) = bilinear_with_grad(&self.levels[k0], r);
+        let (b, gb) = bilinear_with_grad(&self.levels[k0 + 1], r);
+        let inside = roughness > 0.0 && roughness < 1.0;
+        let scale = (LEVELS - 1) as f32;
+        let fw = f64::from(f);
+        (
+            std::array::from_fn(|c| a[c] + (b[c] - a[c]) * f),
+            std::array::from_fn(|c| if inside { (b[c] - a[c]) * scale } else { 0.0 }),
+            std::array::from_fn(|c| ga[c] * (1.0 - fw) + gb[c] * fw),
         )
     }
 }

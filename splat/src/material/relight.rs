@@ -146,8 +146,8 @@ pub struct MaterialGrads {
 /// The material gradients of a loss whose gradient with respect to each Gaussian's relit
 /// colour (as [`shade_gaussians`] computes it, from `eye`) is `d_colors`. From the
 /// differentiable renderer run on [`with_colors`]'s degree-0 set, `d_colors = ∂L/∂f_dc / SH_C0`
-/// (where the colour is not clamped at 0). Normals and views are held fixed (not done: the
-/// gradient through the normal's rotation and scale).
+/// (where the colour is not clamped at 0). Normals and views are held fixed here; the
+/// gradient through them is [`super::relit_backward`]'s.
 ///
 /// # Panics
 /// If `material` or `d_colors` does not have one entry per Gaussian.

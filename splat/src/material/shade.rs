@@ -54,8 +54,8 @@ pub struct Shading {
     pub specular: [f32; 3],
 }
 
-/// Gradients of a loss through [`Environment::shade`] with respect to the material, for a
-/// given gradient of the colour (the normal and view are held fixed).
+/// Gradients of a loss through [`Environment::shade`] with respect to the material, the normal
+/// and the view vector, for a given gradient of the colour.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ShadingGrad {
     /// `∂L/∂albedo = ∂L/∂c ⊙ (1 − k_s) E/π`.
@@ -64,6 +64,10 @@ pub struct ShadingGrad {
     pub roughness: f32,
     /// `∂L/∂F0 = Σ_c ∂L/∂c_c A (L_spec − albedo E/π)_c`.
     pub f0: f32,
+    /// `∂L/∂n` (world): through `E(n)`, `n·v` (the BRDF table) and `R = 2 (n·v) n − v`.
+    pub normal: DVec3,
+    /// `∂L/∂v` (world): through `n·v` and `R`.
+    pub view: DVec3,
 }
 
 /// An environment map ready for split-sum shading.
@@ -131,8 +135,15 @@ impl Environment {
 
 impl Environment {
     /// The gradient of a loss through [`Environment::shade`] given `d_color = ∂L/∂c`
-    /// (see [`ShadingGrad`]; the lookups are piecewise linear in roughness, so the roughness
-    /// derivative is one-sided at the table's and the chain's grid roughnesses).
+    /// (see [`ShadingGrad`]). The lookups are piecewise linear in roughness, `n·v` and the map's
+    /// texel coordinates, so those derivatives are one-sided at the grids' nodes; where `n·v` is
+    /// clamped (0 or 1) nothing passes through it.
+    ///
+    /// With `g_c = ∂L/∂c_c`, `M` the world-to-map rotation:
+    /// `∂L/∂(n·v) = Σ g_c (L_spec − albedo E/π)_c ∂k_s/∂(n·v)`,
+    /// `∂L/∂R = Σ g_c k_s Mᵀ ∇L_spec,c`, `∂L/∂n|_E = Σ g_c (1 − k_s) albedo_c Mᵀ ∇(E_c/π)`, then
+    /// `∂L/∂n = ∂L/∂n|_E + ∂L/∂(n·v) v + 2 (n·v) ∂L/∂R + 2 (∂L/∂R · n) v` and
+    /// `∂L/∂v = ∂L/∂(n·v) n + 2 (∂L/∂R · n) n − ∂L/∂R`.
     #[must_use]
     pub fn shade_grad(
         &self,
@@ -143,21 +154,42 @@ impl Environment {
         f0: f32,
         d_color: [f32; 3],
     ) -> ShadingGrad {
-        let n_dot_v = n.dot(v).clamp(0.0, 1.0);
+        let raw = n.dot(v);
+        let n_dot_v = raw.clamp(0.0, 1.0);
+        let nv_free = raw > 0.0 && raw < 1.0;
         let r = 2.0 * n_dot_v * n - v;
-        let ([a, b], [da, db]) = self.brdf.lookup_with_dr(n_dot_v as f32, roughness);
+        let ([a, b], [da, db], [da_nv, db_nv]) =
+            self.brdf.lookup_with_grads(n_dot_v as f32, roughness);
         let ks = f0 * a + b;
         let dks = f0 * da + db;
-        let irradiance = self.irradiance.eval(self.to_map * n);
-        let (radiance, d_radiance) = self.specular.lookup_with_dr(self.to_map * r, roughness);
+        let dks_nv = f64::from(f0 * da_nv + db_nv);
+        let (irradiance, g_irr) = self.irradiance.eval_with_grad(self.to_map * n);
+        let (radiance, d_radiance, g_rad) =
+            self.specular.lookup_with_grads(self.to_map * r, roughness);
         let mut grad = ShadingGrad::default();
+        let (mut g_nv, mut g_n_map, mut g_r_map) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
         for c in 0..3 {
             let g = d_color[c];
             let diffuse = albedo[c] * irradiance[c];
             grad.albedo[c] = g * (1.0 - ks) * irradiance[c];
             grad.f0 += g * a * (radiance[c] - diffuse);
             grad.roughness += g * (dks * (radiance[c] - diffuse) + ks * d_radiance[c]);
+            let g = f64::from(g);
+            g_nv += g * f64::from(radiance[c] - diffuse) * dks_nv;
+            g_n_map += g_irr[c] * (g * f64::from((1.0 - ks) * albedo[c]));
+            g_r_map += g_rad[c] * (g * f64::from(ks));
         }
+        let to_world = self.to_map.transpose();
+        let g_r = to_world * g_r_map;
+        let mut g_n = to_world * g_n_map + 2.0 * n_dot_v * g_r;
+        let mut g_v = -g_r;
+        if nv_free {
+            let g_nv = g_nv + 2.0 * g_r.dot(n);
+            g_n += g_nv * v;
+            g_v += g_nv * n;
+        }
+        grad.normal = g_n;
+        grad.view = g_v;
         grad
     }
 }

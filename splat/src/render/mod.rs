@@ -18,6 +18,8 @@
 
 mod composite;
 mod grad;
+/// The relit shading's backward pass ([`crate::material`]) chains through these.
+pub(crate) use grad::{normalized, quaternion_vjp, rotation_matrix, sh_basis_grad};
 mod image;
 mod inputs;
 mod options;

@@ -34,5 +34,8 @@ mod tile;
 
 pub use params::{DiffParams, GaussianGrads, GaussianParams, Real};
 pub use pass::{BackwardStats, GradError, GradRender, backward, backward_into, render_with_grad};
+/// The quaternion and SH-direction pieces the relit shading's backward pass
+/// ([`crate::material`]) chains through.
+pub(crate) use project::{normalized, quaternion_vjp, rotation_matrix, sh_basis_grad};
 pub use surfel::{DIST_FAR, DIST_NEAR};
 pub use tile::ImageGrads;

@@ -323,7 +323,7 @@ fn trace<P: DiffParams + ?Sized>(
 
 /// Derivatives of the 16 SH basis values with respect to the unit direction `(x, y, z)` (the
 /// polynomials of [`sh_basis`] differentiated term by term).
-fn sh_basis_grad(degree: u8, d: DVec3) -> [[f64; 3]; 16] {
+pub(crate) fn sh_basis_grad(degree: u8, d: DVec3) -> [[f64; 3]; 16] {
     let mut g = [[0.0; 3]; 16];
     if degree == 0 {
         return g;

@@ -1,0 +1,493 @@
+//! `trisplat fit --appearance brdf`: fitting each Gaussian's material (albedo, roughness, F0;
+//! docs/conventions.md §5 "Relighting") and, when asked, its shading normal (rotation and
+//! log-scales) to target images lit by a known environment map.
+//!
+//! Per iteration one (frame, view) pair drawn with the seed, as the SH fit does; the bound set
+//! placed with that frame's triangle frames ([`to_world`]); every Gaussian shaded by the split
+//! sum from that camera ([`shade_params`]: shortest-axis normal facing the camera); the colours
+//! rendered as degree-0 SH by the 3DGS (or 2DGS) renderer and its backward pass in `f32`; the
+//! loss `(1 − λ) L1 + λ D-SSIM` on rgb ([`super::photometric`]) plus `w_alpha` × the alpha L1;
+//! the renderer's colour gradients (`∂L/∂f_dc / SH_C0`) carried through the shading
+//! ([`relit_backward`]) to the materials and, with `normals`, added to the renderer's own
+//! rotation and log-scale gradients, carried to the local parameters ([`grads_to_local`]); one
+//! Adam step (β 0.9, 0.999, ε 1e-15 as 3DGS). Means and opacities are held fixed.
+//!
+//! **Ranges**: each material attribute is `sigmoid(ℓ)` of an unconstrained logit `ℓ` (so always
+//! strictly inside 0..1; the initial value, clamped to `[1e-4, 1 − 1e-4]`, gives `ℓ₀`), the
+//! gradient `∂L/∂ℓ = ∂L/∂x · x (1 − x)`. Initial materials: the set's own, else albedo from its
+//! degree-0 colour with roughness 0.9 and F0 0.04 (HRAvatar's), as `render --env` shades a set
+//! without materials.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use trisplat_geometry::TriMesh;
+use trisplat_geometry::rng::Rng;
+use trisplat_splat::SH_C0;
+use trisplat_splat::fit::bound::{BoundParams, TriangleFrames, grads_to_local, to_world};
+use trisplat_splat::fit::loss::{Ssim, l1, psnr};
+use trisplat_splat::material::{
+    Environment, Material, MaterialEdits, color_grads_from_sh, effective_material, relit_backward,
+    shade_params,
+};
+use trisplat_splat::render::{
+    GaussianGrads, GaussianParams, ImageGrads, RenderMode, backward_into, render_with_grad,
+};
+use trisplat_splat::{GaussianSet, ScaleDims};
+
+use super::checkpoint::Checkpoint;
+use super::inputs::{FitError, FitFrame};
+use super::neural::CommonOptions;
+use super::photometric::{SsimCache, photometric_loss};
+
+/// Adam's learning rates of the BRDF fit (material logits; local rotations and log-scales).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrdfLearningRates {
+    /// Albedo logits.
+    pub albedo: f64,
+    /// Roughness logits.
+    pub roughness: f64,
+    /// F0 logits.
+    pub f0: f64,
+    /// Raw local quaternions (with `normals`).
+    pub rotations: f64,
+    /// Local log-scales (with `normals`).
+    pub log_scales: f64,
+}
+
+impl Default for BrdfLearningRates {
+    fn default() -> Self {
+        Self {
+            albedo: 0.05,
+            roughness: 0.05,
+            f0: 0.05,
+            rotations: 0.005,
+            log_scales: 0.005,
+        }
+    }
+}
+
+/// What the BRDF fit needs besides the common options.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BrdfFitOptions {
+    /// Adam's learning rates.
+    pub lr: BrdfLearningRates,
+    /// Also fit the shading normal: the local rotations and log-scales (through the shading and
+    /// the renderer's footprint alike).
+    pub normals: bool,
+}
+
+/// The result of [`fit_brdf`].
+#[derive(Clone, Debug)]
+pub struct BrdfFitted {
+    /// The bound set with its fitted material (and rotations and scales with `normals`).
+    pub set: GaussianSet,
+    /// Checkpoints in order (held-out PSNR and SSIM of the relit render).
+    pub checkpoints: Vec<Checkpoint>,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Whether the time budget ended the fit.
+    pub out_of_time: bool,
+    /// Seconds per iteration (optimisation only).
+    pub seconds_per_iteration: f64,
+}
+
+/// Adam on a flat parameter vector, one learning rate per column of `width`.
+struct FlatAdam {
+    m: Vec<f64>,
+    v: Vec<f64>,
+    t: i32,
+}
+
+impl FlatAdam {
+    fn new(n: usize) -> Self {
+        Self {
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            t: 0,
+        }
+    }
+
+    /// One step; non-finite parameters (a surfel's `−∞` log-scale) are left as they are.
+    fn step(&mut self, p: &mut [f64], g: &[f64], lr: &[f64]) {
+        const B1: f64 = 0.9;
+        const B2: f64 = 0.999;
+        const EPS: f64 = 1e-15;
+        self.t = self.t.saturating_add(1);
+        let corr = (1.0 - B2.powi(self.t)).sqrt() / (1.0 - B1.powi(self.t));
+        let w = lr.len();
+        p.par_iter_mut()
+            .zip(g.par_iter())
+            .zip(self.m.par_iter_mut().zip(self.v.par_iter_mut()))
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(j, ((p, &g), (m, v)))| {
+                if !p.is_finite() || !g.is_finite() {
+                    return;
+                }
+                *m = B1 * *m + (1.0 - B1) * g;
+                *v = B2 * *v + (1.0 - B2) * g * g;
+                *p -= lr[j % w] * corr * *m / (v.sqrt() + EPS);
+            });
+    }
+}
+
+fn sigmoid(x: f64) -> f64 {
+    if x >= 0.0 {
+        1.0 / (1.0 + (-x).exp())
+    } else {
+        let e = x.exp();
+        e / (1.0 + e)
+    }
+}
+
+fn logit(x: f32) -> f64 {
+    let x = f64::from(x).clamp(1e-4, 1.0 - 1e-4);
+    (x / (1.0 - x)).ln()
+}
+
+/// Material logits, 5 per Gaussian: albedo r, g, b, roughness, F0.
+fn logits_of(m: &Material) -> Vec<f64> {
+    (0..m.albedo.len())
+        .flat_map(|i| {
+            let a = m.albedo[i];
+            [
+                logit(a[0]),
+                logit(a[1]),
+                logit(a[2]),
+                logit(m.roughness[i]),
+                logit(m.f0[i]),
+            ]
+        })
+        .collect()
+}
+
+fn activate(logits: &[f64], out: &mut Material) {
+    let n = logits.len() / 5;
+    out.albedo.resize(n, [0.0; 3]);
+    out.roughness.resize(n, 0.0);
+    out.f0.resize(n, 0.0);
+    for (i, l) in logits.chunks_exact(5).enumerate() {
+        out.albedo[i] = std::array::from_fn(|c| sigmoid(l[c]) as f32);
+        out.roughness[i] = sigmoid(l[3]) as f32;
+        out.f0[i] = sigmoid(l[4]) as f32;
+    }
+}
+
+fn check(o: &CommonOptions, b: &BrdfFitOptions) -> Result<(), FitError> {
+    let bad = |m: String| Err(FitError::BadOption(m));
+    if o.iterations == 0 || o.eval_every == 0 {
+        return bad("--iterations and --eval-every must be at least 1".into());
+    }
+    if o.render.mode == RenderMode::Perspective {
+        return bad("fitting in perspective mode is not supported: use 3dgs or 2dgs".into());
+    }
+    if !(o.lambda_dssim.is_finite() && (0.0..=1.0).contains(&o.lambda_dssim)) {
+        return bad(format!("--lambda-dssim {}: expected 0..1", o.lambda_dssim));
+    }
+    if !(o.alpha_weight.is_finite() && o.alpha_weight >= 0.0) {
+        return bad(format!("--alpha-weight {}: expected >= 0", o.alpha_weight));
+    }
+    if let Some(t) = o.time_budget
+        && !(t.is_finite() && t > 0.0)
+    {
+        return bad(format!(
+            "--time-budget {t}: expected a number of seconds > 0"
+        ));
+    }
+    let lr = b.lr;
+    for (name, v) in [
+        ("lr-albedo", lr.albedo),
+        ("lr-roughness", lr.roughness),
+        ("lr-f0", lr.f0),
+        ("lr-rotations", lr.rotations),
+        ("lr-scales", lr.log_scales),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(format!("--{name} {v}: expected a finite number >= 0"));
+        }
+    }
+    Ok(())
+}
+
+/// Reused buffers of one iteration.
+#[derive(Default)]
+struct Buffers {
+    world: GaussianParams,
+    material: Material,
+    g_world: GaussianGrads,
+    g_local: GaussianGrads,
+    g_rgb: Vec<f32>,
+    g_alpha: Vec<f32>,
+    d_colors: Vec<[f32; 3]>,
+    g_logits: Vec<f64>,
+}
+
+impl Buffers {
+    /// Places the set with `frames` and writes its colours relit from `eye` as degree-0 SH.
+    fn place(
+        &mut self,
+        bound: &BoundParams,
+        frames: &TriangleFrames,
+        logits: &[f64],
+        eye: DVec3,
+        env: &Environment,
+    ) {
+        to_world(bound, frames, &mut self.world);
+        activate(logits, &mut self.material);
+        let relit = shade_params(&self.world, &self.material, eye, env);
+        self.world.sh_degree = 0;
+        self.world.sh.clear();
+        self.world.sh.extend(
+            relit
+                .colors
+                .iter()
+                .flat_map(|c| c.map(|v| (f64::from(v) - 0.5) / SH_C0)),
+        );
+    }
+}
+
+/// Fits the materials (and with `brdf.normals` the rotations and scales) of `set` (bound to
+/// `template`) to the targets of `frames` lit by `env`, scoring `held_out` by PSNR and SSIM
+/// at checkpoints.
+///
+/// # Errors
+/// [`FitError`]: bad options, a set that cannot be fitted, no training views, targets that do
+/// not fit their cameras, a renderer failure, non-finite parameters.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the fit's inputs, as the other fits take them"
+)]
+pub fn fit_brdf(
+    set: &GaussianSet,
+    template: &TriMesh,
+    frames: &[FitFrame],
+    held_out: &[FitFrame],
+    env: &Environment,
+    options: &CommonOptions,
+    brdf: &BrdfFitOptions,
+    mut on_checkpoint: impl FnMut(&Checkpoint),
+) -> Result<BrdfFitted, FitError> {
+    check(options, brdf)?;
+    if set.scale_dims() == ScaleDims::Two && options.render.mode != RenderMode::Surfel2d {
+        return Err(FitError::BadOption(
+            "the Gaussians are 2-scale surfels: fit them in 2dgs mode (--mode 2dgs)".into(),
+        ));
+    }
+    let pairs: Vec<(usize, usize)> = frames
+        .iter()
+        .enumerate()
+        .flat_map(|(f, fr)| (0..fr.targets.len()).map(move |v| (f, v)))
+        .collect();
+    if pairs.is_empty() {
+        return Err(FitError::Target("no training views".into()));
+    }
+    for fr in frames.iter().chain(held_out) {
+        for t in &fr.targets {
+            let px = t.camera.width as usize * t.camera.height as usize;
+            if t.rgb.len() != 3 * px || t.alpha.as_ref().is_some_and(|a| a.len() != px) {
+                return Err(FitError::Target(format!(
+                    "view '{}': the images do not fit the camera",
+                    t.camera.name
+                )));
+            }
+            if options.alpha_weight > 0.0 && t.alpha.is_none() {
+                return Err(FitError::Target(format!(
+                    "view '{}': --alpha-weight needs a target mask",
+                    t.camera.name
+                )));
+            }
+        }
+    }
+    let mut bound = BoundParams::from_set(set, template.triangle_count())?;
+    if bound.is_empty() {
+        return Err(FitError::BadOption("the set has no Gaussians".into()));
+    }
+    let n = bound.len();
+    let frames_of = |f: &FitFrame| TriangleFrames::binding(template, &f.positions);
+    let train_frames: Vec<TriangleFrames> = frames.iter().map(frames_of).collect();
+    let eval_frames: Vec<TriangleFrames> = held_out.iter().map(frames_of).collect();
+    let mut logits = logits_of(&effective_material(set, &MaterialEdits::default()));
+    let lr = brdf.lr;
+    let material_lr = [lr.albedo, lr.albedo, lr.albedo, lr.roughness, lr.f0];
+    let mut adam_material = FlatAdam::new(logits.len());
+    let mut adam_rotations = FlatAdam::new(4 * n);
+    let mut adam_scales = FlatAdam::new(3 * n);
+    let mut b = Buffers::default();
+    let mut rng = Rng::new(options.seed);
+    let mut ssim = SsimCache::default();
+    let (mut acc_loss, mut acc_l1, mut acc_psnr, mut acc_n) = (0.0, 0.0, 0.0, 0usize);
+    let mut train_s = 0.0;
+    let mut checkpoints = Vec::new();
+    let mut score = |bound: &BoundParams,
+                     logits: &[f64],
+                     b: &mut Buffers,
+                     iteration: usize,
+                     seconds: f64,
+                     acc: (f64, f64, f64, usize)|
+     -> Checkpoint {
+        let (mut ps, mut ss, mut count) = (0.0, 0.0, 0usize);
+        for (f, fr) in held_out.iter().enumerate() {
+            for t in &fr.targets {
+                b.place(bound, &eval_frames[f], logits, t.camera.position(), env);
+                let Ok(out) = render_with_grad::<f32, _>(&b.world, &t.camera, &options.render)
+                else {
+                    continue;
+                };
+                ps += psnr(&out.rgb, &t.rgb);
+                let mut s = Ssim::new(t.camera.width as usize, t.camera.height as usize);
+                ss += s.ssim(&out.rgb, &t.rgb, 3, 0.0, None);
+                count += 1;
+            }
+        }
+        let (loss, l1v, p, k) = acc;
+        let mean = |v: f64, n: usize| (n > 0).then(|| v / n as f64);
+        let c = Checkpoint {
+            iteration,
+            loss: mean(loss, k),
+            train_l1: mean(l1v, k),
+            train_psnr: mean(p, k),
+            eval_psnr: mean(ps, count),
+            eval_ssim: mean(ss, count),
+            eval_depth_l1: None,
+            eval_normal_deg: None,
+            gaussians: bound.len(),
+            sh_degree: 0,
+            seconds,
+        };
+        on_checkpoint(&c);
+        c
+    };
+    checkpoints.push(score(&bound, &logits, &mut b, 0, 0.0, (0.0, 0.0, 0.0, 0)));
+    let mut last = options.iterations;
+    let mut out_of_time = false;
+    for it in 0..options.iterations {
+        let start = Instant::now();
+        let (f, v) =
+            pairs[((rng.uniform_f64() * pairs.len() as f64) as usize).min(pairs.len() - 1)];
+        let target = &frames[f].targets[v];
+        let camera = &target.camera;
+        let eye = camera.position();
+        b.place(&bound, &train_frames[f], &logits, eye, env);
+        let render_err = |source| FitError::Render {
+            iteration: it,
+            view: camera.name.clone(),
+            source,
+        };
+        let fwd =
+            render_with_grad::<f32, _>(&b.world, camera, &options.render).map_err(render_err)?;
+        let size = (camera.width as usize, camera.height as usize);
+        let photometric = photometric_loss(
+            &fwd.rgb,
+            &target.rgb,
+            size,
+            options.lambda_dssim,
+            &mut ssim,
+            &mut b.g_rgb,
+        );
+        let mut loss = photometric.loss;
+        let alpha_term = options.alpha_weight > 0.0;
+        if alpha_term && let Some(a) = &target.alpha {
+            b.g_alpha.clear();
+            b.g_alpha.resize(size.0 * size.1, 0.0);
+            loss += options.alpha_weight * l1(&fwd.alpha, a, options.alpha_weight, &mut b.g_alpha);
+        }
+        let image_grads = ImageGrads {
+            rgb: Some(&b.g_rgb[..]),
+            alpha: alpha_term.then_some(&b.g_alpha[..]),
+            ..ImageGrads::default()
+        };
+        if b.g_world.len() != n || b.g_world.sh.len() != 3 * n {
+            b.g_world = GaussianGrads::zeros(n, 0);
+        } else {
+            b.g_world.clear();
+        }
+        backward_into(
+            &b.world,
+            camera,
+            &options.render,
+            &fwd,
+            &image_grads,
+            &mut b.g_world,
+        )
+        .map_err(render_err)?;
+        color_grads_from_sh(&b.g_world.sh, &mut b.d_colors);
+        let grads = relit_backward(&b.world, &b.material, eye, env, &b.d_colors, &mut b.g_world);
+        // Through the sigmoids.
+        b.g_logits.clear();
+        b.g_logits.extend((0..n).flat_map(|i| {
+            let m = &b.material;
+            let d = |x: f32, g: f32| f64::from(g) * f64::from(x) * (1.0 - f64::from(x));
+            let a = m.albedo[i];
+            let ga = grads.albedo[i];
+            [
+                d(a[0], ga[0]),
+                d(a[1], ga[1]),
+                d(a[2], ga[2]),
+                d(m.roughness[i], grads.roughness[i]),
+                d(m.f0[i], grads.f0[i]),
+            ]
+        }));
+        adam_material.step(&mut logits, &b.g_logits, &material_lr);
+        if brdf.normals {
+            grads_to_local(&bound, &train_frames[f], &b.g_world, &mut b.g_local);
+            adam_rotations.step(
+                bound.local.rotations.as_flattened_mut(),
+                b.g_local.rotations.as_flattened(),
+                &[lr.rotations],
+            );
+            adam_scales.step(
+                bound.local.log_scales.as_flattened_mut(),
+                b.g_local.log_scales.as_flattened(),
+                &[lr.log_scales],
+            );
+        }
+        acc_loss += loss;
+        acc_l1 += photometric.l1;
+        acc_psnr += psnr(&fwd.rgb, &target.rgb);
+        acc_n += 1;
+        train_s += start.elapsed().as_secs_f64();
+        let done = it + 1;
+        if options.time_budget.is_some_and(|t| train_s >= t) {
+            last = done;
+            out_of_time = true;
+        }
+        if done % options.eval_every == 0 || done == last {
+            let finite = logits.iter().all(|v| v.is_finite())
+                && bound
+                    .local
+                    .rotations
+                    .as_flattened()
+                    .iter()
+                    .all(|v| v.is_finite())
+                && bound
+                    .local
+                    .log_scales
+                    .as_flattened()
+                    .iter()
+                    .all(|v| v.is_finite() || *v == f64::NEG_INFINITY);
+            if !finite {
+                return Err(FitError::NonFinite(done));
+            }
+            let acc = (acc_loss, acc_l1, acc_psnr, acc_n);
+            checkpoints.push(score(&bound, &logits, &mut b, done, train_s, acc));
+            (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
+        }
+        if out_of_time {
+            break;
+        }
+    }
+    let mut out = bound.write_into(set);
+    let mut material = Material::default();
+    activate(&logits, &mut material);
+    out.set_material(Some(material))
+        .map_err(|e| FitError::BadOption(format!("the fitted material: {e}")))?;
+    Ok(BrdfFitted {
+        set: out,
+        checkpoints,
+        iterations: last,
+        out_of_time,
+        seconds_per_iteration: train_s / last as f64,
+    })
+}
