@@ -144,8 +144,17 @@ pub fn measure_with(
     samples: usize,
     tau: Tau,
 ) -> Result<Option<FrameMetrics>, MetricsError> {
-    let mut local = pred.clone();
-    local.translate(-gt.origin);
+    // Positions and triangles only (`translate`'s arithmetic, without copying the vertex
+    // attributes a clone would carry).
+    let offset = -gt.origin;
+    let local = TriMesh::new_unchecked(
+        pred.positions()
+            .par_iter()
+            .with_min_len(1 << 14)
+            .map(|&p| p + offset)
+            .collect::<Vec<DVec3>>(),
+        pred.triangles().to_vec(),
+    );
     let points = sample_uniform(&local, samples, SAMPLE_SEED);
     if points.is_empty() {
         return Ok(None);

@@ -663,6 +663,17 @@ fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3) -> (DVec3, f64) {
 /// (possibly flat) set.
 #[must_use]
 pub fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, [f64; 3]) {
+    if triangle_is_flat(a, b, c) {
+        return closest_on_degenerate(p, a, b, c);
+    }
+    closest_point_on_proper_triangle(p, a, b, c)
+}
+
+/// Whether [`closest_point_on_triangle`] treats `a b c` as degenerate (see
+/// [`DEGENERATE_TRIANGLE`]): a property of the triangle alone, so an index can decide it once.
+#[inline]
+#[must_use]
+pub(crate) fn triangle_is_flat(a: DVec3, b: DVec3, c: DVec3) -> bool {
     let ab = b - a;
     let ac = c - a;
     let longest = ab
@@ -670,9 +681,21 @@ pub fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVe
         .max(ac.length_squared())
         .max((c - b).length_squared());
     let n2 = ab.cross(ac).length_squared();
-    if n2 <= DEGENERATE_TRIANGLE * longest * longest {
-        return closest_on_degenerate(p, a, b, c);
-    }
+    n2 <= DEGENERATE_TRIANGLE * longest * longest
+}
+
+/// [`closest_point_on_triangle`] of a triangle that is not [`triangle_is_flat`]: the same
+/// arithmetic after that test, so the same bits.
+#[inline]
+#[must_use]
+pub(crate) fn closest_point_on_proper_triangle(
+    p: DVec3,
+    a: DVec3,
+    b: DVec3,
+    c: DVec3,
+) -> (DVec3, [f64; 3]) {
+    let ab = b - a;
+    let ac = c - a;
     let ap = p - a;
     let d1 = ab.dot(ap);
     let d2 = ac.dot(ap);

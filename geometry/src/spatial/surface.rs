@@ -19,7 +19,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::bvh::closest_point_on_triangle;
+use super::bvh::{closest_point_on_proper_triangle, closest_point_on_triangle, triangle_is_flat};
 use super::error::SpatialError;
 use super::limits::{check_dpoints, check_points};
 use super::morton::{morton_order, morton_sorted};
@@ -60,22 +60,32 @@ pub struct SurfaceHit {
     pub triangle: u32,
 }
 
+/// A triangle in leaf order: what a query reads of it, in one place (two cache lines).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Slot {
+    /// Padded box: the triangle is looked at only when its box is within reach.
+    lo: DVec3,
+    hi: DVec3,
+    /// Corners.
+    corners: [DVec3; 3],
+    /// Mesh triangle id.
+    id: u32,
+    /// Whether [`triangle_is_flat`] (decided once here, not at every query).
+    flat: bool,
+}
+
 /// A BVH over a mesh's triangles for exact closest-point queries (see the module docs).
 pub struct SurfaceIndex {
     nodes: Vec<Node>,
-    /// Corners of the triangles in leaf order.
-    corners: Vec<[DVec3; 3]>,
-    /// Mesh triangle id of each slot.
-    ids: Vec<u32>,
-    /// Padded box of each slot's triangle: a triangle is looked at only when its box is
-    /// within reach.
-    boxes: Vec<[DVec3; 2]>,
+    /// The triangles in leaf order.
+    slots: Vec<Slot>,
 }
 
 impl std::fmt::Debug for SurfaceIndex {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SurfaceIndex")
-            .field("triangles", &self.ids.len())
+            .field("triangles", &self.slots.len())
             .field("nodes", &self.nodes.len())
             .finish_non_exhaustive()
     }
@@ -110,32 +120,34 @@ impl SurfaceIndex {
             })
             .collect();
         let (codes, ids): (Vec<u64>, Vec<u32>) = morton_sorted(&centroids).into_iter().unzip();
-        let corners: Vec<[DVec3; 3]> = ids
-            .par_iter()
-            .with_min_len(4096)
-            .map(|&t| corner(triangles[t as usize]))
-            .collect();
         let diagonal = crate::mesh::Aabb::from_dpoints(positions).map_or(0.0, |b| b.diagonal());
         let pad = diagonal * PADDING;
-        let boxes: Vec<[DVec3; 2]> = corners
+        let slots: Vec<Slot> = ids
             .par_iter()
             .with_min_len(4096)
-            .map(|c| padded_box(c, pad))
+            .map(|&id| {
+                let corners = corner(triangles[id as usize]);
+                let [lo, hi] = padded_box(&corners, pad);
+                let [a, b, c] = corners;
+                Slot {
+                    lo,
+                    hi,
+                    corners,
+                    id,
+                    flat: triangle_is_flat(a, b, c),
+                }
+            })
             .collect();
+        drop(ids);
         let mut nodes = Vec::with_capacity(2 * triangles.len().div_ceil(LEAF));
-        build(&mut nodes, &boxes, &codes, 0, corners.len());
-        Ok(Self {
-            nodes,
-            corners,
-            ids,
-            boxes,
-        })
+        build(&mut nodes, &slots, &codes, 0, slots.len());
+        Ok(Self { nodes, slots })
     }
 
     /// Number of triangles.
     #[must_use]
     pub fn triangle_count(&self) -> usize {
-        self.ids.len()
+        self.slots.len()
     }
 
     /// The closest point of the surface to `query` (f64), or `None` when it is not finite.
@@ -147,7 +159,7 @@ impl SurfaceIndex {
         let (d2, slot) = self.search(query, None);
         Some(SurfaceHit {
             distance: d2.sqrt(),
-            triangle: self.ids[slot as usize],
+            triangle: self.slots[slot as usize].id,
         })
     }
 
@@ -169,7 +181,7 @@ impl SurfaceIndex {
                         previous = Some(slot);
                         SurfaceHit {
                             distance: d2.sqrt(),
-                            triangle: self.ids[slot as usize],
+                            triangle: self.slots[slot as usize].id,
                         }
                     })
                     .collect()
@@ -191,9 +203,14 @@ impl SurfaceIndex {
     /// Squared distance from `q` to the triangle in `slot` and its mesh id.
     #[inline]
     fn candidate(&self, q: DVec3, slot: u32) -> (f64, u32) {
-        let [a, b, c] = self.corners[slot as usize];
-        let (p, _) = closest_point_on_triangle(q, a, b, c);
-        ((p - q).length_squared(), self.ids[slot as usize])
+        let s = &self.slots[slot as usize];
+        let [a, b, c] = s.corners;
+        let (p, _) = if s.flat {
+            closest_point_on_triangle(q, a, b, c)
+        } else {
+            closest_point_on_proper_triangle(q, a, b, c)
+        };
+        ((p - q).length_squared(), s.id)
     }
 
     /// The slot of the lexicographically smallest `(squared distance, id)`, with that squared
@@ -210,7 +227,7 @@ impl SurfaceIndex {
             let n = &self.nodes[node as usize];
             if n.count > 0 {
                 for slot in n.first_or_right..n.first_or_right + n.count {
-                    let [lo, hi] = self.boxes[slot as usize];
+                    let Slot { lo, hi, .. } = self.slots[slot as usize];
                     if (lo - q).max(q - hi).max(DVec3::ZERO).length_squared() > best.0 {
                         continue;
                     }
@@ -270,15 +287,15 @@ fn padded_box(c: &[DVec3; 3], pad: f64) -> [DVec3; 2] {
 }
 
 /// Appends the subtree over slots `first..end` (depth first, left child next), boxes from the
-/// triangles' `boxes`: split where the highest Morton bit that differs in the range flips
+/// slots' boxes: split where the highest Morton bit that differs in the range flips
 /// (so a child is one cell of the Z-curve's octree, a tight box), else halved.
-fn build(nodes: &mut Vec<Node>, boxes: &[[DVec3; 2]], codes: &[u64], first: usize, end: usize) {
+fn build(nodes: &mut Vec<Node>, slots: &[Slot], codes: &[u64], first: usize, end: usize) {
     let index = nodes.len();
     if end - first <= LEAF {
-        let (lo, hi) = boxes[first..end]
+        let (lo, hi) = slots[first..end]
             .iter()
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), b| {
-                (lo.min(b[0]), hi.max(b[1]))
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), s| {
+                (lo.min(s.lo), hi.max(s.hi))
             });
         nodes.push(Node {
             lo,
@@ -304,9 +321,9 @@ fn build(nodes: &mut Vec<Node>, boxes: &[[DVec3; 2]], codes: &[u64], first: usiz
         let prefix = codes[first] >> bit;
         first + codes[first..end].partition_point(|&c| c >> bit == prefix)
     };
-    build(nodes, boxes, codes, first, mid);
+    build(nodes, slots, codes, first, mid);
     let right = nodes.len();
-    build(nodes, boxes, codes, mid, end);
+    build(nodes, slots, codes, mid, end);
     let (l, r) = (nodes[index + 1], nodes[right]);
     nodes[index] = Node {
         lo: l.lo.min(r.lo),
@@ -378,6 +395,77 @@ mod tests {
                 assert_eq!(one, *g);
             }
         }
+    }
+
+    #[test]
+    fn answers_as_the_bvh_on_a_grid_with_ties() {
+        // A flat 30 x 30 grid of unit squares (two triangles each, every diagonal the same
+        // way), a slanted copy of part of it, a sliver and a triangle repeated: queries on
+        // grid points and edge midpoints are equidistant from several triangles.
+        let n = 30u32;
+        let mut p: Vec<DVec3> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| DVec3::new(f64::from(i), f64::from(j), 0.0)))
+            .collect();
+        let mut t = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let v = j * (n + 1) + i;
+                t.push([v, v + 1, v + n + 2]);
+                t.push([v, v + n + 2, v + n + 1]);
+            }
+        }
+        let base = p.len() as u32;
+        p.extend([
+            DVec3::new(3.0, 3.0, 1.0),
+            DVec3::new(9.0, 3.0, 2.0),
+            DVec3::new(3.0, 9.0, 1.0),
+            DVec3::new(5.0, 5.0, 0.5),
+            DVec3::new(5.0 + 1e-9, 5.0, 0.5),
+            DVec3::new(5.0 + 2e-9, 5.0, 0.5),
+        ]);
+        t.extend([
+            [base, base + 1, base + 2],
+            [base + 3, base + 4, base + 5],
+            t[7],
+        ]);
+        let index = SurfaceIndex::new(&p, &t).expect("valid");
+        let bvh = TriangleBvh::from_triangles(&p, &t).expect("valid");
+        let queries: Vec<Vec3> = (0..=2 * n)
+            .flat_map(|j| (0..=2 * n).map(move |i| (i, j)))
+            .flat_map(|(i, j)| {
+                let (x, y) = (i as f32 * 0.5, j as f32 * 0.5);
+                [
+                    Vec3::new(x, y, 0.0),
+                    Vec3::new(x, y, 0.75),
+                    Vec3::new(x, y, -2.0),
+                ]
+            })
+            .collect();
+        let got = index.closest_batch(&queries).expect("finite");
+        let want = bvh.closest_points(&queries).expect("finite");
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert_eq!((g.distance, g.triangle), (w.distance, w.triangle), "{i}");
+        }
+        // And against brute force: the least (squared distance, id) over every triangle.
+        for (i, q) in queries.iter().enumerate().step_by(5) {
+            let q = q.as_dvec3();
+            let (d2, id) = t
+                .iter()
+                .enumerate()
+                .map(|(k, tri)| {
+                    let [a, b, c] = tri.map(|v| p[v as usize]);
+                    (
+                        (closest_point_on_triangle(q, a, b, c).0 - q).length_squared(),
+                        k as u32,
+                    )
+                })
+                .fold((f64::INFINITY, u32::MAX), |x, y| if y < x { y } else { x });
+            assert_eq!((got[i].distance, got[i].triangle), (d2.sqrt(), id), "{i}");
+        }
+        // One triangle, queried everywhere.
+        let one = SurfaceIndex::new(&p, &t[..1]).expect("valid");
+        let hits = one.closest_batch(&queries).expect("finite");
+        assert!(hits.iter().all(|h| h.triangle == 0));
     }
 
     #[test]
