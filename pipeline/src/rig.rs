@@ -393,11 +393,14 @@ mod tests {
                 let d = (got[k] - expected[v]).length();
                 assert!(d < 1e-6, "frame {f}, vertex {k}: {d}");
             }
-            // The vertex off the surface: its triangle's corners are skinned alike only in
-            // part, so it is close, not exact.
+            // The vertex off the surface: at frame 0 the joints rest and one target is fully
+            // on, which the rig plays exactly (normal offset included); turned and blended,
+            // its corners skinned differently, it is the linear rig's approximation.
             let corners = [0usize, 1, 4].map(|c| expected[c]);
             let carried = place_on(corners, coords[4]);
-            assert!((got[4] - carried).length() < 0.1, "frame {f}");
+            let d = (got[4] - carried).length();
+            let bound = if f == 0 { 1e-6 } else { 0.3 };
+            assert!(d < bound, "frame {f}: {d}");
         }
     }
 

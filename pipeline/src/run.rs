@@ -51,6 +51,9 @@ pub fn run(
     }
     let mut session = Session::open(config)?;
     session.set_serial_methods(control.serial_methods);
+    if o.outputs.writes(OutputTarget::Rig) {
+        session.check_rig(methods[0])?;
+    }
     let frames = session.frames();
     let out = &config.output;
     check_outputs(config, &methods, frames.clone(), session.input_files())?;
