@@ -48,6 +48,14 @@ fn basis(positions: &[DVec3], t: [u32; 3]) -> (DVec3, [DVec3; 3]) {
     (a, [e1, e2, m])
 }
 
+/// Where coordinates `uvw` put a vertex on the triangle with corners `corners`: the rule of
+/// [`CarriedMesh::place`] for one vertex.
+#[must_use]
+pub fn place_on(corners: [DVec3; 3], uvw: DVec3) -> DVec3 {
+    let (a, [e1, e2, m]) = basis(&corners, [0, 1, 2]);
+    a + uvw.x * e1 + uvw.y * e2 + uvw.z * m
+}
+
 /// Whether the triangle has a usable frame: its area is not negligible against its edges.
 fn has_area(positions: &[DVec3], t: [u32; 3]) -> bool {
     let [a, b, c] = t.map(|i| positions[i as usize]);
@@ -161,6 +169,19 @@ impl CarriedMesh {
             probes,
             farthest,
         })
+    }
+
+    /// Each key vertex's template triangle and its `(u, v, w)` in that triangle's basis (see
+    /// the module docs): what a rig moved onto the key mesh interpolates by.
+    #[must_use]
+    pub fn binding(&self) -> (&[u32], &[DVec3]) {
+        (&self.triangle, &self.coords)
+    }
+
+    /// The key mesh as extracted.
+    #[must_use]
+    pub fn key(&self) -> &TriMesh {
+        &self.key
     }
 
     /// The largest distance from a key vertex to the Gaussian it was bound by.

@@ -404,6 +404,16 @@ pub enum PipelineError {
         /// Why.
         cause: crate::carry::CarryError,
     },
+    /// The rig of a method's key mesh (`--targets rig`) that cannot be made or written.
+    #[error("{path}: the rig of method {method}'s key mesh: {cause}")]
+    Rig {
+        /// The rig file.
+        path: PathBuf,
+        /// The method.
+        method: Method,
+        /// Why.
+        cause: crate::rig::RigError,
+    },
     /// Shards that cannot be merged.
     #[error("{path}: cannot merge: {problem}")]
     Merge {

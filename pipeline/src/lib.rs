@@ -94,6 +94,8 @@ mod memory;
 mod merge;
 mod option_checks;
 mod plan;
+mod rig;
+mod rig_output;
 mod run;
 mod session;
 mod topology;

@@ -1,7 +1,7 @@
 //! The checks of a run's options that need no file: each names the option, its value and
 //! what it should be.
 
-use crate::config::ExtractConfig;
+use crate::config::{ExtractConfig, OutputTarget};
 use crate::error::PipelineError;
 
 /// Checks the options a session uses before any file is read.
@@ -93,6 +93,12 @@ pub(crate) fn check_options(config: &ExtractConfig) -> Result<(), PipelineError>
     if o.outputs.error_colors && o.tsdf.colors {
         return Err(PipelineError::BadCombination {
             problem: "--error-colors and --tsdf-colors both colour the vertices: choose one",
+        });
+    }
+    if o.outputs.writes(OutputTarget::Rig) && !o.topology.topology.carries() {
+        return Err(PipelineError::BadCombination {
+            problem: "--targets rig moves the template's rig onto a carried key mesh: give \
+                      --topology fixed or adaptive",
         });
     }
     if o.metrics.samples == 0 {

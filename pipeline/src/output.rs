@@ -25,6 +25,12 @@ pub fn frame_file(frame: usize) -> String {
     format!("frame_{frame:06}.ply")
 }
 
+/// Name of `method`'s rig in an output folder (`tsdf_rig.glb`, `--targets rig`).
+#[must_use]
+pub fn rig_file(method: Method) -> String {
+    format!("{}_rig.glb", method.name())
+}
+
 /// The input files of a run, compared by canonical path (symbolic links and `..` resolved).
 #[derive(Clone, Debug, Default)]
 pub struct Inputs(HashSet<PathBuf>);
@@ -198,6 +204,7 @@ fn remove_previous_outputs(out: &Path) {
         }
         let _ = std::fs::remove_file(out.join(format!("{}.glb", m.name())));
         let _ = std::fs::remove_file(out.join(format!("{}.usda", m.name())));
+        let _ = std::fs::remove_file(out.join(rig_file(m)));
         if let Ok(listing) = std::fs::read_dir(out) {
             let prefix = format!("{}_part", m.name());
             for e in listing.flatten() {
@@ -226,6 +233,7 @@ pub fn check_outputs(
         }
         inputs.check(&out.join(format!("{}.glb", m.name())))?;
         inputs.check(&out.join(format!("{}.usda", m.name())))?;
+        inputs.check(&out.join(rig_file(*m)))?;
     }
     for name in [REPORT_JSON, REPORT_MD, REPORT_HTML, PLOT_SVG, PLOT_PNG] {
         inputs.check(&out.join(name))?;

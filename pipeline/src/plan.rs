@@ -298,6 +298,9 @@ impl Plan {
         if o.outputs.writes(OutputTarget::Glb) {
             files.push(format!("{out}/<method>.glb"));
         }
+        if o.outputs.writes(OutputTarget::Rig) {
+            files.push(format!("{out}/<method>_rig.glb"));
+        }
         if o.outputs.writes(OutputTarget::Usd) {
             files.push(format!("{out}/<method>.usda"));
         }

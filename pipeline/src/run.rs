@@ -19,11 +19,12 @@ use crate::lock::FolderLock;
 use crate::metrics::GtSamples;
 use crate::output::{
     check_outputs, frame_file, frame_files, refuse_used_output, remove_frame_files,
-    remove_stale_temporaries, thumbnails_of, write_outputs,
+    remove_stale_temporaries, rig_file, thumbnails_of, write_outputs,
 };
 use crate::records::{DelaunayFrame, FailedFrame, FrameEntry, FrameRecord};
 use crate::report::thumbnail::{self, Colouring, Picture};
 use crate::report::{GT_THUMBNAIL, Report, ReportBuilder, THUMBNAIL_DIR, thumbnail_file};
+use crate::rig_output::write_rig;
 use crate::session::{FrameResult, MethodFrame, Session};
 
 /// Runs the main job and writes every output (see the crate docs); returns the report.
@@ -50,6 +51,9 @@ pub fn run(
     }
     let mut session = Session::open(config)?;
     session.set_serial_methods(control.serial_methods);
+    if o.outputs.writes(OutputTarget::Rig) {
+        session.check_rig(methods[0])?;
+    }
     let frames = session.frames();
     let out = &config.output;
     check_outputs(config, &methods, frames.clone(), session.input_files())?;
@@ -158,6 +162,9 @@ pub fn run(
     if o.outputs.writes(OutputTarget::Report) {
         report.thumbnails = thumbnails_of(out, thumbnail_frame, &report);
     }
+    if o.outputs.writes(OutputTarget::Rig) {
+        write_rigs(&mut session, out, &methods, frames, &mut report)?;
+    }
     let frame_files = frame_files(out, &report);
     write_outputs(
         out,
@@ -171,6 +178,33 @@ pub fn run(
         remove_frame_files(&frame_files);
     }
     Ok(report)
+}
+
+/// Each method's `<method>_rig.glb` over the run's frames (module `rig_output`), its record
+/// in the report; a failure names the file and the method.
+fn write_rigs(
+    session: &mut Session,
+    out: &Path,
+    methods: &[Method],
+    frames: std::ops::Range<usize>,
+    report: &mut Report,
+) -> Result<(), PipelineError> {
+    for &method in methods {
+        let path = out.join(rig_file(method));
+        let fail = |cause| PipelineError::Rig {
+            path: path.clone(),
+            method,
+            cause,
+        };
+        let Some(inputs) = session.rig_inputs(method)? else {
+            continue;
+        };
+        let record = write_rig(&inputs, frames.clone(), &path).map_err(fail)?;
+        if let Some(r) = report.methods.get_mut(method.name()) {
+            r.rig = Some(record);
+        }
+    }
+    Ok(())
 }
 
 /// What a frame writes besides its numbers.

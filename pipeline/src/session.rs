@@ -61,6 +61,8 @@ use crate::topology::{Carrier, CarryContext, mean_edge};
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
+mod rig_inputs;
+
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
 #[derive(Clone, Debug)]
 pub struct SessionOptions {

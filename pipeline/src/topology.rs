@@ -45,6 +45,8 @@ pub struct Carrier {
     key: Option<(usize, Box<CarriedMesh>)>,
     /// The frame this carrier saw last.
     last: Option<usize>,
+    /// The track's first key (frame 0's mesh) bound, kept for the rig (module `rig`).
+    first: Option<Box<CarriedMesh>>,
 }
 
 impl Carrier {
@@ -55,7 +57,14 @@ impl Carrier {
             topology,
             key: None,
             last: None,
+            first: None,
         }
+    }
+
+    /// The track's first key mesh bound to the template, once this carrier has made it.
+    #[must_use]
+    pub fn first_key(&self) -> Option<&CarriedMesh> {
+        self.first.as_deref()
     }
 
     /// The frames this carrier must see (in order, [`Carrier::frame`] with `replay`) before
@@ -110,6 +119,7 @@ impl Carrier {
                 stretched: 0.0,
                 farthest: Some(carried.farthest()),
             };
+            self.first = Some(Box::new(carried.clone()));
             self.key = Some((frame, Box::new(carried)));
             return Ok(Some((output, Some(record))));
         };

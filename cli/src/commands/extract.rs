@@ -393,6 +393,9 @@ fn written_files(targets: &[OutputTarget], journal: bool) -> Vec<&'static str> {
     if targets.contains(&OutputTarget::Usd) {
         written.push("<method>.usda");
     }
+    if targets.contains(&OutputTarget::Rig) {
+        written.push("<method>_rig.glb");
+    }
     if targets.contains(&OutputTarget::Report) {
         written.extend([
             "report.json",

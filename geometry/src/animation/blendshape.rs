@@ -27,7 +27,7 @@ use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 
 use super::error::AnimationError;
-use super::gltf::{GltfTemplate, JointTurn};
+use super::gltf::{GltfTemplate, JointTurn, RigPose};
 use super::sequence::check_topology;
 use super::template::{AnimatedTemplate, DEFAULT_FPS};
 use crate::io::files::read_mesh;
@@ -691,6 +691,39 @@ impl AnimatedTemplate for GltfMorphAnimation {
             });
         self.template
             .evaluate_turned(Some(self.template.clip_time(t)), &lookup, turn)
+    }
+
+    fn gltf_rig(&self) -> Option<&GltfTemplate> {
+        Some(&self.template)
+    }
+
+    fn frame_rig_pose(&self, frame: usize) -> Option<Result<RigPose, AnimationError>> {
+        let (Some(w), Some(t)) = (self.track.weights(frame), self.track.time(frame)) else {
+            return Some(Err(AnimationError::FrameOutOfRange {
+                frame,
+                count: self.track.frame_count(),
+            }));
+        };
+        let lookup = |mesh: usize, target: usize| -> Option<f64> {
+            self.mapping
+                .get(mesh)?
+                .get(target)
+                .copied()
+                .flatten()
+                .map(|c| w[c])
+        };
+        let turn = self
+            .head
+            .zip(self.track.head_pose(frame))
+            .map(|(node, r)| JointTurn {
+                node,
+                rotation: DQuat::from_scaled_axis(r),
+            });
+        Some(Ok(self.template.rig_pose(
+            Some(self.template.clip_time(t)),
+            &lookup,
+            turn,
+        )))
     }
 }
 

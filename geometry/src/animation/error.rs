@@ -190,6 +190,15 @@ pub enum AnimationError {
         /// Number of weights given.
         found: usize,
     },
+    /// The template has no rig to transfer (neither a skin nor morph targets), or one the rig
+    /// export cannot describe.
+    #[error("{path}: no rig to transfer: {message}")]
+    NoRig {
+        /// The template file.
+        path: PathBuf,
+        /// What is missing.
+        message: String,
+    },
     /// The weights track and the blendshape targets share no name.
     #[error("{path}: none of the {channels} weight names matches a blendshape target ({targets})")]
     NoMatchingTargets {

@@ -25,7 +25,9 @@ pub use self::blendshape::{
     BlendshapeAnimation, BlendshapeSet, GltfMorphAnimation, WeightsTrack, canonical_target_name,
 };
 pub use self::error::AnimationError;
-pub use self::gltf::{Clip, GltfTemplate, JointTurn, VertexSkinning};
+pub use self::gltf::{
+    Clip, GltfTemplate, JointTurn, RigNode, RigPose, RigTarget, TemplateRig, VertexSkinning,
+};
 pub use self::sampler::Interpolation;
 pub use self::sequence::{MeshSequence, check_topology, natural_cmp};
 pub use self::template::{AnimatedTemplate, DEFAULT_FPS};

@@ -4,6 +4,7 @@
 use glam::DVec3;
 
 use super::error::AnimationError;
+use super::gltf::{GltfTemplate, RigPose};
 use crate::mesh::TriMesh;
 
 /// Frame rate used when a source has no timing of its own (the LAM/ARKit tracks are 30 fps).
@@ -45,6 +46,20 @@ pub trait AnimatedTemplate: Send + Sync {
     /// target); empty for every other animation.
     fn unused_channels(&self) -> Vec<&str> {
         Vec::new()
+    }
+
+    /// The glTF template whose rig (skin, morph targets: [`GltfTemplate::rig`]) plays this
+    /// animation: a glTF template driven by its clip, or its morph targets driven by a weights
+    /// track; `None` for every other animation.
+    fn gltf_rig(&self) -> Option<&GltfTemplate> {
+        None
+    }
+
+    /// The pose of [`Self::gltf_rig`]'s rig at `frame`: node transforms and morph weights
+    /// that make the rig evaluate to [`Self::frame`]; `None` without a glTF rig.
+    fn frame_rig_pose(&self, frame: usize) -> Option<Result<RigPose, AnimationError>> {
+        let _ = frame;
+        None
     }
 
     /// `frame` as a mesh with the template's topology.

@@ -23,6 +23,7 @@ pub mod hdr;
 mod npy;
 pub mod obj;
 pub mod ply;
+mod rig_glb;
 mod usd_sequence;
 
 pub use atomic::{abandon_writes, write_atomically};
@@ -41,4 +42,5 @@ pub use gltf_sequence::{
 pub use npy::{NpyArray, parse_npy, read_npy, write_npy};
 pub use obj::ObjVertices;
 pub use ply::{PlyEncoding, PlyExtras};
+pub use rig_glb::{RigAnimation, RiggedMesh, write_rigged_glb};
 pub use usd_sequence::{UsdCacheSummary, write_usd_sequence};

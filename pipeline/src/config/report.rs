@@ -102,6 +102,10 @@ pub enum OutputTarget {
     Report,
     /// `<method>.usda`, the sequence as a USD mesh cache (not in the default: text, large).
     Usd,
+    /// `<method>_rig.glb`, the template's skin and morph targets moved onto the method's first
+    /// key mesh, played by the track (`--topology fixed|adaptive`, a glTF template with a
+    /// rig; not in the default: it re-evaluates every frame to measure the rig).
+    Rig,
 }
 
 impl OutputTarget {
@@ -123,6 +127,7 @@ impl std::fmt::Display for OutputTarget {
             Self::Glb => "glb",
             Self::Report => "report",
             Self::Usd => "usd",
+            Self::Rig => "rig",
         })
     }
 }
@@ -147,7 +152,10 @@ pub struct OutputOptions {
     /// its frames are written to assemble it and removed after unless meshes is asked too),
     /// report (report.json, report.md, report.html with its thumbnails, the plot as SVG and
     /// PNG), usd (<method>.usda, a USD mesh cache; not in the default; its frames are written
-    /// and removed as for glb). The run journal is always written.
+    /// and removed as for glb), rig (<method>_rig.glb: the template's skin and morph targets
+    /// moved onto the first key mesh, animated by the track; needs --topology fixed or
+    /// adaptive and a glTF template with a skin or morph targets; not in the default). The run
+    /// journal is always written.
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_delimiter = ',', value_name = "LIST",
         num_args = 1.., default_values_t = OutputTarget::ALL))]
     pub targets: Vec<OutputTarget>,

@@ -263,6 +263,7 @@ fn merged_report(reports: &[(&Path, Report)]) -> Report {
             glb: m.glb.clone(),
             glb_parts: Vec::new(),
             delaunay,
+            rig: None,
         };
     }
     merged

@@ -97,6 +97,7 @@ impl ReportBuilder {
                             std::mem::take(&mut delaunay_frames),
                         )
                     }),
+                    rig: None,
                 },
             );
         }

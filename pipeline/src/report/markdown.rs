@@ -370,6 +370,23 @@ impl Report {
         if let Some(note) = simplify_note(m) {
             v.push(note);
         }
+        if let Some(r) = &m.rig {
+            v.push(format!(
+                "rig: `{}` ({:.1} MB: {} vertices, {} joints, {} morph targets with {} non-zero \
+                 deltas, {} frames keyed); played against the carried key mesh, largest \
+                 distance {} (frame {}), median {}",
+                r.file,
+                r.bytes as f64 / 1e6,
+                r.vertices,
+                r.joints,
+                r.targets,
+                r.deltas,
+                r.frames,
+                significant(r.max_error),
+                r.worst_frame,
+                significant(r.median_error)
+            ));
+        }
         match m.relation {
             Some(Relation::SelfConsistency) => v.push(self_consistency_note(m)),
             Some(Relation::Accuracy) => v.push(format!(

@@ -247,6 +247,42 @@ pub struct MethodReport {
     /// What the incremental update did per frame (delaunay only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delaunay: Option<DelaunayStats>,
+    /// The rig moved onto its first key mesh (`--targets rig`).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub rig: Option<RigRecord>,
+}
+
+/// `<method>_rig.glb` (`--targets rig`): the template's skin and morph targets moved onto the
+/// method's first key mesh, and how far the rig played by geometry's glTF evaluator is from
+/// the carried key mesh at each frame (distances in the template's units).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RigRecord {
+    /// The file, relative to the output folder.
+    pub file: String,
+    /// Its size in bytes.
+    pub bytes: u64,
+    /// Vertices of the rigged mesh (the key mesh's).
+    pub vertices: usize,
+    /// Its triangles.
+    pub triangles: usize,
+    /// Joints of its skin.
+    pub joints: usize,
+    /// Morph targets.
+    pub targets: usize,
+    /// Non-zero vertex deltas over all targets (what the sparse accessors store).
+    pub deltas: usize,
+    /// Frames its animation keys.
+    pub frames: usize,
+    /// Largest distance of a rig vertex from the carried vertex, over all frames.
+    pub max_error: f64,
+    /// Median over the frames of each frame's median distance.
+    pub median_error: f64,
+    /// The frame of the largest distance.
+    pub worst_frame: usize,
+    /// Milliseconds to transfer and write it.
+    pub write_ms: f64,
+    /// Milliseconds to read it back and measure it at every frame.
+    pub measure_ms: f64,
 }
 
 /// The whole run (report.json).
@@ -494,6 +530,7 @@ mod tests {
             glb: format!("{}.glb", m.name()),
             glb_parts: Vec::new(),
             delaunay,
+            rig: None,
         };
         let report = Report {
             version: "0".to_owned(),

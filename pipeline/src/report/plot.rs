@@ -619,6 +619,7 @@ pub(crate) mod tests {
                 glb: format!("{}.glb", m.name()),
                 glb_parts: Vec::new(),
                 delaunay: None,
+                rig: None,
             }
         };
         let relation = if own {

@@ -4,9 +4,11 @@
 // three.js's GLTFLoader (with its meshopt decoder) must load the file, and its AnimationMixer,
 // set to frame k's time, must place every vertex of the visible mesh within
 // TOL x (frame k's bounding-box diagonal) of frame k's PLY (FRAMES_DIR/frame_*.ply in name
-// order). Frame times: --report report.json (its frame_times) or --fps F (k / F).
+// order). Frame times: --report report.json (its frame_times), --fps F (k / F) or --times
+// T,T,... (one per frame file, in name order: a few frames of a rig evaluated by trisplat).
 //
-// usage: node check.mjs [--report report.json | --fps F] [--tolerance 1e-4] [--only K,K,...]
+// usage: node check.mjs [--report report.json | --fps F | --times T,...] [--tolerance 1e-4]
+//        [--only K,K,...]
 //        A.glb=A_frames ...   (--only: check those frames alone, for long tracks)
 // Prints one line per file and "N passed, M failed"; exits 1 on any failure.
 import fs from 'node:fs';
@@ -18,11 +20,12 @@ import { PLYLoader } from 'three/examples/jsm/loaders/PLYLoader.js';
 import { MeshoptDecoder } from 'three/examples/jsm/libs/meshopt_decoder.module.js';
 
 function parseArgs(argv) {
-  const opts = { report: null, fps: null, tolerance: 1e-4, only: null, pairs: [] };
+  const opts = { report: null, fps: null, times: null, tolerance: 1e-4, only: null, pairs: [] };
   for (let i = 0; i < argv.length; i++) {
     const a = argv[i];
     if (a === '--report') opts.report = argv[++i];
     else if (a === '--fps') opts.fps = Number(argv[++i]);
+    else if (a === '--times') opts.times = argv[++i].split(',').map(Number);
     else if (a === '--tolerance') opts.tolerance = Number(argv[++i]);
     else if (a === '--only') opts.only = new Set(argv[++i].split(',').map(Number));
     else if (a.includes('=')) {
@@ -30,8 +33,9 @@ function parseArgs(argv) {
       opts.pairs.push({ glb, frames });
     } else throw new Error(`unknown argument ${a}`);
   }
-  if (!opts.pairs.length || (opts.report === null) === (opts.fps === null)) {
-    throw new Error('usage: check.mjs (--report R | --fps F) [--tolerance T] A.glb=FRAMES ...');
+  const timings = [opts.report, opts.fps, opts.times].filter((t) => t !== null).length;
+  if (!opts.pairs.length || timings !== 1) {
+    throw new Error('usage: check.mjs (--report R | --fps F | --times T,...) [--tolerance T] A.glb=FRAMES ...');
   }
   return opts;
 }
@@ -144,7 +148,7 @@ async function main() {
   let passed = 0;
   let failed = 0;
   for (const pair of opts.pairs) {
-    let times;
+    let times = opts.times ?? undefined;
     if (opts.report) times = JSON.parse(fs.readFileSync(opts.report, 'utf8')).frame_times;
     let result;
     try {

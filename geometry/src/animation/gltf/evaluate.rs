@@ -213,6 +213,20 @@ impl GltfTemplate {
         t: Option<f64>,
         turn: Option<JointTurn>,
     ) -> (Vec<DMat4>, HashMap<usize, Vec<f64>>) {
+        let (locals, anim_weights) = self.pose_locals(t, turn);
+        (
+            world_matrices(&locals, &self.order, &self.parents),
+            anim_weights,
+        )
+    }
+
+    /// Local transforms of every node and the animated morph weights (by node) at time `t`
+    /// (`None`: the stored scene), with `turn` applied.
+    pub(super) fn pose_locals(
+        &self,
+        t: Option<f64>,
+        turn: Option<JointTurn>,
+    ) -> (Vec<Local>, HashMap<usize, Vec<f64>>) {
         // Local transforms (matrix nodes that are animated are decomposed first).
         let mut locals: Vec<Local> = self.nodes.iter().map(|n| n.local).collect();
         let mut anim_weights: HashMap<usize, Vec<f64>> = HashMap::new();
@@ -269,10 +283,7 @@ impl GltfTemplate {
                     * local,
             );
         }
-        (
-            world_matrices(&locals, &self.order, &self.parents),
-            anim_weights,
-        )
+        (locals, anim_weights)
     }
 
     pub(super) fn evaluate_pose(
@@ -376,5 +387,16 @@ impl AnimatedTemplate for GltfTemplate {
     fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
         let t = self.checked_frame_time(frame)?;
         self.evaluate_pose(Some(t), None, None)
+    }
+
+    fn gltf_rig(&self) -> Option<&GltfTemplate> {
+        Some(self)
+    }
+
+    fn frame_rig_pose(&self, frame: usize) -> Option<Result<super::RigPose, AnimationError>> {
+        Some(
+            self.checked_frame_time(frame)
+                .map(|t| self.rig_pose(Some(t), &|_, _| None, None)),
+        )
     }
 }

@@ -23,13 +23,16 @@
 //!
 //! One job a file: `model` holds the scene a template keeps (nodes, meshes, skins, the clip),
 //! `read` builds it from a file, `clip` reads and checks the animation, `evaluate` samples the
-//! clip and poses the scene, and `skinning` exposes the skinning palette.
+//! clip and poses the scene, `skinning` exposes the skinning palette, and `rig` the skeleton, skin and morph targets as
+//! data (for a rig moved onto another mesh).
 
 mod clip;
 mod evaluate;
 mod model;
 mod read;
+mod rig;
 mod skinning;
 
 pub use model::{Clip, GltfTemplate, JointTurn};
+pub use rig::{RigNode, RigPose, RigTarget, TemplateRig};
 pub use skinning::VertexSkinning;

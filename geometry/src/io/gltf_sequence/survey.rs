@@ -176,7 +176,7 @@ impl Survey {
 
 /// The glTF key time of every frame: the largest `f32` not above it, checked to be finite,
 /// non-negative and strictly increasing (in `f64` and as `f32`).
-pub(super) fn key_times(path: &Path, frames: usize, times: &[f64]) -> Result<Vec<f32>, IoError> {
+pub(crate) fn key_times(path: &Path, frames: usize, times: &[f64]) -> Result<Vec<f32>, IoError> {
     if frames == 0 {
         return Err(IoError::malformed(path, "frames", "no frames to write"));
     }
