@@ -11,7 +11,7 @@
 //! `trisplat render --mesh`), scored against MESH.
 //!
 //! Both sides use the same voxel (the object's largest extent / voxels across), truncation
-//! [`TRUNC_VOXELS`] voxels and depth truncation (2DGS default: 2 x the scene radius).
+//! `--trunc-voxels` (default [`TRUNC_VOXELS`]) voxels and depth truncation (2DGS default: 2 x the scene radius).
 //! - Whole process: `trisplat tsdf ... -q` (the release binary next to this one) and
 //!   `python tsdf_open3d.py` (interpreter start, `import open3d`, reading the `.npy` files,
 //!   fusion, writing the PLY), timed from outside as a user's shell would.
@@ -20,9 +20,10 @@
 //!   `integrate` per frame + `extract_triangle_mesh` (its default weight threshold 3 and block
 //!   resolution 16), as its script times it.
 //!
-//! Open3D's VoxelBlockGrid differs from the legacy rules we follow (docs/conventions.md §6):
-//! z-difference sdf, floored pixel lookup, integer voxel positions, and blocks created by a
-//! frame miss the free-space observations of earlier frames.
+//! Open3D's VoxelBlockGrid differs from the rules we follow (docs/conventions.md §6: the legacy
+//! integrator's, with the depth interpolated between pixel centres): z-difference sdf, floored
+//! pixel lookup, integer voxel positions, and blocks created by a frame miss the free-space
+//! observations of earlier frames.
 //!
 //! Chamfer: docs/conventions.md §8 surface mode (exact point-to-triangle distances both ways,
 //! as `trisplat eval --surface`) with [`SAMPLES`] area-uniform samples per mesh, both meshes
@@ -53,7 +54,7 @@ const VIEWS: usize = 60;
 const SIZE: u32 = 512;
 /// Vertical field of view of the rig.
 const FOV_Y_DEG: f64 = 40.0;
-/// Truncation in voxels on both sides (2DGS's default).
+/// Truncation in voxels on both sides by default (2DGS's default).
 const TRUNC_VOXELS: f64 = 5.0;
 /// Voxels across the object's largest extent, by default.
 const DEFAULT_ACROSS: [u32; 5] = [100, 200, 400, 700, 1000];
@@ -77,6 +78,9 @@ pub struct TsdfBenchArgs {
     /// Ground-truth mesh of --scene (its largest extent sets the voxel).
     #[arg(long, requires = "scene")]
     gt: Option<PathBuf>,
+    /// Truncation in voxels, both sides.
+    #[arg(long, default_value_t = TRUNC_VOXELS)]
+    trunc_voxels: f64,
     /// Runs of each whole process (the best is kept).
     #[arg(long, default_value_t = 2)]
     repeats: usize,
@@ -220,8 +224,9 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
     let (_, scene_r) = scene_radius(&cameras).context("cameras do not meet")?;
     let depth_trunc = 2.0 * scene_r;
     println!(
-        "scene: {label}, extent {extent:.4}, depth_trunc {depth_trunc:.3}, trunc {TRUNC_VOXELS} \
-         voxels ({} rayon threads)",
+        "scene: {label}, extent {extent:.4}, depth_trunc {depth_trunc:.3}, trunc {} voxels ({} \
+         rayon threads)",
+        args.trunc_voxels,
         rayon::current_num_threads()
     );
     let cameras_file = dir.join("cameras.json");
@@ -232,7 +237,7 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for (across, with_open3d) in sizes {
         let voxel = extent / f64::from(across.max(1));
-        let trunc = TRUNC_VOXELS * voxel;
+        let trunc = args.trunc_voxels * voxel;
         let out = tmp.path().join("ours.ply");
         let (ours_whole, _) = whole_process(args.repeats, || {
             let mut c = Command::new(&binary);
@@ -256,15 +261,7 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
         let ours_in_process = start.elapsed().as_secs_f64();
         let ours_chamfer = chamfer(&fused.mesh, &gt)?;
         let theirs = match python.filter(|_| with_open3d) {
-            Some(py) => Some(open3d(
-                py,
-                args.repeats,
-                &dir,
-                voxel,
-                depth_trunc,
-                &gt,
-                tmp.path(),
-            )?),
+            Some(py) => Some(open3d(py, args, &dir, voxel, depth_trunc, &gt, tmp.path())?),
             None => None,
         };
         let row = Row {
@@ -296,7 +293,7 @@ pub fn run(args: &TsdfBenchArgs, python: Option<&str>) -> anyhow::Result<()> {
 
 fn open3d(
     python: &str,
-    repeats: usize,
+    args: &TsdfBenchArgs,
     dir: &Path,
     voxel: f64,
     depth_trunc: f64,
@@ -304,10 +301,11 @@ fn open3d(
     tmp: &Path,
 ) -> anyhow::Result<Theirs> {
     let out = tmp.join("open3d.ply");
+    let repeats = args.repeats;
     let args = [
         path_str(dir)?.to_owned(),
         voxel.to_string(),
-        TRUNC_VOXELS.to_string(),
+        args.trunc_voxels.to_string(),
         depth_trunc.to_string(),
         path_str(&out)?.to_owned(),
     ];

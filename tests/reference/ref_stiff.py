@@ -1278,10 +1278,18 @@ TSDF_VOXEL = 2.0**-12  # 2.44e-4, about 2.4 pixel footprints at depth 2
 TSDF_TRUNC = 4 * TSDF_VOXEL
 
 
+TSDF_CELL_SPREAD_PIXELS = 8.0  # extract/src/tsdf: MAX_CELL_SPREAD_PIXELS
+
+
 def tsdf_rule(g, cam, depth, exact=True):
-    """The per-voxel rule of extract/src/tsdf (Open3D's legacy integrator) for an identity-rotation
-    camera: returns tsdf, or None when the voxel is skipped; with exact=True in mpmath (and
-    'ambiguous' when a decision lies within 1e-9 of its threshold), else in float32."""
+    """The per-voxel rule of extract/src/tsdf (Open3D's legacy integrator with the depth read
+    between pixel centres, docs/conventions.md section 6) for an identity-rotation camera:
+    returns tsdf, or None when the voxel is skipped; with exact=True in mpmath (and 'ambiguous'
+    when a decision lies within 1e-9 of its threshold), else in float32.
+
+    The depth at (u, v) is the bilinear interpolation of the four pixel centres around it
+    (centres at j + 1/2) when all four are valid and differ by at most
+    max(trunc, 8 * nearest / f), else the nearest pixel's; sdf = (d - q.z) * |q| / q.z."""
     c, fx, cx, cy = cam["c"], cam["f"], cam["cx"], cam["cy"]
     if exact:
         v = mp.mpf(TSDF_VOXEL)
@@ -1295,15 +1303,35 @@ def tsdf_rule(g, cam, depth, exact=True):
         if not (margin <= u < TSDF_W - margin and margin <= w < TSDF_H - margin):
             return None
         tiny = mp.mpf(1e-9)
+        trunc = mp.mpf(TSDF_TRUNC)
+        # the nearest pixel changes at integers, the cell at half-integers
         if min(abs(u - mp.nint(u)), abs(w - mp.nint(w))) < tiny:
             return "ambiguous"
-        j, i = int(mp.floor(u)), int(mp.floor(w))
-        d = mp.mpf(float(depth[i][j]))
+        if min(abs(u - 0.5 - mp.nint(u - 0.5)), abs(w - 0.5 - mp.nint(w - 0.5))) < tiny:
+            return "ambiguous"
+        x, y = u - mp.mpf(0.5), w - mp.mpf(0.5)
+        d = None
+        if x >= 0 and y >= 0:
+            j0, i0 = int(mp.floor(x)), int(mp.floor(y))
+            if j0 + 1 < TSDF_W and i0 + 1 < TSDF_H:
+                cell = [mp.mpf(float(depth[i0 + a][j0 + b])) for a in (0, 1) for b in (0, 1)]
+                lo, hi = min(cell), max(cell)
+                if lo > 0:
+                    limit = max(trunc, lo * mp.mpf(TSDF_CELL_SPREAD_PIXELS) / fx)
+                    if abs((hi - lo) - limit) < tiny * limit:
+                        return "ambiguous"
+                    if hi - lo <= limit:
+                        tx, ty = x - j0, y - i0
+                        top = cell[0] + tx * (cell[1] - cell[0])
+                        bottom = cell[2] + tx * (cell[3] - cell[2])
+                        d = top + ty * (bottom - top)
+        if d is None:
+            j, i = int(mp.floor(u)), int(mp.floor(w))
+            d = mp.mpf(float(depth[i][j]))
         if d <= 0:
             return None
-        trunc = mp.mpf(TSDF_TRUNC)
         dz = d - q[2]
-        factor = mp.sqrt(1 + ((j + mp.mpf(0.5) - cx) / fx) ** 2 + ((i + mp.mpf(0.5) - cy) / fx) ** 2)
+        factor = mp.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2) / q[2]
         sdf = dz * factor
         if abs(sdf + trunc) < tiny * trunc or abs(dz + trunc) < tiny * trunc:
             return "ambiguous"
@@ -1319,13 +1347,26 @@ def tsdf_rule(g, cam, depth, exact=True):
     w = F32(fx) * q[1] / q[2] + F32(cy)
     if not (F32(1e-4) <= u < F32(TSDF_W - 1e-4) and F32(1e-4) <= w < F32(TSDF_H - 1e-4)):
         return None
-    j, i = int(np.floor(u)), int(np.floor(w))
-    d = F32(depth[i][j])
+    trunc = F32(TSDF_TRUNC)
+    x, y = u - F32(0.5), w - F32(0.5)
+    d = None
+    if x >= 0 and y >= 0:
+        j0, i0 = int(np.floor(x)), int(np.floor(y))
+        if j0 + 1 < TSDF_W and i0 + 1 < TSDF_H:
+            cell = [F32(depth[i0 + a][j0 + b]) for a in (0, 1) for b in (0, 1)]
+            lo, hi = min(cell), max(cell)
+            if lo > 0 and hi - lo <= max(trunc, lo * F32(TSDF_CELL_SPREAD_PIXELS) / F32(fx)):
+                tx, ty = x - F32(j0), y - F32(i0)
+                top = cell[0] + tx * (cell[1] - cell[0])
+                bottom = cell[2] + tx * (cell[3] - cell[2])
+                d = top + ty * (bottom - top)
+    if d is None:
+        j, i = int(np.floor(u)), int(np.floor(w))
+        d = F32(depth[i][j])
     if d <= 0:
         return None
-    trunc = F32(TSDF_TRUNC)
     dz = d - q[2]
-    factor = np.sqrt(F32(1) + ((F32(j) + F32(0.5) - F32(cx)) / F32(fx)) ** 2 + ((F32(i) + F32(0.5) - F32(cy)) / F32(fx)) ** 2)
+    factor = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]) / q[2]
     sdf = dz * factor
     if sdf <= -trunc:
         return None

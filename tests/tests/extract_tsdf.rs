@@ -10,8 +10,8 @@
 //!
 //! Checks: Chamfer to Spot ≤ [`CHAMFER_RATIO`] × Open3D's; every edge used by exactly two
 //! triangles; positive signed volume within [`VOLUME_REL`] of Open3D's; vertex and triangle
-//! counts within [`COUNT_REL`] of Open3D's (same rules, so the meshes should be the same up to
-//! f32 rounding and the ≤ 0.001-voxel vertex margin of `marching_cubes`); the 2DGS scene radius
+//! counts within [`COUNT_REL`] of Open3D's (the same rules but for the depth read between pixel
+//! centres, docs/conventions.md §6: until issue #34 they agreed to 1e-3); the 2DGS scene radius
 //! equal to the reference's.
 
 use std::path::{Path, PathBuf};
@@ -31,10 +31,12 @@ use trisplat_geometry::{read_cameras_json, write_cameras_json};
 const SAMPLES: usize = 100_000;
 /// Our Chamfer may exceed Open3D's by at most this factor (the issue's target).
 const CHAMFER_RATIO: f64 = 1.05;
-/// Relative tolerance of the signed volume against Open3D's mesh.
-const VOLUME_REL: f64 = 1e-3;
-/// Relative tolerance of the vertex and triangle counts against Open3D's mesh.
-const COUNT_REL: f64 = 1e-3;
+/// Relative tolerance of the signed volume against Open3D's mesh (our depth is interpolated
+/// between pixel centres, Open3D's read at the nearest: 0.45% apart here).
+const VOLUME_REL: f64 = 1e-2;
+/// Relative tolerance of the vertex and triangle counts against Open3D's mesh (3.7% fewer
+/// here: the interpolated depth leaves fewer steps a pixel wide).
+const COUNT_REL: f64 = 5e-2;
 
 fn dir() -> PathBuf {
     trisplat_fixtures::path("reference/tsdf")

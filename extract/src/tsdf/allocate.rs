@@ -7,15 +7,22 @@ use glam::{DVec3, IVec3};
 use rayon::prelude::*;
 
 use super::error::TsdfError;
-use super::frame::{Prepared, TILE};
+use super::frame::{Prepared, TILE, cell_range};
 use super::params::TsdfParams;
 use crate::block_grid::{BLOCK, KeyMap};
 
 /// Voxel indices are kept within ±2³⁰ so that block keys and neighbours never overflow `i32`.
 const MAX_VOXEL_INDEX: f64 = (1u64 << 30) as f64;
 
-/// Calls `visit(lo, hi)` with the inclusive range of block keys near each valid pixel of row
-/// `i` of frame `f` (see the module docs), skipping repeats of the previous pixel's range.
+/// Calls `visit(lo, hi)` with the inclusive range of block keys that may hold a voxel with
+/// |sdf| < trunc read from pixel `(i, j)` of row `i` of frame `f`, skipping repeats of the
+/// previous pixel's range. A voxel reads the pixel's depth `d` when it projects into the
+/// pixel's square `[j, j + 1] × [i, i + 1]`, or the cell interpolated from it and its right and
+/// lower neighbours when it projects into `[j + ½, j + 3⁄2] × [i + ½, i + 3⁄2]` (depths
+/// between the cell's smallest and largest, `lo` and `hi`); with |sdf| < trunc its z lies in
+/// `(lo − trunc, hi + trunc)`. The range covers the frustum piece over the union of both
+/// squares between those depths, widened by a voxel diagonal for the corners of the cells
+/// around such voxels.
 fn row_ranges(
     f: &Prepared<'_>,
     i: usize,
@@ -24,22 +31,30 @@ fn row_ranges(
     limit: usize,
     mut visit: impl FnMut(IVec3, IVec3),
 ) -> Result<(), TsdfError> {
-    let camera_to_world = f.world_to_camera.transpose();
-    let lateral = 0.5 * (1.0 / (f.fx * f.fx) + 1.0 / (f.fy * f.fy)).sqrt();
-    let fixed = params.trunc + 3f64.sqrt() * params.voxel;
+    let margin = 3f64.sqrt() * params.voxel;
     let inv_voxel = 1.0 / params.voxel;
-    let yn = (i as f64 + 0.5 - f.cy) / f.fy;
     let mut last: Option<(IVec3, IVec3)> = None;
     for j in 0..f.width {
-        let d = f64::from(f.depth[i * f.width + j]);
+        let k = i * f.width + j;
+        let d = f.depth(k);
         if d <= 0.0 {
             continue;
         }
-        let xn = (j as f64 + 0.5 - f.cx) / f.fx;
-        let p = camera_to_world * DVec3::new(xn * d, yn * d, d) + f.center;
-        let r = fixed + (d + params.trunc) * lateral;
-        let lo = (p - r - origin) * inv_voxel;
-        let hi = (p + r - origin) * inv_voxel;
+        let (lo, hi, reach) = if f.cell_ok(k) {
+            let ([d00, d10], [d01, d11]) = (f.cells[k], f.cells[k + 1]);
+            let (lo, hi) = cell_range([d00, d01.abs(), d10, d11]);
+            (lo, hi, 1.5)
+        } else {
+            (d, d, 1.0)
+        };
+        let (b_min, b_max) = frustum_box(
+            f,
+            [j as f64, j as f64 + reach],
+            [i as f64, i as f64 + reach],
+            [f64::from(lo) - params.trunc, f64::from(hi) + params.trunc],
+        );
+        let lo = (b_min - margin - origin) * inv_voxel;
+        let hi = (b_max + margin - origin) * inv_voxel;
         if lo.abs().max_element() > MAX_VOXEL_INDEX || hi.abs().max_element() > MAX_VOXEL_INDEX {
             return Err(TsdfError::OutOfRange {
                 camera: f.name.to_owned(),
@@ -64,6 +79,27 @@ fn row_ranges(
     Ok(())
 }
 
+/// The world box of the points that project into image rectangle `us × vs` (pixel units)
+/// at camera depths `zs`: that of its eight corners (each coordinate is bilinear in the
+/// normalised image coordinate and the depth, so its extremes are at corners).
+fn frustum_box(f: &Prepared<'_>, us: [f64; 2], vs: [f64; 2], zs: [f64; 2]) -> (DVec3, DVec3) {
+    let camera_to_world = f.world_to_camera.transpose();
+    let xs = us.map(|u| (u - f.cx) / f.fx);
+    let ys = vs.map(|v| (v - f.cy) / f.fy);
+    let mut b_min = DVec3::INFINITY;
+    let mut b_max = DVec3::NEG_INFINITY;
+    for z in zs {
+        for x in xs {
+            for y in ys {
+                let p = camera_to_world * DVec3::new(x * z, y * z, z) + f.center;
+                b_min = b_min.min(p);
+                b_max = b_max.max(p);
+            }
+        }
+    }
+    (b_min, b_max)
+}
+
 /// Component-wise floor of values within ±2³⁰ (checked by the caller), without the libm call
 /// that `f64::floor` becomes on targets without SSE4.1.
 #[inline]
@@ -73,16 +109,16 @@ pub(super) fn floor(v: DVec3) -> DVec3 {
 }
 
 /// The box of block keys that contains the range of every valid pixel of `f`, from its tiles:
-/// each tile's pixels lie in the frustum piece between its smallest and largest depth, whose
-/// box is that of its eight corners; the radius is the largest the tile's depths give.
+/// each tile's pixels and the cells they start read within the tile's rectangle widened by
+/// half a pixel right and down, at depths within its smallest and largest depth widened by
+/// the largest spread of a cell there ([`Prepared::max_spread`] at the largest depth) and the
+/// truncation (see [`row_ranges`]).
 fn tile_bounds(
     f: &Prepared<'_>,
     params: TsdfParams,
     origin: DVec3,
 ) -> Result<Option<(IVec3, IVec3)>, TsdfError> {
-    let camera_to_world = f.world_to_camera.transpose();
-    let lateral = 0.5 * (1.0 / (f.fx * f.fx) + 1.0 / (f.fy * f.fy)).sqrt();
-    let fixed = params.trunc + 3f64.sqrt() * params.voxel;
+    let margin = 3f64.sqrt() * params.voxel;
     let inv_voxel = 1.0 / params.voxel;
     let mut out: Option<(IVec3, IVec3)> = None;
     for (t, (&d_min, &d_max)) in f.tile_min.iter().zip(&f.tile_max).enumerate() {
@@ -91,23 +127,17 @@ fn tile_bounds(
         }
         let (ty, tx) = (t / f.tiles_x, t % f.tiles_x);
         let (i0, j0) = (ty * TILE, tx * TILE);
-        let (i1, j1) = ((i0 + TILE).min(f.height) - 1, (j0 + TILE).min(f.width) - 1);
-        let xs = [j0, j1].map(|j| (j as f64 + 0.5 - f.cx) / f.fx);
-        let ys = [i0, i1].map(|i| (i as f64 + 0.5 - f.cy) / f.fy);
-        let mut b_min = DVec3::INFINITY;
-        let mut b_max = DVec3::NEG_INFINITY;
-        for d in [f64::from(d_min), f64::from(d_max)] {
-            for x in xs {
-                for y in ys {
-                    let p = camera_to_world * DVec3::new(x * d, y * d, d) + f.center;
-                    b_min = b_min.min(p);
-                    b_max = b_max.max(p);
-                }
-            }
-        }
-        let r = fixed + (f64::from(d_max) + params.trunc) * lateral;
-        let lo = (b_min - r - origin) * inv_voxel;
-        let hi = (b_max + r - origin) * inv_voxel;
+        let (i1, j1) = ((i0 + TILE).min(f.height), (j0 + TILE).min(f.width));
+        let (d_min, d_max) = (f64::from(d_min), f64::from(d_max));
+        let reach = f.max_spread(d_max) + params.trunc;
+        let (b_min, b_max) = frustum_box(
+            f,
+            [j0 as f64, j1 as f64 + 0.5],
+            [i0 as f64, i1 as f64 + 0.5],
+            [d_min - reach, d_max + reach],
+        );
+        let lo = (b_min - margin - origin) * inv_voxel;
+        let hi = (b_max + margin - origin) * inv_voxel;
         if lo.abs().max_element() > MAX_VOXEL_INDEX || hi.abs().max_element() > MAX_VOXEL_INDEX {
             return Err(TsdfError::OutOfRange {
                 camera: f.name.to_owned(),

@@ -14,6 +14,12 @@ pub const PIXEL_MARGIN: f64 = 1e-4;
 /// Side of the square pixel tiles whose largest depth culls blocks behind the surface.
 pub(super) const TILE: usize = 16;
 
+/// A 2 x 2 cell of pixels is interpolated only when its depths differ by at most this many
+/// pixel footprints at its nearest depth (`d_min / f`; a surface seen up to about 80° from
+/// head-on), or by at most the truncation; wider cells straddle a depth edge and are read at
+/// the nearest pixel.
+pub const MAX_CELL_SPREAD_PIXELS: f64 = 8.0;
+
 /// One view: a camera, its depth map and optionally its colours (same size as the camera).
 #[derive(Clone, Copy, Debug)]
 pub struct Frame<'a> {
@@ -36,12 +42,18 @@ pub(super) struct Prepared<'a> {
     pub(super) cy: f64,
     pub(super) width: usize,
     pub(super) height: usize,
-    /// Depth with invalid values and those beyond `depth_trunc` set to 0.
-    pub(super) depth: Vec<f32>,
-    /// ((j + ½ − cx)/fx)² per column and ((i + ½ − cy)/fy)² per row: a pixel's ray-length
-    /// factor is `sqrt(1 + col_sq[j] + row_sq[i])`.
-    pub(super) col_sq: Vec<f64>,
-    pub(super) row_sq: Vec<f64>,
+    /// Per pixel `k = i · width + j` (and one more, 0, so that `k + 1` can always be read):
+    /// its depth (invalid values and those beyond `depth_trunc` set to 0) and that of the
+    /// pixel below it (0 in the last row), the first negated when the cell of pixel centres
+    /// `(i, j)`, `(i, j + 1)`, `(i + 1, j)`, `(i + 1, j + 1)` is not interpolated (not all four
+    /// valid, or their depths more than [`Prepared::max_spread`] of the nearest apart; always
+    /// in the last row and column). A cell is read from two neighbouring entries.
+    pub(super) cells: Vec<[f32; 2]>,
+    /// [`MAX_CELL_SPREAD_PIXELS`] / min(fx, fy): a cell's largest interpolated spread per
+    /// unit of its nearest depth.
+    pub(super) spread_per_depth: f64,
+    /// The truncation: the smallest spread a cell may always have.
+    pub(super) min_spread: f64,
     /// Largest depth per TILE x TILE tile (0 = no valid pixel).
     pub(super) tile_max: Vec<f32>,
     /// Smallest valid depth per tile (`f32::INFINITY` = none).
@@ -54,7 +66,7 @@ pub(super) struct Prepared<'a> {
 
 impl<'a> Prepared<'a> {
     /// The tables of `frame`.
-    pub(super) fn new(frame: &Frame<'a>, depth_trunc: f64) -> Result<Self, TsdfError> {
+    pub(super) fn new(frame: &Frame<'a>, depth_trunc: f64, trunc: f64) -> Result<Self, TsdfError> {
         let cam = frame.camera;
         let (width, height) = (cam.width as usize, cam.height as usize);
         if (frame.depth.width(), frame.depth.height()) != (cam.width, cam.height) {
@@ -77,13 +89,13 @@ impl<'a> Prepared<'a> {
             .depth
             .data()
             .iter()
-            .map(|&d| if f64::from(d) <= depth_trunc { d } else { 0.0 })
-            .collect();
-        let col_sq: Vec<f64> = (0..width)
-            .map(|j| ((j as f64 + 0.5 - cam.cx) / cam.fx).powi(2))
-            .collect();
-        let row_sq: Vec<f64> = (0..height)
-            .map(|i| ((i as f64 + 0.5 - cam.cy) / cam.fy).powi(2))
+            .map(|&d| {
+                if d > 0.0 && f64::from(d) <= depth_trunc {
+                    d
+                } else {
+                    0.0
+                }
+            })
             .collect();
         let tiles_x = width.div_ceil(TILE);
         let tiles_y = height.div_ceil(TILE);
@@ -101,6 +113,24 @@ impl<'a> Prepared<'a> {
                 }
             }
         }
+        let spread_per_depth = MAX_CELL_SPREAD_PIXELS / cam.fx.min(cam.fy);
+        let mut cells = vec![[0.0f32; 2]; width * height + 1];
+        for i in 0..height {
+            for j in 0..width {
+                let k = i * width + j;
+                let below = if i + 1 < height {
+                    depth[k + width]
+                } else {
+                    0.0
+                };
+                let ok = i + 1 < height && j + 1 < width && {
+                    let c = [depth[k], depth[k + 1], below, depth[k + width + 1]];
+                    let (lo, hi) = cell_range(c);
+                    lo > 0.0 && f64::from(hi - lo) <= (f64::from(lo) * spread_per_depth).max(trunc)
+                };
+                cells[k] = [if ok { depth[k] } else { -depth[k] }, below];
+            }
+        }
         Ok(Self {
             name: &cam.name,
             world_to_camera: cam.world_to_camera_rotation(),
@@ -111,15 +141,63 @@ impl<'a> Prepared<'a> {
             cy: cam.cy,
             width,
             height,
-            depth,
-            col_sq,
-            row_sq,
+            cells,
+            spread_per_depth,
+            min_spread: trunc,
             tile_max,
             tile_min,
             tile_full,
             tiles_x,
             color: frame.color.map(ColorImage::data),
         })
+    }
+
+    /// The depth seen at image point `(u, v)` (inside `[PIXEL_MARGIN, size − PIXEL_MARGIN)`,
+    /// pixel centres at `j + ½`) and the index of the pixel whose centre is nearest: the
+    /// bilinear interpolation of the 2 x 2 pixel centres around the point when all four are
+    /// valid and their depths differ by at most [`Self::max_spread`] of the nearest, else the
+    /// nearest pixel's depth (0: none).
+    #[inline]
+    pub(super) fn sample(&self, u: f64, v: f64) -> (f64, usize) {
+        let w = self.width;
+        let nearest = ((v as usize) * w + u as usize).min(self.cells.len() - 2);
+        let (x, y) = ((u - 0.5).max(0.0), (v - 0.5).max(0.0));
+        let (j, i) = (x as usize, y as usize);
+        let c = (i * w + j).min(self.cells.len() - 2);
+        let (tx, ty) = (x - j as f64, y - i as f64);
+        let ([a, d10], [b, d11]) = (self.cells[c], self.cells[c + 1]);
+        let (d00, d01) = (f64::from(a.abs()), f64::from(b.abs()));
+        let (d10, d11) = (f64::from(d10), f64::from(d11));
+        let interpolated = a.is_sign_positive() & (u >= 0.5) & (v >= 0.5);
+        let depth = if interpolated {
+            let top = d00 + tx * (d01 - d00);
+            let bottom = d10 + tx * (d11 - d10);
+            top + ty * (bottom - top)
+        } else {
+            // The nearest pixel centre is the cell's corner nearest the point.
+            let top = if tx < 0.5 { d00 } else { d01 };
+            let bottom = if tx < 0.5 { d10 } else { d11 };
+            if ty < 0.5 { top } else { bottom }
+        };
+        (depth, nearest)
+    }
+
+    /// The depth of pixel `k` (0: none).
+    #[inline]
+    pub(super) fn depth(&self, k: usize) -> f32 {
+        self.cells[k][0].abs()
+    }
+
+    /// Whether the cell whose first pixel is `k` is interpolated.
+    #[inline]
+    pub(super) fn cell_ok(&self, k: usize) -> bool {
+        self.cells[k][0].is_sign_positive()
+    }
+
+    /// The largest depth spread of an interpolated cell whose nearest depth is `d`.
+    #[inline]
+    pub(super) fn max_spread(&self, d: f64) -> f64 {
+        (d * self.spread_per_depth).max(self.min_spread)
     }
 
     /// What this frame does to the voxels of the box `[lo, hi]` (world; the first and last
@@ -169,16 +247,18 @@ impl<'a> Prepared<'a> {
             && v_min >= PIXEL_MARGIN
             && u_max < w - PIXEL_MARGIN
             && v_max < h - PIXEL_MARGIN;
-        // The pixels the voxel centres can land on (the projection of the box lies in the
-        // box of its projected corners).
-        let col = |u: f64| u.clamp(0.0, w - 1.0) as usize;
-        let row = |v: f64| v.clamp(0.0, h - 1.0) as usize;
-        let (j0, j1, i0, i1) = (col(u_min), col(u_max), row(v_min), row(v_max));
+        // The pixels the voxel centres can read (the projection of the box lies in the box
+        // of its projected corners; interpolation reads one pixel further).
+        let col = |u: f64| (u - 0.5).clamp(0.0, w - 1.0) as usize;
+        let row = |v: f64| (v - 0.5).clamp(0.0, h - 1.0) as usize;
+        let (col_end, row_end) = (|u: f64| col(u + 1.0), |v: f64| row(v + 1.0));
+        let (j0, j1, i0, i1) = (col(u_min), col_end(u_max), row(v_min), row_end(v_max));
         let range = if (j1 - j0 + 1) * (i1 - i0 + 1) <= RECT_SCAN_MAX {
             self.rect_depths(j0, j1, i0, i1)
         } else {
             self.tile_depths(j0, j1, i0, i1)
         };
+        // A depth read lies between the smallest and largest of the pixels it reads.
         // sdf ≤ (d_max − z_min) · factor and factor ≥ 1: nothing passes sdf > −trunc.
         if range.max == 0.0 || z_min - f64::from(range.max) >= trunc {
             return Visit::Skip;
@@ -194,7 +274,8 @@ impl<'a> Prepared<'a> {
     fn rect_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
         let mut range = DepthRange::EMPTY;
         for i in i0..=i1 {
-            for &d in &self.depth[i * self.width + j0..=i * self.width + j1] {
+            for cell in &self.cells[i * self.width + j0..=i * self.width + j1] {
+                let d = cell[0].abs();
                 range.add(d, d > 0.0);
             }
         }
@@ -215,6 +296,15 @@ impl<'a> Prepared<'a> {
         }
         range
     }
+}
+
+/// The smallest and largest of a cell's four depths.
+#[inline]
+pub(super) fn cell_range(c: [f32; 4]) -> (f32, f32) {
+    (
+        c[0].min(c[1]).min(c[2].min(c[3])),
+        c[0].max(c[1]).max(c[2].max(c[3])),
+    )
 }
 
 /// Largest rectangle of pixels scanned one by one by [`Prepared::visit`] (larger ones use the

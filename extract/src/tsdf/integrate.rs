@@ -91,22 +91,20 @@ pub(super) fn integrate_block(
                 {
                     continue;
                 }
-                let (j, i) = (u as usize, v as usize);
-                let pixel = i * f.width + j;
-                let d = f.depth[pixel];
+                let (d, pixel) = f.sample(u, v);
                 if d <= 0.0 {
                     continue;
                 }
                 // The ray-length factor is ≥ 1: sdf ≥ trunc when dz ≥ trunc (tsdf = 1) and
                 // sdf ≤ −trunc when dz ≤ −trunc, so the square root is only needed between.
-                let dz = f64::from(d) - q.z;
+                let dz = d - q.z;
                 if dz <= -trunc {
                     continue;
                 }
                 let tsdf = if dz >= trunc {
                     1.0
                 } else {
-                    let sdf = dz * (1.0 + f.col_sq[j] + f.row_sq[i]).sqrt();
+                    let sdf = dz * ray_factor(q);
                     if sdf <= -trunc {
                         continue;
                     }
@@ -140,10 +138,17 @@ fn integrate_free(value: &mut [f32], weight: &mut [f32]) {
 /// Voxels in a row of a block (along x).
 const ROW: usize = BLOCK as usize;
 
+/// `‖q‖ / q.z`: the length along the voxel's own ray per unit of z-depth (≥ 1).
+#[inline]
+fn ray_factor(q: DVec3) -> f64 {
+    let inv_z = 1.0 / q.z;
+    (1.0 + (q.x * q.x + q.y * q.y) * (inv_z * inv_z)).sqrt()
+}
+
 /// Integrates one frame into one row of [`ROW`] voxels whose first voxel is at camera-space `q`
-/// and whose next ones follow by `step`, without branches per voxel so that the compiler can
-/// run the lanes side by side: project, look up the pixel (one load of its depth and ray
-/// factor), then update the lanes that pass. All in f64, as the plain rule.
+/// and whose next ones follow by `step`: project the lanes without branches, read the depth
+/// of the lanes inside the image ([`Prepared::sample`]), then update the lanes that pass
+/// without branches. All in f64, as the plain rule.
 #[inline]
 fn integrate_row(
     f: &Prepared<'_>,
@@ -157,40 +162,37 @@ fn integrate_row(
         f.width as f64 - PIXEL_MARGIN,
         f.height as f64 - PIXEL_MARGIN,
     );
-    let mut col = [0u32; ROW];
-    let mut row = [0u32; ROW];
+    let mut uv = [[0.0f64; 2]; ROW];
     let mut inside = [false; ROW];
     let mut z = [0.0f64; ROW];
+    let mut ray = [0.0f64; ROW];
     for k in 0..ROW {
         let kf = k as f64;
         let (qx, qy, qz) = (q.x + kf * step.x, q.y + kf * step.y, q.z + kf * step.z);
         let inv_z = 1.0 / qz;
-        let u = f.fx * qx * inv_z + f.cx;
-        let v = f.fy * qy * inv_z + f.cy;
+        let (x, y) = (qx * inv_z, qy * inv_z);
+        let u = f.fx * x + f.cx;
+        let v = f.fy * y + f.cy;
         let ok = (qz > 0.0) & (u >= PIXEL_MARGIN) & (u < u_end) & (v >= PIXEL_MARGIN) & (v < v_end);
-        let (j, i) = if ok { (u as u32, v as u32) } else { (0, 0) };
-        col[k] = j;
-        row[k] = i;
+        uv[k] = [u, v];
         inside[k] = ok;
         z[k] = qz;
+        ray[k] = (1.0 + x * x + y * y).sqrt();
     }
     if !inside.iter().any(|&b| b) {
         return;
     }
-    // The pixel's depth and its ray-length factor, from the per-column and per-row tables
-    // (small enough to stay in cache) rather than a per-pixel table.
-    let mut sample = [[0.0f64; 2]; ROW];
+    // Every lane reads (at indices clamped into the image, without branches); lanes outside
+    // the image then select 0.
+    let mut depth = [0.0f64; ROW];
     for k in 0..ROW {
-        let (j, i) = (col[k] as usize, row[k] as usize);
-        sample[k] = [
-            f64::from(f.depth[i * f.width + j]),
-            (1.0 + f.col_sq[j] + f.row_sq[i]).sqrt(),
-        ];
+        let d = f.sample(uv[k][0], uv[k][1]).0;
+        depth[k] = if inside[k] { d } else { 0.0 };
     }
     let inv_trunc = 1.0 / trunc;
     for k in 0..ROW {
-        let [d, ray] = sample[k];
-        let sdf = (d - z[k]) * ray;
+        let d = depth[k];
+        let sdf = (d - z[k]) * ray[k];
         let ok = inside[k] & (d > 0.0) & (sdf > -trunc);
         let tsdf = (sdf * inv_trunc).min(1.0);
         let w0 = f64::from(weight[k]);

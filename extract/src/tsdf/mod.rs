@@ -2,23 +2,32 @@
 //!
 //! Per-voxel rules are Open3D's legacy integrator
 //! (`UniformTSDFVolume::IntegrateWithDepthToCameraDistanceMultiplier`), in trisplat's pixel
-//! convention (pixel (i, j) centred at (j + ½, i + ½), docs/conventions.md §2):
+//! convention (pixel (i, j) centred at (j + ½, i + ½), docs/conventions.md §2), with the depth
+//! read between pixel centres:
 //! - voxel `g` is centred at `(g + ½) · voxel` (world);
 //! - its camera-space point `q` (skipped when `q.z ≤ 0`) projects to `(u, v) = (fx q.x / q.z +
 //!   cx, fy q.y / q.z + cy)`; voxels with `u` or `v` outside `[1e-4, size − 1e-4)` are skipped
-//!   ([`PIXEL_MARGIN`]); the pixel is the one whose centre is nearest, `(⌊v⌋, ⌊u⌋)` — Open3D's
-//!   `(int)(u + 0.5)` with its pixel centres at integers;
-//! - pixels with no depth (0, invalid, or beyond `depth_trunc`) are skipped;
-//! - `sdf = (d − q.z) · ‖((j + ½ − cx)/fx, (i + ½ − cy)/fy, 1)‖` (the z difference times the
-//!   ray-length factor of the pixel);
+//!   ([`PIXEL_MARGIN`]);
+//! - pixels with no depth (0, invalid, or beyond `depth_trunc`) have none;
+//! - the depth `d` is the bilinear interpolation of the four pixel centres around `(u, v)` when
+//!   all four have depth and differ by at most `max(trunc, MAX_CELL_SPREAD_PIXELS · d_min /
+//!   min(fx, fy))`, else that of the pixel whose centre is nearest, `(⌊v⌋, ⌊u⌋)` (Open3D's
+//!   `(int)(u + 0.5)` with its pixel centres at integers), and the voxel is skipped when
+//!   that has none. The nearest pixel alone turns a sloped surface into steps a pixel wide,
+//!   and where the steps are deeper than the truncation the asymmetric rule below (dropped
+//!   behind, clamped in front) shrinks convex shapes by part of a pixel footprint whatever the
+//!   voxel (issue #34);
+//! - `sdf = (d − q.z) · ‖q‖ / q.z` (the z difference along the voxel's own ray);
 //! - only when `sdf > −trunc`: `tsdf = min(1, sdf / trunc)` and the running average with unit
-//!   weights `value ← (value · w + tsdf) / (w + 1)`, `w ← w + 1` (colour likewise).
+//!   weights `value ← (value · w + tsdf) / (w + 1)`, `w ← w + 1` (colour likewise, from the
+//!   nearest pixel).
 //!
 //! Open3D's dense volume integrates every voxel of a box; here blocks of 8³ voxels are created
-//! only near observed depth: for each valid pixel, every block within `trunc + √3 voxel +
-//! (d + trunc) · ½ √(1/fx² + 1/fy²)` of its back-projected point (see [`TsdfVolume::allocate`]).
-//! That radius covers every voxel with |sdf| < trunc for that pixel and every corner of a cell
-//! that has such a voxel, so the extracted surface is the one the dense volume would give.
+//! only near observed depth: for each valid pixel, every block within a voxel diagonal of the
+//! frustum piece over the pixel's square (and the interpolated cell it starts) between the
+//! depths it can read ± `trunc` (see [`TsdfVolume::allocate`]). That covers every voxel with
+//! |sdf| < trunc and every corner of a cell that has such a voxel, so the extracted surface is
+//! the one the dense volume would give.
 //! Values are stored in f32, computed in f64. Blocks are integrated in parallel, each looping
 //! over the frames in order, so the result does not depend on the thread count.
 //!
@@ -41,7 +50,7 @@ mod params;
 mod volume;
 
 pub use self::error::TsdfError;
-pub use self::frame::{Frame, PIXEL_MARGIN};
+pub use self::frame::{Frame, MAX_CELL_SPREAD_PIXELS, PIXEL_MARGIN};
 pub use self::fuse::{
     DEFAULT_KEEP_CLUSTERS, DEFAULT_TRUNC_VOXELS, DEFAULT_VOXELS_PER_DEPTH_TRUNC, Fused,
     TsdfOptions, fuse, fuse_streamed, post_process, scene_radius,

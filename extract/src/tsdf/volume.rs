@@ -41,14 +41,14 @@ fn frames_of<'a>(
 }
 
 /// Memory for the per-view tables of one batch of [`TsdfVolume::integrate_streamed`] (the
-/// images, their depth and tile tables: about 9 bytes per pixel, 21 with colour): 60 views of
-/// 512² make one batch, read once for both passes.
+/// images, their depth-pair and tile tables: about 13 bytes per pixel, 25 with colour): 60
+/// views of 512² make one batch, read once for both passes.
 pub const STREAM_BUDGET_BYTES: usize = 256 << 20;
 
 /// Views per batch of [`TsdfVolume::integrate_streamed`]: as many of the largest camera's
 /// size as fit in [`STREAM_BUDGET_BYTES`], at least one.
 fn views_per_batch(cameras: &[Camera], with_color: bool) -> usize {
-    let per_pixel = if with_color { 21 } else { 9 };
+    let per_pixel = if with_color { 25 } else { 13 };
     let largest = cameras
         .iter()
         .map(|c| c.width as usize * c.height as usize)
@@ -311,7 +311,7 @@ impl TsdfVolume {
                         camera: f.camera.name.clone(),
                     });
                 }
-                Prepared::new(f, self.params.depth_trunc)
+                Prepared::new(f, self.params.depth_trunc, self.params.trunc)
             })
             .collect();
         prepared.into_iter().collect()
