@@ -411,8 +411,8 @@ pub enum PipelineError {
         path: PathBuf,
         /// The method.
         method: Method,
-        /// Why.
-        cause: crate::rig::RigError,
+        /// Why (boxed: it carries the template's animation error).
+        cause: Box<crate::rig::RigError>,
     },
     /// Shards that cannot be merged.
     #[error("{path}: cannot merge: {problem}")]

@@ -24,6 +24,7 @@ use crate::output::{
 use crate::records::{DelaunayFrame, FailedFrame, FrameEntry, FrameRecord};
 use crate::report::thumbnail::{self, Colouring, Picture};
 use crate::report::{GT_THUMBNAIL, Report, ReportBuilder, THUMBNAIL_DIR, thumbnail_file};
+use crate::rig::RigError;
 use crate::rig_output::write_rig;
 use crate::session::{FrameResult, MethodFrame, Session};
 
@@ -191,10 +192,10 @@ fn write_rigs(
 ) -> Result<(), PipelineError> {
     for &method in methods {
         let path = out.join(rig_file(method));
-        let fail = |cause| PipelineError::Rig {
+        let fail = |cause: RigError| PipelineError::Rig {
             path: path.clone(),
             method,
-            cause,
+            cause: Box::new(cause),
         };
         let Some(inputs) = session.rig_inputs(method)? else {
             continue;

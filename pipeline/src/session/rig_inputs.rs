@@ -14,10 +14,10 @@ impl Session {
     /// # Errors
     /// [`PipelineError::Rig`].
     pub(crate) fn check_rig(&self, method: Method) -> Result<(), PipelineError> {
-        let fail = |cause| PipelineError::Rig {
+        let fail = |cause: RigError| PipelineError::Rig {
             path: self.template_path.clone(),
             method,
-            cause,
+            cause: Box::new(cause),
         };
         let template = self.animation.get().gltf_rig().ok_or_else(|| {
             fail(RigError::NoRig(
@@ -45,7 +45,7 @@ impl Session {
                 .any(|(m, _, c)| *m == method && c.first_key().is_some())
         };
         if !keyed(self) {
-            self.replay(1)?;
+            self.replay(1);
         }
         let carried = self
             .meshers
