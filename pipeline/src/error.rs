@@ -280,8 +280,8 @@ pub enum PipelineError {
         /// Why.
         cause: trisplat_geometry::simplify::SimplifyError,
     },
-    /// A meshing error ([`PipelineError::Delaunay`], [`PipelineError::Alpha`]) on the vertices
-    /// of `input`: the template (when a mesher is built) or the animation (per frame).
+    /// A meshing error ([`PipelineError::Delaunay`], [`PipelineError::Alpha`],
+    /// [`PipelineError::Carry`], [`PipelineError::Simplify`]) on the vertices of `input`: the template (when a mesher is built) or the animation (per frame).
     #[error("{input}: {cause}")]
     Meshing {
         /// The template file or the animation's label.
@@ -440,12 +440,15 @@ pub(crate) fn first_error_in_order<T: Send, E: Send>(
 }
 
 impl PipelineError {
-    /// A Delaunay or alpha-shape error names `input`, whose vertices it came from; other errors
-    /// name their files already and pass through.
+    /// A Delaunay, alpha-shape, carrying or decimation error names `input`, whose vertices it
+    /// came from; other errors name their files already and pass through.
     #[must_use]
     pub fn on_vertices_of(self, input: &str) -> Self {
         match self {
-            Self::Delaunay { .. } | Self::Alpha { .. } => Self::Meshing {
+            Self::Delaunay { .. }
+            | Self::Alpha { .. }
+            | Self::Carry { .. }
+            | Self::Simplify { .. } => Self::Meshing {
                 input: input.to_owned(),
                 cause: Box::new(self),
             },
@@ -486,5 +489,21 @@ mod tests {
         };
         assert!(std::error::Error::source(&e).is_none());
         assert!(e.to_string().starts_with("walk.glb: frame 3: "), "{e}");
+    }
+
+    #[test]
+    fn a_key_that_cannot_be_carried_names_the_input() {
+        let e = PipelineError::Carry {
+            frame: 0,
+            method: Method::Delaunay,
+            key: 0,
+            cause: crate::carry::CarryError::Nothing("every triangle is degenerate".to_owned()),
+        }
+        .on_vertices_of("walk.obj");
+        assert!(
+            e.to_string()
+                .starts_with("walk.obj: frame 0, method delaunay"),
+            "{e}"
+        );
     }
 }
