@@ -24,6 +24,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::rng::Rng;
+use trisplat_splat::GaussianSet;
 use trisplat_splat::SH_C0;
 use trisplat_splat::fit::bound::{BoundParams, TriangleFrames, grads_to_local, to_world};
 use trisplat_splat::fit::loss::{Ssim, l1, psnr};
@@ -34,11 +35,10 @@ use trisplat_splat::material::{
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, ImageGrads, RenderMode, backward_into, render_with_grad,
 };
-use trisplat_splat::{GaussianSet, ScaleDims};
 
 use super::checkpoint::Checkpoint;
 use super::inputs::{FitError, FitFrame};
-use super::neural::CommonOptions;
+use super::neural::{CommonOptions, training_pairs};
 use super::photometric::{SsimCache, photometric_loss};
 
 /// Adam's learning rates of the BRDF fit (material logits; local rotations and log-scales).
@@ -270,36 +270,7 @@ pub fn fit_brdf(
     mut on_checkpoint: impl FnMut(&Checkpoint),
 ) -> Result<BrdfFitted, FitError> {
     check(options, brdf)?;
-    if set.scale_dims() == ScaleDims::Two && options.render.mode != RenderMode::Surfel2d {
-        return Err(FitError::BadOption(
-            "the Gaussians are 2-scale surfels: fit them in 2dgs mode (--mode 2dgs)".into(),
-        ));
-    }
-    let pairs: Vec<(usize, usize)> = frames
-        .iter()
-        .enumerate()
-        .flat_map(|(f, fr)| (0..fr.targets.len()).map(move |v| (f, v)))
-        .collect();
-    if pairs.is_empty() {
-        return Err(FitError::Target("no training views".into()));
-    }
-    for fr in frames.iter().chain(held_out) {
-        for t in &fr.targets {
-            let px = t.camera.width as usize * t.camera.height as usize;
-            if t.rgb.len() != 3 * px || t.alpha.as_ref().is_some_and(|a| a.len() != px) {
-                return Err(FitError::Target(format!(
-                    "view '{}': the images do not fit the camera",
-                    t.camera.name
-                )));
-            }
-            if options.alpha_weight > 0.0 && t.alpha.is_none() {
-                return Err(FitError::Target(format!(
-                    "view '{}': --alpha-weight needs a target mask",
-                    t.camera.name
-                )));
-            }
-        }
-    }
+    let pairs = training_pairs(set, frames, held_out, options)?;
     let mut bound = BoundParams::from_set(set, template.triangle_count())?;
     if bound.is_empty() {
         return Err(FitError::BadOption("the set has no Gaussians".into()));

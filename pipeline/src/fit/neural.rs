@@ -176,36 +176,7 @@ pub fn fit_neural(
     mut on_checkpoint: impl FnMut(&Checkpoint),
 ) -> Result<NeuralFitted, FitError> {
     check(options, neural)?;
-    if set.scale_dims() == ScaleDims::Two && options.render.mode != RenderMode::Surfel2d {
-        return Err(FitError::BadOption(
-            "the Gaussians are 2-scale surfels: fit them in 2dgs mode (--mode 2dgs)".into(),
-        ));
-    }
-    let pairs: Vec<(usize, usize)> = frames
-        .iter()
-        .enumerate()
-        .flat_map(|(f, fr)| (0..fr.targets.len()).map(move |v| (f, v)))
-        .collect();
-    if pairs.is_empty() {
-        return Err(FitError::Target("no training views".into()));
-    }
-    for fr in frames.iter().chain(held_out) {
-        for t in &fr.targets {
-            let px = t.camera.width as usize * t.camera.height as usize;
-            if t.rgb.len() != 3 * px || t.alpha.as_ref().is_some_and(|a| a.len() != px) {
-                return Err(FitError::Target(format!(
-                    "view '{}': the images do not fit the camera",
-                    t.camera.name
-                )));
-            }
-            if options.alpha_weight > 0.0 && t.alpha.is_none() {
-                return Err(FitError::Target(format!(
-                    "view '{}': --alpha-weight needs a target mask",
-                    t.camera.name
-                )));
-            }
-        }
-    }
+    let pairs = training_pairs(set, frames, held_out, options)?;
     let bound = BoundParams::from_set(set, template.triangle_count())?;
     if bound.is_empty() {
         return Err(FitError::BadOption("the set has no Gaussians".into()));
@@ -385,4 +356,50 @@ pub fn fit_neural(
         out_of_time,
         seconds_per_iteration: train_s / last as f64,
     })
+}
+
+/// The (frame, view) pairs a fit trains on, after checking what every fit needs: surfels fitted
+/// in 2dgs mode, at least one training view, and each target (training or held out) fitting its
+/// camera, with a mask when `--alpha-weight` asks for one.
+///
+/// # Errors
+/// [`FitError::BadOption`] for 2-scale surfels outside 2dgs mode, [`FitError::Target`] for no
+/// training view or a target that does not fit.
+pub(super) fn training_pairs(
+    set: &GaussianSet,
+    frames: &[FitFrame],
+    held_out: &[FitFrame],
+    options: &CommonOptions,
+) -> Result<Vec<(usize, usize)>, FitError> {
+    if set.scale_dims() == ScaleDims::Two && options.render.mode != RenderMode::Surfel2d {
+        return Err(FitError::BadOption(
+            "the Gaussians are 2-scale surfels: fit them in 2dgs mode (--mode 2dgs)".into(),
+        ));
+    }
+    let pairs: Vec<(usize, usize)> = frames
+        .iter()
+        .enumerate()
+        .flat_map(|(f, fr)| (0..fr.targets.len()).map(move |v| (f, v)))
+        .collect();
+    if pairs.is_empty() {
+        return Err(FitError::Target("no training views".into()));
+    }
+    for fr in frames.iter().chain(held_out) {
+        for t in &fr.targets {
+            let px = t.camera.width as usize * t.camera.height as usize;
+            if t.rgb.len() != 3 * px || t.alpha.as_ref().is_some_and(|a| a.len() != px) {
+                return Err(FitError::Target(format!(
+                    "view '{}': the images do not fit the camera",
+                    t.camera.name
+                )));
+            }
+            if options.alpha_weight > 0.0 && t.alpha.is_none() {
+                return Err(FitError::Target(format!(
+                    "view '{}': --alpha-weight needs a target mask",
+                    t.camera.name
+                )));
+            }
+        }
+    }
+    Ok(pairs)
 }
