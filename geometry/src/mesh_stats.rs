@@ -61,6 +61,34 @@ impl MeshStats {
     /// value is NaN.
     #[must_use]
     pub fn of(mesh: &TriMesh) -> Self {
+        Self::of_topology(mesh).0
+    }
+
+    /// [`MeshStats::of`], reusing `cache` when it was made from a mesh with the same vertex
+    /// count and triangles (a mesh carried from frame to frame): then only the areas are
+    /// computed, summed in the same order, so the result is bit for bit [`MeshStats::of`]'s.
+    /// Otherwise `cache` is replaced by this mesh's.
+    #[must_use]
+    pub fn of_cached(mesh: &TriMesh, cache: &mut Option<StatsTopology>) -> Self {
+        if let Some(t) = cache
+            .as_ref()
+            .filter(|t| t.vertices == mesh.vertex_count() && t.triangles == mesh.triangles())
+        {
+            let areas = mesh.triangle_areas();
+            let mut cluster_areas = vec![0.0f64; t.clusters];
+            for (&c, &a) in t.cluster_of.iter().zip(&areas) {
+                cluster_areas[c as usize] += a;
+            }
+            let area = areas.iter().sum::<f64>() + 0.0;
+            return Self::from_parts(mesh, area, &cluster_areas, t.edges);
+        }
+        let (stats, topology) = Self::of_topology(mesh);
+        *cache = Some(topology);
+        stats
+    }
+
+    /// [`MeshStats::of`] and what of it depends only on the triangles.
+    fn of_topology(mesh: &TriMesh) -> (Self, StatsTopology) {
         let triangles = mesh.triangles();
         let (areas, (edges, mut parent)) = rayon::join(
             || mesh.triangle_areas(),
@@ -77,13 +105,26 @@ impl MeshStats {
         // As `TriMesh::area`; `+ 0.0`: an empty f64 sum is -0.0.
         let area = areas.iter().sum::<f64>() + 0.0;
         let clusters = TriangleClusters::labelled(&mut parent, &areas);
-        let largest = clusters.areas.iter().copied().fold(0.0f64, f64::max);
-        let nonempty = !triangles.is_empty();
+        let stats = Self::from_parts(mesh, area, &clusters.areas, edges);
+        let topology = StatsTopology {
+            vertices: mesh.vertex_count(),
+            triangles: triangles.to_vec(),
+            clusters: clusters.count(),
+            cluster_of: clusters.cluster_of,
+            edges,
+        };
+        (stats, topology)
+    }
+
+    /// The summary from the total area, each component's area and the edge counts.
+    fn from_parts(mesh: &TriMesh, area: f64, cluster_areas: &[f64], edges: EdgeCounts) -> Self {
+        let largest = cluster_areas.iter().copied().fold(0.0f64, f64::max);
+        let nonempty = mesh.triangle_count() > 0;
         Self {
             vertices: mesh.vertex_count(),
-            triangles: triangles.len(),
+            triangles: mesh.triangle_count(),
             area,
-            components: clusters.count(),
+            components: cluster_areas.len(),
             largest_component_area_fraction: (area > 0.0).then(|| (largest / area).min(1.0)),
             boundary_edges: edges.boundary,
             non_manifold_edges: edges.non_manifold,
@@ -91,6 +132,17 @@ impl MeshStats {
             winding_consistent: nonempty && edges.misoriented_pairs == 0,
         }
     }
+}
+
+/// What of a [`MeshStats`] depends only on a mesh's triangles and vertex count (its edges and
+/// components), kept by [`MeshStats::of_cached`] for the next mesh with the same triangles.
+#[derive(Clone, Debug)]
+pub struct StatsTopology {
+    vertices: usize,
+    triangles: Vec<[u32; 3]>,
+    clusters: usize,
+    cluster_of: Vec<u32>,
+    edges: EdgeCounts,
 }
 
 /// Counts over the undirected edges of a triangle list, by their number of uses.
@@ -225,6 +277,42 @@ mod tests {
             watertight: nonempty && boundary == 0 && non_manifold == 0,
             winding_consistent: nonempty && misoriented == 0,
         }
+    }
+
+    #[test]
+    fn cached_stats_equal_fresh_ones() {
+        // Two pieces (a tetrahedron and an open triangle), moved; then other triangles.
+        let mut p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        p.extend([
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(4.0, 0.0, 0.0),
+            Vec3::new(3.0, 2.0, 0.0),
+        ]);
+        let t = vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3], [4, 5, 6]];
+        let mut cache = None;
+        for step in 0..4u8 {
+            let s = f32::from(step);
+            let moved: Vec<Vec3> = p
+                .iter()
+                .enumerate()
+                .map(|(k, v)| *v * (1.0 + 0.3 * s) + Vec3::splat((k as f32 * s).sin()))
+                .collect();
+            let mesh = TriMesh::new(moved, t.clone());
+            assert_eq!(
+                MeshStats::of_cached(&mesh, &mut cache),
+                MeshStats::of(&mesh)
+            );
+        }
+        let other = TriMesh::new(p.clone(), t[..4].to_vec());
+        let stats = MeshStats::of_cached(&other, &mut cache);
+        assert_eq!(stats, MeshStats::of(&other));
+        assert!(stats.watertight && stats.components == 1);
+        let more = TriMesh::new([p.clone(), vec![Vec3::ONE]].concat(), t[..4].to_vec());
+        assert_eq!(
+            MeshStats::of_cached(&more, &mut cache),
+            MeshStats::of(&more)
+        );
+        assert_eq!(MeshStats::of_cached(&more, &mut cache).vertices, 8);
     }
 
     #[test]

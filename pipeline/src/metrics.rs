@@ -17,9 +17,9 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
-use trisplat_geometry::mesh_stats::MeshStats;
+use trisplat_geometry::mesh_stats::{MeshStats, StatsTopology};
 use trisplat_geometry::metrics::{
-    MetricsError, MetricsOptions, Relation, Shape, Tau, evaluate, shared_vertex_fraction,
+    MetricsError, MetricsOptions, Relation, Shape, Side, Tau, evaluate, shared_vertex_fraction,
 };
 use trisplat_geometry::rng::splitmix64;
 use trisplat_geometry::sampling::sample_uniform;
@@ -60,6 +60,14 @@ impl GtSamples {
     /// Samples and indexes `mesh`; `None` when it has no area.
     #[must_use]
     pub fn new(mesh: TriMesh, samples: usize) -> Option<Self> {
+        Self::reusing(mesh, samples, None)
+    }
+
+    /// [`GtSamples::new`], refitting the index of `previous` (the last frame's ground truth)
+    /// when it indexes the same triangles ([`SurfaceIndex::reuse`]): the same samples and
+    /// the same answers, without a new tree.
+    #[must_use]
+    pub fn reusing(mesh: TriMesh, samples: usize, previous: Option<Self>) -> Option<Self> {
         let bounds = mesh.bounds()?;
         let origin = bounds.center();
         let mut local = mesh.clone();
@@ -68,7 +76,8 @@ impl GtSamples {
         if points.is_empty() {
             return None;
         }
-        let index = SurfaceIndex::new(local.positions(), local.triangles()).ok();
+        let previous = previous.and_then(|p| p.index);
+        let index = SurfaceIndex::reuse(previous, local.positions(), local.triangles()).ok();
         let diagonal = bounds.diagonal();
         let area = mesh.area();
         Some(Self {
@@ -144,6 +153,30 @@ pub fn measure_with(
     samples: usize,
     tau: Tau,
 ) -> Result<Option<FrameMetrics>, MetricsError> {
+    measure_cached(pred, gt, samples, tau, &mut ScoreCache::default())
+}
+
+/// What scoring one method's mesh leaves for its next frame: its surface index and the
+/// topological part of its structure, reused (refitted) when the next mesh has the same
+/// triangles, as a carried mesh (`--topology fixed|adaptive`) has between keys.
+#[derive(Debug, Default)]
+pub struct ScoreCache {
+    index: Option<SurfaceIndex>,
+    stats: Option<StatsTopology>,
+}
+
+/// [`measure_with`], reusing `cache` (see [`ScoreCache`]) and leaving this mesh's in it; the
+/// metrics are bit for bit [`measure_with`]'s.
+///
+/// # Errors
+/// As [`measure_with`].
+pub fn measure_cached(
+    pred: &TriMesh,
+    gt: &GtSamples,
+    samples: usize,
+    tau: Tau,
+    cache: &mut ScoreCache,
+) -> Result<Option<FrameMetrics>, MetricsError> {
     // Positions and triangles only (`translate`'s arithmetic, without copying the vertex
     // attributes a clone would carry).
     let offset = -gt.origin;
@@ -163,11 +196,20 @@ pub fn measure_with(
         taus: trisplat_geometry::metrics::resolve_taus(&[tau], gt.diagonal)?,
         surface: true,
     };
+    let ScoreCache { index, stats } = cache;
     let (m, (structure, shared)) = rayon::join(
-        || evaluate(Shape::mesh(&local, &points), gt.shape(), &options),
+        || -> Result<_, MetricsError> {
+            let built = SurfaceIndex::reuse(index.take(), local.positions(), local.triangles())
+                .map_err(|source| MetricsError::Spatial {
+                    side: Side::Prediction,
+                    source,
+                })?;
+            let shape = Shape::surface_indexed(&local, &points, index.insert(built));
+            evaluate(shape, gt.shape(), &options)
+        },
         || {
             rayon::join(
-                || MeshStats::of(pred),
+                || MeshStats::of_cached(pred, stats),
                 || shared_vertex_fraction(gt.mesh.positions(), pred.positions()),
             )
         },

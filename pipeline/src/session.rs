@@ -52,7 +52,7 @@ use crate::input::{
     shard_frames,
 };
 use crate::methods::{FrameInput, Mesher, MethodOutput, parameters};
-use crate::metrics::{GtSamples, is_watertight, measure_with};
+use crate::metrics::{GtSamples, ScoreCache, is_watertight, measure_cached};
 use crate::option_checks::check_options;
 use crate::plan::{Plan, Stage};
 use crate::records::{FrameMetrics, FrameRecord, Resolved, ShardRecord, TopologyFrame};
@@ -61,6 +61,7 @@ use crate::topology::{Carrier, CarryContext, mean_edge};
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
+mod ground_truth;
 mod rig_inputs;
 
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
@@ -164,6 +165,8 @@ pub struct Session {
     kept_means: Vec<Vec3>,
     /// Each method's mesher and the topology of its meshes through the track.
     meshers: Vec<(Method, Mesher, Carrier)>,
+    /// Each method's scoring state (one per mesher): what a carried mesh's next frame reuses.
+    score_caches: Vec<ScoreCache>,
     /// `--topology` and its thresholds.
     topology: TopologyOptions,
     /// Decimation and vertex colours of every mesh made.
@@ -174,6 +177,8 @@ pub struct Session {
     mean_edge: f64,
     gt: Option<GroundTruth>,
     static_gt: Option<GtSamples>,
+    /// The last frame's ground truth, whose index the next frame's refits.
+    previous_gt: Option<GtSamples>,
     /// `--gt-sequence`: the ground-truth mesh file of each animation frame.
     gt_files: Vec<PathBuf>,
     /// `--gt gaussians`: the stored template's triangles, over the Gaussians (Gaussian `i`
@@ -427,12 +432,14 @@ impl Session {
             visibility: Visibility::all(0),
             kept_means: Vec::new(),
             meshers: Vec::new(),
+            score_caches: Vec::new(),
             topology: o.topology,
             finish,
             gaussian_triangles: Vec::new(),
             mean_edge: 0.0,
             gt: config.gt.clone(),
             static_gt,
+            previous_gt: None,
             gt_files,
             gaussian_gt_triangles,
             samples: o.metrics.samples,
@@ -465,6 +472,7 @@ impl Session {
                 session
                     .meshers
                     .push((m, mesher, Carrier::new(o.topology.topology)));
+                session.score_caches.push(ScoreCache::default());
             }
         }
         if o.topology.topology.carries() {
@@ -935,49 +943,7 @@ impl Session {
             collapsed,
             ms: deform_ms,
         } = self.deform_frame(frame)?;
-        let frame_gt = match (&self.gt, self.plan.runs(Stage::Metrics)) {
-            (Some(GroundTruth::Template), true) => {
-                let mut mesh =
-                    TriMesh::new_unchecked(positions.clone(), self.template().triangles().to_vec());
-                mesh.translate(self.origin);
-                Some(
-                    GtSamples::new(mesh, self.samples).ok_or(PipelineError::EmptyGroundTruth {
-                        gt: "template".to_owned(),
-                        frame,
-                    })?,
-                )
-            }
-            (Some(GroundTruth::Gaussians), true) => {
-                let origin = self.origin;
-                let mesh = TriMesh::new_unchecked(
-                    self.scratch
-                        .means
-                        .iter()
-                        .map(|m| m.as_dvec3() + origin)
-                        .collect(),
-                    self.gaussian_gt_triangles.clone(),
-                );
-                Some(
-                    GtSamples::new(mesh, self.samples).ok_or(PipelineError::EmptyGroundTruth {
-                        gt: "gaussians".to_owned(),
-                        frame,
-                    })?,
-                )
-            }
-            (Some(GroundTruth::Sequence(_)), true) => {
-                let path = self.gt_files.get(frame).ok_or(PipelineError::Internal {
-                    what: "a frame past the checked ground-truth sequence",
-                })?;
-                let mesh = read_mesh(path)?;
-                Some(GtSamples::new(mesh, self.samples).ok_or_else(|| {
-                    PipelineError::EmptyGroundTruth {
-                        gt: path.display().to_string(),
-                        frame,
-                    }
-                })?)
-            }
-            _ => None,
-        };
+        let frame_gt = self.frame_ground_truth(frame, &positions)?;
         // The point methods mesh the kept means; the tsdf renders every Gaussian, so what a
         // frame exposes (an opening mouth) is in its depth maps.
         let means = if self.visibility.kept().is_some() {
@@ -1017,51 +983,60 @@ impl Session {
             mean_edge: self.mean_edge,
             finish: &self.finish,
         };
-        let mesh_and_measure = |(method, mesher, carrier): &mut (Method, Mesher, Carrier)|
+        let mesh_and_measure = |((method, mesher, carrier), cache): (
+            &mut (Method, Mesher, Carrier),
+            &mut ScoreCache,
+        )|
          -> Result<MethodFrame, PipelineError> {
-                let (mut output, topology) = carrier
-                    .frame(*method, mesher, &input, &context, false)
-                    .map_err(|e| e.on_vertices_of(label))?
-                    .ok_or(PipelineError::Internal {
-                        what: "a carrier gives every frame it is not replaying",
-                    })?;
-                let consistency = match &gaussian_views {
-                    Some(views) if output.mesh.triangle_count() > 0 => {
-                        Some(views.score(&output.mesh)?)
-                    }
-                    _ => None,
-                };
-                output.mesh.translate(origin);
-                let metrics = match gt {
-                    Some(gt) => measure_with(&output.mesh, gt, samples, tau).map_err(|source| {
+            let (mut output, topology) = carrier
+                .frame(*method, mesher, &input, &context, false)
+                .map_err(|e| e.on_vertices_of(label))?
+                .ok_or(PipelineError::Internal {
+                    what: "a carrier gives every frame it is not replaying",
+                })?;
+            let consistency = match &gaussian_views {
+                Some(views) if output.mesh.triangle_count() > 0 => Some(views.score(&output.mesh)?),
+                _ => None,
+            };
+            output.mesh.translate(origin);
+            let metrics = match gt {
+                Some(gt) => {
+                    measure_cached(&output.mesh, gt, samples, tau, cache).map_err(|source| {
                         PipelineError::Metrics {
                             gt: gt_label.clone(),
                             frame,
                             method: *method,
                             cause: source,
                         }
-                    })?,
-                    None => None,
-                };
-                Ok(MethodFrame {
-                    method: *method,
-                    output,
-                    metrics,
-                    consistency,
-                    topology,
-                })
+                    })?
+                }
+                None => None,
             };
+            Ok(MethodFrame {
+                method: *method,
+                output,
+                metrics,
+                consistency,
+                topology,
+            })
+        };
         // Side by side, each method's own parallel loops share the cores with the others';
         // one after another, each method's time is its own.
         let methods: Vec<MethodFrame> = if self.serial_methods {
             self.meshers
                 .iter_mut()
+                .zip(&mut self.score_caches)
                 .map(mesh_and_measure)
                 .collect::<Result<_, _>>()?
         } else {
             // Every method runs; the first failure in method order is reported, as one after
             // another.
-            first_error_in_order(self.meshers.par_iter_mut().map(mesh_and_measure))?
+            first_error_in_order(
+                self.meshers
+                    .par_iter_mut()
+                    .zip(&mut self.score_caches)
+                    .map(mesh_and_measure),
+            )?
         };
         let mut ran = Vec::new();
         for m in &methods {
@@ -1093,6 +1068,7 @@ impl Session {
             None
         };
         let extra = after(&mut result, gt);
+        self.previous_gt = frame_gt;
         Ok((result, extra))
     }
 }

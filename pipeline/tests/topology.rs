@@ -183,3 +183,47 @@ fn adaptive_keys_do_not_depend_on_where_a_run_starts() {
         }
     }
 }
+
+/// A carried mesh's metrics reuse its surface index (refitted) and structure from frame to
+/// frame, and the ground truth's index is refitted too: every metric must equal a fresh
+/// `measure_with` of the same mesh against the same ground truth, bit for bit.
+#[test]
+fn carried_scores_equal_fresh_scores_bit_for_bit() {
+    use trisplat_pipeline::Session;
+    use trisplat_pipeline::config::GroundTruth;
+    use trisplat_pipeline::metrics::measure_with;
+
+    let dir = common::fresh_dir("topology", "scores");
+    let track = common::opening_mouth(&dir);
+    let mut config = config(&track, Topology::Adaptive, "0..10", &dir.join("out"));
+    config.gt = Some(GroundTruth::Gaussians);
+    let (samples, tau) = (
+        config.options.metrics.samples,
+        config.options.metrics.threshold(),
+    );
+    let mut session = Session::open(&config).expect("session");
+    let mut carried = 0;
+    for f in session.frames() {
+        let (result, compared) = session
+            .frame_with(f, |result, gt| {
+                let gt = gt.expect("ground truth");
+                result
+                    .methods
+                    .iter()
+                    .map(|m| {
+                        let fresh = measure_with(&m.output.mesh, gt, samples, tau).expect("ok");
+                        assert_eq!(m.metrics, fresh, "frame {f} {}", m.method.name());
+                        assert!(fresh.is_some());
+                    })
+                    .count()
+            })
+            .expect("frame");
+        assert_eq!(compared, METHODS.len());
+        carried += result
+            .methods
+            .iter()
+            .filter(|m| m.topology.as_ref().is_some_and(|t| t.key != f))
+            .count();
+    }
+    assert!(carried >= 10, "carried method-frames: {carried}");
+}

@@ -80,6 +80,8 @@ pub struct SurfaceIndex {
     nodes: Vec<Node>,
     /// The triangles in leaf order.
     slots: Vec<Slot>,
+    /// The triangles indexed (mesh order): what [`SurfaceIndex::refit`] checks a mesh against.
+    triangles: Vec<[u32; 3]>,
 }
 
 impl std::fmt::Debug for SurfaceIndex {
@@ -120,28 +122,73 @@ impl SurfaceIndex {
             })
             .collect();
         let (codes, ids): (Vec<u64>, Vec<u32>) = morton_sorted(&centroids).into_iter().unzip();
-        let diagonal = crate::mesh::Aabb::from_dpoints(positions).map_or(0.0, |b| b.diagonal());
-        let pad = diagonal * PADDING;
+        let pad = padding(positions);
         let slots: Vec<Slot> = ids
             .par_iter()
             .with_min_len(4096)
-            .map(|&id| {
-                let corners = corner(triangles[id as usize]);
-                let [lo, hi] = padded_box(&corners, pad);
-                let [a, b, c] = corners;
-                Slot {
-                    lo,
-                    hi,
-                    corners,
-                    id,
-                    flat: triangle_is_flat(a, b, c),
-                }
-            })
+            .map(|&id| slot(corner(triangles[id as usize]), id, pad))
             .collect();
         drop(ids);
         let mut nodes = Vec::with_capacity(2 * triangles.len().div_ceil(LEAF));
         build(&mut nodes, &slots, &codes, 0, slots.len());
-        Ok(Self { nodes, slots })
+        Ok(Self {
+            nodes,
+            slots,
+            triangles: triangles.to_vec(),
+        })
+    }
+
+    /// Indexes `triangles` over `positions`, refitting `previous` when it indexes the same
+    /// triangles (a mesh carried from frame to frame: same triangles, moved vertices), else
+    /// building anew ([`SurfaceIndex::new`]). Answers are the same either way: the tree only
+    /// decides what is skipped.
+    ///
+    /// # Errors
+    /// As [`SurfaceIndex::new`].
+    pub fn reuse(
+        previous: Option<Self>,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+    ) -> Result<Self, SpatialError> {
+        match previous {
+            Some(mut index) if index.triangles == triangles => {
+                index.refit(positions)?;
+                Ok(index)
+            }
+            _ => Self::new(positions, triangles),
+        }
+    }
+
+    /// Moves the indexed triangles' corners to `positions` and recomputes every box bottom-up,
+    /// keeping the tree (its order is the build's Morton order: still a valid tree, a looser
+    /// one the farther the vertices moved).
+    fn refit(&mut self, positions: &[DVec3]) -> Result<(), SpatialError> {
+        check_dpoints(positions)?;
+        super::bvh::check_indices(positions.len(), &self.triangles)?;
+        let pad = padding(positions);
+        let triangles = &self.triangles;
+        self.slots.par_iter_mut().with_min_len(4096).for_each(|s| {
+            *s = slot(
+                triangles[s.id as usize].map(|i| positions[i as usize]),
+                s.id,
+                pad,
+            );
+        });
+        // Children follow their parent (depth first), so a reverse pass meets them first.
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            let (lo, hi) = if n.count > 0 {
+                leaf_box(
+                    &self.slots[n.first_or_right as usize..(n.first_or_right + n.count) as usize],
+                )
+            } else {
+                let (l, r) = (&self.nodes[i + 1], &self.nodes[n.first_or_right as usize]);
+                (l.lo.min(r.lo), l.hi.max(r.hi))
+            };
+            self.nodes[i].lo = lo;
+            self.nodes[i].hi = hi;
+        }
+        Ok(())
     }
 
     /// Number of triangles.
@@ -277,6 +324,33 @@ fn box_distance_sq(n: &Node, q: DVec3) -> f64 {
     (n.lo - q).max(q - n.hi).max(DVec3::ZERO).length_squared()
 }
 
+/// The absolute part of the boxes' padding: [`PADDING`] of the bounding-box diagonal.
+fn padding(positions: &[DVec3]) -> f64 {
+    crate::mesh::Aabb::from_dpoints(positions).map_or(0.0, |b| b.diagonal()) * PADDING
+}
+
+/// A triangle's slot: its corners, padded box and flatness.
+fn slot(corners: [DVec3; 3], id: u32, pad: f64) -> Slot {
+    let [lo, hi] = padded_box(&corners, pad);
+    let [a, b, c] = corners;
+    Slot {
+        lo,
+        hi,
+        corners,
+        id,
+        flat: triangle_is_flat(a, b, c),
+    }
+}
+
+/// The union of the slots' boxes.
+fn leaf_box(slots: &[Slot]) -> (DVec3, DVec3) {
+    slots
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), s| {
+            (lo.min(s.lo), hi.max(s.hi))
+        })
+}
+
 /// The box of a triangle's corners grown by `pad` plus [`PADDING`] of its coordinates'
 /// magnitude.
 fn padded_box(c: &[DVec3; 3], pad: f64) -> [DVec3; 2] {
@@ -292,11 +366,7 @@ fn padded_box(c: &[DVec3; 3], pad: f64) -> [DVec3; 2] {
 fn build(nodes: &mut Vec<Node>, slots: &[Slot], codes: &[u64], first: usize, end: usize) {
     let index = nodes.len();
     if end - first <= LEAF {
-        let (lo, hi) = slots[first..end]
-            .iter()
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), s| {
-                (lo.min(s.lo), hi.max(s.hi))
-            });
+        let (lo, hi) = leaf_box(&slots[first..end]);
         nodes.push(Node {
             lo,
             hi,
@@ -466,6 +536,52 @@ mod tests {
         let one = SurfaceIndex::new(&p, &t[..1]).expect("valid");
         let hits = one.closest_batch(&queries).expect("finite");
         assert!(hits.iter().all(|h| h.triangle == 0));
+    }
+
+    #[test]
+    fn a_refitted_index_answers_as_a_new_one() {
+        let (p, t) = soup(3000, 5);
+        let mut index = SurfaceIndex::new(&p, &t).expect("valid");
+        let mut rng = Rng::new(6);
+        let queries: Vec<Vec3> = (0..3000)
+            .map(|_| Vec3::new(rng.uniform_f32(), rng.uniform_f32(), rng.uniform_f32()) * 1.4 - 0.2)
+            .collect();
+        // The vertices move further each step (a looser and looser tree), once far off.
+        let mut moved = p.clone();
+        for step in 1..=4 {
+            for (k, v) in moved.iter_mut().enumerate() {
+                let w = (k as f64 * 0.37 + f64::from(step)).sin();
+                *v += DVec3::new(w, -w * 0.5, w * 0.25) * 0.02 * f64::from(step * step);
+            }
+            index = SurfaceIndex::reuse(Some(index), &moved, &t).expect("valid");
+            let fresh = SurfaceIndex::new(&moved, &t).expect("valid");
+            let bvh = TriangleBvh::from_triangles(&moved, &t).expect("valid");
+            let got = index.closest_batch(&queries).expect("finite");
+            assert_eq!(
+                got,
+                fresh.closest_batch(&queries).expect("finite"),
+                "{step}"
+            );
+            let want = bvh.closest_points(&queries).expect("finite");
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!((g.distance, g.triangle), (w.distance, w.triangle), "{step}");
+            }
+        }
+        // Other triangles: built anew, not refitted.
+        let fewer = &t[..t.len() / 2];
+        let other = SurfaceIndex::reuse(Some(index), &moved, fewer).expect("valid");
+        assert_eq!(other.triangle_count(), fewer.len());
+        let fresh = SurfaceIndex::new(&moved, fewer).expect("valid");
+        assert_eq!(
+            other.closest_batch(&queries).expect("finite"),
+            fresh.closest_batch(&queries).expect("finite")
+        );
+        // A bad position is an error on a refit too.
+        let mut bad = moved.clone();
+        bad[4] = DVec3::NAN;
+        let fresh = SurfaceIndex::new(&moved, &t).expect("valid");
+        assert!(SurfaceIndex::reuse(Some(fresh), &bad, &t).is_err());
+        assert!(SurfaceIndex::reuse(None, &moved[..10], &t).is_err());
     }
 
     #[test]
