@@ -31,7 +31,7 @@ use trisplat_extract::alpha_shape::alpha_shape;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, IncrementalDelaunay};
 use trisplat_extract::opacity::{
     DEFAULT_BISECTION_STEPS as OPACITY_BISECTION_STEPS, DEFAULT_LEVEL as OPACITY_LEVEL,
-    OpacityOptions, opacity_mesh,
+    OpacityOptions, OpacityTrack, opacity_mesh_tracked,
 };
 use trisplat_extract::tsdf::{ColorImage, DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
@@ -455,6 +455,9 @@ pub enum Mesher {
         /// Whether vertices get the field's composited colours (not with
         /// `--vertex-colors off`).
         colors: bool,
+        /// The tetrahedralisation carried from frame to frame (the Gaussians are bound: the
+        /// same points move), repaired where it is no longer Delaunay; equal to a rebuild.
+        track: Box<OpacityTrack>,
     },
 }
 
@@ -509,6 +512,7 @@ impl Mesher {
                 views: options.tsdf.views,
                 resolution: options.tsdf.resolution,
                 colors: options.finish.vertex_colors != VertexColors::Off,
+                track: Box::default(),
             },
         })
     }
@@ -560,19 +564,21 @@ impl Mesher {
                 views,
                 resolution,
                 colors,
+                track,
             } => {
                 let start = Instant::now();
                 let world = input.world.ok_or(PipelineError::Internal {
                     what: "the opacity method without the frame's deformed Gaussians",
                 })?;
                 let cameras = opacity_rig(world, *views, *resolution)?;
-                let meshed = opacity_mesh(
+                let meshed = opacity_mesh_tracked(
                     &opacity_gaussians(world),
                     &cameras,
                     &OpacityOptions {
                         colors: *colors,
                         ..OpacityOptions::default()
                     },
+                    track,
                 )
                 .map_err(|cause| PipelineError::Opacity { frame, cause })?;
                 Ok(MethodOutput {

@@ -28,7 +28,8 @@ mod sort;
 use std::fmt;
 
 use glam::Vec3;
-use predicates::{insphere, insphere_sos, orient3d};
+use predicates::insphere;
+pub(crate) use predicates::{insphere_sos, orient3d};
 
 /// Largest accepted coordinate magnitude. The in-sphere determinant is a degree-5 polynomial of
 /// coordinate differences: with |x| <= 1e30 its terms stay far below `f64::MAX`, so the exact
@@ -43,7 +44,7 @@ pub const MAX_POINTS: usize = (u32::MAX >> 1) as usize;
 pub const MAX_TETRAHEDRA: usize = (u32::MAX - 3) as usize;
 
 /// The vertex at infinity (in the internal arrays).
-const INF: u32 = u32::MAX;
+pub(crate) const INF: u32 = u32::MAX;
 /// Vertex marker of a deleted tetrahedron slot.
 const DEAD: u32 = u32::MAX - 1;
 
@@ -246,6 +247,13 @@ impl Delaunay3d {
     #[must_use]
     pub fn neighbours(&self) -> &[[u32; 4]] {
         &self.neighbours[..self.finite]
+    }
+
+    /// Every tetrahedron, the finite ones first, then the infinite ones closing the convex
+    /// hull (one vertex [`INF`], positive when it is replaced by a far point beyond the hull
+    /// face), with their neighbours (`[t][i]` across the face opposite vertex `i`).
+    pub(crate) fn all_tetrahedra(&self) -> (&[[u32; 4]], &[[u32; 4]]) {
+        (&self.tets, &self.neighbours)
     }
 
     /// Points skipped because an earlier point has the same coordinates.

@@ -16,6 +16,7 @@
 //! - **Determinism**: every point's value depends only on the views in order, never on the
 //!   thread count.
 
+mod carry;
 mod error;
 mod field;
 mod gaussians;
@@ -31,6 +32,7 @@ use glam::DVec3;
 use trisplat_geometry::{Camera, Rgba, TriMesh};
 
 use crate::delaunay3d::Delaunay3d;
+use carry::CarriedTets;
 use field::{Mode, NO_VIEW, evaluate};
 use order::z_order;
 use view::CertifyAt;
@@ -51,6 +53,11 @@ pub const DEFAULT_BISECTION_STEPS: u32 = 8;
 /// Default opacity below which a Gaussian is left out (the renderer's alpha cut, 1/255: such a
 /// Gaussian never changes a pixel).
 pub const DEFAULT_OPACITY_CUT: f32 = 1.0 / 255.0;
+
+/// Share of the tetrahedra an [`OpacityTrack`]'s repair may replace and still carry on:
+/// beyond it a repair costs about a rebuild (LAM's points change ~25% of their tetrahedra
+/// per frame, docs/benchmarks.md), and the track rebuilds from then on.
+pub const CARRY_WORTH_SHARE: f64 = 0.12;
 
 /// Share of the surface's area a piece needs for [`KeepPieces::Major`].
 pub const MAJOR_PIECE_FRACTION: f64 = 0.01;
@@ -115,6 +122,13 @@ pub struct OpacityStats {
     pub pieces: usize,
     /// Share of the surface's area kept by the selection (1 with [`KeepPieces::All`]).
     pub kept_area_fraction: f64,
+    /// Whether the tetrahedralisation was carried from the previous frame of an
+    /// [`OpacityTrack`] (checked and repaired) rather than built from scratch.
+    pub carried: bool,
+    /// With `carried`: points whose tetrahedra failed the check and were re-tetrahedralised.
+    pub hopped: usize,
+    /// With `carried`: tetrahedra replaced by the repair.
+    pub replaced: usize,
     /// Milliseconds per stage: field at the points, tetrahedralisation, marching and
     /// bisection, colours.
     pub ms: [f64; 4],
@@ -168,15 +182,101 @@ pub fn opacity_mesh(
     cameras: &[Camera],
     options: &OpacityOptions,
 ) -> Result<OpacityMesh, OpacityError> {
-    opacity_mesh_within(gaussians, cameras, options, HELD_BYTES)
+    opacity_mesh_within(gaussians, cameras, options, HELD_BYTES, None)
 }
 
-/// [`opacity_mesh`], holding the views' bins when they fit in `budget` bytes.
+/// What [`opacity_mesh_tracked`] keeps from one frame of a bound avatar to the next: the
+/// Delaunay tetrahedralisation of the points, with the kept Gaussians it was made for.
+#[derive(Clone, Debug, Default)]
+pub struct OpacityTrack {
+    tets: Option<CarriedTets>,
+    /// Set once a repair replaced more than [`CARRY_WORTH_SHARE`] of the tetrahedra or did
+    /// not fit: the points change too much from frame to frame for carrying to pay, and the
+    /// later frames are rebuilt without trying.
+    given_up: bool,
+    /// Input index of each kept Gaussian the tetrahedralisation's points came from.
+    source: Vec<u32>,
+}
+
+/// [`opacity_mesh`] for one frame of a sequence whose Gaussians keep their identity (a bound
+/// avatar): the tetrahedralisation of the previous frame in `track` is moved to this frame's
+/// points, checked and repaired where it is no longer Delaunay (module `carry`), instead of
+/// being rebuilt. The mesh is the one [`opacity_mesh`] gives. Falls back to a rebuild (and
+/// says so in [`OpacityStats::carried`]) on the first frame, when the kept Gaussians change,
+/// when some point is not seen, or when the repair does not fit; once a repair does not fit or
+/// replaces more than [`CARRY_WORTH_SHARE`] of the tetrahedra, every later frame is rebuilt.
+///
+/// # Errors
+/// As [`opacity_mesh`]; `track` is then reset.
+pub fn opacity_mesh_tracked(
+    gaussians: &OpacityGaussians,
+    cameras: &[Camera],
+    options: &OpacityOptions,
+    track: &mut OpacityTrack,
+) -> Result<OpacityMesh, OpacityError> {
+    let out = opacity_mesh_within(gaussians, cameras, options, HELD_BYTES, Some(track));
+    if out.is_err() {
+        *track = OpacityTrack::default();
+    }
+    out
+}
+
+/// The finite tetrahedra of `points`, carried in `track` when it
+/// holds them, else built (and kept in `track` when given and every point is a vertex).
+fn tetrahedralise(
+    points: &[DVec3],
+    all_seen: bool,
+    source: &[u32],
+    track: Option<&mut OpacityTrack>,
+    stats: &mut OpacityStats,
+) -> Result<Vec<[u32; 4]>, OpacityError> {
+    let coords: Vec<[f64; 3]> = points.iter().map(|x| x.to_array()).collect();
+    let mut track = track.filter(|t| all_seen && !t.given_up);
+    if let Some(t) = track.as_deref_mut()
+        && t.source == source
+        && let Some(tets) = t.tets.as_mut()
+    {
+        match tets.update(coords.clone()) {
+            Ok(c) => {
+                if c.replaced as f64 > CARRY_WORTH_SHARE * tets.live_count() as f64 {
+                    t.given_up = true;
+                }
+                stats.carried = true;
+                stats.hopped = c.hopped;
+                stats.replaced = c.replaced;
+                let out = tets.finite();
+                stats.tetrahedra = out.len();
+                return Ok(out);
+            }
+            Err(_) => {
+                t.tets = None;
+                t.given_up = true;
+            }
+        }
+    }
+    let delaunay = Delaunay3d::from_f64(coords)?;
+    if delaunay.dimension() < 3 {
+        return Err(OpacityError::Degenerate {
+            dimension: delaunay.dimension(),
+        });
+    }
+    if let Some(t) = track.filter(|t| !t.given_up) {
+        t.tets = CarriedTets::new(&delaunay);
+        t.source = source.to_vec();
+    }
+    let out = delaunay.tetrahedra().to_vec();
+    stats.tetrahedra = out.len();
+    Ok(out)
+}
+
+/// [`opacity_mesh`], holding the views' bins when they fit in `budget` bytes, carrying the
+/// tetrahedralisation in `track` when given.
 fn opacity_mesh_within(
     gaussians: &OpacityGaussians,
     cameras: &[Camera],
     options: &OpacityOptions,
     budget: usize,
+    track: Option<&mut OpacityTrack>,
 ) -> Result<OpacityMesh, OpacityError> {
     if cameras.is_empty() {
         return Err(OpacityError::NoCameras);
@@ -217,18 +317,13 @@ fn opacity_mesh_within(
     stats.ms[0] = ms(clock);
 
     let clock = Instant::now();
-    let delaunay = Delaunay3d::from_f64(points.iter().map(|x| x.to_array()).collect())?;
-    if delaunay.dimension() < 3 {
-        return Err(OpacityError::Degenerate {
-            dimension: delaunay.dimension(),
-        });
-    }
-    stats.tetrahedra = delaunay.tetrahedra().len();
+    let all_seen = points.len() == stats.points;
+    let tetrahedra = tetrahedralise(&points, all_seen, &p.source, track, &mut stats)?;
     stats.ms[1] = ms(clock);
 
     let clock = Instant::now();
-    let crossings = tets::march(&points, delaunay.tetrahedra(), &inside);
-    drop(delaunay);
+    let crossings = tets::march(&points, &tetrahedra, &inside);
+    drop(tetrahedra);
     if crossings.triangles.is_empty() {
         return Err(OpacityError::NoSurface {
             level: options.level,

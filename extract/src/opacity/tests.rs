@@ -455,8 +455,8 @@ fn held_views_mesh_equals_streamed() {
     let g = cloud(700);
     let cams = rig(DVec3::ZERO, 0.4, 12);
     let opts = OpacityOptions::default();
-    let held = opacity_mesh_within(&g, &cams, &opts, views::HELD_BYTES).expect("held");
-    let streamed = opacity_mesh_within(&g, &cams, &opts, 0).expect("streamed");
+    let held = opacity_mesh_within(&g, &cams, &opts, views::HELD_BYTES, None).expect("held");
+    let streamed = opacity_mesh_within(&g, &cams, &opts, 0, None).expect("streamed");
     assert!(held.mesh.triangle_count() > 100);
     assert_eq!(held.mesh.positions(), streamed.mesh.positions());
     assert_eq!(held.mesh.triangles(), streamed.mesh.triangles());
@@ -526,4 +526,50 @@ fn certified_signs_equal_exact_field() {
             assert_eq!(*a >= level, *b >= level, "point {i}: exact {a}, signed {b}");
         }
     }
+}
+
+/// Over frames of a smoothly moving cloud, carrying the tetrahedralisation gives the mesh of
+/// a from-scratch run at every frame, bit for bit, and is carried (repaired) on most frames.
+#[test]
+fn tracked_mesh_equals_from_scratch() {
+    let rest = cloud(500);
+    let cams = rig(DVec3::ZERO, 0.4, 8);
+    let opts = OpacityOptions {
+        bisection_steps: 3,
+        ..OpacityOptions::default()
+    };
+    let mut track = OpacityTrack::default();
+    let mut carried = 0;
+    for frame in 0..6 {
+        let t = 0.001 * f64::from(frame);
+        let mut g = rest.clone();
+        for m in &mut g.means {
+            let (c, s) = ((t * 2.0).cos() as f32, (t * 2.0).sin() as f32);
+            let bend = (t * f64::from(m.y) * 8.0) as f32;
+            *m = Vec3::new(c * m.x - s * m.z, m.y + bend * m.x, s * m.x + c * m.z);
+        }
+        let tracked = opacity_mesh_tracked(&g, &cams, &opts, &mut track).expect("tracked");
+        let fresh = opacity_mesh(&g, &cams, &opts).expect("fresh");
+        assert_eq!(
+            tracked.stats.tetrahedra, fresh.stats.tetrahedra,
+            "frame {frame}"
+        );
+        assert_eq!(
+            tracked.mesh.positions(),
+            fresh.mesh.positions(),
+            "frame {frame}"
+        );
+        assert_eq!(
+            tracked.mesh.triangles(),
+            fresh.mesh.triangles(),
+            "frame {frame}"
+        );
+        assert_eq!(tracked.mesh.colors(), fresh.mesh.colors(), "frame {frame}");
+        assert!(!fresh.stats.carried);
+        if tracked.stats.carried {
+            carried += 1;
+            assert!(tracked.stats.replaced > 0, "frame {frame}: nothing moved?");
+        }
+    }
+    assert!(carried >= 4, "carried on {carried} of 5 frames");
 }

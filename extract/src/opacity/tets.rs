@@ -1,6 +1,9 @@
 //! Marching tetrahedra over the sign of the field: one vertex per crossing edge (welded: an
 //! edge is shared by every tetrahedron around it), one or two triangles per crossing
 //! tetrahedron, each facing from the inside (field at or above the level) to the outside.
+//! The result does not depend on the order of the tetrahedra or of their vertices (a
+//! tetrahedralisation carried from the last frame lists them in another order than a
+//! rebuild): each tetrahedron is read with its vertices sorted, and the triangles are sorted.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -29,21 +32,34 @@ pub(crate) fn march(points: &[DVec3], tets: &[[u32; 4]], inside: &[bool]) -> Cro
     edges.par_sort_unstable();
     edges.dedup();
     let find = |e: [u32; 2]| edges.binary_search(&e).map_or(0, |i| i as u32);
-    let triangles = local
+    let mut triangles: Vec<[u32; 3]> = local
         .iter()
         .flat_map(|(tris, n)| tris[..usize::from(*n)].iter())
-        .map(|t| [find(t[0]), find(t[1]), find(t[2])])
+        .map(|t| {
+            // Smallest edge first, the orientation kept.
+            let [a, b, c] = [find(t[0]), find(t[1]), find(t[2])];
+            if a <= b && a <= c {
+                [a, b, c]
+            } else if b <= c {
+                [b, c, a]
+            } else {
+                [c, a, b]
+            }
+        })
         .collect();
+    triangles.par_sort_unstable();
     Crossings { edges, triangles }
 }
 
 /// The triangles of one tetrahedron (0, 1 or 2), each as three (inside, outside) edges, facing
 /// the outside points.
 fn tet_triangles(points: &[DVec3], tet: &[u32; 4], inside: &[bool]) -> ([[[u32; 2]; 3]; 2], u8) {
+    let mut tet = *tet;
+    tet.sort_unstable();
     let mut ins = [0u32; 4];
     let mut outs = [0u32; 4];
     let (mut ni, mut no) = (0, 0);
-    for &v in tet {
+    for v in tet {
         if inside[v as usize] {
             ins[ni] = v;
             ni += 1;
