@@ -19,8 +19,12 @@ pub const DEFAULT_ALPHA_FLOOR_SPACINGS: f64 = 1.5;
 pub const DEFAULT_ALPHA_CEILING_SPACINGS: f64 = 12.0;
 /// Steps of the default alpha search per doubling of α.
 pub const ALPHA_STEPS_PER_DOUBLING: u32 = 4;
-/// Default `--alpha-pieces`: the alpha search stops at the first α whose mesh is one piece.
-pub const DEFAULT_ALPHA_PIECES: usize = 1;
+/// Default `--alpha-pieces`: the alpha search stops at the first α whose mesh has at most 10
+/// pieces. 10, not 1: on the LAM head one piece needs a coarse α (F-score against its Gaussians'
+/// surface 0.65 -> 0.60), while 10 improves every accuracy score over Open3D's shape on LAM,
+/// CesiumMan and a Spot walk (docs/benchmarks.md, "Alpha shapes: one piece"); `--alpha-pieces 1`
+/// asks for one piece.
+pub const DEFAULT_ALPHA_PIECES: usize = 10;
 
 /// Which triangles the alpha method outputs (docs/conventions.md §6 "Alpha shapes").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -29,7 +33,8 @@ pub enum AlphaRule {
     /// The alpha complex (CGAL's Alpha_shape_3, GENERAL mode): the faces of exactly one kept
     /// tetrahedron plus the singular triangles, whose own smallest circumsphere is empty and
     /// of radius <= alpha; without --alpha, the smallest alpha (1.5 to 12 mean spacings, 4
-    /// steps per doubling) whose mesh has at most --alpha-pieces pieces, per frame.
+    /// steps per doubling) whose mesh has at most --alpha-pieces pieces, per frame. One piece
+    /// or few, but not manifold (folds: its area exceeds the surface's).
     #[default]
     Complex,
     /// Open3D's regularised alpha shape (faces of exactly one tetrahedron of circumradius <=
