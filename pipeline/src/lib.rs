@@ -45,8 +45,11 @@
 //!   / [`config::COARSEST_VOXELS_PER_RADIUS`] ([`methods::default_voxel`]); truncation
 //!   5 voxels; [`config::DEFAULT_VIEWS`] views of [`config::DEFAULT_RESOLUTION`]² pixels,
 //!   40° field of view, framing each frame's bounding sphere with a 10% margin.
-//! - Alpha: [`config::DEFAULT_ALPHA_SPACINGS`] × the mean nearest-neighbour spacing of the
-//!   rest-pose Gaussian means.
+//! - Alpha: the alpha complex (singular triangles kept) at the smallest α from
+//!   [`config::DEFAULT_ALPHA_FLOOR_SPACINGS`] to [`config::DEFAULT_ALPHA_CEILING_SPACINGS`] × the
+//!   mean nearest-neighbour spacing of the rest-pose Gaussian means whose mesh has at most
+//!   `--alpha-pieces` (default 10) pieces, per frame; `--alpha-rule open3d`:
+//!   [`config::DEFAULT_ALPHA_SPACINGS`] spacings.
 //! - Delaunay: incremental (`--hop-threshold`, default 0: each frame equals a from-scratch
 //!   triangulation; above 0 fewer charts are redone and frames may differ from one);
 //!   `--rebuild-every N` rebuilds every N frames, 1 on every frame. The report keeps what each

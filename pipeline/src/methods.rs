@@ -16,9 +16,13 @@
 //!   template edges; `rebuild_every` forces full rebuilds, and updates that cost more than
 //!   rebuilds are followed by rebuilds unless `no_auto_rebuild`); [`MethodOutput::delaunay`] says
 //!   what each update did.
-//! - **alpha**: the alpha shape of the deformed means at `alpha` (default
-//!   [`DEFAULT_ALPHA_SPACINGS`] times the mean nearest-neighbour spacing of the rest-pose
-//!   means), optionally only its largest edge-connected pieces (`alpha_keep_clusters`).
+//! - **alpha**: the alpha complex of the deformed means (the extract crate's `alpha_complex`:
+//!   regular and singular triangles) at the smallest α from
+//!   [`DEFAULT_ALPHA_FLOOR_SPACINGS`] to [`DEFAULT_ALPHA_CEILING_SPACINGS`] mean spacings of
+//!   the rest-pose means whose mesh has at most `alpha.pieces` pieces, searched per frame; or
+//!   at a fixed `alpha`; or Open3D's alpha shape (`AlphaRule::Open3d`, default
+//!   [`DEFAULT_ALPHA_SPACINGS`] spacings); optionally only its largest edge-connected pieces
+//!   (`alpha_keep_clusters`).
 //! - **opacity**: the opacity field of every deformed Gaussian (Gaussian Opacity Fields, the
 //!   extract crate's `opacity`) from the tsdf method's rig (`views`, `resolution`), framed
 //!   around the Gaussians and their 3-sigma boxes; every piece.
@@ -27,7 +31,9 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
-use trisplat_extract::alpha_shape::alpha_shape;
+use trisplat_extract::alpha_complex::{AlphaComplex, AlphaSearch, smallest_connected_alpha};
+use trisplat_extract::alpha_shape::{AlphaShape, alpha_shape};
+use trisplat_extract::delaunay3d::Delaunay3d;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, IncrementalDelaunay};
 use trisplat_extract::opacity::{
     DEFAULT_BISECTION_STEPS as OPACITY_BISECTION_STEPS, DEFAULT_LEVEL as OPACITY_LEVEL,
@@ -43,9 +49,10 @@ use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
 
 use crate::config::{
-    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS,
-    DepthKind, ExtractOptions, Method, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule,
-    VertexColors,
+    ALPHA_STEPS_PER_DOUBLING, AlphaRule, COARSEST_VOXELS_PER_RADIUS,
+    DEFAULT_ALPHA_CEILING_SPACINGS, DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_SPACINGS,
+    DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS, DepthKind, ExtractOptions, Method,
+    RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule, VertexColors,
 };
 use crate::error::PipelineError;
 use crate::opacity::{opacity_gaussians, opacity_rig};
@@ -128,6 +135,18 @@ pub fn parameters(
         }
         Method::Alpha => {
             parameters.insert("alpha".to_owned(), resolved.alpha);
+            let search = o.alpha.alpha.is_none() && o.alpha.rule == AlphaRule::Complex;
+            parameters.insert(
+                "alpha_complex".to_owned(),
+                f64::from(u8::from(o.alpha.rule == AlphaRule::Complex)),
+            );
+            if search {
+                parameters.insert(
+                    "alpha_ceiling".to_owned(),
+                    DEFAULT_ALPHA_CEILING_SPACINGS * resolved.mean_spacing,
+                );
+                parameters.insert("alpha_pieces".to_owned(), o.alpha.pieces as f64);
+            }
             parameters.insert("keep_clusters".to_owned(), o.alpha.keep_clusters as f64);
         }
         Method::Opacity => {
@@ -220,7 +239,10 @@ impl Resolved {
             alpha: check(
                 "alpha",
                 options.alpha.alpha,
-                DEFAULT_ALPHA_SPACINGS * spacing,
+                match options.alpha.rule {
+                    AlphaRule::Complex => DEFAULT_ALPHA_FLOOR_SPACINGS * spacing,
+                    AlphaRule::Open3d => DEFAULT_ALPHA_SPACINGS * spacing,
+                },
             )?,
         })
     }
@@ -235,6 +257,28 @@ pub fn default_voxel(template_radius: f64, spacing: f64) -> f64 {
     let finest = template_radius / DEFAULT_VOXELS_PER_RADIUS;
     let coarsest = template_radius / COARSEST_VOXELS_PER_RADIUS;
     spacing.max(finest).min(coarsest)
+}
+
+/// The alpha method's mesh of `means`: the alpha complex at the smallest α of `search`, or
+/// at `alpha` by `rule`.
+fn alpha_mesh(
+    means: &[Vec3],
+    alpha: f64,
+    rule: AlphaRule,
+    search: Option<&AlphaSearch>,
+) -> Result<AlphaShape, trisplat_extract::alpha_shape::AlphaError> {
+    match (rule, search) {
+        (AlphaRule::Open3d, _) => alpha_shape(means, alpha),
+        (AlphaRule::Complex, search) => {
+            let delaunay = Delaunay3d::new(means)?;
+            let complex = AlphaComplex::new(&delaunay);
+            let alpha = match search {
+                Some(s) => smallest_connected_alpha(&complex, s)?.alpha,
+                None => alpha,
+            };
+            complex.shape(alpha)
+        }
+    }
 }
 
 /// Why [`rendered_depth`] failed.
@@ -437,11 +481,15 @@ pub enum Mesher {
     Tsdf(TsdfMesher),
     /// Incremental Delaunay (keeps its triangulation between frames).
     Delaunay(Box<IncrementalDelaunay>),
-    /// Alpha shape at this radius, keeping the edge-connected pieces at least as large as the
-    /// `keep_clusters`-th largest (0: all).
+    /// Alpha shape at this radius (or the smallest α of `search`), keeping the edge-connected
+    /// pieces at least as large as the `keep_clusters`-th largest (0: all).
     Alpha {
-        /// Circumradius bound.
+        /// Circumradius bound (the fixed α).
         alpha: f64,
+        /// Which triangles form the mesh.
+        rule: AlphaRule,
+        /// The per-frame search of α (complex rule without a fixed α).
+        search: Option<AlphaSearch>,
         /// Pieces kept (0: all).
         keep_clusters: usize,
     },
@@ -506,6 +554,15 @@ impl Mesher {
             }
             Method::Alpha => Self::Alpha {
                 alpha: resolved.alpha,
+                rule: options.alpha.rule,
+                search: (options.alpha.alpha.is_none() && options.alpha.rule == AlphaRule::Complex)
+                    .then(|| AlphaSearch {
+                        floor: resolved.alpha,
+                        ceiling: (DEFAULT_ALPHA_CEILING_SPACINGS * resolved.mean_spacing)
+                            .max(resolved.alpha),
+                        steps_per_doubling: ALPHA_STEPS_PER_DOUBLING,
+                        max_pieces: options.alpha.pieces,
+                    }),
                 keep_clusters: options.alpha.keep_clusters,
             },
             Method::Opacity => Self::Opacity {
@@ -544,13 +601,17 @@ impl Mesher {
             }
             Self::Alpha {
                 alpha,
+                rule,
+                search,
                 keep_clusters,
             } => {
                 let start = Instant::now();
                 let shape =
-                    alpha_shape(input.means, *alpha).map_err(|source| PipelineError::Alpha {
-                        frame,
-                        cause: source,
+                    alpha_mesh(input.means, *alpha, *rule, search.as_ref()).map_err(|source| {
+                        PipelineError::Alpha {
+                            frame,
+                            cause: source,
+                        }
                     })?;
                 Ok(MethodOutput {
                     mesh: keep_largest_clusters(&shape.mesh, *keep_clusters),
@@ -674,6 +735,8 @@ mod tests {
         for (keep, triangles) in [(0, 16), (1, 12), (2, 16)] {
             let mut mesher = Mesher::Alpha {
                 alpha: 2.0,
+                rule: AlphaRule::Open3d,
+                search: None,
                 keep_clusters: keep,
             };
             let out = mesher.mesh(&input).expect("alpha shape");

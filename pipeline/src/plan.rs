@@ -6,7 +6,8 @@ use std::fmt;
 use crate::config::GaussianLayout;
 
 use crate::config::{
-    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig,
+    AlphaRule, COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_CEILING_SPACINGS,
+    DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS, ExtractConfig,
     GroundTruth, Method, Mode, OutputTarget, Topology,
 };
 
@@ -200,10 +201,25 @@ impl Plan {
                     };
                     format!("{rebuild}; {hop}")
                 }
-                Method::Alpha => match o.alpha.alpha {
-                    Some(a) => format!("alpha {a} on the deformed means"),
-                    None => format!(
-                        "alpha = {DEFAULT_ALPHA_SPACINGS} x mean Gaussian spacing, on the deformed means"
+                Method::Alpha => match (o.alpha.rule, o.alpha.alpha) {
+                    (AlphaRule::Complex, Some(a)) => {
+                        format!(
+                            "alpha complex (singular triangles kept) at {a}, on the deformed means"
+                        )
+                    }
+                    (AlphaRule::Complex, None) => format!(
+                        "alpha complex (singular triangles kept) on the deformed means, per frame at \
+                         the smallest alpha from {DEFAULT_ALPHA_FLOOR_SPACINGS} to \
+                         {DEFAULT_ALPHA_CEILING_SPACINGS} x mean Gaussian spacing giving at most {} \
+                         piece(s)",
+                        o.alpha.pieces
+                    ),
+                    (AlphaRule::Open3d, Some(a)) => {
+                        format!("Open3D's alpha shape at {a}, on the deformed means")
+                    }
+                    (AlphaRule::Open3d, None) => format!(
+                        "Open3D's alpha shape at {DEFAULT_ALPHA_SPACINGS} x mean Gaussian spacing, on \
+                         the deformed means"
                     ),
                 },
                 Method::Opacity => format!(

@@ -237,7 +237,8 @@ pub struct Resolved {
     pub mean_spacing: f64,
     /// TSDF voxel.
     pub voxel: f64,
-    /// Alpha-shape radius.
+    /// Alpha radius: the fixed `--alpha` (or `--alpha-rule open3d`'s default), else the
+    /// smallest α of the per-frame search.
     pub alpha: f64,
 }
 

@@ -11,7 +11,7 @@ use glam::{DVec3, Vec3};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_pipeline::config::{
-    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_SPACINGS, DEFAULT_VOXELS_PER_RADIUS,
+    COARSEST_VOXELS_PER_RADIUS, DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_VOXELS_PER_RADIUS,
 };
 use trisplat_pipeline::input::read_template;
 use trisplat_pipeline::methods::default_voxel;
@@ -175,7 +175,8 @@ fn skinned_template_with_a_scaled_node_is_meshed_in_world_space() {
     );
     // Four Gaussians per triangle of edge sqrt(2): spacing a sizeable part of an edge.
     assert!(r.mean_spacing > 0.1 && r.mean_spacing < 1.0, "{r:?}");
-    assert_eq!(r.alpha, DEFAULT_ALPHA_SPACINGS * r.mean_spacing);
+    // The alpha complex's search starts at its floor (the report's `alpha`).
+    assert_eq!(r.alpha, DEFAULT_ALPHA_FLOOR_SPACINGS * r.mean_spacing);
     // The delaunay report keeps its update's statistics: one frame, rebuilt (the first).
     let d = report.methods["delaunay"]
         .delaunay

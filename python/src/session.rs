@@ -255,6 +255,7 @@ impl Session {
             alpha: AlphaOptions {
                 keep_clusters: alpha_keep_clusters,
                 alpha,
+                ..defaults.alpha
             },
             visibility: VisibilityRule {
                 min_contribution: min_contribution.unwrap_or(defaults.visibility.min_contribution),

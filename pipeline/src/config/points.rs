@@ -9,7 +9,38 @@ use trisplat_extract::incremental_delaunay::DEFAULT_HOP_THRESHOLD;
 /// while 6 lowers Chamfer L1 against the deformed template at the same cost (docs/benchmarks.md,
 /// "Main job (`sweep`)": CesiumMan 6.6e-3 -> 3.4e-3, F-score 0.55 -> 0.72; the LAM head
 /// 8.7e-3 -> 1.4e-3, F-score 0.43 -> 0.75; the time is the tetrahedralisation's either way).
+/// Since issue #34 this is the radius of `--alpha-rule open3d` only; the default rule searches
+/// α itself ([`DEFAULT_ALPHA_FLOOR_SPACINGS`]).
 pub const DEFAULT_ALPHA_SPACINGS: f64 = 6.0;
+/// The smallest α the default alpha search tries, in mean spacings (below about 2 spacings the
+/// alpha complex of 4 Gaussians per triangle is hundreds of pieces on every template measured).
+pub const DEFAULT_ALPHA_FLOOR_SPACINGS: f64 = 1.5;
+/// The largest α the default alpha search tries, in mean spacings.
+pub const DEFAULT_ALPHA_CEILING_SPACINGS: f64 = 12.0;
+/// Steps of the default alpha search per doubling of α.
+pub const ALPHA_STEPS_PER_DOUBLING: u32 = 4;
+/// Default `--alpha-pieces`: the alpha search stops at the first α whose mesh has at most 10
+/// pieces. 10, not 1: on the LAM head one piece needs a coarse α (F-score against its Gaussians'
+/// surface 0.65 -> 0.60), while 10 improves every accuracy score over Open3D's shape on LAM,
+/// CesiumMan and a Spot walk (docs/benchmarks.md, "Alpha shapes: one piece"); `--alpha-pieces 1`
+/// asks for one piece.
+pub const DEFAULT_ALPHA_PIECES: usize = 10;
+
+/// Which triangles the alpha method outputs (docs/conventions.md §6 "Alpha shapes").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum AlphaRule {
+    /// The alpha complex (CGAL's Alpha_shape_3, GENERAL mode): the faces of exactly one kept
+    /// tetrahedron plus the singular triangles, whose own smallest circumsphere is empty and
+    /// of radius <= alpha; without --alpha, the smallest alpha (1.5 to 12 mean spacings, 4
+    /// steps per doubling) whose mesh has at most --alpha-pieces pieces, per frame. One piece
+    /// or few, but not manifold (folds: its area exceeds the surface's).
+    #[default]
+    Complex,
+    /// Open3D's regularised alpha shape (faces of exactly one tetrahedron of circumradius <=
+    /// alpha); without --alpha, 6 mean spacings. Hundreds of pieces on surface samples.
+    Open3d,
+}
 /// Default [`VisibilityRule::min_contribution`]: one step of an 8-bit image.
 pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
 /// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
@@ -92,14 +123,24 @@ impl Default for DelaunayOptions {
     }
 }
 
-/// The alpha method's radius and the pieces it keeps.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The alpha method's rule, radius and the pieces it keeps.
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct AlphaOptions {
-    /// Alpha-shape radius in scene units [default: 6 x the mean nearest-neighbour spacing of
-    /// the rest-pose Gaussian means].
+    /// Alpha radius in scene units, the same on every frame [default: per frame, the smallest
+    /// alpha from 1.5 to 12 mean nearest-neighbour spacings of the rest-pose Gaussian means
+    /// whose mesh has at most --alpha-pieces pieces (--alpha-rule open3d: 6 spacings)].
     #[cfg_attr(feature = "cli", arg(long, value_name = "A"))]
     pub alpha: Option<f64>,
+    /// Alpha: which triangles form the mesh.
+    #[cfg_attr(feature = "cli", arg(long = "alpha-rule", value_name = "RULE",
+        value_enum, default_value_t = AlphaRule::Complex))]
+    pub rule: AlphaRule,
+    /// Alpha, without --alpha: the piece count the alpha search stops at (if no alpha up to
+    /// 12 spacings reaches it, the one with the fewest pieces is used).
+    #[cfg_attr(feature = "cli", arg(long = "alpha-pieces", value_name = "N",
+        default_value_t = DEFAULT_ALPHA_PIECES, value_parser = super::arg::parse_positive))]
+    pub pieces: usize,
     /// Alpha: keep the edge-connected pieces at least as large (in triangles) as the K-th
     /// largest, as tsdf keeps its largest (0: keep every piece; the report counts them).
     #[cfg_attr(
@@ -112,4 +153,15 @@ pub struct AlphaOptions {
         )
     )]
     pub keep_clusters: usize,
+}
+
+impl Default for AlphaOptions {
+    fn default() -> Self {
+        Self {
+            alpha: None,
+            rule: AlphaRule::Complex,
+            pieces: DEFAULT_ALPHA_PIECES,
+            keep_clusters: 0,
+        }
+    }
 }
