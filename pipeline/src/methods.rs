@@ -46,13 +46,13 @@ use trisplat_geometry::cleanup::keep_largest_clusters;
 use trisplat_geometry::spatial::PointIndex;
 use trisplat_geometry::{bounding_sphere, sphere_rig};
 use trisplat_splat::GaussianSet;
-use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render};
+use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render, render_front};
 
 use crate::config::{
     ALPHA_STEPS_PER_DOUBLING, AlphaRule, COARSEST_VOXELS_PER_RADIUS,
     DEFAULT_ALPHA_CEILING_SPACINGS, DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_SPACINGS,
-    DEFAULT_FOV_DEG, DEFAULT_VOXELS_PER_RADIUS, DepthKind, ExtractOptions, Method,
-    RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule, VertexColors,
+    DEFAULT_FOV_DEG, DEFAULT_FRONT_ALPHA, DEFAULT_VOXELS_PER_RADIUS, DepthKind, ExtractOptions,
+    Method, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule, VertexColors,
 };
 use crate::error::PipelineError;
 use crate::opacity::{opacity_gaussians, opacity_rig};
@@ -124,6 +124,7 @@ pub fn parameters(
             );
             parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf.colors)));
             parameters.insert("alpha_cut".to_owned(), f64::from(o.tsdf.alpha_cut));
+            parameters.insert("front_alpha".to_owned(), f64::from(o.tsdf.front_alpha));
         }
         Method::Delaunay => {
             parameters.insert("rebuild_every".to_owned(), o.delaunay.rebuild_every as f64);
@@ -301,6 +302,9 @@ pub struct DepthRules {
     pub splat: SplatDepthRule,
     /// Pixels whose rendered alpha is below this carry no depth (0 < cut <= 1).
     pub alpha_cut: f32,
+    /// When positive, each depth map carries the front depth at this alpha
+    /// ([`DepthImage::with_front`]): free space ends where the alpha first reaches it.
+    pub front_alpha: f32,
 }
 
 impl Default for DepthRules {
@@ -309,6 +313,7 @@ impl Default for DepthRules {
             kind: DepthKind::default(),
             splat: SplatDepthRule::default(),
             alpha_cut: RENDERED_ALPHA_MIN,
+            front_alpha: DEFAULT_FRONT_ALPHA,
         }
     }
 }
@@ -352,10 +357,21 @@ pub fn rendered_view(
         splat_depth: rules.splat.into(),
         ..RenderOptions::default()
     };
-    let out = render(world, camera, &options).map_err(RenderedDepthError::Render)?;
+    if kind == DepthKind::Front && !(rules.front_alpha > 0.0) {
+        return Err(RenderedDepthError::Render(RenderError::BadFrontAlpha(
+            rules.front_alpha,
+        )));
+    }
+    let mut out = if rules.front_alpha > 0.0 {
+        render_front(world, camera, &options, rules.front_alpha)
+    } else {
+        render(world, camera, &options)
+    }
+    .map_err(RenderedDepthError::Render)?;
     let depth = match kind {
         DepthKind::Expected => out.images.depth,
         DepthKind::Median => out.images.median_depth,
+        DepthKind::Front => out.images.front_depth.take(),
     };
     let (Some(mut depth), Some(alpha)) = (depth, out.images.alpha) else {
         // Both were asked for: only a renderer that refused the set returns neither.
@@ -387,8 +403,11 @@ pub fn rendered_view(
         }
         (true, None) => return Err(RenderedDepthError::Render(RenderError::LocalParameters)),
     };
-    let depth = DepthImage::try_new(camera.width, camera.height, depth)
+    let mut depth = DepthImage::try_new(camera.width, camera.height, depth)
         .map_err(RenderedDepthError::Image)?;
+    if let Some(front) = out.images.front_depth {
+        depth = depth.with_front(front).map_err(RenderedDepthError::Image)?;
+    }
     Ok((depth, color))
 }
 
@@ -533,6 +552,7 @@ impl Mesher {
                     kind: options.tsdf.depth,
                     splat: options.tsdf.splat_depth,
                     alpha_cut: options.tsdf.alpha_cut,
+                    front_alpha: options.tsdf.front_alpha,
                 },
                 colors: options.tsdf.colors,
             }),
@@ -661,6 +681,11 @@ mod tests {
     /// Two walls of wide flat Gaussians facing a camera on the z axis: a half-transparent one
     /// (opacity 0.6) at z = 1 in front of an opaque one at z = 2.
     fn two_walls() -> (GaussianSet, Camera) {
+        two_walls_with(0.6)
+    }
+
+    /// [`two_walls`] with the front wall of opacity `front`.
+    fn two_walls_with(front: f32) -> (GaussianSet, Camera) {
         use trisplat_splat::{GaussianParts, ParameterSpace, ScaleDims};
         let logit = |o: f32| (o / (1.0 - o)).ln();
         let mut parts = GaussianParts {
@@ -677,7 +702,7 @@ mod tests {
             extras: Vec::new(),
             property_order: None,
         };
-        for (z, opacity) in [(1.0, 0.6), (2.0, 0.999)] {
+        for (z, opacity) in [(1.0, front), (2.0, 0.999)] {
             parts.means.push(Vec3::new(0.0, 0.0, z));
             parts
                 .log_scales
@@ -709,6 +734,34 @@ mod tests {
         // 0.6 of the weight at z = 1, 0.4 at z = 2, normalised by the alpha (≈ 1).
         let expected = centre(DepthKind::Expected);
         assert!((expected - 1.4).abs() < 1e-2, "{expected}");
+    }
+
+    #[test]
+    fn front_depth_is_where_the_alpha_first_reaches_the_front_alpha() {
+        // A wall of opacity 0.3 in front of an opaque one: the alpha passes 1/2 only at the
+        // back wall, 0.2 already at the front one.
+        let (set, camera) = two_walls_with(0.3);
+        let rules = |kind, front_alpha| DepthRules {
+            kind,
+            splat: SplatDepthRule::Mean,
+            alpha_cut: 0.5,
+            front_alpha,
+        };
+        let centre = |r: &DepthRules| rendered_depth(&set, &camera, r).expect("renders");
+        let median = centre(&rules(DepthKind::Median, 0.2));
+        assert!((median.data()[8 * 16 + 8] - 2.0).abs() < 1e-3);
+        // The median depth map carries the front depth for fusion's free space.
+        let front = median.front().expect("front depths")[8 * 16 + 8];
+        assert!((front - 1.0).abs() < 1e-3, "{front}");
+        let fused = centre(&rules(DepthKind::Front, 0.2));
+        assert!((fused.data()[8 * 16 + 8] - 1.0).abs() < 1e-3);
+        // Above the front wall's alpha the front depth is the back wall's.
+        let deep = centre(&rules(DepthKind::Front, 0.4));
+        assert!((deep.data()[8 * 16 + 8] - 2.0).abs() < 1e-3);
+        // Without a front alpha the front kind is refused, and median maps carry none.
+        assert!(rendered_depth(&set, &camera, &rules(DepthKind::Front, 0.0)).is_err());
+        let plain = centre(&rules(DepthKind::Median, 0.0));
+        assert!(plain.front().is_none());
     }
 
     #[test]

@@ -61,6 +61,13 @@ pub(crate) fn check_options(config: &ExtractConfig) -> Result<(), PipelineError>
             expected: "a rendered alpha in (0, 1]",
         });
     }
+    if !(o.tsdf.front_alpha >= 0.0 && o.tsdf.front_alpha < 1.0) {
+        return Err(PipelineError::BadOption {
+            name: "tsdf-front-alpha",
+            value: f64::from(o.tsdf.front_alpha),
+            expected: "a rendered alpha in [0, 1) (0: free space up to the fused depth)",
+        });
+    }
     if !(o.visibility.min_contribution >= 0.0 && o.visibility.min_contribution < 1.0) {
         return Err(PipelineError::BadOption {
             name: "min-contribution",

@@ -248,6 +248,7 @@ impl Session {
                 splat_depth: self::tsdf_splat_depth(tsdf_splat_depth)?,
                 colors: tsdf_colors,
                 alpha_cut: tsdf_alpha_cut.unwrap_or(defaults.tsdf.alpha_cut),
+                front_alpha: defaults.tsdf.front_alpha,
                 voxel,
                 views: views.unwrap_or(defaults.tsdf.views),
                 resolution: resolution.unwrap_or(defaults.tsdf.resolution),

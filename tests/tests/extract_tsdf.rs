@@ -11,14 +11,15 @@
 //! Checks: Chamfer to Spot ≤ [`CHAMFER_RATIO`] × Open3D's; every edge used by exactly two
 //! triangles; positive signed volume within [`VOLUME_REL`] of Open3D's; vertex and triangle
 //! counts within [`COUNT_REL`] of Open3D's (the same rules but for the depth read between pixel
-//! centres, docs/conventions.md §6: until issue #34 they agreed to 1e-3); the 2DGS scene radius
+//! centres, docs/conventions.md §6), and within [`NEAREST_REL`] with `--depth-lookup nearest`
+//! (Open3D's rules); the 2DGS scene radius
 //! equal to the reference's.
 
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 use trisplat_extract::tsdf::{
-    DepthImage, TsdfError, TsdfOptions, fuse, read_depth, read_depth_dir, scene_radius,
+    DepthImage, DepthLookup, TsdfError, TsdfOptions, fuse, read_depth, read_depth_dir, scene_radius,
 };
 use trisplat_geometry::io::{read_mesh, write_npy};
 use trisplat_geometry::metrics::{MetricsOptions, Shape, evaluate};
@@ -37,6 +38,8 @@ const VOLUME_REL: f64 = 1e-2;
 /// Relative tolerance of the vertex and triangle counts against Open3D's mesh (3.7% fewer
 /// here: the interpolated depth leaves fewer steps a pixel wide).
 const COUNT_REL: f64 = 5e-2;
+/// Relative tolerance of the counts and volume with [`DepthLookup::Nearest`].
+const NEAREST_REL: f64 = 1e-3;
 
 fn dir() -> PathBuf {
     trisplat_fixtures::path("reference/tsdf")
@@ -71,6 +74,19 @@ fn chamfer(pred: &TriMesh, gt: &TriMesh) -> f64 {
 
 #[test]
 fn spot_matches_open3d_and_is_watertight() {
+    check_against_open3d(DepthLookup::Bilinear, COUNT_REL, VOLUME_REL);
+}
+
+/// With the depth read at the nearest pixel, the rules are Open3D's: the same mesh up to f32
+/// rounding (counts and volume within [`NEAREST_REL`], as before issue #34).
+#[test]
+fn spot_matches_open3d_exactly_with_the_nearest_pixel() {
+    check_against_open3d(DepthLookup::Nearest, NEAREST_REL, NEAREST_REL);
+}
+
+/// Fuses the reference's depth maps with `lookup` and checks the mesh against Open3D's:
+/// counts within `count_rel`, signed volume within `volume_rel`, closed, Chamfer.
+fn check_against_open3d(lookup: DepthLookup, count_rel: f64, volume_rel: f64) {
     let r = reference();
     let cams = cameras();
     assert_eq!(cams.len(), 30);
@@ -78,6 +94,7 @@ fn spot_matches_open3d_and_is_watertight() {
     let options = TsdfOptions {
         voxel: Some(num(&r, "voxel")),
         trunc: Some(num(&r, "trunc")),
+        depth_lookup: lookup,
         ..TsdfOptions::default()
     };
     let fused = fuse(&cams, &depths, None, &options).expect("fusion");
@@ -95,7 +112,7 @@ fn spot_matches_open3d_and_is_watertight() {
     let theirs = num(&r, "signed_volume");
     assert!(volume > 0.0);
     assert!(
-        (volume - theirs).abs() < VOLUME_REL * theirs,
+        (volume - theirs).abs() < volume_rel * theirs,
         "{volume} vs {theirs}"
     );
 
@@ -106,7 +123,7 @@ fn spot_matches_open3d_and_is_watertight() {
     ] {
         let theirs = num(&r, key);
         assert!(
-            (ours as f64 - theirs).abs() <= COUNT_REL * theirs,
+            (ours as f64 - theirs).abs() <= count_rel * theirs,
             "{key}: {ours} vs Open3D {theirs}"
         );
     }

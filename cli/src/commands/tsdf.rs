@@ -101,6 +101,7 @@ pub fn run(args: TsdfArgs, ctx: &Context) -> anyhow::Result<()> {
                 kind: args.depth_kind,
                 splat: args.splat_depth,
                 alpha_cut: args.alpha_cut,
+                ..DepthRules::default()
             };
             let depths = render_depths(gaussians, &cameras, &rules)?;
             spinner.set_message("fusing");

@@ -7,6 +7,7 @@ use trisplat_geometry::Camera;
 
 use super::error::TsdfError;
 use super::image::{ColorImage, DepthImage};
+use super::params::DepthLookup;
 
 /// Projected coordinates must lie in `[PIXEL_MARGIN, size − PIXEL_MARGIN)` (Open3D's 0.0001).
 pub const PIXEL_MARGIN: f64 = 1e-4;
@@ -62,11 +63,24 @@ pub(super) struct Prepared<'a> {
     pub(super) tile_full: Vec<bool>,
     pub(super) tiles_x: usize,
     pub(super) color: Option<&'a [[f32; 3]]>,
+    /// Per pixel (and one more), the depth beyond which it marks no free space: its front
+    /// depth ([`DepthImage::with_front`]) when that lies before its depth, else its depth;
+    /// `None` when the depth map has no front depths.
+    pub(super) limits: Option<Vec<f32>>,
+    /// Smallest limit of a valid pixel per tile (`f32::INFINITY` = none); empty without
+    /// limits.
+    pub(super) tile_limit_min: Vec<f32>,
 }
 
 impl<'a> Prepared<'a> {
     /// The tables of `frame`.
-    pub(super) fn new(frame: &Frame<'a>, depth_trunc: f64, trunc: f64) -> Result<Self, TsdfError> {
+    /// `lookup` [`DepthLookup::Nearest`] marks every cell as not interpolated.
+    pub(super) fn new(
+        frame: &Frame<'a>,
+        depth_trunc: f64,
+        trunc: f64,
+        lookup: DepthLookup,
+    ) -> Result<Self, TsdfError> {
         let cam = frame.camera;
         let (width, height) = (cam.width as usize, cam.height as usize);
         if (frame.depth.width(), frame.depth.height()) != (cam.width, cam.height) {
@@ -123,12 +137,31 @@ impl<'a> Prepared<'a> {
                 } else {
                     0.0
                 };
-                let ok = i + 1 < height && j + 1 < width && {
+                let ok = lookup == DepthLookup::Bilinear && i + 1 < height && j + 1 < width && {
                     let c = [depth[k], depth[k + 1], below, depth[k + width + 1]];
                     let (lo, hi) = cell_range(c);
                     lo > 0.0 && f64::from(hi - lo) <= (f64::from(lo) * spread_per_depth).max(trunc)
                 };
                 cells[k] = [if ok { depth[k] } else { -depth[k] }, below];
+            }
+        }
+        let limits = frame.depth.front().map(|front| {
+            let mut limits: Vec<f32> = depth
+                .iter()
+                .zip(front)
+                .map(|(&d, &f)| if f > 0.0 && f < d { f } else { d })
+                .collect();
+            limits.push(0.0);
+            limits
+        });
+        let mut tile_limit_min = Vec::new();
+        if let Some(limits) = &limits {
+            tile_limit_min = vec![f32::INFINITY; tiles_x * tiles_y];
+            for (k, &l) in limits[..width * height].iter().enumerate() {
+                if l > 0.0 {
+                    let t = (k / width / TILE) * tiles_x + (k % width) / TILE;
+                    tile_limit_min[t] = tile_limit_min[t].min(l);
+                }
             }
         }
         Ok(Self {
@@ -149,6 +182,8 @@ impl<'a> Prepared<'a> {
             tile_full,
             tiles_x,
             color: frame.color.map(ColorImage::data),
+            limits,
+            tile_limit_min,
         })
     }
 
@@ -180,6 +215,23 @@ impl<'a> Prepared<'a> {
             if ty < 0.5 { top } else { bottom }
         };
         (depth, nearest)
+    }
+
+    /// The depth of the pixel whose centre is nearest image point `(u, v)` (inside
+    /// `[PIXEL_MARGIN, size − PIXEL_MARGIN)`) and its index: [`Self::sample`] when no cell is
+    /// interpolated ([`DepthLookup::Nearest`]), with one read.
+    #[inline(always)]
+    pub(super) fn sample_nearest(&self, u: f64, v: f64) -> (f64, usize) {
+        let k = ((v as usize) * self.width + u as usize).min(self.cells.len() - 2);
+        (f64::from(self.cells[k][0].abs()), k)
+    }
+
+    /// The depth beyond which pixel `k` marks no free space (`+∞` without front depths).
+    #[inline(always)]
+    pub(super) fn limit(&self, k: usize) -> f64 {
+        self.limits
+            .as_ref()
+            .map_or(f64::INFINITY, |l| f64::from(l[k]))
     }
 
     /// The depth of pixel `k` (0: none).
@@ -264,7 +316,12 @@ impl<'a> Prepared<'a> {
             return Visit::Skip;
         }
         // sdf ≥ (d_min − z_max) · factor ≥ trunc for every voxel: tsdf = 1.
-        if inside && range.all_valid && f64::from(range.min) - z_max >= trunc {
+        // ... and no voxel lies beyond a pixel's free-space limit.
+        if inside
+            && range.all_valid
+            && f64::from(range.min) - z_max >= trunc
+            && f64::from(range.limit_min) >= z_max
+        {
             return Visit::Free;
         }
         Visit::Voxels
@@ -277,6 +334,15 @@ impl<'a> Prepared<'a> {
             for cell in &self.cells[i * self.width + j0..=i * self.width + j1] {
                 let d = cell[0].abs();
                 range.add(d, d > 0.0);
+            }
+        }
+        if let Some(limits) = &self.limits {
+            for i in i0..=i1 {
+                for &l in &limits[i * self.width + j0..=i * self.width + j1] {
+                    if l > 0.0 {
+                        range.limit_min = range.limit_min.min(l);
+                    }
+                }
             }
         }
         range
@@ -292,6 +358,9 @@ impl<'a> Prepared<'a> {
                 range.max = range.max.max(self.tile_max[t]);
                 range.min = range.min.min(self.tile_min[t]);
                 range.all_valid &= self.tile_full[t];
+                if let Some(&l) = self.tile_limit_min.get(t) {
+                    range.limit_min = range.limit_min.min(l);
+                }
             }
         }
         range
@@ -323,12 +392,14 @@ pub(super) enum Visit {
 }
 
 /// Depths seen over some pixels: the largest (0 when none is valid), the smallest valid
-/// (`+∞` when none), and whether every pixel is valid.
+/// (`+∞` when none), whether every pixel is valid, and the smallest free-space limit (`+∞`
+/// when none or without limits).
 #[derive(Clone, Copy, Debug)]
 struct DepthRange {
     max: f32,
     min: f32,
     all_valid: bool,
+    limit_min: f32,
 }
 
 impl DepthRange {
@@ -336,6 +407,7 @@ impl DepthRange {
         max: 0.0,
         min: f32::INFINITY,
         all_valid: true,
+        limit_min: f32::INFINITY,
     };
 
     /// Adds a depth, valid or not (an invalid depth is 0 and only clears `all_valid`).

@@ -11,7 +11,7 @@ use trisplat_geometry::{Camera, TriMesh};
 use super::error::TsdfError;
 use super::frame::Frame;
 use super::image::{ColorImage, DepthImage};
-use super::params::TsdfParams;
+use super::params::{DepthLookup, TsdfParams};
 use super::volume::{DEFAULT_MAX_BLOCKS, TsdfVolume};
 
 /// Default truncation in voxels (2DGS: `sdf_trunc = 5 * voxel_size`).
@@ -50,6 +50,12 @@ pub struct TsdfOptions {
     /// Most voxel blocks of 8^3 (memory cap: about 4 KiB per block).
     #[cfg_attr(feature = "cli", arg(long = "max-blocks", default_value_t = DEFAULT_MAX_BLOCKS))]
     pub max_blocks: usize,
+    /// How a voxel reads the depth at its projection: bilinear between the four pixel centres
+    /// around it where they agree (else the nearest pixel), or nearest (Open3D's rule, which
+    /// stops improving once the voxel is below about a third of a pixel's footprint).
+    #[cfg_attr(feature = "cli", arg(long = "depth-lookup", value_enum, value_name = "RULE",
+        default_value_t = DepthLookup::default()))]
+    pub depth_lookup: DepthLookup,
 }
 
 impl Default for TsdfOptions {
@@ -60,6 +66,7 @@ impl Default for TsdfOptions {
             depth_trunc: None,
             keep_clusters: DEFAULT_KEEP_CLUSTERS,
             max_blocks: DEFAULT_MAX_BLOCKS,
+            depth_lookup: DepthLookup::default(),
         }
     }
 }
@@ -215,7 +222,9 @@ pub fn fuse(
             color: colors.map(|c| &c[i]),
         })
         .collect();
-    let mut volume = TsdfVolume::new(params, colors.is_some())?.with_max_blocks(options.max_blocks);
+    let mut volume = TsdfVolume::new(params, colors.is_some())?
+        .with_max_blocks(options.max_blocks)
+        .with_depth_lookup(options.depth_lookup);
     let seconds = volume.integrate_timed(&frames)?;
     Ok(finish(&volume, options, seconds))
 }
@@ -237,7 +246,9 @@ where
     L: Fn(usize) -> Result<(DepthImage, Option<ColorImage>), TsdfError> + Sync,
 {
     let params = options.resolve(cameras)?;
-    let mut volume = TsdfVolume::new(params, with_color)?.with_max_blocks(options.max_blocks);
+    let mut volume = TsdfVolume::new(params, with_color)?
+        .with_max_blocks(options.max_blocks)
+        .with_depth_lookup(options.depth_lookup);
     let seconds = volume.integrate_streamed(cameras, |i| {
         let (depth, color) = load(i)?;
         if with_color && color.is_none() {

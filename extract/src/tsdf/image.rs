@@ -27,6 +27,7 @@ pub struct DepthImage {
     height: u32,
     data: Vec<f32>,
     invalid: usize,
+    front: Option<Vec<f32>>,
 }
 
 impl DepthImage {
@@ -55,7 +56,38 @@ impl DepthImage {
             height,
             data,
             invalid,
+            front: None,
         })
+    }
+
+    /// This depth map with a front depth per pixel (row-major, same size): where the view
+    /// saw the first appreciable opacity along the pixel's ray, at or before the depth (for
+    /// rendered Gaussians, where the accumulated alpha first reaches a small value). Fusion
+    /// then marks free space only in front of it: a voxel between the front depth and the
+    /// surface is not updated by this view (docs/conventions.md §6). 0, NaN, negative or
+    /// infinite values mean none (the depth itself is the front).
+    ///
+    /// # Errors
+    /// [`TsdfError::ImageSize`] when `front.len() != width * height`.
+    pub fn with_front(mut self, mut front: Vec<f32>) -> Result<Self, TsdfError> {
+        if front.len() != self.data.len() {
+            return Err(TsdfError::ImageSize {
+                what: "front depth map".into(),
+                expected: (self.width, self.height),
+                found: format!("{} values", front.len()),
+            });
+        }
+        for f in &mut front {
+            *f = if f.is_finite() && *f > 0.0 { *f } else { 0.0 };
+        }
+        self.front = Some(front);
+        Ok(self)
+    }
+
+    /// The front depths of [`DepthImage::with_front`], if any (0 = none).
+    #[must_use]
+    pub fn front(&self) -> Option<&[f32]> {
+        self.front.as_deref()
     }
 
     /// Width in pixels.

@@ -4,7 +4,7 @@
 use glam::{DVec3, IVec3};
 
 use super::frame::{PIXEL_MARGIN, Prepared, Visit};
-use super::params::TsdfParams;
+use super::params::{DepthLookup, TsdfParams};
 use crate::block_grid::{BLOCK, BLOCK_VOXELS, local_coords};
 
 /// `RECIPROCALS[w] = 1 / (w + 1)`: the running average multiplies instead of dividing for
@@ -34,6 +34,7 @@ pub(super) fn integrate_block(
     origin: DVec3,
     frames: &[Prepared<'_>],
     params: TsdfParams,
+    lookup: DepthLookup,
 ) {
     let trunc = params.trunc;
     let inv_trunc = 1.0 / trunc;
@@ -51,20 +52,26 @@ pub(super) fn integrate_block(
         }
         let step = f.world_to_camera * DVec3::new(voxel, 0.0, 0.0);
         if block.color.is_none() {
+            let row = match (lookup, f.limits.is_some()) {
+                (DepthLookup::Nearest, false) => integrate_row::<true, false>,
+                (DepthLookup::Nearest, true) => integrate_row::<true, true>,
+                (DepthLookup::Bilinear, false) => integrate_row::<false, false>,
+                (DepthLookup::Bilinear, true) => integrate_row::<false, true>,
+            };
             for start in (0..BLOCK_VOXELS).step_by(ROW) {
                 let l = local_coords(start);
                 let p = origin + (base + l).as_dvec3() * voxel;
                 let q = f.world_to_camera * (p - f.center);
-                let row = start..start + ROW;
-                integrate_row(
+                let voxels = start..start + ROW;
+                row(
                     f,
                     q,
                     step,
                     trunc,
-                    (&mut block.value[row.clone()])
+                    (&mut block.value[voxels.clone()])
                         .try_into()
                         .expect("a block row"),
-                    (&mut block.weight[row]).try_into().expect("a block row"),
+                    (&mut block.weight[voxels]).try_into().expect("a block row"),
                 );
             }
             continue;
@@ -91,7 +98,10 @@ pub(super) fn integrate_block(
                 {
                     continue;
                 }
-                let (d, pixel) = f.sample(u, v);
+                let (d, pixel) = match lookup {
+                    DepthLookup::Nearest => f.sample_nearest(u, v),
+                    DepthLookup::Bilinear => f.sample(u, v),
+                };
                 if d <= 0.0 {
                     continue;
                 }
@@ -101,15 +111,11 @@ pub(super) fn integrate_block(
                 if dz <= -trunc {
                     continue;
                 }
-                let tsdf = if dz >= trunc {
-                    1.0
-                } else {
-                    let sdf = dz * ray_factor(q);
-                    if sdf <= -trunc {
-                        continue;
-                    }
-                    (sdf * inv_trunc).min(1.0)
-                };
+                let sdf = dz * ray_factor(q);
+                if sdf <= -trunc || (sdf >= trunc && q.z > f.limit(pixel)) {
+                    continue;
+                }
+                let tsdf = (sdf * inv_trunc).min(1.0);
                 let w0 = f64::from(block.weight[s]);
                 let w1 = w0 + 1.0;
                 let inv_w1 = RECIPROCALS.get(w0 as usize).copied().unwrap_or(1.0 / w1);
@@ -147,10 +153,11 @@ fn ray_factor(q: DVec3) -> f64 {
 
 /// Integrates one frame into one row of [`ROW`] voxels whose first voxel is at camera-space `q`
 /// and whose next ones follow by `step`: project the lanes without branches, read the depth
-/// of the lanes inside the image ([`Prepared::sample`]), then update the lanes that pass
-/// without branches. All in f64, as the plain rule.
+/// of the lanes inside the image ([`Prepared::sample`], or [`Prepared::sample_nearest`] when
+/// `NEAREST`), then update the lanes that pass without branches (with `LIMIT`, free space
+/// only in front of each pixel's [`Prepared::limit`]). All in f64, as the plain rule.
 #[inline]
-fn integrate_row(
+fn integrate_row<const NEAREST: bool, const LIMIT: bool>(
     f: &Prepared<'_>,
     q: DVec3,
     step: DVec3,
@@ -185,15 +192,26 @@ fn integrate_row(
     // Every lane reads (at indices clamped into the image, without branches); lanes outside
     // the image then select 0.
     let mut depth = [0.0f64; ROW];
+    let mut limit = [f64::INFINITY; ROW];
     for k in 0..ROW {
-        let d = f.sample(uv[k][0], uv[k][1]).0;
+        let (d, pixel) = if NEAREST {
+            f.sample_nearest(uv[k][0], uv[k][1])
+        } else {
+            f.sample(uv[k][0], uv[k][1])
+        };
         depth[k] = if inside[k] { d } else { 0.0 };
+        if LIMIT {
+            limit[k] = f.limit(pixel);
+        }
     }
     let inv_trunc = 1.0 / trunc;
     for k in 0..ROW {
         let d = depth[k];
         let sdf = (d - z[k]) * ray[k];
-        let ok = inside[k] & (d > 0.0) & (sdf > -trunc);
+        let mut ok = inside[k] & (d > 0.0) & (sdf > -trunc);
+        if LIMIT {
+            ok &= (sdf < trunc) | (z[k] <= limit[k]);
+        }
         let tsdf = (sdf * inv_trunc).min(1.0);
         let w0 = f64::from(weight[k]);
         let averaged = ((f64::from(value[k]) * w0 + tsdf) / (w0 + 1.0)) as f32;

@@ -59,5 +59,5 @@ pub use self::image::{
     ColorImage, DEFAULT_DEPTH_SCALE, DepthImage, find_image, read_color, read_color_dir,
     read_depth, read_depth_dir,
 };
-pub use self::params::TsdfParams;
+pub use self::params::{DepthLookup, TsdfParams};
 pub use self::volume::{DEFAULT_MAX_BLOCKS, STREAM_BUDGET_BYTES, TsdfVolume};

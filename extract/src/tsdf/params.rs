@@ -34,3 +34,29 @@ impl TsdfParams {
         Ok(())
     }
 }
+
+/// How a voxel reads the depth at its projection (`--depth-lookup`, docs/conventions.md §6).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum DepthLookup {
+    /// The pixel whose centre is nearest (Open3D's rule): a sloped surface becomes steps a
+    /// pixel wide, which sink convex shapes by part of a pixel footprint once the voxel is
+    /// below about a third of it.
+    Nearest,
+    /// Bilinear between the four pixel centres around the projection when all four are valid
+    /// and agree within [`super::MAX_CELL_SPREAD_PIXELS`] footprints (or the truncation), else
+    /// the nearest pixel. The default: the error keeps falling with the voxel.
+    #[default]
+    Bilinear,
+}
+
+impl DepthLookup {
+    /// The lookup's name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Nearest => "nearest",
+            Self::Bilinear => "bilinear",
+        }
+    }
+}

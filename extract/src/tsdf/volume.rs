@@ -11,7 +11,7 @@ use super::error::TsdfError;
 use super::frame::{Frame, Prepared};
 use super::image::{ColorImage, DepthImage};
 use super::integrate::{BlockData, integrate_block};
-use super::params::TsdfParams;
+use super::params::{DepthLookup, TsdfParams};
 use crate::block_grid::{BLOCK_VOXELS, BlockGrid};
 use crate::marching_cubes::marching_cubes;
 
@@ -64,6 +64,7 @@ pub struct TsdfVolume {
     grid: BlockGrid,
     params: TsdfParams,
     max_blocks: usize,
+    lookup: DepthLookup,
 }
 
 impl TsdfVolume {
@@ -78,6 +79,7 @@ impl TsdfVolume {
             grid: BlockGrid::new(params.voxel, DVec3::splat(0.5 * params.voxel), with_color),
             params,
             max_blocks: DEFAULT_MAX_BLOCKS,
+            lookup: DepthLookup::default(),
         })
     }
 
@@ -86,6 +88,20 @@ impl TsdfVolume {
     pub fn with_max_blocks(mut self, max_blocks: usize) -> Self {
         self.max_blocks = max_blocks;
         self
+    }
+
+    /// Sets how voxels read the depth (default [`DepthLookup::Bilinear`]; set it before
+    /// allocating: with [`DepthLookup::Nearest`] fewer blocks are needed).
+    #[must_use]
+    pub fn with_depth_lookup(mut self, lookup: DepthLookup) -> Self {
+        self.lookup = lookup;
+        self
+    }
+
+    /// How voxels read the depth.
+    #[must_use]
+    pub fn depth_lookup(&self) -> DepthLookup {
+        self.lookup
     }
 
     /// The parameters.
@@ -160,7 +176,7 @@ impl TsdfVolume {
 
     /// [`TsdfVolume::integrate_allocated`] on frames prepared by [`TsdfVolume::prepare`].
     fn integrate_prepared(&mut self, prepared: &[Prepared<'_>]) {
-        let params = self.params;
+        let (params, lookup) = (self.params, self.lookup);
         let grid = &mut self.grid;
         let (voxel, origin) = (grid.voxel, grid.origin);
         let keys = &grid.keys;
@@ -177,7 +193,7 @@ impl TsdfVolume {
                         weight,
                         color: Some(color),
                     };
-                    integrate_block(block, key, voxel, origin, prepared, params);
+                    integrate_block(block, key, voxel, origin, prepared, params, lookup);
                 }),
             None => grid
                 .value
@@ -190,7 +206,7 @@ impl TsdfVolume {
                         weight,
                         color: None,
                     };
-                    integrate_block(block, key, voxel, origin, prepared, params);
+                    integrate_block(block, key, voxel, origin, prepared, params, lookup);
                 }),
         }
     }
@@ -311,7 +327,7 @@ impl TsdfVolume {
                         camera: f.camera.name.clone(),
                     });
                 }
-                Prepared::new(f, self.params.depth_trunc, self.params.trunc)
+                Prepared::new(f, self.params.depth_trunc, self.params.trunc, self.lookup)
             })
             .collect();
         prepared.into_iter().collect()

@@ -19,6 +19,12 @@ pub const DEFAULT_FOV_DEG: f64 = 40.0;
 /// the Gaussians barely cover it (2DGS and GOF cut at 1/2).
 pub const RENDERED_ALPHA_MIN: f32 = 0.5;
 
+/// Accumulated alpha at which a view's free space ends (the default of `--tsdf-front-alpha`):
+/// a voxel between the depth where a pixel's alpha first reaches it and the pixel's median
+/// depth is not carved by that view (semi-transparent hair in front of the skull stays for
+/// the views that see it edge-on); 0 carves up to the median depth.
+pub const DEFAULT_FRONT_ALPHA: f32 = 0.0;
+
 /// Which depth of the rendered Gaussians TSDF fuses (`extract --tsdf-depth`, `tsdf
 /// --depth-kind`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -33,6 +39,9 @@ pub enum DepthKind {
     /// TSDF's Chamfer distance to the Gaussians' surface from 7.4 to 5.2 mm.
     #[default]
     Median,
+    /// The depth of the Gaussian at which the accumulated alpha first reaches
+    /// `--tsdf-front-alpha` (the outer edge of semi-transparent layers).
+    Front,
 }
 
 impl DepthKind {
@@ -42,6 +51,7 @@ impl DepthKind {
         match self {
             Self::Expected => "expected",
             Self::Median => "median",
+            Self::Front => "front",
         }
     }
 }
@@ -120,6 +130,12 @@ pub struct TsdfOptions {
     #[cfg_attr(feature = "cli", arg(id = "tsdf_alpha_cut", long = "tsdf-alpha-cut",
         value_name = "A", default_value_t = RENDERED_ALPHA_MIN))]
     pub alpha_cut: f32,
+    /// TSDF: a view marks free space only in front of the depth where a pixel's accumulated
+    /// alpha first reaches A (0 <= A < 1; 0: up to the fused depth), so that semi-transparent
+    /// layers (fuzzy hair) that a view sees through are not carved by it.
+    #[cfg_attr(feature = "cli", arg(id = "tsdf_front_alpha", long = "tsdf-front-alpha",
+        value_name = "A", default_value_t = DEFAULT_FRONT_ALPHA))]
+    pub front_alpha: f32,
 }
 
 impl Default for TsdfOptions {
@@ -132,6 +148,7 @@ impl Default for TsdfOptions {
             splat_depth: SplatDepthRule::default(),
             colors: false,
             alpha_cut: RENDERED_ALPHA_MIN,
+            front_alpha: DEFAULT_FRONT_ALPHA,
         }
     }
 }

@@ -113,6 +113,7 @@ struct Band<'a> {
     alpha: Option<&'a mut [f32]>,
     depth: Option<&'a mut [f32]>,
     median: Option<&'a mut [f32]>,
+    front: Option<&'a mut [f32]>,
     normal: Option<&'a mut [f32]>,
 }
 
@@ -150,13 +151,47 @@ pub fn rasterize<K: SplatKernel>(
 pub fn rasterize_with_contribution<K: SplatKernel>(
     screen: &ScreenSplats,
     kernel: &K,
-    (width, height): (u32, u32),
+    size: (u32, u32),
     rules: &CompositeRules,
     outputs: Outputs,
     background: [f32; 3],
     contribution: bool,
     stats: &mut RenderStats,
 ) -> (RenderImages, Option<Vec<f32>>) {
+    let extra = Extra {
+        contribution,
+        front_alpha: None,
+    };
+    rasterize_extra(
+        screen, kernel, size, rules, outputs, background, extra, stats,
+    )
+}
+
+/// What [`rasterize_extra`] computes besides the images of `outputs`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Extra {
+    /// Each screen splat's largest blending weight (as [`rasterize_with_contribution`]).
+    pub(super) contribution: bool,
+    /// [`RenderImages::front_depth`] at this accumulated alpha (in (0, 1)).
+    pub(super) front_alpha: Option<f32>,
+}
+
+/// [`rasterize_with_contribution`], and with `extra.front_alpha` the front depth.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn rasterize_extra<K: SplatKernel>(
+    screen: &ScreenSplats,
+    kernel: &K,
+    (width, height): (u32, u32),
+    rules: &CompositeRules,
+    outputs: Outputs,
+    background: [f32; 3],
+    extra: Extra,
+    stats: &mut RenderStats,
+) -> (RenderImages, Option<Vec<f32>>) {
+    let Extra {
+        contribution,
+        front_alpha,
+    } = extra;
     let start = std::time::Instant::now();
     // One global depth sort; the per-splat data the tile loop reads is gathered into that
     // order so each tile walks memory forwards.
@@ -206,6 +241,9 @@ pub fn rasterize_with_contribution<K: SplatKernel>(
 
     let start = std::time::Instant::now();
     let mut images = RenderImages::new(width, height, outputs);
+    if front_alpha.is_some() {
+        images.front_depth = Some(vec![0.0; width as usize * height as usize]);
+    }
     let w = width as usize;
     let band_px = TILE_SIZE as usize * w;
     let n = bins.tiles_y as usize;
@@ -213,18 +251,21 @@ pub fn rasterize_with_contribution<K: SplatKernel>(
     let alpha = split_bands(&mut images.alpha, band_px, n);
     let depth = split_bands(&mut images.depth, band_px, n);
     let median = split_bands(&mut images.median_depth, band_px, n);
+    let front = split_bands(&mut images.front_depth, band_px, n);
     let normal = split_bands(&mut images.normal, 3 * band_px, n);
     let bands: Vec<Band<'_>> = rgb
         .into_iter()
         .zip(alpha)
         .zip(depth)
         .zip(median)
+        .zip(front)
         .zip(normal)
-        .map(|((((rgb, alpha), depth), median), normal)| Band {
+        .map(|(((((rgb, alpha), depth), median), front), normal)| Band {
             rgb,
             alpha,
             depth,
             median,
+            front,
             normal,
         })
         .collect();
@@ -242,6 +283,7 @@ pub fn rasterize_with_contribution<K: SplatKernel>(
         kernel_index,
         rules,
         outputs,
+        front_alpha,
         background,
         width,
         height,
@@ -303,6 +345,8 @@ struct TileContext<'a, K> {
     kernel_index: Option<&'a [u32]>,
     rules: &'a CompositeRules,
     outputs: Outputs,
+    /// The alpha of the front depth, when it is asked for.
+    front_alpha: Option<f32>,
     background: [f32; 3],
     width: u32,
     height: u32,
@@ -317,6 +361,8 @@ struct TileState {
     rgb: [[f32; TILE_PIXELS]; 3],
     depth: [f32; TILE_PIXELS],
     median: [f32; TILE_PIXELS],
+    /// Depth where the accumulated alpha first reaches the front alpha (0: not yet).
+    front: [f32; TILE_PIXELS],
     normal: [[f32; TILE_PIXELS]; 3],
 }
 
@@ -328,6 +374,7 @@ impl Default for TileState {
             rgb: [[0.0; TILE_PIXELS]; 3],
             depth: [0.0; TILE_PIXELS],
             median: [0.0; TILE_PIXELS],
+            front: [0.0; TILE_PIXELS],
             normal: [[0.0; TILE_PIXELS]; 3],
         }
     }
@@ -348,6 +395,9 @@ struct RowRules {
     /// A pixel stops when `next_T < stop_below` (the `<=` rule uses the next float up).
     stop_below: f32,
     median: MedianRule,
+    /// The front depth is taken where the transmittance first drops to this or below (−1:
+    /// never, when it is not asked for).
+    front_t: f32,
 }
 
 /// Pixels evaluated together: rows are processed in groups of this many pixels (the width of
@@ -400,6 +450,10 @@ fn composite_chunk<const EXTRA: bool>(
         };
         let med = &mut s.median[range.clone()];
         Vec4::select(take, depth, Vec4::from_slice(med)).write_to_slice(med);
+        let front_t = Vec4::splat(r.front_t);
+        let take = accept & t.cmpgt(front_t) & next_t.cmple(front_t);
+        let front = &mut s.front[range.clone()];
+        Vec4::select(take, depth, Vec4::from_slice(front)).write_to_slice(front);
         for c in 0..3 {
             let acc = &mut s.normal[c][range.clone()];
             (Vec4::from_slice(acc) + w * g.normal[c]).write_to_slice(acc);
@@ -434,9 +488,10 @@ impl<K: SplatKernel> TileContext<'_, K> {
         }
         s.depth.fill(0.0);
         let o = self.outputs;
-        let extra = o.median_depth || o.normal;
+        let extra = o.median_depth || o.normal || self.front_alpha.is_some();
         if extra {
             s.median.fill(0.0);
+            s.front.fill(0.0);
             for c in &mut s.normal {
                 c.fill(0.0);
             }
@@ -451,6 +506,7 @@ impl<K: SplatKernel> TileContext<'_, K> {
                 r.stop_transmittance
             },
             median: r.median,
+            front_t: self.front_alpha.map_or(-1.0, |a| 1.0 - a),
         };
         let mut remaining = tw * th;
         let off = r.pixel_offset;
@@ -563,6 +619,9 @@ impl<K: SplatKernel> TileContext<'_, K> {
                 }
                 if let Some(median) = band.median.as_deref_mut() {
                     median[q] = s.median[p];
+                }
+                if let Some(front) = band.front.as_deref_mut() {
+                    front[q] = s.front[p];
                 }
                 if let Some(normal) = band.normal.as_deref_mut() {
                     for c in 0..3 {

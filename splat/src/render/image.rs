@@ -31,6 +31,10 @@ pub struct RenderImages {
     pub depth: Option<Vec<f32>>,
     /// `[H, W]` median z-depth (0 where there is none).
     pub median_depth: Option<Vec<f32>>,
+    /// `[H, W]` front z-depth: that of the splat at which the accumulated alpha first reaches
+    /// the front alpha asked of [`super::render_front`] (0 where it never does); not written
+    /// to files.
+    pub front_depth: Option<Vec<f32>>,
     /// `[H, W, 3]` composited normals.
     pub normal: Option<Vec<f32>>,
 }
@@ -49,6 +53,7 @@ impl RenderImages {
             alpha: make(outputs.alpha, 1),
             depth: make(outputs.depth, 1),
             median_depth: make(outputs.median_depth, 1),
+            front_depth: None,
             normal: make(outputs.normal, 3),
         }
     }
@@ -73,6 +78,7 @@ impl RenderImages {
             &self.alpha,
             &self.depth,
             &self.median_depth,
+            &self.front_depth,
             &self.normal,
         ]
         .into_iter()

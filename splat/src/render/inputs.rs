@@ -27,6 +27,9 @@ pub enum RenderError {
         /// Far plane.
         far: f32,
     },
+    /// The front alpha of [`super::render_front`] is not in (0, 1).
+    #[error("front alpha {0} must lie in (0, 1)")]
+    BadFrontAlpha(f32),
     /// The background colour is not finite.
     #[error("background colour {0:?} is not finite")]
     BadBackground([f32; 3]),

@@ -55,7 +55,7 @@ pub use project::{
     EPS_2D, EwaKernel, EwaSplat, FRUSTUM_MARGIN, GSPLAT_EXTENT, ORIGINAL_EXTENT, exp_f32, exp_neg4,
     project_ewa,
 };
-pub use run::{RenderOutput, render};
+pub use run::{RenderOutput, render, render_front};
 pub use screen::{Sample, ScreenEntry, ScreenSplats, SplatKernel};
 pub use surfel::{
     FILTER_INV_SQUARE, FILTER_SIZE, ProjectedSurfel, SURFEL_EXTENT, SURFEL_NEAR, SURFEL_RULES,

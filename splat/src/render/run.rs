@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use trisplat_geometry::Camera;
 
-use super::composite::{CompositeRules, RenderStats, rasterize_with_contribution};
+use super::composite::{CompositeRules, Extra, RenderStats, rasterize_extra};
 use super::image::RenderImages;
 use super::inputs::{RenderError, check_inputs};
 use super::options::{RenderMode, RenderOptions, Rules};
@@ -37,12 +37,43 @@ pub fn render(
     camera: &Camera,
     options: &RenderOptions,
 ) -> Result<RenderOutput, RenderError> {
+    render_with(set, camera, options, None)
+}
+
+/// [`render`], and the front depth ([`super::RenderImages::front_depth`]): per pixel, the
+/// z-depth of the splat at which the accumulated alpha first reaches `front_alpha` (0 where
+/// it never does), by the same rules as the median depth (which is this at ½). Where a ray
+/// crosses semi-transparent splats before its median depth (fuzzy hair in front of a skull),
+/// the front depth says where they begin.
+///
+/// # Errors
+/// As [`render`], and [`RenderError::BadFrontAlpha`] when `front_alpha` is not in (0, 1).
+pub fn render_front(
+    set: &GaussianSet,
+    camera: &Camera,
+    options: &RenderOptions,
+    front_alpha: f32,
+) -> Result<RenderOutput, RenderError> {
+    if !(front_alpha > 0.0 && front_alpha < 1.0) {
+        return Err(RenderError::BadFrontAlpha(front_alpha));
+    }
+    render_with(set, camera, options, Some(front_alpha))
+}
+
+/// [`render`] with the front depth at `front_alpha` when given.
+fn render_with(
+    set: &GaussianSet,
+    camera: &Camera,
+    options: &RenderOptions,
+    front_alpha: Option<f32>,
+) -> Result<RenderOutput, RenderError> {
     check_inputs(set, camera, options)?;
     let run = Run {
         n: set.len(),
         start: Instant::now(),
         size: (camera.width, camera.height),
         options,
+        front_alpha,
     };
     match options.mode {
         RenderMode::Gaussian3d => {
@@ -78,6 +109,7 @@ struct Run<'a> {
     /// Image width and height.
     size: (u32, u32),
     options: &'a RenderOptions,
+    front_alpha: Option<f32>,
 }
 
 /// The shared sort and composite stages after a mode's projection.
@@ -92,19 +124,24 @@ fn finish<K: SplatKernel>(
         start,
         size,
         options,
+        front_alpha,
     } = *run;
     let mut stats = RenderStats {
         project_s: start.elapsed().as_secs_f64(),
         ..RenderStats::default()
     };
-    let (images, by_screen) = rasterize_with_contribution(
+    let extra = Extra {
+        contribution: options.contribution,
+        front_alpha,
+    };
+    let (images, by_screen) = rasterize_extra(
         screen,
         kernel,
         size,
         rules,
         options.outputs,
         options.background,
-        options.contribution,
+        extra,
         &mut stats,
     );
     let contribution = by_screen.map(|by_screen| {

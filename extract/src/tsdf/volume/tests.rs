@@ -559,3 +559,51 @@ fn error_falls_with_the_voxel_below_the_pixel_footprint() {
     let (finest, bias) = errors[2];
     assert!(bias.abs() < 0.5 * finest + 1e-5, "{errors:?}");
 }
+
+/// A view with front depths marks free space only in front of them: a voxel between a
+/// pixel's front depth and its depth keeps what other views said (here nothing), while
+/// without front depths the same view carves it (the free-space block path and the voxel
+/// path both, since the block lies wholly in front of the surface).
+#[test]
+fn front_depths_end_the_free_space() {
+    let cam = Camera::look_at("c", DVec3::ZERO, DVec3::Z, DVec3::NEG_Y, (16, 16), 40.0).unwrap();
+    let plane = |z: f32| DepthImage::try_new(16, 16, vec![z; 256]).unwrap();
+    let (near, far) = (plane(0.75), plane(1.0));
+    let fronted = plane(1.0).with_front(vec![0.5; 256]).unwrap();
+    fn frame<'a>(camera: &'a Camera, depth: &'a DepthImage) -> Frame<'a> {
+        Frame {
+            camera,
+            depth,
+            color: None,
+        }
+    }
+    // The voxel on the axis at z = 0.75 and one near the surface at z = 0.99.
+    let (between, surface) = (IVec3::new(0, 0, 37), IVec3::new(0, 0, 49));
+    let run = |depth: &DepthImage, lookup| {
+        let mut volume = TsdfVolume::new(params(), false)
+            .unwrap()
+            .with_depth_lookup(lookup);
+        volume
+            .allocate(&[frame(&cam, &near), frame(&cam, &far)])
+            .unwrap();
+        volume.integrate_allocated(&[frame(&cam, depth)]).unwrap();
+        let grid = volume.grid();
+        (
+            grid.voxel_value(between).unwrap(),
+            grid.voxel_value(surface).unwrap(),
+        )
+    };
+    for lookup in [DepthLookup::Bilinear, DepthLookup::Nearest] {
+        let (carved, plain_surface) = run(&far, lookup);
+        assert_eq!(carved, (1.0, 1.0), "{lookup:?}");
+        let (kept, surface) = run(&fronted, lookup);
+        assert_eq!(kept.1, 0.0, "{lookup:?}: the view says nothing between");
+        assert_eq!(
+            surface, plain_surface,
+            "{lookup:?}: the surface is the same"
+        );
+        assert_eq!(surface.1, 1.0);
+    }
+    // Front depths of the wrong size are refused.
+    assert!(plane(1.0).with_front(vec![0.5; 255]).is_err());
+}
