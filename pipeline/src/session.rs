@@ -61,6 +61,7 @@ use crate::topology::{Carrier, CarryContext, mean_edge};
 use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
+mod keys;
 mod rig_inputs;
 
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).
