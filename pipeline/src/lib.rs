@@ -86,6 +86,7 @@ pub mod records;
 pub mod refine;
 pub mod report;
 
+mod carried_frames;
 mod carry;
 mod deform;
 mod error;

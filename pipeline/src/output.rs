@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 use trisplat_geometry::io::{
-    FrameFiles, GLB_PART_LIMIT, GltfCompression, SequenceLayout, SequenceOptions,
+    FrameFiles, FrameSource, GLB_PART_LIMIT, GltfCompression, SequenceLayout, SequenceOptions,
     write_sequence_parts_with, write_usd_sequence,
 };
 
@@ -79,8 +79,25 @@ impl Created {
 }
 
 /// The per-frame mesh files of each method, in frame order: the animated glTF is assembled
-/// from them at the end, one frame at a time (no frame's mesh stays in memory).
+/// from them at the end, one frame at a time (no frame's mesh stays in memory), unless the
+/// run carries its meshes (module `carried_frames`).
 pub type FrameFilesByMethod = BTreeMap<Method, Vec<PathBuf>>;
+
+/// Each method's frames for the glTF and USD cache, handed over one at a time: read from its
+/// frame files, or placed again from the run's carried keys (module `carried_frames`).
+pub type SequenceSources<'a> = BTreeMap<Method, Box<dyn FrameSource + Sync + 'a>>;
+
+/// The frames of `files`, read from the files.
+#[must_use]
+pub fn file_sources(files: &FrameFilesByMethod) -> SequenceSources<'_> {
+    files
+        .iter()
+        .map(|(m, f)| {
+            let source: Box<dyn FrameSource + Sync> = Box::new(FrameFiles(f));
+            (*m, source)
+        })
+        .collect()
+}
 
 /// The frame files in `out` of every frame `report` lists, per method.
 #[must_use]
@@ -255,14 +272,14 @@ pub fn check_outputs(
 pub fn write_outputs(
     out: &Path,
     report: &mut Report,
-    frame_files: &FrameFilesByMethod,
+    frames: &SequenceSources<'_>,
     targets: &[OutputTarget],
     compression: GltfCompression,
 ) -> Result<(), PipelineError> {
     if targets.contains(&OutputTarget::Glb) {
         // One method per task: reading the frame files back is most of the work.
         let written: Vec<(Method, Vec<PathBuf>)> =
-            first_error_in_order(frame_files.par_iter().map(|(m, files)| {
+            first_error_in_order(frames.par_iter().map(|(m, source)| {
                 let glb = out.join(format!("{}.glb", m.name()));
                 let options = SequenceOptions {
                     layout: SequenceLayout::Auto,
@@ -270,7 +287,7 @@ pub fn write_outputs(
                 };
                 write_sequence_parts_with(
                     &glb,
-                    &FrameFiles(files),
+                    &**source,
                     &report.frame_times,
                     &options,
                     GLB_PART_LIMIT,
@@ -290,9 +307,9 @@ pub fn write_outputs(
     }
     if targets.contains(&OutputTarget::Usd) {
         // One method at a time: the writer formats each frame's points in parallel.
-        for (m, files) in frame_files {
+        for (m, source) in frames {
             let usda = out.join(format!("{}.usda", m.name()));
-            write_usd_sequence(&usda, &FrameFiles(files), &report.frame_times)?;
+            write_usd_sequence(&usda, &**source, &report.frame_times)?;
         }
     }
     if targets.contains(&OutputTarget::Report) {

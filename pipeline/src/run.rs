@@ -3,7 +3,7 @@
 //! loop emits [`Event`]s; the report is assembled from them ([`ReportBuilder`]) and written
 //! with the animated glTFs at the end (module `output`).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 use rayon::prelude::*;
@@ -11,15 +11,16 @@ use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_geometry::metrics::Tau;
 use trisplat_splat::Axes;
 
-use crate::config::{ExtractConfig, Method, OutputTarget, RunControl};
+use crate::carried_frames::{CarriedFrames, TemplateSpool, carries_frames, writes_frame_files};
+use crate::config::{ExtractConfig, ExtractOptions, Method, OutputTarget, RunControl};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::event::Event;
 use crate::journal::{Journal, Previous};
 use crate::lock::FolderLock;
 use crate::metrics::GtSamples;
 use crate::output::{
-    check_outputs, frame_file, frame_files, refuse_used_output, remove_frame_files,
-    remove_stale_temporaries, rig_file, thumbnails_of, write_outputs,
+    SequenceSources, check_outputs, file_sources, frame_file, frame_files, refuse_used_output,
+    remove_frame_files, remove_stale_temporaries, rig_file, thumbnails_of, write_outputs,
 };
 use crate::records::{DelaunayFrame, FailedFrame, FrameEntry, FrameRecord};
 use crate::report::thumbnail::{self, Colouring, Picture};
@@ -84,8 +85,13 @@ pub fn run(
         )));
     }
     emit(session.started(config, total));
-    // The frame files: asked for, or the glTF or USD cache is assembled from them.
-    let frame_files_wanted = o.outputs.writes_frame_files();
+    // The frame files: asked for, or the glTF or USD cache is assembled from them (unless
+    // they are made from the carried frames, module `carried_frames`).
+    let frame_files_wanted = writes_frame_files(o);
+    let carried = carries_frames(o);
+    if carried {
+        session.keep_keys();
+    }
     // report.html shows the meshes of the middle frame.
     let thumbnail_frame = frames.start + frames.len().saturating_sub(1) / 2;
     let extras = |f: usize| FrameExtras {
@@ -167,18 +173,73 @@ pub fn run(
         write_rigs(&mut session, out, &methods, frames, &mut report)?;
     }
     let frame_files = frame_files(out, &report);
-    write_outputs(
-        out,
-        &mut report,
-        &frame_files,
-        &o.outputs.targets,
-        o.outputs.gltf_compression,
-    )?;
-    if o.outputs.writes_frame_files() && !o.outputs.writes(OutputTarget::Meshes) {
+    if carried {
+        write_carried_outputs(&mut session, out, &mut report, o)?;
+    } else {
+        let sources = file_sources(&frame_files);
+        write_outputs(
+            out,
+            &mut report,
+            &sources,
+            &o.outputs.targets,
+            o.outputs.gltf_compression,
+        )?;
+    }
+    if frame_files_wanted && !o.outputs.writes(OutputTarget::Meshes) {
         // Written only to assemble the glTF or the USD cache.
         remove_frame_files(&frame_files);
     }
     Ok(report)
+}
+
+/// The outputs (module `output`) with each method's glTF and USD cache made from its carried
+/// frames (module `carried_frames`): the keys the run did not meet met again, the template's
+/// positions of every frame spooled, each frame placed again as the writers ask.
+fn write_carried_outputs(
+    session: &mut Session,
+    out: &Path,
+    report: &mut Report,
+    o: &ExtractOptions,
+) -> Result<(), PipelineError> {
+    let frames: BTreeSet<usize> = report
+        .methods
+        .values()
+        .flat_map(|m| m.frames.iter().map(|r| r.frame))
+        .collect();
+    if let Some(&last) = frames.last() {
+        session.see_frames_before(last + 1);
+    }
+    let spool = TemplateSpool::write(out, frames.iter().copied(), |f| session.positions(f))?;
+    let session = &*session;
+    let mut sources: SequenceSources<'_> = BTreeMap::new();
+    for m in report.methods.values() {
+        let keyed: Option<Vec<(usize, usize)>> = m
+            .frames
+            .iter()
+            .map(|r| r.topology.map(|t| (r.frame, t.key)))
+            .collect();
+        let (Some(keyed), Some(keys)) = (keyed, session.kept_keys(m.method)) else {
+            return Err(PipelineError::Internal {
+                what: "a carried method's frames have keys, and its carrier kept them",
+            });
+        };
+        let frames = CarriedFrames::new(
+            keyed,
+            keys,
+            &spool,
+            session.welded().mesh.triangles(),
+            session.origin(),
+            out.join(&m.ply_dir),
+        );
+        sources.insert(m.method, Box::new(frames));
+    }
+    write_outputs(
+        out,
+        report,
+        &sources,
+        &o.outputs.targets,
+        o.outputs.gltf_compression,
+    )
 }
 
 /// Each method's `<method>_rig.glb` over the run's frames (module `rig_output`), its record

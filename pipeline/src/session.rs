@@ -62,6 +62,7 @@ use crate::visibility::{Pose, VISIBILITY_FRAMES, Visibility, decide};
 use trisplat_geometry::metrics::Tau;
 
 mod ground_truth;
+mod keys;
 mod rig_inputs;
 
 /// What a session needs beyond [`ExtractConfig`] (`trisplat deform`'s options).

@@ -6,7 +6,9 @@
 //! elsewhere (a shard, `--frames`, `--resume`) first replays the frames before its own
 //! ([`Carrier::history`]), meshing only at keys, so any split gives the same meshes.
 
+use std::collections::BTreeMap;
 use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
@@ -42,11 +44,13 @@ pub struct CarryContext<'a> {
 pub struct Carrier {
     topology: Topology,
     /// The current key frame and its mesh bound to the template.
-    key: Option<(usize, Box<CarriedMesh>)>,
+    key: Option<(usize, Arc<CarriedMesh>)>,
     /// The frame this carrier saw last.
     last: Option<usize>,
     /// The track's first key (frame 0's mesh) bound, kept for the rig (module `rig`).
-    first: Option<Box<CarriedMesh>>,
+    first: Option<Arc<CarriedMesh>>,
+    /// Every key made since [`Carrier::keep_keys`], by key frame (`None`: not kept).
+    kept: Option<BTreeMap<usize, Arc<CarriedMesh>>>,
 }
 
 impl Carrier {
@@ -58,7 +62,29 @@ impl Carrier {
             key: None,
             last: None,
             first: None,
+            kept: None,
         }
+    }
+
+    /// Keeps every key this carrier makes from now on (replaying or not), so that a carried
+    /// frame can be placed again later (module `carried_frames`).
+    pub fn keep_keys(&mut self) {
+        self.kept.get_or_insert_with(BTreeMap::new);
+    }
+
+    /// The keys kept since [`Carrier::keep_keys`], by key frame.
+    #[must_use]
+    pub fn kept_keys(&self) -> Option<&BTreeMap<usize, Arc<CarriedMesh>>> {
+        self.kept.as_ref()
+    }
+
+    /// `carried` becomes the key of `frame` (and is kept when keys are).
+    fn set_key(&mut self, frame: usize, carried: CarriedMesh) {
+        let carried = Arc::new(carried);
+        if let Some(kept) = &mut self.kept {
+            kept.insert(frame, Arc::clone(&carried));
+        }
+        self.key = Some((frame, carried));
     }
 
     /// The track's first key mesh bound to the template, once this carrier has made it.
@@ -119,8 +145,8 @@ impl Carrier {
                 stretched: 0.0,
                 farthest: Some(carried.farthest()),
             };
-            self.first = Some(Box::new(carried.clone()));
-            self.key = Some((frame, Box::new(carried)));
+            self.set_key(frame, carried);
+            self.first = self.key.as_ref().map(|(_, k)| Arc::clone(k));
             return Ok(Some((output, Some(record))));
         };
         let key = *key;
@@ -141,7 +167,7 @@ impl Carrier {
                 farthest: Some(carried.farthest()),
                 ..record(frame, drift)
             };
-            self.key = Some((frame, Box::new(carried)));
+            self.set_key(frame, carried);
             return Ok(Some((output, Some(record))));
         }
         if replay {

@@ -24,7 +24,8 @@ use crate::config::OutputTarget;
 use crate::error::PipelineError;
 use crate::lock::FolderLock;
 use crate::output::{
-    FrameFilesByMethod, frame_file, refuse_used_output, remove_frame_files, write_outputs,
+    FrameFilesByMethod, file_sources, frame_file, refuse_used_output, remove_frame_files,
+    write_outputs,
 };
 mod checks;
 
@@ -153,7 +154,7 @@ pub fn merge_with(
     write_outputs(
         out,
         &mut merged,
-        &frame_files,
+        &file_sources(&frame_files),
         &outputs.targets,
         outputs.gltf_compression,
     )?;

@@ -36,8 +36,9 @@
 //! stream the bytes into the `.glb`, so it holds only the first frame, the previous frame's
 //! triangles and the frame at hand, whatever the length of the sequence (`.gltf` holds its
 //! base64 buffer in memory). Both readings must agree (a frame file changed in between is an
-//! error). The main job writes its per-frame PLY files first and assembles each method's
-//! `.glb` from them this way.
+//! error). The main job assembles each method's `.glb` this way from its per-frame PLY
+//! files, or, for a carried mesh, from a source that places each frame again from its key
+//! (`pipeline`'s `carried_frames`), so no frame file is read.
 //!
 //! Both layouts put everything in one animation named `sequence` whose duration is the last
 //! frame time; a one-frame sequence gets a single-key scale channel so that every file has
