@@ -1,7 +1,8 @@
 //! `trisplat fit --appearance brdf`: a short material fit of Spot under the CC0 fixture map
 //! writes a PLY with materials in range and raises the held-out PSNR; a missing `--env`, `--env`
 //! with another appearance, an SH-only option and a file that is not a Radiance map are refused
-//! with nothing written.
+//! with nothing written; `--env-fit` writes the estimated map beside the PLY and refuses a
+//! bad width.
 
 mod common;
 use common::{fixture, fresh_dir, listing, run, run_ok, s};
@@ -108,4 +109,54 @@ fn fit_brdf_writes_materials_and_refuses_bad_input() {
     assert_eq!(m.albedo.len(), set.len());
     assert!(m.first_out_of_range().is_none());
     assert!(set.binding().is_some());
+    // --env-fit: an odd or too wide map, or another appearance, refused with nothing written.
+    let listed = listing(&dir);
+    for (extra, what) in [
+        (
+            &["--appearance", "brdf", "--env-fit", "--env-fit-width", "7"][..],
+            "--env-fit-width",
+        ),
+        (
+            &[
+                "--appearance",
+                "brdf",
+                "--env-fit",
+                "--env-fit-width",
+                "256",
+            ][..],
+            "--env-fit-width",
+        ),
+        (&["--env-fit"][..], "--env-fit"),
+    ] {
+        let r = fit(extra);
+        let stderr = String::from_utf8_lossy(&r.stderr).to_string();
+        assert_eq!(r.status.code(), Some(2), "{extra:?}: {stderr}");
+        assert!(stderr.contains(what), "{stderr}");
+        assert_eq!(listing(&dir), listed);
+    }
+    // The environment estimated from a grey start, written beside the PLY.
+    let done = fit(&[
+        "--appearance",
+        "brdf",
+        "--env-fit",
+        "--env-fit-width",
+        "16",
+        "--json",
+    ]);
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let v: Value = serde_json::from_slice(&done.stdout).unwrap();
+    let map_path = dir.join("fitted.env.hdr");
+    assert_eq!(v["env_fit"].as_str(), Some(s(&map_path)));
+    let map = trisplat_geometry::envmap::EnvMap::read(&map_path).unwrap();
+    assert_eq!((map.width(), map.height()), (16, 8));
+    assert!(
+        map.texels()
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && *v > 0.0)
+    );
 }

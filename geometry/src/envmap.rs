@@ -126,6 +126,14 @@ impl EnvMap {
         })
     }
 
+    /// Writes the map as a Radiance `.hdr` file ([`crate::io::hdr::write_hdr`], atomic).
+    ///
+    /// # Errors
+    /// [`IoError`] naming the file when the write fails.
+    pub fn write(&self, path: &Path) -> Result<(), IoError> {
+        crate::io::hdr::write_hdr(path, self.width, self.height, &self.texels)
+    }
+
     /// Width in texels.
     #[must_use]
     pub fn width(&self) -> u32 {

@@ -29,6 +29,7 @@ use trisplat_geometry::{TriId, TriMesh};
 
 use crate::frames::{
     CanonicalTriangle, FrameOptions, corners_of, gaussian_avatars_frame, is_degenerate,
+    transform_normal,
 };
 use crate::gaussians::{
     GaussianParts, GaussianSet, ParameterSpace, ScaleDims, normalize_wxyz, quat_from_rotation,
@@ -650,6 +651,90 @@ impl Deformer {
         }
     }
 
+    /// Each Gaussian's shading normal with the template at `positions` (unit, not turned to
+    /// any camera; docs/conventions.md §5 "Relighting"): its shortest local axis `e_k` (`k` the
+    /// smallest local log-scale, the first on ties; a surfel's flat third axis) carried to the
+    /// world, `R_local` the normalised local rotation:
+    ///
+    /// - [`DeformMode::Binding`]: `R_f R_local e_k`, the shortest axis of the deformed Gaussian
+    ///   (the frame is a rotation times a uniform scale);
+    /// - [`DeformMode::Jacobian`]: `normalize(J⁻ᵀ R_c R_local e_k)` ([`transform_normal`] of
+    ///   `M = J k_c R_c`, whose inverse transpose differs from `J⁻ᵀ R_c` by the positive factor
+    ///   `1 / k_c`): the normal of the Gaussian's tangent plane carried by `J`. The shortest axis
+    ///   of the deformed covariance `J Σ Jᵀ` tends to it only as the Gaussian gets flat (it is
+    ///   it for a surfel); `J n` is neither. Where `M` is so singular that `cof(M) n` vanishes,
+    ///   the deformed covariance's shortest axis is taken.
+    ///
+    /// Triangles are taken as they are at `positions` (no [`FrameHold`]).
+    ///
+    /// # Errors
+    /// As [`Deformer::deform`].
+    pub fn shading_normals(
+        &self,
+        set: &GaussianSet,
+        positions: &[DVec3],
+    ) -> Result<Vec<Vec3>, DeformError> {
+        self.check(set)?;
+        self.check_positions(positions)?;
+        let binding = set.binding().map_or(&[][..], |b| b.triangles.as_slice());
+        let flat = set.scale_dims() == ScaleDims::Two;
+        let local_axis = |i: usize| -> DVec3 {
+            let [w, x, y, z] = set.rotations()[i];
+            let q = normalize_wxyz([w, x, y, z]).unwrap_or(DQuat::IDENTITY);
+            let r = DMat3::from_quat(q);
+            let s = set.log_scales()[i];
+            if flat {
+                r.z_axis
+            } else if s.x <= s.y && s.x <= s.z {
+                r.x_axis
+            } else if s.y <= s.z {
+                r.y_axis
+            } else {
+                r.z_axis
+            }
+        };
+        let normals: Vec<Vec3> = match self.mode {
+            DeformMode::Binding => {
+                let tris = self.binding_triangles(positions);
+                (0..set.len())
+                    .into_par_iter()
+                    .with_min_len(CHUNK)
+                    .map(|i| {
+                        let t = &tris[binding[i].index()];
+                        (t.rotation.as_dquat() * local_axis(i)).as_vec3()
+                    })
+                    .collect()
+            }
+            DeformMode::Jacobian => {
+                let tris = self.jacobian_triangles(positions);
+                (0..set.len())
+                    .into_par_iter()
+                    .with_min_len(CHUNK)
+                    .map(|i| {
+                        let m = tris[binding[i].index()].m;
+                        transform_normal(m, local_axis(i)).map_or_else(
+                            || {
+                                let (q, _) = factor_f64(
+                                    m,
+                                    set.rotations()[i],
+                                    set.log_scales()[i].to_array(),
+                                    flat,
+                                );
+                                let [w, x, y, z] = q;
+                                Quat::from_xyzw(x, y, z, w) * Vec3::Z
+                            },
+                            DVec3::as_vec3,
+                        )
+                    })
+                    .collect()
+            }
+        };
+        match normals.iter().position(|n| !n.is_finite()) {
+            Some(index) => Err(DeformError::NonFiniteOutput { index }),
+            None => Ok(normals),
+        }
+    }
+
     fn binding_triangles(&self, positions: &[DVec3]) -> Vec<BindingTri> {
         (0..self.triangles.len())
             .into_par_iter()
@@ -856,6 +941,80 @@ mod tests {
         let b = plain.deform(&set, &stretched).unwrap();
         assert_eq!(a.means(), b.means());
         assert_eq!(a.rotations(), b.rotations());
+    }
+
+    /// A sheared triangle: in Jacobian mode the shading normal is `J⁻ᵀ n` of the rest normal,
+    /// `J` written by hand (the shear `x += s y` in the triangle's plane, area kept), which for
+    /// Gaussians tilted out of the plane differs from `J n` and from the deformed covariance's
+    /// shortest axis; in binding mode it is the deformed Gaussian's shortest axis.
+    #[test]
+    fn jacobian_normals_move_by_the_inverse_transpose() {
+        use crate::densify::shortest_axis;
+        let rest = vec![DVec3::ZERO, DVec3::X, DVec3::Y];
+        let s = 0.8;
+        let moved = vec![DVec3::ZERO, DVec3::X, DVec3::new(s, 1.0, 0.0)];
+        let mesh = TriMesh::new(rest.clone(), vec![[0, 1, 2]]);
+        let mut rng = Rng::new(7);
+        let n = 40;
+        let set = GaussianSet::try_new(GaussianParts {
+            means: (0..n)
+                .map(|_| Vec3::new(rng.uniform_f32(), rng.uniform_f32(), 0.0) * 0.3)
+                .collect(),
+            log_scales: (0..n)
+                .map(|i| {
+                    // No ties; the shortest axis cycles, thickness ratio 0.3 to 0.74.
+                    let mut l = [-2.0, -2.3, -2.6 - 0.02 * i as f32];
+                    l.rotate_left(i % 3);
+                    Vec3::from_array(l)
+                })
+                .collect(),
+            rotations: (0..n)
+                .map(|_| {
+                    let q = crate::test_util::random_rotation(&mut rng).as_quat();
+                    [q.w, q.x, q.y, q.z]
+                })
+                .collect(),
+            opacity_logits: vec![0.0; n],
+            sh: vec![0.0; 3 * n],
+            binding: Some(Binding {
+                triangles: vec![TriId(0); n],
+                encoding: BindingEncoding::Float,
+            }),
+            space: ParameterSpace::Local,
+            ..GaussianParts::default()
+        })
+        .unwrap();
+        let j = DMat3::from_cols(DVec3::X, DVec3::new(s, 1.0, 0.0), DVec3::Z);
+        let j_inv_t = j.inverse().transpose();
+        let deformer = Deformer::new(&mesh, DeformMode::Jacobian);
+        let at_rest = deformer.deform(&set, &rest).unwrap();
+        let deformed = deformer.deform(&set, &moved).unwrap();
+        let normals = deformer.shading_normals(&set, &moved).unwrap();
+        let (mut off_jn, mut off_svd) = (0.0f64, 0.0f64);
+        for (i, got) in normals.iter().enumerate() {
+            let n_rest = shortest_axis(&at_rest, i);
+            let want = (j_inv_t * n_rest).normalize();
+            let got = got.as_dvec3();
+            assert!((got.length() - 1.0).abs() < 1e-6);
+            assert!(1.0 - got.dot(want).abs() < 1e-6, "{i}: {got} vs {want}");
+            off_jn = off_jn.max(1.0 - (j * n_rest).normalize().dot(want).abs());
+            off_svd = off_svd.max(1.0 - shortest_axis(&deformed, i).dot(want).abs());
+        }
+        // The test tells the three apart.
+        assert!(off_jn > 0.05 && off_svd > 1e-3, "{off_jn} {off_svd}");
+        // Binding mode: the deformed Gaussian's own shortest axis.
+        let binding = Deformer::new(&mesh, DeformMode::Binding);
+        let deformed = binding.deform(&set, &moved).unwrap();
+        let normals = binding.shading_normals(&set, &moved).unwrap();
+        for (i, got) in normals.iter().enumerate() {
+            let a = shortest_axis(&deformed, i);
+            assert!(1.0 - a.dot(got.as_dvec3()).abs() < 1e-6, "{i}");
+        }
+        // Bad frames are refused as by `deform`.
+        assert!(matches!(
+            deformer.shading_normals(&set, &moved[..2]),
+            Err(DeformError::VertexCount { .. })
+        ));
     }
 
     /// A 2DGS surfel deformed by a Jacobian `J` (covariance axes `J R diag(s0, s1, 0)`): the

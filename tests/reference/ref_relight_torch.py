@@ -21,6 +21,10 @@ indices constant), colour = (1 - ks) albedo E/pi + ks L_spec, ks = F0 A + B.
 
 Loss = sum_i g_i . colour_i with seeded weights g; autograd gives d loss / d (albedo, roughness,
 F0, q, mu). Written to fixtures/data/relight/split_sum_torch.json.
+
+The same loss's gradient with respect to the map's texels (as read, before INTENSITY; through the
+downsampling, the SH projection, the prefiltered chain and the bilinear lookups, all linear in the
+texels): fixtures/data/relight/split_sum_env_torch.json, 9 significant digits, row-major [H, W, 3].
 """
 
 import json
@@ -201,7 +205,8 @@ def quat_to_matrix(q):
 def main():
     img = cv2.imread(str(DATA / "esplanade_64x32.hdr"), cv2.IMREAD_UNCHANGED)
     assert img is not None and img.dtype == np.float32
-    env = torch.from_numpy(img[:, :, ::-1].astype(np.float64).copy()) * INTENSITY
+    texels = torch.from_numpy(img[:, :, ::-1].astype(np.float64).copy()).requires_grad_()
+    env = texels * INTENSITY
     coeffs = irradiance_coeffs(downsample(env, IRRADIANCE_WIDTH))
     levels = [downsample(env, LEVEL_WIDTHS[0])]
     for k in range(1, LEVELS):
@@ -282,6 +287,20 @@ def main():
     out = DATA / "split_sum_torch.json"
     out.write_text(json.dumps(doc))
     print(f"wrote {out} ({RECORDS} records, loss {float(loss):.6f})")
+    d_env = texels.grad.reshape(-1)
+    env_doc = {
+        "generator": "tests/reference/ref_relight_torch.py",
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "records": "split_sum_torch.json",
+        "map": "esplanade_64x32.hdr",
+        "shape": list(texels.shape),
+        "loss": float(loss),
+        "d_texels": [float(f"{x:.9g}") for x in d_env.tolist()],
+    }
+    out = DATA / "split_sum_env_torch.json"
+    out.write_text(json.dumps(env_doc))
+    print(f"wrote {out} (max |d texel| {float(d_env.abs().max()):.6f})")
 
 
 if __name__ == "__main__":

@@ -2,12 +2,15 @@
 //! torch 2.15.0 on the CPU in float64, autograd; fixture `relight/split_sum_torch.json` on the
 //! CC0 map `relight/esplanade_64x32.hdr`): per Gaussian the colour through its shortest-axis
 //! normal, and the gradient of `Σ g · colour` with respect to albedo, roughness, F0, the raw
-//! quaternion and the mean.
+//! quaternion and the mean; and (fixture `relight/split_sum_env_torch.json`) the gradient of the
+//! same loss with respect to every texel of the map, through its preparation.
 
 use serde_json::Value;
 use trisplat_geometry::envmap::EnvMap;
 use trisplat_geometry::glam::DVec3;
-use trisplat_splat::material::{EnvOptions, Environment, Material, relit_backward, shade_params};
+use trisplat_splat::material::{
+    EnvGrad, EnvOptions, Environment, Material, relit_backward, relit_env_backward, shade_params,
+};
 use trisplat_splat::render::{GaussianGrads, GaussianParams};
 
 /// The forward: colours within 1e-4 of torch's float64, relative to `max(1, |c|)` (the Rust side
@@ -40,22 +43,30 @@ fn check(got: f64, want: f64, tol: f64, what: &str) -> f64 {
     err
 }
 
-#[test]
-fn relit_forward_and_backward_match_torch() {
+/// The fixture's environment, eye, Gaussians, materials and colour gradients.
+struct Case {
+    doc: Value,
+    map: EnvMap,
+    options: EnvOptions,
+    env: Environment,
+    eye: DVec3,
+    params: GaussianParams,
+    material: Material,
+    g: Vec<[f32; 3]>,
+}
+
+fn case() -> Case {
     let doc: Value = serde_json::from_str(
         &std::fs::read_to_string(trisplat_fixtures::path("relight/split_sum_torch.json"))
             .expect("fixture"),
     )
     .expect("json");
     let map = EnvMap::read(&trisplat_fixtures::path("relight/esplanade_64x32.hdr")).expect("map");
-    let env = Environment::new(
-        &map,
-        EnvOptions {
-            rotation_deg: doc["rotation_deg"].as_f64().unwrap(),
-            intensity: doc["intensity"].as_f64().unwrap() as f32,
-        },
-    )
-    .unwrap();
+    let options = EnvOptions {
+        rotation_deg: doc["rotation_deg"].as_f64().unwrap(),
+        intensity: doc["intensity"].as_f64().unwrap() as f32,
+    };
+    let env = Environment::new(&map, options).unwrap();
     let eye = {
         let e = floats(&doc["eye"]);
         DVec3::new(e[0], e[1], e[2])
@@ -84,6 +95,31 @@ fn relit_forward_and_backward_match_torch() {
         material.f0.push(r["f0"].as_f64().unwrap() as f32);
         g.push(f32s::<3>(&r["g"]));
     }
+    Case {
+        doc,
+        map,
+        options,
+        env,
+        eye,
+        params,
+        material,
+        g,
+    }
+}
+
+#[test]
+fn relit_forward_and_backward_match_torch() {
+    let Case {
+        doc,
+        env,
+        eye,
+        params,
+        material,
+        g,
+        ..
+    } = case();
+    let records = doc["records"].as_array().unwrap();
+    let n = records.len();
     let relit = shade_params(&params, &material, eye, &env);
     let mut geometry = GaussianGrads::zeros(n, 0);
     let grads = relit_backward(&params, &material, eye, &env, &g, &mut geometry);
@@ -128,4 +164,31 @@ fn relit_forward_and_backward_match_torch() {
         }
     }
     println!("largest relative error: forward {fwd:.2e}, backward {bwd:.2e}");
+}
+
+/// The gradient with respect to the map's 64 × 32 × 3 texels within 1e-4 of torch's, relative
+/// to the largest (f32 maps and lookup weights on the Rust side).
+#[test]
+fn the_environment_gradient_matches_torch() {
+    let c = case();
+    let want: Value = serde_json::from_str(
+        &std::fs::read_to_string(trisplat_fixtures::path("relight/split_sum_env_torch.json"))
+            .expect("fixture"),
+    )
+    .expect("json");
+    let want = floats(&want["d_texels"]);
+    let mut acc = EnvGrad::zeros(&c.env);
+    relit_env_backward(&c.params, &c.material, c.eye, &c.env, &c.g, &mut acc);
+    let got = acc.to_texels(&c.map, c.options);
+    assert_eq!(got.len() * 3, want.len());
+    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.01, "a degenerate fixture");
+    let worst = got
+        .iter()
+        .flatten()
+        .zip(&want)
+        .map(|(g, w)| (g - w).abs())
+        .fold(0.0f64, f64::max);
+    assert!(worst <= 1e-4 * scale, "worst {worst:.3e} of {scale}");
+    println!("environment gradient: worst {worst:.2e} of {scale:.3}");
 }

@@ -397,6 +397,7 @@ fn render_all(args: &RenderArgs, cameras: &[Camera], ctx: &Context) -> anyhow::R
             let camera = camera.translated(-origin);
             let out = render_relit(
                 &set,
+                None,
                 &relight.material,
                 &camera,
                 &relight.env,

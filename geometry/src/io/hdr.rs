@@ -1,4 +1,5 @@
-//! Radiance HDR (`.hdr`, RGBE) images: the reader of environment maps (docs/conventions.md §5
+//! Radiance HDR (`.hdr`, RGBE) images: the reader (and a flat writer, [`write_hdr`]) of
+//! environment maps (docs/conventions.md §5
 //! "Relighting").
 //!
 //! - Header: the magic `#?RADIANCE` or `#?RGBE`, variable lines up to an empty line (only
@@ -88,6 +89,64 @@ pub fn parse_hdr(path: &Path, bytes: &[u8]) -> Result<HdrImage, IoError> {
         }));
     }
     Ok(HdrImage { width, height, rgb })
+}
+
+/// Writes linear RGB radiance (`width × height`, row 0 at the top) as a Radiance `.hdr` file:
+/// `#?RADIANCE`, `FORMAT=32-bit_rle_rgbe`, `-Y H +X W`, flat RGBE scanlines (what
+/// [`read_hdr`], OpenCV and stb_image read). A texel is stored as [`rgb_to_rgbe`]. Written
+/// atomically (temporary file, then rename).
+///
+/// # Errors
+/// [`IoError`] naming the file: a size that does not match `rgb`, a negative or non-finite
+/// value (naming the texel), or the write failing.
+pub fn write_hdr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<(), IoError> {
+    if u64::from(width) * u64::from(height) != rgb.len() as u64 {
+        return Err(IoError::malformed(
+            path,
+            "pixel data",
+            format!("{} texels for a {width}x{height} image", rgb.len()),
+        ));
+    }
+    if let Some(k) = rgb
+        .iter()
+        .position(|t| t.iter().any(|v| !(v.is_finite() && *v >= 0.0)))
+    {
+        return Err(IoError::malformed(
+            path,
+            format!("texel {k}"),
+            format!("radiance {:?} is not finite and >= 0", rgb[k]),
+        ));
+    }
+    super::atomic::write_atomically(path, |out| {
+        let os = |e| IoError::os(path, e);
+        write!(
+            out,
+            "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {height} +X {width}\n"
+        )
+        .map_err(os)?;
+        let bytes: Vec<u8> = rgb.iter().flat_map(|&t| rgb_to_rgbe(t)).collect();
+        out.write_all(&bytes).map_err(os)
+    })
+}
+
+/// Linear RGB as one RGBE texel (Greg Ward's encoding: the largest channel's exponent `e`,
+/// each channel `⌊c / 2^(e − 136)⌋`; 0 below 1e-32). [`rgbe_to_rgb`] gives each channel back
+/// less than one step `2^(e − 8)` below it, within `2^-7` of the largest channel.
+#[must_use]
+pub fn rgb_to_rgbe(rgb: [f32; 3]) -> [u8; 4] {
+    let m = rgb[0].max(rgb[1]).max(rgb[2]);
+    if m.is_nan() || m < 1e-32 || m.is_infinite() {
+        return [0; 4];
+    }
+    // m = f · 2^e with f in [0.5, 1): e = ⌊log2 m⌋ + 1.
+    let mut e = f64::from(m).log2().floor() as i32 + 1;
+    if f64::from(m) >= f64::from(e).exp2() {
+        e += 1;
+    }
+    let e = e.clamp(-128, 127);
+    let scale = 256.0 / f64::from(e).exp2();
+    let c = rgb.map(|v| (f64::from(v.max(0.0)) * scale).floor().clamp(0.0, 255.0) as u8);
+    [c[0], c[1], c[2], (e + 128) as u8]
 }
 
 /// One RGBE texel as linear RGB.
@@ -266,6 +325,47 @@ fn read_flat(body: &[u8], mut at: usize, line: &mut [[u8; 4]]) -> Result<usize, 
 
 #[cfg(test)]
 mod tests {
+
+    /// Written then read: every channel within `2^-7` of the texel's largest, never above it,
+    /// zeros kept;
+    /// negative or NaN radiance refused with the texel named, nothing written.
+    #[test]
+    fn write_then_read_round_trips() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.hdr");
+        let rgb: Vec<[f32; 3]> = (0..32)
+            .map(|k| {
+                let k = k as f32;
+                [
+                    0.01 * k * k,
+                    3.0 + k,
+                    if (k as u32).is_multiple_of(5) {
+                        0.0
+                    } else {
+                        1e3 / (k + 1.0)
+                    },
+                ]
+            })
+            .chain([[0.0; 3], [1.0, 0.5, 0.25], [65_000.0, 1.0, 0.0]])
+            .chain(std::iter::repeat_n([0.2; 3], 15))
+            .collect();
+        write_hdr(&path, 10, 5, &rgb).unwrap();
+        let back = read_hdr(&path).unwrap();
+        assert_eq!((back.width, back.height), (10, 5));
+        for (a, b) in rgb.iter().zip(&back.rgb) {
+            let m = a[0].max(a[1]).max(a[2]);
+            for c in 0..3 {
+                assert!(b[c] <= a[c] && a[c] - b[c] <= m / 128.0, "{a:?} {b:?}");
+            }
+        }
+        let mut bad = rgb.clone();
+        bad[7][1] = f32::NAN;
+        let other = dir.path().join("bad.hdr");
+        let err = write_hdr(&other, 10, 5, &bad).unwrap_err().to_string();
+        assert!(err.contains("texel 7"), "{err}");
+        assert!(!other.exists());
+        assert!(write_hdr(&other, 10, 4, &rgb).is_err());
+    }
     use super::*;
 
     fn header(res: &str) -> Vec<u8> {

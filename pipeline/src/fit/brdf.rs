@@ -17,20 +17,33 @@
 //! gradient `∂L/∂ℓ = ∂L/∂x · x (1 − x)`. Initial materials: the set's own, else albedo from its
 //! degree-0 colour with roughness 0.9 and F0 0.04 (HRAvatar's), as `render --env` shades a set
 //! without materials.
+//!
+//! **A jointly estimated environment** ([`EnvFit`], `--env-fit`): the map's texels are fitted too,
+//! as `T = exp(θ)` per texel and channel (positive; Adam on `θ`, started from the given map or
+//! a uniform grey one at a low resolution, at most [`MAX_ENV_FIT_WIDTH`] wide). Each step the
+//! environment (irradiance, prefiltered chain) is prepared again from the current texels
+//! ([`Environment::set_map`]), and the same colour gradients that reach the materials are
+//! carried through the shading to the irradiance coefficients and the prefiltered texels
+//! ([`relit_env_backward`]) and back through the preparation, linear in the texels, to `T`
+//! ([`EnvGrad::to_texels`]); `∂L/∂θ = ∂L/∂T · T`. Albedo and light share a scale (and, per
+//! channel, a tint): the split sum cannot tell a brighter light on a darker albedo apart, so the
+//! fitted map and albedo are determined up to that factor (docs/benchmarks.md, "Relightable
+//! fit", says how it is normalised when scored).
 
 use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
+use trisplat_geometry::envmap::EnvMap;
 use trisplat_geometry::rng::Rng;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::SH_C0;
 use trisplat_splat::fit::bound::{BoundParams, TriangleFrames, grads_to_local, to_world};
 use trisplat_splat::fit::loss::{Ssim, l1, psnr};
 use trisplat_splat::material::{
-    Environment, Material, MaterialEdits, color_grads_from_sh, effective_material, relit_backward,
-    shade_params,
+    EnvGrad, EnvOptions, Environment, Material, MaterialEdits, color_grads_from_sh,
+    effective_material, relit_backward, relit_env_backward, shade_params,
 };
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, ImageGrads, RenderMode, backward_into, render_with_grad,
@@ -68,14 +81,45 @@ impl Default for BrdfLearningRates {
     }
 }
 
+/// Widest environment map [`EnvFit`] fits (the transposed prefilter costs the product of the
+/// levels' texel counts per step).
+pub const MAX_ENV_FIT_WIDTH: u32 = 128;
+
+/// Default width of a fitted environment map (`--env-fit-width`).
+pub const DEFAULT_ENV_FIT_WIDTH: u32 = 32;
+
+/// Default radiance of the uniform grey map a fit starts from without `--env`.
+pub const DEFAULT_ENV_FIT_GREY: f32 = 0.5;
+
+/// Default Adam learning rate of the fitted map's log-radiance (`--lr-env`).
+pub const DEFAULT_ENV_FIT_LR: f64 = 0.02;
+
+/// Smallest radiance a fitted texel starts from (its log is the parameter).
+const MIN_ENV_TEXEL: f32 = 1e-4;
+
+/// A jointly estimated environment (module documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvFit {
+    /// The map the fit starts from, at the resolution it is fitted at (2:1, at most
+    /// [`MAX_ENV_FIT_WIDTH`] wide); texels below 1e-4 start at 1e-4.
+    pub initial: EnvMap,
+    /// Its placement: rotation about +Y, and the intensity, a factor on the fitted texels.
+    pub options: EnvOptions,
+    /// Adam's learning rate of the texels' log-radiance.
+    pub lr: f64,
+}
+
 /// What the BRDF fit needs besides the common options.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct BrdfFitOptions {
     /// Adam's learning rates.
     pub lr: BrdfLearningRates,
     /// Also fit the shading normal: the local rotations and log-scales (through the shading and
     /// the renderer's footprint alike).
     pub normals: bool,
+    /// Also fit the environment map, from this start (then the `env` given to [`fit_brdf`] is
+    /// not read).
+    pub env_fit: Option<EnvFit>,
 }
 
 /// The result of [`fit_brdf`].
@@ -91,6 +135,9 @@ pub struct BrdfFitted {
     pub out_of_time: bool,
     /// Seconds per iteration (optimisation only).
     pub seconds_per_iteration: f64,
+    /// The fitted environment map (with [`BrdfFitOptions::env_fit`]), at its fitted
+    /// resolution, before its intensity.
+    pub env: Option<EnvMap>,
 }
 
 /// Adam on a flat parameter vector, one learning rate per column of `width`.
@@ -208,7 +255,35 @@ fn check(o: &CommonOptions, b: &BrdfFitOptions) -> Result<(), FitError> {
             return bad(format!("--{name} {v}: expected a finite number >= 0"));
         }
     }
+    if let Some(e) = &b.env_fit {
+        if !(e.lr.is_finite() && e.lr >= 0.0) {
+            return bad(format!("--lr-env {}: expected a finite number >= 0", e.lr));
+        }
+        if e.initial.width() > MAX_ENV_FIT_WIDTH {
+            return bad(format!(
+                "the environment to fit is {} texels wide; at most {MAX_ENV_FIT_WIDTH}",
+                e.initial.width()
+            ));
+        }
+        let i = e.options.intensity;
+        if !(i.is_finite() && i > 0.0 && e.options.rotation_deg.is_finite()) {
+            return bad(format!(
+                "the fitted environment's intensity {i} must be finite and > 0, its rotation \
+                 finite"
+            ));
+        }
+    }
     Ok(())
+}
+
+/// The fitted map's texels `exp(θ)` (finite: θ is checked finite).
+fn env_map_of(theta: &[f64], width: u32) -> Result<EnvMap, FitError> {
+    let texels = theta
+        .chunks_exact(3)
+        .map(|t| std::array::from_fn(|c| t[c].exp().min(f64::from(f32::MAX)) as f32))
+        .collect();
+    EnvMap::try_new(width, width / 2, texels)
+        .map_err(|e| FitError::BadOption(format!("the fitted environment: {e}")))
 }
 
 /// Reused buffers of one iteration.
@@ -271,6 +346,33 @@ pub fn fit_brdf(
 ) -> Result<BrdfFitted, FitError> {
     check(options, brdf)?;
     let pairs = training_pairs(set, frames, held_out, options)?;
+    // The environment: as given, or the one being fitted (its log-texels `env_theta`).
+    let mut fitted_env = None;
+    let mut env_theta = Vec::new();
+    if let Some(e) = &brdf.env_fit {
+        fitted_env = Some(
+            Environment::new(&e.initial, e.options)
+                .map_err(|err| FitError::BadOption(format!("the environment to fit: {err}")))?,
+        );
+        env_theta = e
+            .initial
+            .texels()
+            .iter()
+            .flat_map(|t| t.map(|v| f64::from(v.max(MIN_ENV_TEXEL)).ln()))
+            .collect();
+    }
+    let mut env_map = brdf
+        .env_fit
+        .as_ref()
+        .map(|e| env_map_of(&env_theta, e.initial.width()))
+        .transpose()?;
+    if let (Some(map), Some(fit), Some(current)) = (&env_map, &brdf.env_fit, &mut fitted_env) {
+        current
+            .set_map(map, fit.options.intensity)
+            .map_err(|err| FitError::BadOption(format!("the environment to fit: {err}")))?;
+    }
+    let mut adam_env = FlatAdam::new(env_theta.len());
+    let mut g_env = Vec::new();
     let mut bound = BoundParams::from_set(set, template.triangle_count())?;
     if bound.is_empty() {
         return Err(FitError::BadOption("the set has no Gaussians".into()));
@@ -293,6 +395,7 @@ pub fn fit_brdf(
     let mut checkpoints = Vec::new();
     let mut score = |bound: &BoundParams,
                      logits: &[f64],
+                     env: &Environment,
                      b: &mut Buffers,
                      iteration: usize,
                      seconds: f64,
@@ -330,7 +433,15 @@ pub fn fit_brdf(
         on_checkpoint(&c);
         c
     };
-    checkpoints.push(score(&bound, &logits, &mut b, 0, 0.0, (0.0, 0.0, 0.0, 0)));
+    checkpoints.push(score(
+        &bound,
+        &logits,
+        fitted_env.as_ref().unwrap_or(env),
+        &mut b,
+        0,
+        0.0,
+        (0.0, 0.0, 0.0, 0),
+    ));
     let mut last = options.iterations;
     let mut out_of_time = false;
     for it in 0..options.iterations {
@@ -340,7 +451,8 @@ pub fn fit_brdf(
         let target = &frames[f].targets[v];
         let camera = &target.camera;
         let eye = camera.position();
-        b.place(&bound, &train_frames[f], &logits, eye, env);
+        let env_now = fitted_env.as_ref().unwrap_or(env);
+        b.place(&bound, &train_frames[f], &logits, eye, env_now);
         let render_err = |source| FitError::Render {
             iteration: it,
             view: camera.name.clone(),
@@ -384,7 +496,38 @@ pub fn fit_brdf(
         )
         .map_err(render_err)?;
         color_grads_from_sh(&b.g_world.sh, &mut b.d_colors);
-        let grads = relit_backward(&b.world, &b.material, eye, env, &b.d_colors, &mut b.g_world);
+        let grads = relit_backward(
+            &b.world,
+            &b.material,
+            eye,
+            env_now,
+            &b.d_colors,
+            &mut b.g_world,
+        );
+        if let (Some(fit), Some(map)) = (&brdf.env_fit, &env_map) {
+            let mut acc = EnvGrad::zeros(env_now);
+            relit_env_backward(&b.world, &b.material, eye, env_now, &b.d_colors, &mut acc);
+            g_env.clear();
+            g_env.extend(
+                acc.to_texels(map, fit.options)
+                    .iter()
+                    .zip(map.texels())
+                    .flat_map(|(g, t)| {
+                        std::array::from_fn::<f64, 3, _>(|c| g[c] * f64::from(t[c]))
+                    }),
+            );
+            adam_env.step(&mut env_theta, &g_env, &[fit.lr]);
+            if env_theta.iter().any(|v| !v.is_finite()) {
+                return Err(FitError::NonFinite(it + 1));
+            }
+            let next = env_map_of(&env_theta, map.width())?;
+            if let Some(current) = &mut fitted_env {
+                current
+                    .set_map(&next, fit.options.intensity)
+                    .map_err(|err| FitError::BadOption(format!("the fitted environment: {err}")))?;
+            }
+            env_map = Some(next);
+        }
         // Through the sigmoids.
         b.g_logits.clear();
         b.g_logits.extend((0..n).flat_map(|i| {
@@ -442,7 +585,15 @@ pub fn fit_brdf(
                 return Err(FitError::NonFinite(done));
             }
             let acc = (acc_loss, acc_l1, acc_psnr, acc_n);
-            checkpoints.push(score(&bound, &logits, &mut b, done, train_s, acc));
+            checkpoints.push(score(
+                &bound,
+                &logits,
+                fitted_env.as_ref().unwrap_or(env),
+                &mut b,
+                done,
+                train_s,
+                acc,
+            ));
             (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
         }
         if out_of_time {
@@ -460,5 +611,6 @@ pub fn fit_brdf(
         iterations: last,
         out_of_time,
         seconds_per_iteration: train_s / last as f64,
+        env: env_map,
     })
 }

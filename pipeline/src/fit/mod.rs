@@ -63,7 +63,10 @@ mod photometric;
 mod score;
 mod targets;
 
-pub use brdf::{BrdfFitOptions, BrdfFitted, BrdfLearningRates, fit_brdf};
+pub use brdf::{
+    BrdfFitOptions, BrdfFitted, BrdfLearningRates, DEFAULT_ENV_FIT_GREY, DEFAULT_ENV_FIT_LR,
+    DEFAULT_ENV_FIT_WIDTH, EnvFit, MAX_ENV_FIT_WIDTH, fit_brdf,
+};
 pub use brdf_score::{LMSE_WINDOW, MaterialScores, lmse, material_scores};
 pub use checkpoint::Checkpoint;
 pub use inputs::{FitError, FitFrame, Target};

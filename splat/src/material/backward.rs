@@ -22,6 +22,7 @@ use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
 use super::attributes::Material;
+use super::env_grad::EnvGrad;
 use super::relight::{MaterialGrads, Relit};
 use super::shade::Environment;
 use crate::render::{DiffParams, GaussianGrads, normalized, quaternion_vjp, rotation_matrix};
@@ -182,6 +183,54 @@ pub fn relit_backward<P: DiffParams + ?Sized>(
             }
         });
     out
+}
+
+/// The environment's part of the backward pass of [`shade_params`]: adds to `out` (shaped by
+/// [`EnvGrad::zeros`] of `env`) the gradient of the loss whose colour gradients are `d_colors`
+/// with respect to `env`'s irradiance coefficients and prefiltered texels (normals and views
+/// held as the forward took them); [`EnvGrad::to_texels`] carries it to the map's texels.
+///
+/// # Panics
+/// If `material` or `d_colors` does not have one entry per Gaussian.
+pub fn relit_env_backward<P: DiffParams + ?Sized>(
+    params: &P,
+    material: &Material,
+    eye: DVec3,
+    env: &Environment,
+    d_colors: &[[f32; 3]],
+    out: &mut EnvGrad,
+) {
+    let n = params.len();
+    assert_eq!(material.albedo.len(), n, "one material per Gaussian");
+    assert_eq!(d_colors.len(), n, "one colour gradient per Gaussian");
+    let sum = (0..n)
+        .into_par_iter()
+        .with_min_len(1024)
+        .fold(
+            || EnvGrad::zeros(env),
+            |mut acc, i| {
+                if d_colors[i] != [0.0; 3] {
+                    let t = normal_of(params, i, eye);
+                    env.shade_env_grad(
+                        t.normal,
+                        t.view,
+                        material.albedo[i],
+                        material.roughness[i],
+                        material.f0[i],
+                        d_colors[i],
+                        &mut acc,
+                    );
+                }
+                acc
+            },
+        )
+        .reduce_with(|mut a, b| {
+            a.add(&b);
+            a
+        });
+    if let Some(sum) = sum {
+        out.add(&sum);
+    }
 }
 
 #[cfg(test)]

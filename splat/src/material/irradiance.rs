@@ -7,14 +7,21 @@
 //! with `Â₀ = π`, `Â₁ = 2π/3`, `Â₂ = π/4`, and [`Irradiance::eval`] gives `max(E(n), 0) / π`:
 //! the radiance a white Lambertian surface sends back (1 under a uniform radiance of 1).
 
-use std::f64::consts::PI;
-
 use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_geometry::envmap::EnvMap;
 
 use crate::render::sh_basis_grad;
 use crate::sh::sh_basis;
+
+/// `Â_l / π` of basis function `k` (band `l` = 0, 1, 1, 1, 2, ...).
+pub(super) fn band_factor(k: usize) -> f64 {
+    match k {
+        0 => 1.0,
+        1..=3 => 2.0 / 3.0,
+        _ => 0.25,
+    }
+}
 
 /// `E(n) / π` of an environment, as 9 SH coefficients per channel (see the module
 /// documentation).
@@ -55,16 +62,17 @@ impl Irradiance {
             }
         }
         for (k, c) in coeffs.iter_mut().enumerate() {
-            let band = match k {
-                0 => PI,
-                1..=3 => 2.0 * PI / 3.0,
-                _ => PI / 4.0,
-            };
             for v in c.iter_mut() {
-                *v *= band / PI;
+                *v *= band_factor(k);
             }
         }
         Self { coeffs }
+    }
+
+    /// The coefficients `Â_l L_lm / π`, per basis function and channel.
+    #[must_use]
+    pub(super) fn coeffs(&self) -> &[[f64; 3]; 9] {
+        &self.coeffs
     }
 
     /// `max(E(n), 0) / π` towards unit normal `n`.

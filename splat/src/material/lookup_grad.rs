@@ -73,6 +73,29 @@ pub fn bilinear_with_grad(map: &EnvMap, d: DVec3) -> ([f32; 3], [DVec3; 3]) {
     (value, grad)
 }
 
+/// The four texels [`EnvMap::bilinear`] of `map` blends towards `d` and their weights (texel
+/// index `j W + i`, weight; the same floors and `f32` fractions as the lookup): the lookup's
+/// derivative with respect to the map's texels.
+#[must_use]
+pub fn bilinear_taps(map: &EnvMap, d: DVec3) -> [(usize, f64); 4] {
+    let (u, v) = EnvMap::uv(d);
+    let (w, h) = (map.width() as usize, map.height() as usize);
+    let x = u * w as f64 - 0.5;
+    let y = (v * h as f64 - 0.5).clamp(0.0, (h - 1) as f64);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (f64::from((x - x0) as f32), f64::from((y - y0) as f32));
+    let i0 = (x0 as i64).rem_euclid(w as i64) as usize;
+    let i1 = (i0 + 1) % w;
+    let j0 = y0 as usize;
+    let j1 = (j0 + 1).min(h - 1);
+    [
+        (j0 * w + i0, (1.0 - fx) * (1.0 - fy)),
+        (j0 * w + i1, fx * (1.0 - fy)),
+        (j1 * w + i0, (1.0 - fx) * fy),
+        (j1 * w + i1, fx * fy),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

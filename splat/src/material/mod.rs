@@ -7,12 +7,14 @@
 //! ([`Environment`]: one point's split sum) ─► `irradiance` (9-coefficient SH), `prefilter`
 //! (GGX mip chain), `brdf` (the integration table); `backward` differentiates the shading
 //! through each Gaussian's normal (quaternion) and view (mean), `lookup_grad` the map lookups
-//! by direction. `attributes` is a leaf:
+//! by direction; `env_grad` ([`EnvGrad`]) gathers the gradient with respect to the environment
+//! and carries it back through the prefiltering to the map's texels. `attributes` is a leaf:
 //! [`crate::GaussianSet`] holds a [`Material`].
 
 pub(crate) mod attributes;
 mod backward;
 mod brdf;
+mod env_grad;
 mod irradiance;
 mod lookup_grad;
 mod maps;
@@ -23,8 +25,11 @@ mod shade;
 pub use attributes::{
     DEFAULT_F0, DEFAULT_ROUGHNESS, Material, PLY_ALBEDO, PLY_REFLECTANCE, PLY_ROUGHNESS,
 };
-pub use backward::{NormalTrace, color_grads_from_sh, normal_of, relit_backward, shade_params};
+pub use backward::{
+    NormalTrace, color_grads_from_sh, normal_of, relit_backward, relit_env_backward, shade_params,
+};
 pub use brdf::{BRDF_TABLE_SAMPLES, BRDF_TABLE_SIZE, BrdfTable};
+pub use env_grad::EnvGrad;
 pub use irradiance::Irradiance;
 pub use maps::{MATERIAL_KINDS, material_image_files, write_material_maps};
 pub use prefilter::{LEVEL_WIDTHS, LEVELS, MIRROR_WIDTH, SOURCE_WIDTHS, SpecularChain, prefilter};

@@ -104,6 +104,17 @@ impl SpecularChain {
     }
 }
 
+/// The weight `D(R·h) max(R·l, 0) ΔΩ` of a source texel (module documentation), `a2 = α²`.
+pub(super) fn ggx_weight(a2: f64, r_dot_l: f64, omega: f64) -> f64 {
+    if r_dot_l <= 0.0 {
+        return 0.0;
+    }
+    // h = normalize(R + l): R·h = √((1 + R·l) / 2).
+    let x2 = 0.5 * (1.0 + r_dot_l);
+    let denom = (a2 - 1.0) * x2 + 1.0;
+    a2 / (std::f64::consts::PI * denom * denom) * r_dot_l * omega
+}
+
 /// `source` prefiltered for roughness `r` on a `width`-wide map (module documentation).
 ///
 /// When the source width is a multiple of `width` the weight of a source texel depends only on
@@ -115,15 +126,7 @@ pub fn prefilter(source: &EnvMap, width: u32, r: f64) -> EnvMap {
     let height = width / 2;
     let a2 = (r * r) * (r * r);
     let (sw, sh) = (source.width() as usize, source.height() as usize);
-    let weight = move |r_dot_l: f64, omega: f64| {
-        if r_dot_l <= 0.0 {
-            return 0.0;
-        }
-        // h = normalize(R + l): R·h = √((1 + R·l) / 2).
-        let x2 = 0.5 * (1.0 + r_dot_l);
-        let denom = (a2 - 1.0) * x2 + 1.0;
-        a2 / (std::f64::consts::PI * denom * denom) * r_dot_l * omega
-    };
+    let weight = move |r_dot_l: f64, omega: f64| ggx_weight(a2, r_dot_l, omega);
     let texels: Vec<[f64; 3]> = source.texels().iter().map(|t| t.map(f64::from)).collect();
     let (w, h) = (width as usize, height as usize);
     let out: Vec<[f32; 3]> = if sw % w == 0 {

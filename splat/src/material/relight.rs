@@ -3,7 +3,7 @@
 //! colours composited by the ordinary renderer in place of the SH colour ([`render_relit`]),
 //! and the material maps albedo, roughness and specular composited the same way.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
@@ -98,14 +98,16 @@ pub struct Relit {
     pub specular: Vec<[f32; 3]>,
 }
 
-/// Shades every Gaussian of `set` (world space) seen from `eye`: normal = the shortest axis
-/// (the flat axis of a surfel) turned towards `eye`, view vector = mean to `eye`.
+/// Shades every Gaussian of `set` (world space) seen from `eye`: normal = `normals[i]` when
+/// given (e.g. [`crate::Deformer::shading_normals`], `J⁻ᵀ n` in Jacobian mode), else the shortest
+/// axis (the flat axis of a surfel), turned towards `eye`; view vector = mean to `eye`.
 ///
 /// # Panics
-/// If `material` does not have one entry per Gaussian.
+/// If `material` (or `normals`) does not have one entry per Gaussian.
 #[must_use]
 pub fn shade_gaussians(
     set: &GaussianSet,
+    normals: Option<&[Vec3]>,
     material: &Material,
     eye: DVec3,
     env: &Environment,
@@ -115,10 +117,11 @@ pub fn shade_gaussians(
         set.len(),
         "one material per Gaussian"
     );
+    check_normals(set, normals);
     let (colors, specular) = (0..set.len())
         .into_par_iter()
         .map(|i| {
-            let (n, v) = normal_and_view(set, i, eye);
+            let (n, v) = normal_and_view(set, normals, i, eye);
             let s = env.shade(
                 n,
                 v,
@@ -147,13 +150,14 @@ pub struct MaterialGrads {
 /// colour (as [`shade_gaussians`] computes it, from `eye`) is `d_colors`. From the
 /// differentiable renderer run on [`with_colors`]'s degree-0 set, `d_colors = ∂L/∂f_dc / SH_C0`
 /// (where the colour is not clamped at 0). Normals and views are held fixed here; the
-/// gradient through them is [`super::relit_backward`]'s.
+/// gradient through them is [`super::relit_backward`]'s. `normals` as [`shade_gaussians`].
 ///
 /// # Panics
-/// If `material` or `d_colors` does not have one entry per Gaussian.
+/// If `material`, `d_colors` (or `normals`) does not have one entry per Gaussian.
 #[must_use]
 pub fn material_grads(
     set: &GaussianSet,
+    normals: Option<&[Vec3]>,
     material: &Material,
     eye: DVec3,
     env: &Environment,
@@ -169,10 +173,11 @@ pub fn material_grads(
         set.len(),
         "one colour gradient per Gaussian"
     );
+    check_normals(set, normals);
     let grads: Vec<_> = (0..set.len())
         .into_par_iter()
         .map(|i| {
-            let (n, v) = normal_and_view(set, i, eye);
+            let (n, v) = normal_and_view(set, normals, i, eye);
             env.shade_grad(
                 n,
                 v,
@@ -190,11 +195,25 @@ pub fn material_grads(
     }
 }
 
-/// Gaussian `i`'s shading normal (shortest axis facing `eye`) and view vector (mean to `eye`).
-fn normal_and_view(set: &GaussianSet, i: usize, eye: DVec3) -> (DVec3, DVec3) {
+fn check_normals(set: &GaussianSet, normals: Option<&[Vec3]>) {
+    if let Some(n) = normals {
+        assert_eq!(n.len(), set.len(), "one normal per Gaussian");
+    }
+}
+
+/// Gaussian `i`'s shading normal (`normals[i]` or the shortest axis, facing `eye`) and view
+/// vector (mean to `eye`). A given normal that cannot be normalised falls back to the axis.
+fn normal_and_view(
+    set: &GaussianSet,
+    normals: Option<&[Vec3]>,
+    i: usize,
+    eye: DVec3,
+) -> (DVec3, DVec3) {
     let to_eye = eye - set.means()[i].as_dvec3();
     let v = to_eye.try_normalize().unwrap_or(DVec3::Z);
-    let axis = shortest_axis(set, i);
+    let axis = normals
+        .and_then(|n| n[i].as_dvec3().try_normalize())
+        .unwrap_or_else(|| shortest_axis(set, i));
     let n = if axis.dot(v) < 0.0 { -axis } else { axis };
     (n, v)
 }
@@ -248,7 +267,7 @@ pub struct RelitRender {
 }
 
 /// Renders `set` (world space) relit under `env` as seen by `camera`: the colours of
-/// [`shade_gaussians`] composited by [`render`] with `options`, and each map of `maps` by a
+/// [`shade_gaussians`] (with `normals` when given) composited by [`render`] with `options`, and each map of `maps` by a
 /// render of its per-Gaussian values (rgb only, black background; weighted sums like the
 /// normal map, not divided by alpha).
 ///
@@ -256,9 +275,10 @@ pub struct RelitRender {
 /// [`RenderError`] as [`render`].
 ///
 /// # Panics
-/// If `material` does not have one entry per Gaussian.
+/// If `material` (or `normals`) does not have one entry per Gaussian.
 pub fn render_relit(
     set: &GaussianSet,
+    normals: Option<&[Vec3]>,
     material: &Material,
     camera: &Camera,
     env: &Environment,
@@ -266,7 +286,7 @@ pub fn render_relit(
     maps: MaterialMaps,
 ) -> Result<RelitRender, RenderError> {
     check_inputs(set, camera, options)?;
-    let relit = shade_gaussians(set, material, camera.position(), env);
+    let relit = shade_gaussians(set, normals, material, camera.position(), env);
     let output = render(&with_colors(set, &relit.colors), camera, options)?;
     let map_options = RenderOptions {
         outputs: Outputs {
@@ -341,7 +361,7 @@ mod tests {
         let eye = DVec3::new(0.3, 0.4, 2.0);
         let g: Vec<[f32; 3]> = (0..n).map(|i| [0.5, -0.3, 0.1 * i as f32]).collect();
         let loss = |m: &Material| -> f64 {
-            let relit = shade_gaussians(&set, m, eye, &env);
+            let relit = shade_gaussians(&set, None, m, eye, &env);
             relit
                 .colors
                 .iter()
@@ -349,7 +369,7 @@ mod tests {
                 .map(|(c, g)| (0..3).map(|k| f64::from(c[k] * g[k])).sum::<f64>())
                 .sum()
         };
-        let grads = material_grads(&set, &material, eye, &env, &g);
+        let grads = material_grads(&set, None, &material, eye, &env, &g);
         let h = 1e-3f32;
         for i in 0..n {
             let mut up = material.clone();

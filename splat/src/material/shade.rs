@@ -73,11 +73,11 @@ pub struct ShadingGrad {
 /// An environment map ready for split-sum shading.
 #[derive(Clone, Debug)]
 pub struct Environment {
-    irradiance: Irradiance,
-    specular: SpecularChain,
-    brdf: BrdfTable,
+    pub(super) irradiance: Irradiance,
+    pub(super) specular: SpecularChain,
+    pub(super) brdf: BrdfTable,
     /// World direction to map direction (`R_y(−θ)`).
-    to_map: DMat3,
+    pub(super) to_map: DMat3,
 }
 
 impl Environment {
@@ -103,6 +103,28 @@ impl Environment {
             brdf: BrdfTable::default(),
             to_map: DMat3::from_rotation_y(-options.rotation_deg.to_radians()),
         })
+    }
+
+    /// Prepares `map` again in place of the current one (scaled by `intensity`; the rotation
+    /// and the BRDF table kept): an environment being fitted, rebuilt from its texels each step.
+    ///
+    /// # Errors
+    /// As [`Environment::new`].
+    pub fn set_map(
+        &mut self,
+        map: &EnvMap,
+        intensity: f32,
+    ) -> Result<(), trisplat_geometry::envmap::EnvMapError> {
+        let scaled;
+        let map = if intensity == 1.0 {
+            map
+        } else {
+            scaled = map.scaled(intensity)?;
+            &scaled
+        };
+        self.irradiance = Irradiance::project(&map.downsampled(IRRADIANCE_WIDTH));
+        self.specular = SpecularChain::new(map);
+        Ok(())
     }
 
     /// The BRDF integration table.
