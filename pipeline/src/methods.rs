@@ -357,7 +357,7 @@ pub fn rendered_view(
         splat_depth: rules.splat.into(),
         ..RenderOptions::default()
     };
-    if kind == DepthKind::Front && !(rules.front_alpha > 0.0) {
+    if kind == DepthKind::Front && (rules.front_alpha.is_nan() || rules.front_alpha <= 0.0) {
         return Err(RenderedDepthError::Render(RenderError::BadFrontAlpha(
             rules.front_alpha,
         )));
