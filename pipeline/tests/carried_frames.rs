@@ -13,46 +13,17 @@ use trisplat_geometry::io::{
     FrameFiles, GLB_PART_LIMIT, SequenceLayout, SequenceOptions, write_sequence_parts_with,
     write_usd_sequence,
 };
-use trisplat_pipeline::avatar::AvatarFolder;
-use trisplat_pipeline::config::{
-    BindOptions, GaussianLayout, MetricOptions, OutputOptions, OutputTarget,
-};
-use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, Method, Report, RunControl, Topology, TopologyOptions, run,
-};
+use trisplat_pipeline::config::{OutputOptions, OutputTarget};
+use trisplat_pipeline::{ExtractConfig, Method, Report, RunControl, Topology, run};
 
 const METHODS: [Method; 3] = [Method::Tsdf, Method::Delaunay, Method::Alpha];
 
 fn config(track: &Path, frames: &str, targets: &[OutputTarget], out: &Path) -> ExtractConfig {
-    let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
-    ExtractConfig {
-        template: avatar.template,
-        animation: Some(track.display().to_string()),
-        gaussians: Some(avatar.gaussians),
-        methods: METHODS.to_vec(),
-        output: out.to_path_buf(),
-        frames: Some(frames.to_owned()),
-        gt: None,
-        options: ExtractOptions {
-            bind: BindOptions {
-                layout: GaussianLayout::Lam,
-                ..BindOptions::default()
-            },
-            outputs: OutputOptions {
-                targets: targets.to_vec(),
-                ..OutputOptions::default()
-            },
-            metrics: MetricOptions {
-                consistency_views: 0,
-                ..MetricOptions::default()
-            },
-            topology: TopologyOptions {
-                topology: Topology::Adaptive,
-                ..TopologyOptions::default()
-            },
-            ..ExtractOptions::default()
-        },
-    }
+    let mut config = common::lam_mini_config(track, &METHODS, frames, out);
+    config.options.outputs.targets = targets.to_vec();
+    config.options.metrics.consistency_views = 0;
+    config.options.topology.topology = Topology::Adaptive;
+    config
 }
 
 fn extract(

@@ -11,49 +11,17 @@ use std::path::Path;
 
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::read_mesh;
-use trisplat_pipeline::avatar::AvatarFolder;
-use trisplat_pipeline::config::{
-    BindOptions, FinishOptions, GaussianLayout, MetricOptions, OutputOptions, OutputTarget,
-    VertexColors,
-};
-use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, Method, Report, RunControl, Topology, TopologyOptions, run,
-};
+use trisplat_pipeline::config::{FinishOptions, VertexColors};
+use trisplat_pipeline::{Method, Report, RunControl, Topology, run};
 
 const METHODS: [Method; 2] = [Method::Delaunay, Method::Alpha];
 const FACES: usize = 400;
 
 fn extract(track: &Path, topology: Topology, finish: FinishOptions, out: &Path) -> Report {
-    let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
-    let config = ExtractConfig {
-        template: avatar.template,
-        animation: Some(track.display().to_string()),
-        gaussians: Some(avatar.gaussians),
-        methods: METHODS.to_vec(),
-        output: out.to_path_buf(),
-        frames: Some("5..9".to_owned()),
-        gt: None,
-        options: ExtractOptions {
-            bind: BindOptions {
-                layout: GaussianLayout::Lam,
-                ..BindOptions::default()
-            },
-            outputs: OutputOptions {
-                targets: vec![OutputTarget::Meshes, OutputTarget::Report],
-                ..OutputOptions::default()
-            },
-            metrics: MetricOptions {
-                consistency_views: 0,
-                ..MetricOptions::default()
-            },
-            topology: TopologyOptions {
-                topology,
-                ..TopologyOptions::default()
-            },
-            finish,
-            ..ExtractOptions::default()
-        },
-    };
+    let mut config = common::lam_mini_config(track, &METHODS, "5..9", out);
+    config.options.metrics.consistency_views = 0;
+    config.options.topology.topology = topology;
+    config.options.finish = finish;
     run(&config, RunControl::default(), &mut |_| {}).expect("run")
 }
 

@@ -9,37 +9,16 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use trisplat_geometry::io::GltfCompression;
-use trisplat_pipeline::avatar::AvatarFolder;
-use trisplat_pipeline::config::{BindOptions, GaussianLayout, OutputOptions, OutputTarget};
+use trisplat_pipeline::config::OutputTarget;
 use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, MergeOutputs, Method, PipelineError, Report, RunControl, Shard,
-    ShardOptions, ShardSpec, merge, merge_with, run,
+    ExtractConfig, MergeOutputs, Method, PipelineError, Report, RunControl, Shard, ShardOptions,
+    ShardSpec, merge, merge_with, run,
 };
 
 /// The LAM fixture driven by `track` (10 frames), meshed by `methods` over `frames` into
 /// `out`: frame files and report only.
 fn config(track: &Path, methods: &[Method], frames: &str, out: &Path) -> ExtractConfig {
-    let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
-    ExtractConfig {
-        template: avatar.template,
-        animation: Some(track.display().to_string()),
-        gaussians: Some(avatar.gaussians),
-        methods: methods.to_vec(),
-        output: out.to_path_buf(),
-        frames: Some(frames.to_owned()),
-        gt: None,
-        options: ExtractOptions {
-            bind: BindOptions {
-                layout: GaussianLayout::Lam,
-                ..BindOptions::default()
-            },
-            outputs: OutputOptions {
-                targets: vec![OutputTarget::Meshes, OutputTarget::Report],
-                ..OutputOptions::default()
-            },
-            ..ExtractOptions::default()
-        },
-    }
+    common::lam_mini_config(track, methods, frames, out)
 }
 
 fn extract(track: &Path, methods: &[Method], frames: &str, out: &Path) -> Report {

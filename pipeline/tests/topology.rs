@@ -9,47 +9,16 @@ mod common;
 use std::path::Path;
 
 use trisplat_geometry::io::read_mesh;
-use trisplat_pipeline::avatar::AvatarFolder;
-use trisplat_pipeline::config::{
-    BindOptions, GaussianLayout, MetricOptions, OutputOptions, OutputTarget,
-};
-use trisplat_pipeline::{
-    ExtractConfig, ExtractOptions, Method, Report, RunControl, Topology, TopologyOptions, run,
-};
+use trisplat_pipeline::{ExtractConfig, Method, Report, RunControl, Topology, run};
 
 const METHODS: [Method; 3] = [Method::Tsdf, Method::Delaunay, Method::Alpha];
 
 /// The LAM fixture meshed with `topology` over `frames` into `out` (frame files, report).
 fn config(track: &Path, topology: Topology, frames: &str, out: &Path) -> ExtractConfig {
-    let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
-    ExtractConfig {
-        template: avatar.template,
-        animation: Some(track.display().to_string()),
-        gaussians: Some(avatar.gaussians),
-        methods: METHODS.to_vec(),
-        output: out.to_path_buf(),
-        frames: Some(frames.to_owned()),
-        gt: None,
-        options: ExtractOptions {
-            bind: BindOptions {
-                layout: GaussianLayout::Lam,
-                ..BindOptions::default()
-            },
-            outputs: OutputOptions {
-                targets: vec![OutputTarget::Meshes, OutputTarget::Report],
-                ..OutputOptions::default()
-            },
-            metrics: MetricOptions {
-                consistency_views: 0,
-                ..MetricOptions::default()
-            },
-            topology: TopologyOptions {
-                topology,
-                ..TopologyOptions::default()
-            },
-            ..ExtractOptions::default()
-        },
-    }
+    let mut config = common::lam_mini_config(track, &METHODS, frames, out);
+    config.options.metrics.consistency_views = 0;
+    config.options.topology.topology = topology;
+    config
 }
 
 fn extract(track: &Path, topology: Topology, frames: &str, out: &Path) -> Report {

@@ -1,6 +1,11 @@
-//! What the LAM-fixture tests share: a track that opens the mouth, and fresh folders.
+//! What the LAM-fixture tests share: a track that opens the mouth, fresh folders, and the
+//! fixture's run configuration.
 
 use std::path::{Path, PathBuf};
+
+use trisplat_pipeline::avatar::AvatarFolder;
+use trisplat_pipeline::config::{BindOptions, GaussianLayout, OutputOptions, OutputTarget};
+use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method};
 
 /// A 10-frame weights track for the fixture's targets: the mouth closed in frames 0..7, the
 /// jaw open and the tongue out in frames 7..10.
@@ -31,4 +36,35 @@ pub fn fresh_dir(group: &str, name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("dir");
     dir
+}
+
+/// The LAM fixture meshed by `methods` over `frames` of `track` into `out`: frame files and
+/// the report, every other option at its default (the tests set what they are about).
+pub fn lam_mini_config(
+    track: &Path,
+    methods: &[Method],
+    frames: &str,
+    out: &Path,
+) -> ExtractConfig {
+    let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
+    ExtractConfig {
+        template: avatar.template,
+        animation: Some(track.display().to_string()),
+        gaussians: Some(avatar.gaussians),
+        methods: methods.to_vec(),
+        output: out.to_path_buf(),
+        frames: Some(frames.to_owned()),
+        gt: None,
+        options: ExtractOptions {
+            bind: BindOptions {
+                layout: GaussianLayout::Lam,
+                ..BindOptions::default()
+            },
+            outputs: OutputOptions {
+                targets: vec![OutputTarget::Meshes, OutputTarget::Report],
+                ..OutputOptions::default()
+            },
+            ..ExtractOptions::default()
+        },
+    }
 }
