@@ -95,6 +95,7 @@ fn median_field_gives_one_closed_piece() {
         vec![
             "--json",
             "opacity-mesh",
+            s(&g),
             "--field",
             "median",
             "--margin",

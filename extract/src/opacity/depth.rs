@@ -45,9 +45,9 @@ pub struct DepthRules {
     /// depth-carved hull; more keeps semi-transparent rims that one view sees through).
     pub carve_views: u16,
     /// Every `sample_stride`-th pixel (in rows and columns) of every covered map adds two
-    /// points to the tetrahedralisation, half a footprint behind its median depth and `margin`
-    /// + 1/2 footprints in front of it, so the marching sees the surface where the Gaussians'
-    /// own points are too sparse (thin or fuzzy layers); 0: GOF's points only.
+    /// points to the tetrahedralisation, half a footprint behind its median depth and
+    /// `margin + 1/2` footprints in front of it, so the marching sees the surface where the
+    /// Gaussians' own points are too sparse (thin or fuzzy layers); 0: GOF's points only.
     pub sample_stride: u32,
 }
 
@@ -97,9 +97,8 @@ impl<'a> DepthViews<'a> {
         if views.is_empty() {
             return Err(OpacityError::NoCameras);
         }
-        if !(rules.margin.is_finite() && rules.margin >= 0.0)
-            || !(1..=MAX_CARVE_VIEWS).contains(&rules.carve_views)
-        {
+        let margin_ok = rules.margin.is_finite() && rules.margin >= 0.0;
+        if !margin_ok || !(1..=MAX_CARVE_VIEWS).contains(&rules.carve_views) {
             return Err(OpacityError::BadDepthRules {
                 margin: rules.margin,
                 carve_views: rules.carve_views,
@@ -333,7 +332,7 @@ mod tests {
         for v in views {
             let cam = &v.camera;
             let c = cam.world_to_camera(x);
-            if !(c.z > NEAR) {
+            if c.z.is_nan() || c.z <= NEAR {
                 continue;
             }
             let uv = cam.project(c);

@@ -331,7 +331,11 @@ fn opacity_mesh_within(
     let mut hint: Vec<u16> = Vec::new();
     let first_hints =
         |edges: &[[u32; 2]]| -> Vec<u16> { edges.iter().map(|e| decider[e[1] as usize]).collect() };
-    let (vertices, triangles, edges) = surface(
+    let Surface {
+        vertices,
+        triangles,
+        edges,
+    } = surface(
         &points,
         &inside,
         all_seen,
@@ -413,7 +417,11 @@ pub fn median_depth_mesh(
     drop(all);
     stats.ms[0] = ms(clock);
     let all_seen = points.len() == stats.points;
-    let (vertices, triangles, _) = surface(
+    let Surface {
+        vertices,
+        triangles,
+        ..
+    } = surface(
         &points,
         &inside,
         all_seen,
@@ -439,11 +447,18 @@ pub fn median_depth_mesh(
     Ok(OpacityMesh { mesh, stats })
 }
 
+/// What [`surface`] makes: one vertex per crossing edge, the triangles over them, and the
+/// crossing edges (inside point, outside point).
+struct Surface {
+    vertices: Vec<DVec3>,
+    triangles: Vec<[u32; 3]>,
+    edges: Vec<[u32; 2]>,
+}
+
 /// The surface over `points` whose sides are `inside`: tetrahedralised (carried in `track`
 /// when given and `options.carry`), marched, and every crossing edge bisected
 /// `options.bisection_steps` times with `side_of(crossing edges, midpoints, their Z-order)`.
-/// Returns the vertices (one per crossing edge), the triangles and the crossing edges (inside
-/// point, outside point).
+/// Returns a [`Surface`].
 #[expect(
     clippy::too_many_arguments,
     reason = "the stages' shared state, passed once"
@@ -457,7 +472,7 @@ fn surface(
     options: &OpacityOptions,
     stats: &mut OpacityStats,
     mut side_of: impl FnMut(&[[u32; 2]], &[DVec3], &[u32]) -> Vec<bool>,
-) -> Result<(Vec<DVec3>, Vec<[u32; 3]>, Vec<[u32; 2]>), OpacityError> {
+) -> Result<Surface, OpacityError> {
     let clock = Instant::now();
     let tetrahedra = tetralise_or_carry(points, all_seen, source, track, options, stats)?;
     stats.ms[1] = ms(clock);
@@ -502,7 +517,11 @@ fn surface(
     }
     let vertices: Vec<DVec3> = lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5).collect();
     stats.ms[2] = ms(clock);
-    Ok((vertices, crossings.triangles, crossings.edges))
+    Ok(Surface {
+        vertices,
+        triangles: crossings.triangles,
+        edges: crossings.edges,
+    })
 }
 
 /// [`tetrahedralise`], carrying in `track` only when `options.carry` asks for it.
