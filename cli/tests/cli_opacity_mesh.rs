@@ -82,3 +82,53 @@ fn bad_gaussians_give_one_line_naming_the_file() {
         assert!(!out_path.exists(), "{name}: no output");
     }
 }
+
+/// `--field median`: the blob's rendered median-depth maps carve one closed, outward piece with
+/// colours; a negative margin is refused by the parser.
+#[test]
+fn median_field_gives_one_closed_piece() {
+    let dir = fresh_dir("opacity_median");
+    let g = dir.join("blob.ply");
+    write_blob(&g, 0.04f32.ln(), 4.0);
+    let out_path = dir.join("mesh.ply");
+    let args = |margin: &'static str| {
+        vec![
+            "--json",
+            "opacity-mesh",
+            s(&g),
+            "--field",
+            "median",
+            "--margin",
+            margin,
+            "--views",
+            "12",
+            "--resolution",
+            "64",
+        ]
+    };
+    let mut ok = args("1");
+    ok.extend(["-o", s(&out_path)]);
+    let out = run(&ok);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(json["pieces"], 1);
+    let mesh = read_mesh(&out_path).expect("read output");
+    assert!(mesh.triangle_count() > 100);
+    assert!(trisplat_geometry::topology::boundary_edges(mesh.triangles()).is_empty());
+    assert!(mesh.signed_volume() > 0.0);
+    assert!(mesh.colors().is_some());
+    std::fs::remove_file(&out_path).expect("remove");
+    let mut bad = args("-1");
+    bad.extend(["-o", s(&out_path)]);
+    let out = run(&bad);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "a negative margin is a usage error"
+    );
+    assert!(!out_path.exists());
+}

@@ -522,8 +522,9 @@ pub enum Mesher {
         /// Whether vertices get the field's composited colours (not with
         /// `--vertex-colors off`).
         colors: bool,
-        /// The tetrahedralisation carried from frame to frame (the Gaussians are bound: the
-        /// same points move), repaired where it is no longer Delaunay; equal to a rebuild.
+        /// The tetrahedralisation carried from frame to frame when `OpacityOptions::carry` asks
+        /// for it (off by default: on LAM a repair costs more than a rebuild, so every frame
+        /// is rebuilt); equal to a rebuild either way.
         track: Box<OpacityTrack>,
     },
 }

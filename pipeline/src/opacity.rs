@@ -1,13 +1,15 @@
 //! The opacity method's inputs from a Gaussian set (`trisplat opacity-mesh`, and the main job's
-//! `--method opacity`): the set as the extract crate's plain arrays, and the rig the tsdf method
-//! uses.
+//! `--method opacity`): the set as the extract crate's plain arrays, the rig the tsdf method
+//! uses, and the rendered median-depth maps of the median-depth field.
 
 use glam::{DVec3, Vec3};
-use trisplat_extract::opacity::OpacityGaussians;
+use trisplat_extract::opacity::{DepthView, OpacityGaussians};
 use trisplat_geometry::{Camera, bounding_sphere, sphere_rig};
+use trisplat_splat::render::{Outputs, RenderOptions, render};
 use trisplat_splat::{GaussianSet, eval_rgb};
 
 use crate::config::DEFAULT_FOV_DEG;
+use crate::consistency::COVERED_ALPHA;
 use crate::error::PipelineError;
 
 /// The world-space `set` as the opacity field reads it: activated scales (a 2DGS surfel's flat
@@ -71,4 +73,70 @@ pub fn opacity_rig(
         DEFAULT_FOV_DEG,
     )
     .map_err(|_| bad("at least one view of a non-empty image"))
+}
+
+/// The median-depth maps of `set` (world space) from `cameras`, rendered as render consistency
+/// renders them (docs/conventions.md §8: the default renderer, 3DGS with gsplat's rules): per
+/// pixel the median depth where alpha > 1/2 and the depth is finite and positive, else 0; with
+/// `colors`, the rendered colour divided by alpha (the colour of what the pixel composites,
+/// black background) for vertex colours.
+///
+/// # Errors
+/// [`PipelineError::Render`] (frame `frame`) when a view cannot be rendered.
+pub fn median_depth_views(
+    set: &GaussianSet,
+    cameras: &[Camera],
+    colors: bool,
+    frame: usize,
+) -> Result<Vec<DepthView>, PipelineError> {
+    let options = RenderOptions {
+        outputs: Outputs {
+            rgb: colors,
+            alpha: true,
+            depth: false,
+            median_depth: true,
+            normal: false,
+        },
+        ..RenderOptions::default()
+    };
+    cameras
+        .iter()
+        .map(|camera| {
+            let out = render(set, camera, &options).map_err(|cause| PipelineError::Render {
+                frame,
+                camera: camera.name.clone(),
+                cause,
+            })?;
+            let images = out.images;
+            let (Some(alpha), Some(mut depth)) = (images.alpha, images.median_depth) else {
+                return Err(PipelineError::Internal {
+                    what: "a render without the images asked for",
+                });
+            };
+            for (z, a) in depth.iter_mut().zip(&alpha) {
+                if !(*a > COVERED_ALPHA && z.is_finite() && *z > 0.0) {
+                    *z = 0.0;
+                }
+            }
+            let rgb = match images.rgb.filter(|_| colors) {
+                Some(rgb) => alpha
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &a)| {
+                        if a > 0.0 {
+                            [rgb[3 * i] / a, rgb[3 * i + 1] / a, rgb[3 * i + 2] / a]
+                        } else {
+                            [0.5; 3]
+                        }
+                    })
+                    .collect(),
+                None => Vec::new(),
+            };
+            Ok(DepthView {
+                camera: camera.clone(),
+                depth,
+                rgb,
+            })
+        })
+        .collect()
 }

@@ -1,17 +1,18 @@
 //! `trisplat opacity-mesh GAUSSIANS.ply [--cameras C.json] -o MESH.ply [--views N]
-//! [--resolution R] [--keep-pieces all|major|largest] [--field gof|peak]`: mesh the Gaussians' opacity field
+//! [--resolution R] [--keep-pieces all|major|largest] [--field gof|peak|median]`: mesh the Gaussians' opacity field
 //! (docs/conventions.md §6).
 
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
 use trisplat_extract::opacity::{
-    AlphaRules, DEFAULT_BISECTION_STEPS, DEFAULT_LEVEL, KeepPieces, OpacityOptions, RayModel,
-    opacity_mesh,
+    AlphaRules, DEFAULT_BISECTION_STEPS, DEFAULT_CARVE_VIEWS, DEFAULT_LEVEL, DEFAULT_MARGIN,
+    DEFAULT_SAMPLE_STRIDE, DepthRules, KeepPieces, MAX_CARVE_VIEWS, OpacityOptions, RayModel,
+    median_depth_mesh, opacity_mesh,
 };
 use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_pipeline::config::{DEFAULT_RESOLUTION, DEFAULT_VIEWS};
-use trisplat_pipeline::opacity::{opacity_gaussians, opacity_rig};
+use trisplat_pipeline::opacity::{median_depth_views, opacity_gaussians, opacity_rig};
 use trisplat_splat::ParameterSpace;
 use trisplat_splat::ply::read_gaussians;
 
@@ -41,7 +42,9 @@ rules); marching tetrahedra at --level with --steps bisection steps on every cro
 vertex colours: the colours composited up to the vertex in the view where it is least covered. \
 Views: --cameras, or the tsdf method's rig (--views cameras of --resolution pixels, 40 degree \
 field of view, on a sphere around the bounding sphere of the means and box corners). Views are streamed: memory does \
-not grow with their number.")]
+not grow with their number. --field median: the same points and marching, a point outside when at least \
+--carve-views views see it more than --margin pixels in front of their rendered median depth (or see no \
+median depth there); vertex colours from the renders.")]
 pub struct OpacityMeshArgs {
     /// World-space Gaussians (3DGS PLY).
     pub gaussians: PathBuf,
@@ -73,8 +76,24 @@ pub struct OpacityMeshArgs {
     /// (`gof`: Gaussian Opacity Fields' ramp; the level set lies in front of the median depth) or
     /// nothing (`peak`: the level set lies where the renderer's transmittance halves, but
     /// one-layer parts have no inside and vanish).
+    /// `median`: a point is outside when --carve-views views see it in front of their rendered
+    /// median depth by more than --margin pixels, or see no median depth there (the level set
+    /// is the renderer's median depth; --level is not used).
     #[arg(long, value_enum, default_value_t = FieldModel::Gof)]
     pub field: FieldModel,
+    /// With `--field median`: how far in front of a view's median depth a point must lie for
+    /// that view to carve it, in pixel footprints at the point's depth.
+    #[arg(long, value_name = "PX", default_value_t = DEFAULT_MARGIN, value_parser = parse_margin)]
+    pub margin: f32,
+    /// With `--field median`: how many views must carve a point for it to be outside.
+    #[arg(long, value_name = "K", default_value_t = DEFAULT_CARVE_VIEWS,
+        value_parser = clap::value_parser!(u16).range(1..=i64::from(MAX_CARVE_VIEWS)))]
+    pub carve_views: u16,
+    /// With `--field median`: every Nth pixel of every map adds a point behind and one in front
+    /// of its median depth to the tetrahedralisation (0: the Gaussians' points only).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_SAMPLE_STRIDE,
+        value_parser = clap::value_parser!(u32).range(0..=4096))]
+    pub depth_samples: u32,
     /// No vertex colours.
     #[arg(long)]
     pub no_colors: bool,
@@ -90,6 +109,16 @@ pub enum FieldModel {
     Gof,
     /// Nothing before the peak (the renderer's median depth).
     Peak,
+    /// The views' rendered median-depth maps decide each point's side.
+    Median,
+}
+
+/// `--margin`: finite and >= 0.
+fn parse_margin(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(m) if m.is_finite() && m >= 0.0 => Ok(m),
+        _ => Err(format!("expected a finite margin >= 0 (pixels), got '{s}'")),
+    }
 }
 
 /// `--level`: in (0, 1).
@@ -135,15 +164,27 @@ pub fn run(args: OpacityMeshArgs, ctx: &Context) -> anyhow::Result<()> {
         rules: AlphaRules {
             model: match args.field {
                 FieldModel::Peak => RayModel::Peak,
-                FieldModel::Gof => RayModel::Gof,
+                FieldModel::Gof | FieldModel::Median => RayModel::Gof,
             },
             ..AlphaRules::default()
         },
         ..OpacityOptions::default()
     };
     let spinner = ctx.progress.spinner("meshing the opacity field");
-    let out = opacity_mesh(&opacity_gaussians(&set), &cameras, &options)
-        .with_context(|| format!("{}: opacity mesh failed", args.gaussians.display()))?;
+    let gaussians = opacity_gaussians(&set);
+    let out = if args.field == FieldModel::Median {
+        let views = median_depth_views(&set, &cameras, options.colors, 0)
+            .with_context(|| format!("{}: median depth maps", args.gaussians.display()))?;
+        let rules = DepthRules {
+            margin: args.margin,
+            carve_views: args.carve_views,
+            sample_stride: args.depth_samples,
+        };
+        median_depth_mesh(&gaussians, &views, rules, &options, None)
+    } else {
+        opacity_mesh(&gaussians, &cameras, &options)
+    }
+    .with_context(|| format!("{}: opacity mesh failed", args.gaussians.display()))?;
     spinner.finish_and_clear();
     let s = &out.stats;
     if !ctx.quiet && s.pieces > 1 && options.keep != KeepPieces::All {

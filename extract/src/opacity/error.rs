@@ -60,6 +60,27 @@ pub enum OpacityError {
         /// The cut.
         cut: f32,
     },
+    /// A median-depth map (`--field median`) does not fit its camera or holds a depth that
+    /// is negative or not finite.
+    #[error("depth map {view} ({name}): {problem}")]
+    BadDepthMap {
+        /// Index of the view.
+        view: usize,
+        /// The camera's name.
+        name: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The median-depth rules are out of range.
+    #[error(
+        "median-depth rules: margin {margin} must be finite and >= 0, carve views {carve_views} in 1..=16"
+    )]
+    BadDepthRules {
+        /// The margin, pixel footprints.
+        margin: f32,
+        /// Views that must carve a point.
+        carve_views: u16,
+    },
     /// No camera was given.
     #[error("no cameras")]
     NoCameras,

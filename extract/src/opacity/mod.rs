@@ -17,6 +17,7 @@
 //!   thread count.
 
 mod carry;
+mod depth;
 mod error;
 mod field;
 mod gaussians;
@@ -33,11 +34,16 @@ use trisplat_geometry::{Camera, Rgba, TriMesh};
 
 use crate::delaunay3d::Delaunay3d;
 use carry::CarriedTets;
+use depth::{DepthViews, depth_colors, depth_field, depth_samples};
 use field::{Mode, NO_VIEW, evaluate};
 use order::z_order;
 use view::CertifyAt;
 use views::{HELD_BYTES, Views};
 
+pub use depth::{
+    BLEND_SPREAD, DEFAULT_CARVE_VIEWS, DEFAULT_MARGIN, DEFAULT_SAMPLE_STRIDE, DepthRules,
+    DepthView, MAX_CARVE_VIEWS,
+};
 pub use error::OpacityError;
 pub use field::{AlphaRules, RayModel};
 pub use gaussians::OpacityGaussians;
@@ -90,6 +96,9 @@ pub struct OpacityOptions {
     pub keep: KeepPieces,
     /// Whether vertices get colours.
     pub colors: bool,
+    /// Whether [`opacity_mesh_tracked`] carries the tetrahedralisation from frame to frame
+    /// (off by default: on LAM a repair costs more than a rebuild, docs/benchmarks.md).
+    pub carry: bool,
 }
 
 impl Default for OpacityOptions {
@@ -101,6 +110,7 @@ impl Default for OpacityOptions {
             rules: AlphaRules::default(),
             keep: KeepPieces::default(),
             colors: true,
+            carry: false,
         }
     }
 }
@@ -316,13 +326,159 @@ fn opacity_mesh_within(
     drop(all);
     stats.ms[0] = ms(clock);
 
-    let clock = Instant::now();
     let all_seen = points.len() == stats.points;
-    let tetrahedra = tetrahedralise(&points, all_seen, &p.source, track, &mut stats)?;
+    // Each edge first walks the view that put its outer end outside.
+    let mut hint: Vec<u16> = Vec::new();
+    let first_hints =
+        |edges: &[[u32; 2]]| -> Vec<u16> { edges.iter().map(|e| decider[e[1] as usize]).collect() };
+    let Surface {
+        vertices,
+        triangles,
+        edges,
+    } = surface(
+        &points,
+        &inside,
+        all_seen,
+        &p.source,
+        track,
+        options,
+        &mut stats,
+        |edges, mid, order| {
+            if hint.is_empty() {
+                hint = first_hints(edges);
+            }
+            let f = evaluate(&p, &mut views, mid, order, Some(&hint), sign, options.rules);
+            let inside: Vec<bool> = f.value.iter().map(|&v| v >= level).collect();
+            for (k, h) in hint.iter_mut().enumerate() {
+                if !inside[k] && f.decider[k] != NO_VIEW {
+                    *h = f.decider[k];
+                }
+            }
+            inside
+        },
+    )?;
+    if hint.is_empty() {
+        hint = first_hints(&edges);
+    }
+
+    let clock = Instant::now();
+    let (mut mesh, kept) = keep_pieces(vertices, triangles, options.keep, &mut stats);
+    if options.colors {
+        let used_hint: Vec<u16> = kept.iter().map(|&v| hint[v as usize]).collect();
+        let colors = field::colors(&p, &mut views, mesh.positions(), &used_hint, options.rules);
+        mesh = with_colors(mesh, &colors);
+    }
+    stats.ms[3] = ms(clock);
+    Ok(OpacityMesh { mesh, stats })
+}
+
+/// [`opacity_mesh`] with the median-depth field (module `depth`, docs/conventions.md §6):
+/// the same points, tetrahedralisation, marching and bisection, with each point's side read
+/// from the views' rendered median-depth maps; vertex colours from the rendered colours of the
+/// view whose median depth lies closest to the vertex. `options.rules` and `options.level` are
+/// not used (the level is `-rules.margin`).
+///
+/// # Errors
+/// As [`opacity_mesh`], and [`OpacityError::BadDepthMap`] / [`OpacityError::BadDepthRules`].
+pub fn median_depth_mesh(
+    gaussians: &OpacityGaussians,
+    views: &[DepthView],
+    rules: DepthRules,
+    options: &OpacityOptions,
+    track: Option<&mut OpacityTrack>,
+) -> Result<OpacityMesh, OpacityError> {
+    let maps = DepthViews::new(views, rules)?;
+    let level = maps.level();
+    let p = Prepared::new(gaussians, options.opacity_cut, options.rules.min_alpha)?;
+    let mut stats = OpacityStats {
+        gaussians: p.len(),
+        ..OpacityStats::default()
+    };
+    let clock = Instant::now();
+    let mut all = tetra_points(&p);
+    let samples = depth_samples(&maps);
+    // The samples change from frame to frame: only the Gaussians' points can be carried.
+    let track = track.filter(|_| samples.is_empty());
+    all.extend(samples);
+    stats.points = all.len();
+    let (value, seen) = depth_field(&maps, &all);
+    let mut points = Vec::with_capacity(all.len());
+    let mut inside = Vec::with_capacity(all.len());
+    for (k, &x) in all.iter().enumerate() {
+        if seen[k] {
+            points.push(x);
+            inside.push(value[k] >= level);
+        }
+    }
+    stats.points_seen = points.len();
+    if points.is_empty() {
+        return Err(OpacityError::NotSeen { points: all.len() });
+    }
+    drop(all);
+    stats.ms[0] = ms(clock);
+    let all_seen = points.len() == stats.points;
+    let Surface {
+        vertices,
+        triangles,
+        ..
+    } = surface(
+        &points,
+        &inside,
+        all_seen,
+        &p.source,
+        track,
+        options,
+        &mut stats,
+        |_, mid, _| {
+            depth_field(&maps, mid)
+                .0
+                .iter()
+                .map(|&v| v >= level)
+                .collect()
+        },
+    )?;
+    let clock = Instant::now();
+    let (mut mesh, _) = keep_pieces(vertices, triangles, options.keep, &mut stats);
+    if options.colors {
+        let colors = depth_colors(&maps, mesh.positions());
+        mesh = with_colors(mesh, &colors);
+    }
+    stats.ms[3] = ms(clock);
+    Ok(OpacityMesh { mesh, stats })
+}
+
+/// What [`surface`] makes: one vertex per crossing edge, the triangles over them, and the
+/// crossing edges (inside point, outside point).
+struct Surface {
+    vertices: Vec<DVec3>,
+    triangles: Vec<[u32; 3]>,
+    edges: Vec<[u32; 2]>,
+}
+
+/// The surface over `points` whose sides are `inside`: tetrahedralised (carried in `track`
+/// when given and `options.carry`), marched, and every crossing edge bisected
+/// `options.bisection_steps` times with `side_of(crossing edges, midpoints, their Z-order)`.
+/// Returns a [`Surface`].
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the stages' shared state, passed once"
+)]
+fn surface(
+    points: &[DVec3],
+    inside: &[bool],
+    all_seen: bool,
+    source: &[u32],
+    track: Option<&mut OpacityTrack>,
+    options: &OpacityOptions,
+    stats: &mut OpacityStats,
+    mut side_of: impl FnMut(&[[u32; 2]], &[DVec3], &[u32]) -> Vec<bool>,
+) -> Result<Surface, OpacityError> {
+    let clock = Instant::now();
+    let tetrahedra = tetralise_or_carry(points, all_seen, source, track, options, stats)?;
     stats.ms[1] = ms(clock);
 
     let clock = Instant::now();
-    let crossings = tets::march(&points, &tetrahedra, &inside);
+    let crossings = tets::march(points, &tetrahedra, inside);
     drop(tetrahedra);
     if crossings.triangles.is_empty() {
         return Err(OpacityError::NoSurface {
@@ -342,12 +498,6 @@ fn opacity_mesh_within(
         .iter()
         .map(|e| points[e[1] as usize])
         .collect();
-    // Each edge first walks the view that put its outer end outside.
-    let mut hint: Vec<u16> = crossings
-        .edges
-        .iter()
-        .map(|e| decider[e[1] as usize])
-        .collect();
     let mut mid: Vec<DVec3> = lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5).collect();
     // The midpoints move by less than their edges: one Z-order serves every step.
     let mid_order = z_order(&mid);
@@ -356,40 +506,55 @@ fn opacity_mesh_within(
             mid.clear();
             mid.extend(lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5));
         }
-        let f = evaluate(
-            &p,
-            &mut views,
-            &mid,
-            &mid_order,
-            Some(&hint),
-            sign,
-            options.rules,
-        );
+        let ins = side_of(&crossings.edges, &mid, &mid_order);
         for (k, m) in mid.iter().enumerate() {
-            if f.value[k] >= level {
+            if ins[k] {
                 lo[k] = *m;
             } else {
                 hi[k] = *m;
-                if f.decider[k] != NO_VIEW {
-                    hint[k] = f.decider[k];
-                }
             }
         }
     }
     let vertices: Vec<DVec3> = lo.iter().zip(&hi).map(|(a, b)| (*a + *b) * 0.5).collect();
     stats.ms[2] = ms(clock);
+    Ok(Surface {
+        vertices,
+        triangles: crossings.triangles,
+        edges: crossings.edges,
+    })
+}
 
-    let clock = Instant::now();
-    let (piece, areas) = pieces::pieces(&vertices, &crossings.triangles);
+/// [`tetrahedralise`], carrying in `track` only when `options.carry` asks for it.
+fn tetralise_or_carry(
+    points: &[DVec3],
+    all_seen: bool,
+    source: &[u32],
+    track: Option<&mut OpacityTrack>,
+    options: &OpacityOptions,
+    stats: &mut OpacityStats,
+) -> Result<Vec<[u32; 4]>, OpacityError> {
+    let track = track.filter(|_| options.carry);
+    tetrahedralise(points, all_seen, source, track, stats)
+}
+
+/// The pieces `keep` selects (stats: pieces, kept share of the area), as a mesh without the
+/// vertices no kept triangle uses; with the index of each kept vertex in `vertices`.
+fn keep_pieces(
+    vertices: Vec<DVec3>,
+    triangles: Vec<[u32; 3]>,
+    keep: KeepPieces,
+    stats: &mut OpacityStats,
+) -> (TriMesh, Vec<u32>) {
+    let (piece, areas) = pieces::pieces(&vertices, &triangles);
     stats.pieces = areas.len();
     let total: f64 = areas.iter().sum();
-    let triangles: Vec<[u32; 3]> = match options.keep {
+    let triangles: Vec<[u32; 3]> = match keep {
         KeepPieces::All => {
             stats.kept_area_fraction = 1.0;
-            crossings.triangles
+            triangles
         }
         KeepPieces::Largest | KeepPieces::Major => {
-            let kept = if options.keep == KeepPieces::Largest {
+            let kept = if keep == KeepPieces::Largest {
                 1
             } else {
                 areas
@@ -403,8 +568,7 @@ fn opacity_mesh_within(
             } else {
                 1.0
             };
-            crossings
-                .triangles
+            triangles
                 .iter()
                 .zip(&piece)
                 .filter(|(_, p)| (**p as usize) < kept)
@@ -415,7 +579,7 @@ fn opacity_mesh_within(
     // Drop vertices no kept triangle uses, keeping their order.
     let mut remap = vec![u32::MAX; vertices.len()];
     let mut used = Vec::new();
-    let mut used_hint = Vec::new();
+    let mut kept = Vec::new();
     for t in &triangles {
         for &v in t {
             if remap[v as usize] == u32::MAX {
@@ -427,33 +591,31 @@ fn opacity_mesh_within(
         if *r == 0 {
             *r = used.len() as u32;
             used.push(vertices[v]);
-            used_hint.push(hint[v]);
+            kept.push(v as u32);
         }
     }
     let triangles: Vec<[u32; 3]> = triangles
         .iter()
         .map(|t| t.map(|v| remap[v as usize]))
         .collect();
-    let mut mesh = TriMesh::new(used, triangles);
-    if options.colors {
-        let colors = field::colors(&p, &mut views, mesh.positions(), &used_hint, options.rules);
-        let rgba: Vec<Rgba> = colors
-            .iter()
-            .map(|c| {
-                [
-                    c[0].clamp(0.0, 1.0),
-                    c[1].clamp(0.0, 1.0),
-                    c[2].clamp(0.0, 1.0),
-                    1.0,
-                ]
-            })
-            .collect();
-        mesh = mesh
-            .with_colors(rgba)
-            .expect("one colour per vertex by construction");
-    }
-    stats.ms[3] = ms(clock);
-    Ok(OpacityMesh { mesh, stats })
+    (TriMesh::new(used, triangles), kept)
+}
+
+/// `mesh` with `colors` clamped to [0, 1] as its vertex colours (alpha 1).
+fn with_colors(mesh: TriMesh, colors: &[[f32; 3]]) -> TriMesh {
+    let rgba: Vec<Rgba> = colors
+        .iter()
+        .map(|c| {
+            [
+                c[0].clamp(0.0, 1.0),
+                c[1].clamp(0.0, 1.0),
+                c[2].clamp(0.0, 1.0),
+                1.0,
+            ]
+        })
+        .collect();
+    mesh.with_colors(rgba)
+        .expect("one colour per vertex by construction")
 }
 
 fn ms(clock: Instant) -> f64 {

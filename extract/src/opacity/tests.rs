@@ -536,6 +536,7 @@ fn tracked_mesh_equals_from_scratch() {
     let cams = rig(DVec3::ZERO, 0.4, 8);
     let opts = OpacityOptions {
         bisection_steps: 3,
+        carry: true,
         ..OpacityOptions::default()
     };
     let mut track = OpacityTrack::default();

@@ -1,0 +1,588 @@
+//! The median-depth field (docs/conventions.md §6, `--field median`): the sign of a point comes
+//! from the views' rendered median-depth maps, the renderer's own rule for where a surface is,
+//! instead of from walks along rays. A view *carves* a point it sees when the pixel the point
+//! falls in is not covered (alpha ≤ 1/2: no median depth) or when the point lies in front of
+//! that pixel's median depth by more than a margin; the field is the `k`-th smallest over the
+//! views that see the point of the signed depth `(z - D) f / z` (in pixel footprints at the
+//! point's depth), so a point is outside when at least `k` views carve it.
+
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use trisplat_geometry::Camera;
+
+use super::error::OpacityError;
+use super::view::NEAR;
+
+/// Largest number of views that must carve a point ([`DepthRules::carve_views`]).
+pub const MAX_CARVE_VIEWS: u16 = 16;
+
+/// Largest spread of a pixel quad's four median depths, in pixel footprints, over which the
+/// depth is interpolated bilinearly; beyond it (an occlusion edge) the point's own pixel's
+/// depth is used, so depths of two surfaces are never blended.
+pub const BLEND_SPREAD: f64 = 8.0;
+
+/// One view's rendered median-depth map (docs/conventions.md §5: the z-depth of the splat at
+/// which the transmittance first drops below 1/2), as plain arrays.
+#[derive(Clone, Debug)]
+pub struct DepthView {
+    /// The camera.
+    pub camera: Camera,
+    /// Row-major `height x width`: the median depth where the Gaussians cover the pixel
+    /// (alpha > 1/2, depth finite and positive), 0 elsewhere.
+    pub depth: Vec<f32>,
+    /// Row-major rendered colours (linear RGB), for vertex colours; empty: none.
+    pub rgb: Vec<[f32; 3]>,
+}
+
+/// How the median-depth maps decide a point's side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthRules {
+    /// A view carves a point in front of its median depth by more than this many pixel
+    /// footprints at the point's depth (`z / f`): the surface lies this far in front of the
+    /// carving view's median depth, and layers one Gaussian thick keep an inside.
+    pub margin: f32,
+    /// A point is outside when at least this many views carve it (1: any view, the strict
+    /// depth-carved hull; more keeps semi-transparent rims that one view sees through).
+    pub carve_views: u16,
+    /// Every `sample_stride`-th pixel (in rows and columns) of every covered map adds two
+    /// points to the tetrahedralisation, half a footprint behind its median depth and
+    /// `margin + 1/2` footprints in front of it, so the marching sees the surface where the
+    /// Gaussians' own points are too sparse (thin or fuzzy layers); 0: GOF's points only.
+    pub sample_stride: u32,
+}
+
+/// Default [`DepthRules::margin`], pixel footprints (with [`DEFAULT_CARVE_VIEWS`] the setting
+/// that beats GOF's field on every render-consistency score on LAM, docs/benchmarks.md).
+pub const DEFAULT_MARGIN: f32 = 3.0;
+/// Default [`DepthRules::sample_stride`].
+pub const DEFAULT_SAMPLE_STRIDE: u32 = 0;
+/// Default [`DepthRules::carve_views`].
+pub const DEFAULT_CARVE_VIEWS: u16 = 2;
+
+impl Default for DepthRules {
+    fn default() -> Self {
+        Self {
+            margin: DEFAULT_MARGIN,
+            carve_views: DEFAULT_CARVE_VIEWS,
+            sample_stride: DEFAULT_SAMPLE_STRIDE,
+        }
+    }
+}
+
+/// A [`DepthView`] with its projection at hand.
+struct Prepared<'a> {
+    view: &'a DepthView,
+    /// World to camera.
+    rot: DMat3,
+    origin: DVec3,
+    /// Mean focal length (pixels): a pixel's footprint at depth `z` is `z / focal`.
+    focal: f64,
+}
+
+/// The checked views of [`depth_field`] and [`depth_colors`].
+pub(crate) struct DepthViews<'a> {
+    views: Vec<Prepared<'a>>,
+    rules: DepthRules,
+}
+
+impl<'a> DepthViews<'a> {
+    /// Checks the maps' sizes and the rules.
+    ///
+    /// # Errors
+    /// [`OpacityError::NoCameras`] without views, [`OpacityError::BadDepthMap`] for a map or
+    /// colour image of the wrong size or a depth that is negative or not finite,
+    /// [`OpacityError::BadDepthRules`] for a margin that is negative or not finite or a
+    /// `carve_views` outside 1..=[`MAX_CARVE_VIEWS`].
+    pub fn new(views: &'a [DepthView], rules: DepthRules) -> Result<Self, OpacityError> {
+        if views.is_empty() {
+            return Err(OpacityError::NoCameras);
+        }
+        let margin_ok = rules.margin.is_finite() && rules.margin >= 0.0;
+        if !margin_ok || !(1..=MAX_CARVE_VIEWS).contains(&rules.carve_views) {
+            return Err(OpacityError::BadDepthRules {
+                margin: rules.margin,
+                carve_views: rules.carve_views,
+            });
+        }
+        let mut out = Vec::with_capacity(views.len());
+        for (index, view) in views.iter().enumerate() {
+            let c = &view.camera;
+            let pixels = c.width as usize * c.height as usize;
+            let bad = |problem: String| OpacityError::BadDepthMap {
+                view: index,
+                name: c.name.clone(),
+                problem,
+            };
+            if view.depth.len() != pixels {
+                return Err(bad(format!(
+                    "{} depths for {}x{} pixels",
+                    view.depth.len(),
+                    c.width,
+                    c.height
+                )));
+            }
+            if !view.rgb.is_empty() && view.rgb.len() != pixels {
+                return Err(bad(format!(
+                    "{} colours for {}x{} pixels",
+                    view.rgb.len(),
+                    c.width,
+                    c.height
+                )));
+            }
+            if let Some(k) = view
+                .depth
+                .iter()
+                .position(|d| !(d.is_finite() && *d >= 0.0))
+            {
+                return Err(bad(format!(
+                    "pixel {k} has depth {} (expected finite and >= 0)",
+                    view.depth[k]
+                )));
+            }
+            out.push(Prepared {
+                view,
+                rot: c.world_to_camera_rotation(),
+                origin: c.position(),
+                focal: 0.5 * (c.fx + c.fy),
+            });
+        }
+        Ok(Self { views: out, rules })
+    }
+
+    /// The level: a point is inside when its field is at least this.
+    pub fn level(&self) -> f64 {
+        -f64::from(self.rules.margin)
+    }
+}
+
+/// Where `x` falls in `v`: camera z and pixel coordinates (u, v), `None` behind the near plane
+/// or outside the image.
+#[inline]
+fn locate(v: &Prepared, x: DVec3) -> Option<(f64, f64, f64)> {
+    let c = v.rot * (x - v.origin);
+    if c.z.is_nan() || c.z <= NEAR {
+        return None;
+    }
+    let cam = &v.view.camera;
+    let u = cam.fx * c.x / c.z + cam.cx;
+    let w = cam.fy * c.y / c.z + cam.cy;
+    if !(u >= 0.0 && w >= 0.0 && u < f64::from(cam.width) && w < f64::from(cam.height)) {
+        return None;
+    }
+    Some((c.z, u, w))
+}
+
+/// The median depth `v` shows at pixel coordinates (u, w): bilinear over the four pixel
+/// centres around it when all four are covered and their depths spread by at most
+/// [`BLEND_SPREAD`] footprints, else the depth of the pixel it falls in; 0 when that pixel is
+/// not covered.
+#[inline]
+pub(crate) fn median_at(v: &DepthView, focal: f64, u: f64, w: f64) -> f64 {
+    let (width, height) = (v.camera.width as usize, v.camera.height as usize);
+    let own = f64::from(v.depth[(w as usize) * width + u as usize]);
+    if own <= 0.0 {
+        return 0.0;
+    }
+    let (fu, fw) = (u - 0.5, w - 0.5);
+    if fu < 0.0 || fw < 0.0 {
+        return own;
+    }
+    let (i, j) = (fu as usize, fw as usize);
+    if i + 1 >= width || j + 1 >= height {
+        return own;
+    }
+    let d = [
+        f64::from(v.depth[j * width + i]),
+        f64::from(v.depth[j * width + i + 1]),
+        f64::from(v.depth[(j + 1) * width + i]),
+        f64::from(v.depth[(j + 1) * width + i + 1]),
+    ];
+    let (lo, hi) = d.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+        (lo.min(x), hi.max(x))
+    });
+    if lo <= 0.0 || (hi - lo) * focal > BLEND_SPREAD * own {
+        return own;
+    }
+    let (a, b) = (fu - i as f64, fw - j as f64);
+    (d[0] * (1.0 - a) + d[1] * a) * (1.0 - b) + (d[2] * (1.0 - a) + d[3] * a) * b
+}
+
+/// The signed depth of `x` in `v`, in pixel footprints (`(z - D) f / z`; −∞ where the pixel is
+/// not covered), `None` when `v` does not see `x`.
+#[inline]
+fn signed(v: &Prepared, x: DVec3) -> Option<f64> {
+    let (z, u, w) = locate(v, x)?;
+    let d = median_at(v.view, v.focal, u, w);
+    Some(if d > 0.0 {
+        (z - d) * v.focal / z
+    } else {
+        f64::NEG_INFINITY
+    })
+}
+
+/// The field at `x`: the `carve_views`-th smallest signed depth over the views that see `x`
+/// (+∞ when fewer see it), and whether any view sees it.
+pub(crate) fn field_at(views: &DepthViews, x: DVec3) -> (f64, bool) {
+    let k = usize::from(views.rules.carve_views);
+    let mut smallest = [f64::INFINITY; MAX_CARVE_VIEWS as usize];
+    let mut seen = false;
+    for v in &views.views {
+        let Some(s) = signed(v, x) else { continue };
+        seen = true;
+        if s < smallest[k - 1] {
+            // Insert into the sorted k smallest.
+            let mut at = k - 1;
+            while at > 0 && smallest[at - 1] > s {
+                smallest[at] = smallest[at - 1];
+                at -= 1;
+            }
+            smallest[at] = s;
+        }
+    }
+    (smallest[k - 1], seen)
+}
+
+/// [`field_at`] at every point (values, seen).
+pub(crate) fn depth_field(views: &DepthViews, points: &[DVec3]) -> (Vec<f64>, Vec<bool>) {
+    points
+        .par_iter()
+        .with_min_len(1024)
+        .map(|&x| field_at(views, x))
+        .unzip()
+}
+
+/// The sample points of [`DepthRules::sample_stride`]: per view, per sampled covered pixel
+/// (its centre), the points `0.5` footprints behind and `margin + 0.5` in front of its
+/// median depth along the pixel's ray; none with a stride of 0.
+pub(crate) fn depth_samples(views: &DepthViews) -> Vec<DVec3> {
+    let stride = views.rules.sample_stride as usize;
+    if stride == 0 {
+        return Vec::new();
+    }
+    let margin = f64::from(views.rules.margin);
+    let mut out = Vec::new();
+    for v in &views.views {
+        let cam = &v.view.camera;
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let to_world = v.rot.transpose();
+        for row in (stride / 2..h).step_by(stride) {
+            for col in (stride / 2..w).step_by(stride) {
+                let d = f64::from(v.view.depth[row * w + col]);
+                if d <= 0.0 {
+                    continue;
+                }
+                let ray = cam.unproject(col as f64 + 0.5, row as f64 + 0.5);
+                for z in [
+                    d * (1.0 + 0.5 / v.focal),
+                    d * (1.0 - (margin + 0.5) / v.focal),
+                ] {
+                    if z > NEAR {
+                        out.push(to_world * (ray * z) + v.origin);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Vertex colours: the rendered colour of the pixel a vertex falls in, in the view whose median
+/// depth there is closest to it (in footprints) among the views that see it covered; grey where
+/// none does or the views have no colours.
+pub(crate) fn depth_colors(views: &DepthViews, points: &[DVec3]) -> Vec<[f32; 3]> {
+    points
+        .par_iter()
+        .with_min_len(1024)
+        .map(|&x| {
+            let mut best = (f64::INFINITY, [0.5f32; 3]);
+            for v in &views.views {
+                if v.view.rgb.is_empty() {
+                    continue;
+                }
+                let Some((z, u, w)) = locate(v, x) else {
+                    continue;
+                };
+                let k = (w as usize) * v.view.camera.width as usize + u as usize;
+                let d = f64::from(v.view.depth[k]);
+                if d <= 0.0 {
+                    continue;
+                }
+                let off = ((z - d) * v.focal / z).abs();
+                if off < best.0 {
+                    best = (off, v.view.rgb[k]);
+                }
+            }
+            best.1
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+    use trisplat_geometry::sphere_rig;
+
+    use super::*;
+    use crate::opacity::{OpacityGaussians, OpacityOptions, median_depth_mesh};
+
+    /// The definition, evaluated directly: every view's signed depth through the camera's own
+    /// projection, all of them sorted, the `k`-th taken.
+    fn brute_force(views: &[DepthView], rules: DepthRules, x: DVec3) -> (f64, bool) {
+        let mut all = Vec::new();
+        for v in views {
+            let cam = &v.camera;
+            let c = cam.world_to_camera(x);
+            if c.z.is_nan() || c.z <= NEAR {
+                continue;
+            }
+            let uv = cam.project(c);
+            let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+            if !(uv.x >= 0.0 && uv.y >= 0.0 && uv.x < w && uv.y < h) {
+                continue;
+            }
+            let f = (cam.fx + cam.fy) / 2.0;
+            let at = |col: f64, row: f64| {
+                f64::from(v.depth[row as usize * cam.width as usize + col as usize])
+            };
+            let own = at(uv.x.floor(), uv.y.floor());
+            let (i, j) = ((uv.x - 0.5).floor(), (uv.y - 0.5).floor());
+            let inside = i >= 0.0 && j >= 0.0 && i + 1.0 < w && j + 1.0 < h;
+            let quad = if inside {
+                [
+                    at(i, j),
+                    at(i + 1.0, j),
+                    at(i, j + 1.0),
+                    at(i + 1.0, j + 1.0),
+                ]
+            } else {
+                [0.0; 4]
+            };
+            let d = if own <= 0.0 {
+                0.0
+            } else if inside
+                && quad.iter().all(|&d| d > 0.0)
+                && (quad.iter().copied().fold(0.0, f64::max)
+                    - quad.iter().copied().fold(f64::INFINITY, f64::min))
+                    * f
+                    <= BLEND_SPREAD * own
+            {
+                let (a, b) = (uv.x - 0.5 - i, uv.y - 0.5 - j);
+                quad[0] * (1.0 - a) * (1.0 - b)
+                    + quad[1] * a * (1.0 - b)
+                    + quad[2] * (1.0 - a) * b
+                    + quad[3] * a * b
+            } else {
+                own
+            };
+            all.push(if d > 0.0 {
+                (c.z - d) * f / c.z
+            } else {
+                f64::NEG_INFINITY
+            });
+        }
+        all.sort_by(f64::total_cmp);
+        let k = usize::from(rules.carve_views);
+        (
+            all.get(k - 1).copied().unwrap_or(f64::INFINITY),
+            !all.is_empty(),
+        )
+    }
+
+    /// A small deterministic generator (no dependency).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Maps with smooth parts, jumps (occlusion edges) and holes (uncovered pixels), on a
+    /// non-square image.
+    fn random_views(seed: u64) -> Vec<DepthView> {
+        let mut state = seed;
+        let cams = sphere_rig(DVec3::ZERO, 1.0, 7, (24, 17), 40.0).expect("rig");
+        cams.into_iter()
+            .map(|camera| {
+                let base = camera.position().length();
+                let (w, h) = (camera.width as usize, camera.height as usize);
+                let mut depth = vec![0.0f32; w * h];
+                for (k, d) in depth.iter_mut().enumerate() {
+                    let (col, row) = ((k % w) as f64, (k / w) as f64);
+                    let r = lcg(&mut state);
+                    *d = if r < 0.15 {
+                        0.0
+                    } else if col > 14.0 {
+                        (base - 0.6 + 0.01 * row) as f32
+                    } else {
+                        (base + 0.02 * (col * 0.7 + row * 0.3).sin() + 0.002 * r) as f32
+                    };
+                }
+                DepthView {
+                    camera,
+                    depth,
+                    rgb: Vec::new(),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn field_equals_brute_force() {
+        let views = random_views(7);
+        let mut state = 99u64;
+        let points: Vec<DVec3> = (0..4000)
+            .map(|_| {
+                DVec3::new(lcg(&mut state), lcg(&mut state), lcg(&mut state)) * 2.4
+                    - DVec3::splat(1.2)
+            })
+            .collect();
+        let mut kinds = [0usize; 3];
+        for k in [1u16, 2, 3] {
+            let rules = DepthRules {
+                margin: 0.5,
+                carve_views: k,
+                sample_stride: 0,
+            };
+            let prepared = DepthViews::new(&views, rules).expect("views");
+            let (value, seen) = depth_field(&prepared, &points);
+            for (i, &x) in points.iter().enumerate() {
+                let (want, want_seen) = brute_force(&views, rules, x);
+                assert_eq!(seen[i], want_seen, "point {i}");
+                let got = value[i];
+                if want.is_finite() {
+                    assert!(
+                        (got - want).abs() <= 1e-9 * (1.0 + want.abs()),
+                        "point {i}, k {k}: {got} against {want}"
+                    );
+                    kinds[0] += 1;
+                } else {
+                    assert_eq!(got, want, "point {i}, k {k}");
+                    kinds[usize::from(want > 0.0) + 1] += 1;
+                }
+            }
+        }
+        // Finite values, carved by uncovered pixels (-inf) and seen by fewer than k views.
+        assert!(
+            kinds[0] > 1000 && kinds[1] > 1000 && kinds[2] > 0,
+            "{kinds:?}"
+        );
+    }
+
+    #[test]
+    fn bad_maps_and_rules_are_refused() {
+        let mut views = random_views(1);
+        assert!(matches!(
+            DepthViews::new(
+                &views,
+                DepthRules {
+                    margin: -1.0,
+                    ..DepthRules::default()
+                }
+            ),
+            Err(OpacityError::BadDepthRules { .. })
+        ));
+        assert!(matches!(
+            DepthViews::new(
+                &views,
+                DepthRules {
+                    carve_views: 0,
+                    ..DepthRules::default()
+                }
+            ),
+            Err(OpacityError::BadDepthRules { .. })
+        ));
+        views[2].depth[5] = f32::NAN;
+        let err = DepthViews::new(&views, DepthRules::default())
+            .err()
+            .expect("refused");
+        assert!(
+            matches!(err, OpacityError::BadDepthMap { view: 2, .. }),
+            "{err}"
+        );
+        views[2].depth.pop();
+        assert!(matches!(
+            DepthViews::new(&views, DepthRules::default()),
+            Err(OpacityError::BadDepthMap { view: 2, .. })
+        ));
+        assert!(matches!(
+            DepthViews::new(&[], DepthRules::default()),
+            Err(OpacityError::NoCameras)
+        ));
+    }
+
+    /// Exact depth maps of a sphere (ray cast): the mesh of Gaussians on it lies on the sphere,
+    /// `margin` footprints in front of it at most, and is one closed piece.
+    #[test]
+    fn sphere_mesh_lies_at_the_median_depth() {
+        let radius = 0.3;
+        let cams = sphere_rig(DVec3::ZERO, 0.4, 20, (96, 96), 40.0).expect("rig");
+        let views: Vec<DepthView> = cams
+            .into_iter()
+            .map(|camera| {
+                let (w, h) = (camera.width, camera.height);
+                let mut depth = vec![0.0f32; (w * h) as usize];
+                for row in 0..h {
+                    for col in 0..w {
+                        let (o, d) = camera.pixel_ray(row, col);
+                        let b = o.dot(d);
+                        let disc = b * b - (o.length_squared() - radius * radius);
+                        if disc > 0.0 {
+                            let t = -b - disc.sqrt();
+                            depth[(row * w + col) as usize] =
+                                (t / camera.ray_length_factor(row, col)) as f32;
+                        }
+                    }
+                }
+                DepthView {
+                    camera,
+                    depth,
+                    rgb: Vec::new(),
+                }
+            })
+            .collect();
+        let n = 600;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let means: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - y * y).sqrt();
+                let a = golden * i as f64;
+                (DVec3::new(r * a.cos(), y, r * a.sin()) * radius).as_vec3()
+            })
+            .collect();
+        let g = OpacityGaussians {
+            scales: vec![Vec3::splat(0.02); n],
+            rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
+            opacities: vec![0.9; n],
+            colors: vec![[0.5; 3]; n],
+            means,
+        };
+        let margin = 0.5;
+        let rules = DepthRules {
+            margin,
+            carve_views: 1,
+            sample_stride: 0,
+        };
+        let options = OpacityOptions {
+            colors: false,
+            ..OpacityOptions::default()
+        };
+        let out = median_depth_mesh(&g, &views, rules, &options, None).expect("mesh");
+        assert_eq!(out.stats.pieces, 1);
+        // A footprint at the nearest camera distance (~1.17) at 96 px, 40 degrees: ~6 mm.
+        let footprint = 1.17 / (48.0 / 20f64.to_radians().tan());
+        let mut err: Vec<f64> = out
+            .mesh
+            .positions()
+            .iter()
+            .map(|p| p.length() - radius)
+            .collect();
+        err.sort_by(f64::total_cmp);
+        let median = err[err.len() / 2];
+        let (lo, hi) = (err[0], err[err.len() - 1]);
+        assert!(
+            median.abs() < 0.5 * footprint && lo > -2.0 * footprint && hi < 0.5 * footprint,
+            "radial error median {median}, range {lo}..{hi}, footprint {footprint}"
+        );
+    }
+}
