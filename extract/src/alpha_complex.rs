@@ -24,6 +24,20 @@
 //! edges that two output triangles share, starting from the regular ones (a sheet touching no
 //! regular triangle keeps the orientation of its first triangle's tetrahedron).
 //!
+//! **The solid's boundary** ([`Surface::Solid`], the default): the complex is not manifold (on
+//! surface samples about a sixth of its edges carry three or more triangles: folds where both
+//! diagonals of a nearly planar quadrilateral pass the emptiness test, sheets inside the
+//! object), so its area exceeds the surface's by a quarter. The solid keeps only what can be
+//! seen from outside: a tetrahedron is *exterior* when it can be reached from the outside of the
+//! convex hull by crossing only triangles that are not in the complex (neither regular nor
+//! singular) into tetrahedra that are not kept; every other tetrahedron is the solid. The
+//! output is the triangles between an exterior tetrahedron (or the outside of the hull) and a
+//! solid one, oriented away from the solid; each is a regular or singular triangle of the
+//! complex. Folds, doubled sheets and interior faces lie inside the solid and are dropped;
+//! a sheet with the outside on both sides (a dangling fin) is dropped too. Every edge of the
+//! output has an even number of triangles (the boundary of a union of tetrahedra), two except
+//! where two parts of the solid touch along an edge.
+//!
 //! [`smallest_connected_alpha`] is CGAL's `find_optimal_alpha(1)` in spirit: the smallest α on a
 //! geometric ladder whose output has at most a given number of edge-connected pieces.
 //!
@@ -31,12 +45,25 @@
 //! sphere passes within rounding of a vertex, or whose radius is within rounding of α, can be
 //! classified either way.
 
+use glam::DVec3;
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
-use trisplat_geometry::topology::{TriangleClusters, sorted_edge_uses};
+use trisplat_geometry::topology::{TriangleClusters, adjacency_lists, sorted_edge_uses};
 
-use crate::alpha_shape::{AlphaError, AlphaShape, circumradius};
+use crate::alpha_shape::{AlphaError, AlphaShape, circumradius, compact};
 use crate::delaunay3d::{Delaunay3d, FACE_VERTICES};
+
+/// Which triangles of the alpha complex make the mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Surface {
+    /// Every regular and singular triangle (CGAL's GENERAL mode): one piece at a small α, but
+    /// not manifold (folds, interior sheets, fins).
+    General,
+    /// The boundary of the solid the complex encloses: the complex's triangles between a
+    /// tetrahedron reachable from outside and one that is not (module docs).
+    #[default]
+    Solid,
+}
 
 /// A triangle's place in the complex at one α.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,6 +92,13 @@ struct Facet {
     gabriel_radius: f64,
 }
 
+impl Facet {
+    /// Whether the triangle's own smallest circumsphere puts it in the complex at `alpha`.
+    fn singular_at(&self, alpha: f64) -> bool {
+        self.gabriel_radius <= alpha
+    }
+}
+
 /// The alpha complex's spectrum over a tetrahedralisation: every tetrahedron's circumradius and
 /// every triangle's smallest empty circumsphere, computed once and reused for any α.
 #[derive(Debug)]
@@ -72,6 +106,8 @@ pub struct AlphaComplex<'a> {
     delaunay: &'a Delaunay3d,
     radius: Vec<f64>,
     facets: Vec<Facet>,
+    /// `facet_of[t][i]`: the index in `facets` of tetrahedron `t`'s face opposite vertex `i`.
+    facet_of: Vec<[u32; 4]>,
 }
 
 impl<'a> AlphaComplex<'a> {
@@ -113,10 +149,25 @@ impl<'a> AlphaComplex<'a> {
                 })
             })
             .collect();
+        let mut facet_of = vec![[u32::MAX; 4]; finite];
+        for (k, f) in facets.iter().enumerate() {
+            for t in [f.inner, f.outer] {
+                if let Some(slots) = facet_of.get_mut(t as usize) {
+                    let other = if t == f.inner { f.outer } else { f.inner };
+                    // The face opposite the vertex that is not on the triangle.
+                    let tet = tets[t as usize];
+                    if let Some(i) = (0..4).find(|&i| !f.tri.contains(&tet[i])) {
+                        debug_assert_eq!(neighbours[t as usize][i], other);
+                        slots[i] = k as u32;
+                    }
+                }
+            }
+        }
         Self {
             delaunay,
             radius,
             facets,
+            facet_of,
         }
     }
 
@@ -139,15 +190,80 @@ impl<'a> AlphaComplex<'a> {
                     (true, true) => State::Out,
                     (true, false) => State::Regular { flip: false },
                     (false, true) => State::Regular { flip: true },
-                    (false, false) if f.gabriel_radius <= alpha => State::Singular,
+                    (false, false) if f.singular_at(alpha) => State::Singular,
                     (false, false) => State::Out,
                 },
             )
             .collect()
     }
 
-    /// The output triangles at `alpha` (regular oriented outward, singular as stored) and
-    /// whether each is regular.
+    /// The output triangles at `alpha` by `surface`, oriented (see [`Self::shape`]).
+    fn triangles(&self, alpha: f64, surface: Surface) -> Vec<[u32; 3]> {
+        match surface {
+            Surface::General => {
+                let (mut triangles, regular) = self.select(alpha);
+                orient_sheets(&mut triangles, &regular);
+                triangles
+            }
+            Surface::Solid => self.solid_boundary(alpha),
+        }
+    }
+
+    /// Which finite tetrahedra are exterior at `alpha`: reachable from outside the convex hull
+    /// across triangles not in the complex, into tetrahedra not kept.
+    fn exterior(&self, alpha: f64) -> Vec<bool> {
+        let neighbours = self.delaunay.neighbours();
+        let finite = self.radius.len();
+        let mut exterior = vec![false; finite];
+        // Crossing face `i` of `t` into `t` itself (from its neighbour) is open when `t` is not
+        // kept and the face is not singular (a kept neighbour makes it regular: it is never
+        // crossed because the flood never stands in a kept tetrahedron).
+        let open_into = |t: usize, i: usize| {
+            self.radius[t] > alpha && !self.facets[self.facet_of[t][i] as usize].singular_at(alpha)
+        };
+        let mut stack: Vec<u32> = Vec::new();
+        for t in 0..finite {
+            if (0..4).any(|i| neighbours[t][i] as usize >= finite && open_into(t, i)) {
+                exterior[t] = true;
+                stack.push(t as u32);
+            }
+        }
+        while let Some(t) = stack.pop() {
+            for &u in &neighbours[t as usize] {
+                let u = u as usize;
+                if u >= finite || exterior[u] {
+                    continue;
+                }
+                // The face of `u` that looks back at `t`.
+                let Some(i) = (0..4).find(|&i| neighbours[u][i] == t) else {
+                    continue;
+                };
+                if open_into(u, i) {
+                    exterior[u] = true;
+                    stack.push(u as u32);
+                }
+            }
+        }
+        exterior
+    }
+
+    /// The triangles between an exterior tetrahedron (or the hull's outside) and the solid,
+    /// oriented away from the solid.
+    fn solid_boundary(&self, alpha: f64) -> Vec<[u32; 3]> {
+        let exterior = self.exterior(alpha);
+        let outside = |t: u32| exterior.get(t as usize).is_none_or(|&e| e);
+        self.facets
+            .par_iter()
+            .filter_map(|f| match (outside(f.inner), outside(f.outer)) {
+                (false, true) => Some(f.tri),
+                (true, false) => Some([f.tri[0], f.tri[2], f.tri[1]]),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The general complex's triangles at `alpha` (regular oriented outward, singular as
+    /// stored) and whether each is regular.
     fn select(&self, alpha: f64) -> (Vec<[u32; 3]>, Vec<bool>) {
         let state = self.classify(alpha);
         self.facets
@@ -168,19 +284,20 @@ impl<'a> AlphaComplex<'a> {
         self.radius.par_iter().filter(|&&r| r <= alpha).count()
     }
 
-    /// The boundary of the alpha complex at `alpha`: regular triangles oriented outward plus
-    /// the singular ones, oriented to agree with their neighbours; vertices are the used input
-    /// points in input order (as [`crate::alpha_shape::alpha_shape`]). A negative α gives an
-    /// empty mesh, `f64::INFINITY` the convex hull.
+    /// The alpha complex at `alpha` as a mesh by `surface`: [`Surface::General`], the regular
+    /// triangles oriented outward plus the singular ones, oriented to agree with their
+    /// neighbours; [`Surface::Solid`], the boundary of the enclosed solid, oriented outward.
+    /// Vertices are the used input points in input order (as
+    /// [`crate::alpha_shape::alpha_shape`]). A negative α gives an empty mesh,
+    /// `f64::INFINITY` the convex hull.
     ///
     /// # Errors
     /// [`AlphaError::InvalidAlpha`] for a NaN α.
-    pub fn shape(&self, alpha: f64) -> Result<AlphaShape, AlphaError> {
+    pub fn shape(&self, alpha: f64, surface: Surface) -> Result<AlphaShape, AlphaError> {
         if alpha.is_nan() {
             return Err(AlphaError::InvalidAlpha(alpha));
         }
-        let (mut triangles, regular) = self.select(alpha);
-        orient_sheets(&mut triangles, &regular);
+        let triangles = self.triangles(alpha, surface);
         let (mesh, vertex_ids) = compact(self.delaunay.points(), &triangles);
         Ok(AlphaShape {
             mesh,
@@ -192,8 +309,11 @@ impl<'a> AlphaComplex<'a> {
 
     /// Number of edge-connected pieces of [`Self::shape`] at `alpha` (0 when it is empty).
     #[must_use]
-    pub fn pieces(&self, alpha: f64) -> usize {
-        let (triangles, _) = self.select(alpha);
+    pub fn pieces(&self, alpha: f64, surface: Surface) -> usize {
+        let triangles = match surface {
+            Surface::General => self.select(alpha).0,
+            Surface::Solid => self.solid_boundary(alpha),
+        };
         let mesh = TriMesh::new_unchecked(
             self.delaunay
                 .points()
@@ -209,34 +329,21 @@ impl<'a> AlphaComplex<'a> {
 /// The radius of the smallest circumsphere of `tri` if no point of `opposite` lies strictly
 /// inside it, else infinity (also for a triangle collinear in floating point).
 fn gabriel_radius(points: &[[f64; 3]], tri: [u32; 3], opposite: &[u32]) -> f64 {
-    let p = |i: u32| points[i as usize];
-    let (a, b, c) = (p(tri[0]), p(tri[1]), p(tri[2]));
-    let sub = |u: [f64; 3], v: [f64; 3]| [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
-    let cross = |u: [f64; 3], v: [f64; 3]| {
-        [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ]
-    };
-    let dot = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
-    let u = sub(b, a);
-    let v = sub(c, a);
-    let w = cross(u, v);
-    let ww = dot(w, w);
+    let p = |i: u32| DVec3::from_array(points[i as usize]);
+    let a = p(tri[0]);
+    let u = p(tri[1]) - a;
+    let v = p(tri[2]) - a;
+    let w = u.cross(v);
+    let ww = w.length_squared();
     if ww == 0.0 {
         return f64::INFINITY;
     }
     // Circumcentre relative to a: (|u|^2 (v x w) + |v|^2 (w x u)) / (2 |w|^2).
-    let vw = cross(v, w);
-    let wu = cross(w, u);
-    let (lu, lv) = (dot(u, u), dot(v, v));
-    let centre: [f64; 3] = std::array::from_fn(|k| (lu * vw[k] + lv * wu[k]) / (2.0 * ww));
-    let r2 = dot(centre, centre);
-    let inside = opposite.iter().any(|&o| {
-        let d = sub(sub(p(o), a), centre);
-        dot(d, d) < r2
-    });
+    let centre = (u.length_squared() * v.cross(w) + v.length_squared() * w.cross(u)) / (2.0 * ww);
+    let r2 = centre.length_squared();
+    let inside = opposite
+        .iter()
+        .any(|&o| (p(o) - a - centre).length_squared() < r2);
     if inside || !r2.is_finite() {
         f64::INFINITY
     } else {
@@ -251,28 +358,13 @@ fn orient_sheets(triangles: &mut [[u32; 3]], regular: &[bool]) {
         return;
     }
     let uses = sorted_edge_uses(triangles);
-    // Pairs of triangles across a manifold edge, as an adjacency list.
-    let mut degree = vec![0u32; triangles.len() + 1];
+    // Pairs of triangles across a manifold edge, as adjacency lists.
     let pairs: Vec<(u32, u32)> = uses
         .chunk_by(|a, b| a.0 == b.0)
         .filter(|run| run.len() == 2)
         .map(|run| (run[0].1, run[1].1))
         .collect();
-    for &(s, t) in &pairs {
-        degree[s as usize + 1] += 1;
-        degree[t as usize + 1] += 1;
-    }
-    for i in 1..degree.len() {
-        degree[i] += degree[i - 1];
-    }
-    let mut fill = degree.clone();
-    let mut adjacent = vec![0u32; pairs.len() * 2];
-    for &(s, t) in &pairs {
-        adjacent[fill[s as usize] as usize] = t;
-        fill[s as usize] += 1;
-        adjacent[fill[t as usize] as usize] = s;
-        fill[t as usize] += 1;
-    }
+    let (offsets, adjacent) = adjacency_lists(triangles.len(), &pairs);
     let mut done: Vec<bool> = regular.to_vec();
     let mut stack: Vec<u32> = (0..triangles.len() as u32)
         .filter(|&t| regular[t as usize])
@@ -281,7 +373,7 @@ fn orient_sheets(triangles: &mut [[u32; 3]], regular: &[bool]) {
     loop {
         while let Some(s) = stack.pop() {
             let st = triangles[s as usize];
-            for &t in &adjacent[degree[s as usize] as usize..degree[s as usize + 1] as usize] {
+            for &t in &adjacent[offsets[s as usize] as usize..offsets[s as usize + 1] as usize] {
                 if done[t as usize] {
                     continue;
                 }
@@ -313,36 +405,6 @@ fn shares_direction(s: [u32; 3], t: [u32; 3]) -> bool {
     })
 }
 
-/// The mesh of `triangles` over the used `points` in input order, and their input indices.
-pub(crate) fn compact(points: &[[f64; 3]], triangles: &[[u32; 3]]) -> (TriMesh, Vec<u32>) {
-    let mut index = vec![u32::MAX; points.len()];
-    for tri in triangles {
-        for &v in tri {
-            index[v as usize] = 0;
-        }
-    }
-    let mut vertex_ids = Vec::new();
-    for (i, slot) in index.iter_mut().enumerate() {
-        if *slot == 0 {
-            *slot = vertex_ids.len() as u32;
-            vertex_ids.push(i as u32);
-        }
-    }
-    let positions: Vec<glam::Vec3> = vertex_ids
-        .iter()
-        .map(|&i| {
-            let p = points[i as usize];
-            // Exact: the points came from f32 (or are rounded once when given as f64).
-            glam::Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32)
-        })
-        .collect();
-    let triangles = triangles
-        .iter()
-        .map(|t| t.map(|v| index[v as usize]))
-        .collect();
-    (TriMesh::new_unchecked(positions, triangles), vertex_ids)
-}
-
 /// How [`smallest_connected_alpha`] searches.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AlphaSearch {
@@ -354,6 +416,8 @@ pub struct AlphaSearch {
     pub steps_per_doubling: u32,
     /// Accept the first α whose output has at most this many edge-connected pieces.
     pub max_pieces: usize,
+    /// Which triangles make the output.
+    pub surface: Surface,
 }
 
 /// The α [`smallest_connected_alpha`] chose and what it saw on the way.
@@ -399,7 +463,7 @@ pub fn smallest_connected_alpha(
     let mut k = 0i32;
     loop {
         let alpha = (search.floor * step.powi(k)).min(search.ceiling);
-        let pieces = complex.pieces(alpha);
+        let pieces = complex.pieces(alpha, search.surface);
         tried.push((alpha, pieces));
         if pieces > 0 && pieces <= search.max_pieces {
             return Ok(AlphaChoice {
@@ -470,7 +534,7 @@ mod tests {
         ];
         let d = Delaunay3d::new(&pts).expect("finite");
         let complex = AlphaComplex::new(&d);
-        let shape = complex.shape(1.0).expect("alpha");
+        let shape = complex.shape(1.0, Surface::General).expect("alpha");
         assert_eq!(shape.mesh.triangle_count(), 1);
         assert_eq!(shape.kept_tetrahedra, 0);
         assert_eq!(shape.vertex_ids, vec![0, 1, 2]);
@@ -481,11 +545,18 @@ mod tests {
                 .triangle_count(),
             0
         );
-        assert_eq!(complex.shape(0.7).expect("alpha").mesh.triangle_count(), 0);
+        assert_eq!(
+            complex
+                .shape(0.7, Surface::General)
+                .expect("alpha")
+                .mesh
+                .triangle_count(),
+            0
+        );
         // An attached triangle is not singular: (0,0,0), (1,0,0), (0,0,10) has the base's
         // opposite vertex (0,1,0) outside too, but its radius 5.02 is above alpha.
-        assert_eq!(complex.pieces(1.0), 1);
-        assert_eq!(complex.pieces(0.5), 0);
+        assert_eq!(complex.pieces(1.0, Surface::General), 1);
+        assert_eq!(complex.pieces(0.5, Surface::General), 0);
     }
 
     #[test]
@@ -493,17 +564,50 @@ mod tests {
         let pts = sphere(200);
         let d = Delaunay3d::new(&pts).expect("finite");
         let complex = AlphaComplex::new(&d);
-        let hull = complex.shape(f64::INFINITY).expect("alpha");
+        let hull = complex
+            .shape(f64::INFINITY, Surface::General)
+            .expect("alpha");
         let open3d = alpha_shape_from_delaunay(&d, f64::INFINITY).expect("alpha");
         assert_eq!(
             sorted(&hull.mesh, &hull.vertex_ids),
             sorted(&open3d.mesh, &open3d.vertex_ids)
         );
-        assert_eq!(complex.shape(-1.0).expect("alpha").mesh.triangle_count(), 0);
+        let solid = complex.shape(f64::INFINITY, Surface::Solid).expect("alpha");
+        assert_eq!(
+            sorted(&solid.mesh, &solid.vertex_ids),
+            sorted(&open3d.mesh, &open3d.vertex_ids)
+        );
+        assert_eq!(
+            complex
+                .shape(-1.0, Surface::Solid)
+                .expect("alpha")
+                .mesh
+                .triangle_count(),
+            0
+        );
+        assert_eq!(
+            complex
+                .shape(-1.0, Surface::General)
+                .expect("alpha")
+                .mesh
+                .triangle_count(),
+            0
+        );
         assert!(matches!(
-            complex.shape(f64::NAN),
+            complex.shape(f64::NAN, Surface::General),
             Err(AlphaError::InvalidAlpha(_))
         ));
+    }
+
+    /// The search for one piece from 0.5 to 4 sample spacings.
+    fn one_piece(spacing: f64, surface: Surface) -> AlphaSearch {
+        AlphaSearch {
+            floor: 0.5 * spacing,
+            ceiling: 4.0 * spacing,
+            steps_per_doubling: 4,
+            max_pieces: 1,
+            surface,
+        }
     }
 
     #[test]
@@ -512,13 +616,8 @@ mod tests {
         let spacing = (4.0 * std::f64::consts::PI / 800.0).sqrt();
         let d = Delaunay3d::new(&pts).expect("finite");
         let complex = AlphaComplex::new(&d);
-        let search = AlphaSearch {
-            floor: 0.5 * spacing,
-            ceiling: 4.0 * spacing,
-            steps_per_doubling: 4,
-            max_pieces: 1,
-        };
-        let choice = smallest_connected_alpha(&complex, &search).expect("valid search");
+        let choice = smallest_connected_alpha(&complex, &one_piece(spacing, Surface::General))
+            .expect("valid search");
         assert!(choice.met, "{choice:?}");
         assert_eq!(choice.pieces, 1);
         // The ladder stopped at the first success.
@@ -527,7 +626,9 @@ mod tests {
                 .iter()
                 .all(|&(_, p)| p != 1)
         );
-        let shape = complex.shape(choice.alpha).expect("alpha");
+        let shape = complex
+            .shape(choice.alpha, Surface::General)
+            .expect("alpha");
         assert_eq!(TriangleClusters::of(&shape.mesh).count(), 1);
         // Every point is used and the mesh covers the sphere once: area within 3% of 4 pi
         // (the inscribed polyhedron is a little smaller), every vertex near radius 1.
@@ -556,12 +657,20 @@ mod tests {
             .collect();
         let d = Delaunay3d::new(&plane).expect("finite");
         let complex = AlphaComplex::new(&d);
-        assert_eq!(complex.shape(2.0).expect("alpha").mesh.triangle_count(), 0);
+        assert_eq!(
+            complex
+                .shape(2.0, Surface::General)
+                .expect("alpha")
+                .mesh
+                .triangle_count(),
+            0
+        );
         let search = AlphaSearch {
             floor: 0.5,
             ceiling: 4.0,
             steps_per_doubling: 2,
             max_pieces: 1,
+            surface: Surface::General,
         };
         let choice = smallest_connected_alpha(&complex, &search).expect("valid search");
         assert_eq!((choice.pieces, choice.met), (0, false));
@@ -574,10 +683,19 @@ mod tests {
         cube.push(cube[3]);
         let d = Delaunay3d::new(&cube).expect("finite");
         let complex = AlphaComplex::new(&d);
-        let shape = complex.shape(2.0).expect("alpha");
+        let shape = complex.shape(2.0, Surface::General).expect("alpha");
         assert_eq!(shape.mesh.triangle_count(), 12);
         assert_eq!(shape.duplicates.len(), 1);
-        assert_eq!(complex.pieces(2.0), 1);
+        assert_eq!(complex.pieces(2.0, Surface::General), 1);
+        assert_eq!(
+            complex
+                .shape(2.0, Surface::Solid)
+                .expect("alpha")
+                .mesh
+                .triangle_count(),
+            12
+        );
+        assert_eq!(complex.pieces(2.0, Surface::Solid), 1);
         // Bad searches are errors, not panics.
         for bad in [
             AlphaSearch {
@@ -603,5 +721,94 @@ mod tests {
         ] {
             assert!(smallest_connected_alpha(&complex, &bad).is_err(), "{bad:?}");
         }
+    }
+
+    /// Signed volume of a closed mesh (positive when its triangles face outward).
+    fn signed_volume(mesh: &TriMesh) -> f64 {
+        let p = mesh.positions();
+        mesh.triangles()
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| p[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
+    #[test]
+    fn the_solid_of_a_sphere_with_an_inner_disc_is_the_sphere_alone() {
+        // A sphere sample plus a disc of points across its equator at the same spacing: the
+        // general complex holds the disc as a sheet inside the ball; the solid's boundary is
+        // the sphere only, closed, manifold and facing outward.
+        let n = 800;
+        let spacing = (4.0 * std::f64::consts::PI / n as f64).sqrt();
+        let mut pts = sphere(n);
+        let rings = (0.9 / spacing) as usize;
+        for k in 1..=rings {
+            let r = k as f64 * spacing;
+            let m = (2.0 * std::f64::consts::PI * r / spacing).round() as usize;
+            for j in 0..m {
+                let a = 2.0 * std::f64::consts::PI * (j as f64 + 0.5 * (k % 2) as f64) / m as f64;
+                pts.push(Vec3::new((r * a.cos()) as f32, 0.013, (r * a.sin()) as f32));
+            }
+        }
+        let d = Delaunay3d::new(&pts).expect("finite");
+        let complex = AlphaComplex::new(&d);
+        let choice = smallest_connected_alpha(&complex, &one_piece(spacing, Surface::Solid))
+            .expect("valid search");
+        assert!(choice.met, "{choice:?}");
+        let solid = complex.shape(choice.alpha, Surface::Solid).expect("alpha");
+        let general = complex
+            .shape(choice.alpha, Surface::General)
+            .expect("alpha");
+        let area = |m: &TriMesh| m.triangle_areas().iter().sum::<f64>();
+        let sphere_area = 4.0 * std::f64::consts::PI;
+        assert!((area(&solid.mesh) / sphere_area - 0.985).abs() < 0.02);
+        // The disc (area about pi) is in the general complex, not in the solid's boundary.
+        assert!(
+            area(&general.mesh) > area(&solid.mesh) + 2.0,
+            "{}",
+            area(&general.mesh)
+        );
+        // Only sphere points are used.
+        assert!(solid.vertex_ids.iter().all(|&v| (v as usize) < n));
+        // Closed and manifold: every edge has exactly two triangles, running opposite ways.
+        let uses = sorted_edge_uses(solid.mesh.triangles());
+        for run in uses.chunk_by(|a, b| a.0 == b.0) {
+            assert_eq!(run.len(), 2, "edge {:?}", run[0].0);
+            let s = solid.mesh.triangles()[run[0].1 as usize];
+            let t = solid.mesh.triangles()[run[1].1 as usize];
+            assert!(!shares_direction(s, t), "{s:?} {t:?}");
+        }
+        // Outward: the enclosed volume is the inscribed polyhedron's, a little under 4 pi / 3.
+        let volume = signed_volume(&solid.mesh);
+        assert!(
+            (volume / (4.0 * std::f64::consts::PI / 3.0) - 0.98).abs() < 0.02,
+            "{volume}"
+        );
+    }
+
+    #[test]
+    fn a_solid_with_a_hole_larger_than_alpha_is_flooded() {
+        // A sphere sample without its top cap (a hole much wider than alpha): the outside
+        // reaches the inside through the hole, so the surface sheet has the outside on both
+        // sides and is not output; at an alpha that spans the hole the solid is whole again.
+        let pts: Vec<Vec3> = sphere(800).into_iter().filter(|p| p.y < 0.8).collect();
+        let spacing = (4.0 * std::f64::consts::PI / 800.0).sqrt();
+        let d = Delaunay3d::new(&pts).expect("finite");
+        let complex = AlphaComplex::new(&d);
+        let alpha = 1.5 * spacing;
+        let general = complex.shape(alpha, Surface::General).expect("alpha");
+        let solid = complex.shape(alpha, Surface::Solid).expect("alpha");
+        assert!(general.mesh.triangle_count() > 1000);
+        assert!(
+            solid.mesh.triangle_count() < general.mesh.triangle_count() / 4,
+            "{} of {}",
+            solid.mesh.triangle_count(),
+            general.mesh.triangle_count()
+        );
+        let closed = complex.shape(2.0, Surface::Solid).expect("alpha");
+        assert_eq!(complex.pieces(2.0, Surface::Solid), 1);
+        assert!(signed_volume(&closed.mesh) > 3.0);
     }
 }

@@ -17,7 +17,7 @@
 //!   determinants of absolute coordinates, which lose digits far from the origin); a tetrahedron
 //!   whose circumradius is within rounding of α can be decided differently.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 
@@ -96,9 +96,19 @@ pub fn alpha_shape_from_delaunay(
             })
         })
         .collect();
-    // Compact the used vertices, keeping input order.
+    let (mesh, vertex_ids) = compact(points, &boundary);
+    Ok(AlphaShape {
+        mesh,
+        vertex_ids,
+        kept_tetrahedra,
+        duplicates: delaunay.duplicates().to_vec(),
+    })
+}
+
+/// The mesh of `triangles` over the used `points` in input order, and their input indices.
+pub(crate) fn compact(points: &[[f64; 3]], triangles: &[[u32; 3]]) -> (TriMesh, Vec<u32>) {
     let mut index = vec![u32::MAX; points.len()];
-    for tri in &boundary {
+    for tri in triangles {
         for &v in tri {
             index[v as usize] = 0;
         }
@@ -118,16 +128,11 @@ pub fn alpha_shape_from_delaunay(
             Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32)
         })
         .collect();
-    let triangles: Vec<[u32; 3]> = boundary
+    let triangles = triangles
         .iter()
         .map(|t| t.map(|v| index[v as usize]))
         .collect();
-    Ok(AlphaShape {
-        mesh: TriMesh::new_unchecked(positions, triangles),
-        vertex_ids,
-        kept_tetrahedra,
-        duplicates: delaunay.duplicates().to_vec(),
-    })
+    (TriMesh::new_unchecked(positions, triangles), vertex_ids)
 }
 
 /// Circumradius of the tetrahedron `p` (`f64::INFINITY` when it is flat in floating point).
@@ -156,24 +161,12 @@ fn circumradius_at_most(p: [[f64; 3]; 4], alpha: f64) -> bool {
 /// `(|n|^2, d)` with circumcentre = `a + n / d`, relative to the first vertex `a`:
 /// `n = |b'|^2 (c' x d') + |c'|^2 (d' x b') + |d'|^2 (b' x c')`, `d = 2 b' . (c' x d')`.
 fn circumradius_parts(p: [[f64; 3]; 4]) -> (f64, f64) {
-    let sub = |u: [f64; 3], v: [f64; 3]| [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
-    let cross = |u: [f64; 3], v: [f64; 3]| {
-        [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ]
-    };
-    let dot = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
-    let b = sub(p[1], p[0]);
-    let c = sub(p[2], p[0]);
-    let d = sub(p[3], p[0]);
-    let cd = cross(c, d);
-    let db = cross(d, b);
-    let bc = cross(b, c);
-    let (lb, lc, ld) = (dot(b, b), dot(c, c), dot(d, d));
-    let n: [f64; 3] = std::array::from_fn(|k| lb * cd[k] + lc * db[k] + ld * bc[k]);
-    (dot(n, n), 2.0 * dot(b, cd))
+    let [a, b, c, d] = p.map(DVec3::from_array);
+    let (b, c, d) = (b - a, c - a, d - a);
+    let cd = c.cross(d);
+    let n =
+        b.length_squared() * cd + c.length_squared() * d.cross(b) + d.length_squared() * b.cross(c);
+    (n.length_squared(), 2.0 * b.dot(cd))
 }
 
 #[cfg(test)]

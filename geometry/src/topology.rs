@@ -92,6 +92,33 @@ pub fn non_manifold_edges(triangles: &[[u32; 3]]) -> Vec<Edge> {
 }
 
 /// 1-ring vertex adjacency in compressed sparse row form: the neighbours of vertex `v` are
+/// Symmetric adjacency lists of `count` nodes from undirected `pairs`, in compressed form:
+/// `(offsets, adjacent)` with node `v`'s neighbours at `adjacent[offsets[v]..offsets[v + 1]]`,
+/// in the order of `pairs` (each pair adds `b` to `a`'s list and `a` to `b`'s).
+///
+/// # Panics
+/// If a pair names a node `>= count`.
+#[must_use]
+pub fn adjacency_lists(count: usize, pairs: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>) {
+    let mut offsets = vec![0u32; count + 1];
+    for &(a, b) in pairs {
+        offsets[a as usize + 1] += 1;
+        offsets[b as usize + 1] += 1;
+    }
+    for i in 1..offsets.len() {
+        offsets[i] += offsets[i - 1];
+    }
+    let mut fill = offsets.clone();
+    let mut adjacent = vec![0u32; pairs.len() * 2];
+    for &(a, b) in pairs {
+        adjacent[fill[a as usize] as usize] = b;
+        fill[a as usize] += 1;
+        adjacent[fill[b as usize] as usize] = a;
+        fill[b as usize] += 1;
+    }
+    (offsets, adjacent)
+}
+
 /// `neighbors[offsets[v]..offsets[v + 1]]`, sorted and unique.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct VertexAdjacency {
@@ -107,23 +134,7 @@ impl VertexAdjacency {
     #[must_use]
     pub fn new(vertex_count: usize, triangles: &[[u32; 3]]) -> Self {
         let edges = unique_edges(triangles);
-        let mut degree = vec![0u32; vertex_count + 1];
-        for &(a, b) in &edges {
-            degree[a as usize + 1] += 1;
-            degree[b as usize + 1] += 1;
-        }
-        let mut offsets = degree;
-        for i in 1..offsets.len() {
-            offsets[i] += offsets[i - 1];
-        }
-        let mut fill = offsets.clone();
-        let mut neighbors = vec![0u32; edges.len() * 2];
-        for &(a, b) in &edges {
-            neighbors[fill[a as usize] as usize] = b;
-            fill[a as usize] += 1;
-            neighbors[fill[b as usize] as usize] = a;
-            fill[b as usize] += 1;
-        }
+        let (offsets, mut neighbors) = adjacency_lists(vertex_count, &edges);
         for v in 0..vertex_count {
             neighbors[offsets[v] as usize..offsets[v + 1] as usize].sort_unstable();
         }

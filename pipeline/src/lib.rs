@@ -45,7 +45,8 @@
 //!   / [`config::COARSEST_VOXELS_PER_RADIUS`] ([`methods::default_voxel`]); truncation
 //!   5 voxels; [`config::DEFAULT_VIEWS`] views of [`config::DEFAULT_RESOLUTION`]² pixels,
 //!   40° field of view, framing each frame's bounding sphere with a 10% margin.
-//! - Alpha: the alpha complex (singular triangles kept) at the smallest α from
+//! - Alpha: the boundary of the solid the alpha complex (singular triangles kept) encloses
+//!   (`--alpha-rule solid`; `complex` the whole complex) at the smallest α from
 //!   [`config::DEFAULT_ALPHA_FLOOR_SPACINGS`] to [`config::DEFAULT_ALPHA_CEILING_SPACINGS`] × the
 //!   mean nearest-neighbour spacing of the rest-pose Gaussian means whose mesh has at most
 //!   `--alpha-pieces` (default 10) pieces, per frame; `--alpha-rule open3d`:

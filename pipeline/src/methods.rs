@@ -17,7 +17,8 @@
 //!   rebuilds are followed by rebuilds unless `no_auto_rebuild`); [`MethodOutput::delaunay`] says
 //!   what each update did.
 //! - **alpha**: the alpha complex of the deformed means (the extract crate's `alpha_complex`:
-//!   regular and singular triangles) at the smallest α from
+//!   regular and singular triangles; by default only the boundary of the solid it encloses,
+//!   `AlphaRule::Solid`) at the smallest α from
 //!   [`DEFAULT_ALPHA_FLOOR_SPACINGS`] to [`DEFAULT_ALPHA_CEILING_SPACINGS`] mean spacings of
 //!   the rest-pose means whose mesh has at most `alpha.pieces` pieces, searched per frame; or
 //!   at a fixed `alpha`; or Open3D's alpha shape (`AlphaRule::Open3d`, default
@@ -136,10 +137,14 @@ pub fn parameters(
         }
         Method::Alpha => {
             parameters.insert("alpha".to_owned(), resolved.alpha);
-            let search = o.alpha.alpha.is_none() && o.alpha.rule == AlphaRule::Complex;
+            let search = o.alpha.alpha.is_none() && o.alpha.rule.surface().is_some();
             parameters.insert(
                 "alpha_complex".to_owned(),
-                f64::from(u8::from(o.alpha.rule == AlphaRule::Complex)),
+                f64::from(u8::from(o.alpha.rule.surface().is_some())),
+            );
+            parameters.insert(
+                "alpha_solid".to_owned(),
+                f64::from(u8::from(o.alpha.rule == AlphaRule::Solid)),
             );
             if search {
                 parameters.insert(
@@ -241,7 +246,7 @@ impl Resolved {
                 "alpha",
                 options.alpha.alpha,
                 match options.alpha.rule {
-                    AlphaRule::Complex => DEFAULT_ALPHA_FLOOR_SPACINGS * spacing,
+                    AlphaRule::Complex | AlphaRule::Solid => DEFAULT_ALPHA_FLOOR_SPACINGS * spacing,
                     AlphaRule::Open3d => DEFAULT_ALPHA_SPACINGS * spacing,
                 },
             )?,
@@ -268,16 +273,16 @@ fn alpha_mesh(
     rule: AlphaRule,
     search: Option<&AlphaSearch>,
 ) -> Result<AlphaShape, trisplat_extract::alpha_shape::AlphaError> {
-    match (rule, search) {
-        (AlphaRule::Open3d, _) => alpha_shape(means, alpha),
-        (AlphaRule::Complex, search) => {
+    match rule.surface() {
+        None => alpha_shape(means, alpha),
+        Some(surface) => {
             let delaunay = Delaunay3d::new(means)?;
             let complex = AlphaComplex::new(&delaunay);
             let alpha = match search {
                 Some(s) => smallest_connected_alpha(&complex, s)?.alpha,
                 None => alpha,
             };
-            complex.shape(alpha)
+            complex.shape(alpha, surface)
         }
     }
 }
@@ -576,13 +581,18 @@ impl Mesher {
             Method::Alpha => Self::Alpha {
                 alpha: resolved.alpha,
                 rule: options.alpha.rule,
-                search: (options.alpha.alpha.is_none() && options.alpha.rule == AlphaRule::Complex)
-                    .then(|| AlphaSearch {
+                search: options
+                    .alpha
+                    .rule
+                    .surface()
+                    .filter(|_| options.alpha.alpha.is_none())
+                    .map(|surface| AlphaSearch {
                         floor: resolved.alpha,
                         ceiling: (DEFAULT_ALPHA_CEILING_SPACINGS * resolved.mean_spacing)
                             .max(resolved.alpha),
                         steps_per_doubling: ALPHA_STEPS_PER_DOUBLING,
                         max_pieces: options.alpha.pieces,
+                        surface,
                     }),
                 keep_clusters: options.alpha.keep_clusters,
             },

@@ -202,6 +202,17 @@ impl Plan {
                     format!("{rebuild}; {hop}")
                 }
                 Method::Alpha => match (o.alpha.rule, o.alpha.alpha) {
+                    (AlphaRule::Solid, Some(a)) => format!(
+                        "boundary of the alpha complex's solid (folds and inner sheets dropped) \
+                         at {a}, on the deformed means"
+                    ),
+                    (AlphaRule::Solid, None) => format!(
+                        "boundary of the alpha complex's solid (folds and inner sheets dropped) on \
+                         the deformed means, per frame at the smallest alpha from \
+                         {DEFAULT_ALPHA_FLOOR_SPACINGS} to {DEFAULT_ALPHA_CEILING_SPACINGS} x mean \
+                         Gaussian spacing giving at most {} piece(s)",
+                        o.alpha.pieces
+                    ),
                     (AlphaRule::Complex, Some(a)) => {
                         format!(
                             "alpha complex (singular triangles kept) at {a}, on the deformed means"

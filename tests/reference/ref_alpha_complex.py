@@ -7,10 +7,17 @@ At α a Delaunay triangle is output when exactly one adjacent tetrahedron has ci
 (regular), or when neither has and its smallest circumsphere is empty with radius <= α
 (singular). Inputs: the alpha fixtures of ref_alpha.py (spot_samples.ply, ball.ply).
 
+The solid's boundary (trisplat's `Surface::Solid`): a tetrahedron is exterior when a walk from
+outside the convex hull reaches it crossing only triangles that are not in the complex into
+tetrahedra that are not kept (scipy's neighbour table, breadth first); the output is every
+triangle between an exterior tetrahedron (or the outside) and one that is not, oriented so that
+its normal points away from the non-exterior one.
+
 Output fixtures/data/reference/alpha/complex.json, per (input, α): the output triangles as
-sorted input-index triples (flat, sorted), the edge-connected piece count, and the triangles
-whose classification is within 1e-9 (relative) of a tie (a radius at α, or a point on a
-smallest circumsphere), which the Rust test leaves out on both sides.
+sorted input-index triples (flat, sorted), the edge-connected piece count, the solid's boundary
+as oriented triples (each rotated to start at its smallest index; flat, sorted) with its piece
+count, and the triangles whose classification is within 1e-9 (relative) of a tie (a radius at
+α, or a point on a smallest circumsphere), which the Rust test leaves out on both sides.
 
     python -m venv venv && venv/bin/pip install -r tests/reference/requirements.txt
     venv/bin/python tests/reference/ref_alpha_complex.py
@@ -84,6 +91,51 @@ def pieces(tris):
     return len({find(t) for t in range(len(tris))})
 
 
+def solid_boundary(pts, simp, neighbors, kept, faces, singular_flags):
+    """The solid's boundary (module docs) as oriented triples, rotated to start at their
+    smallest index, sorted."""
+    singular = {f: bool(s) for f, s in zip(faces.keys(), singular_flags)}
+
+    def face(t, i):
+        s = simp[t].tolist()
+        return tuple(sorted(s[:i] + s[i + 1 :]))
+
+    def open_into(t, i):
+        return not kept[t] and not singular[face(t, i)]
+
+    exterior = np.zeros(len(simp), dtype=bool)
+    queue = []
+    for t in range(len(simp)):
+        if any(neighbors[t][i] == -1 and open_into(t, i) for i in range(4)):
+            exterior[t] = True
+            queue.append(t)
+    while queue:
+        t = queue.pop()
+        for u in neighbors[t]:
+            if u == -1 or exterior[u]:
+                continue
+            i = list(neighbors[u]).index(t)
+            if open_into(u, i):
+                exterior[u] = True
+                queue.append(u)
+    out = []
+    for t in range(len(simp)):
+        if exterior[t]:
+            continue
+        for i in range(4):
+            u = neighbors[t][i]
+            if u != -1 and not exterior[u]:
+                continue
+            s = simp[t].tolist()
+            a, b, c = s[:i] + s[i + 1 :]
+            # Normal away from the solid tetrahedron's fourth vertex.
+            if np.dot(np.cross(pts[b] - pts[a], pts[c] - pts[a]), pts[s[i]] - pts[a]) > 0:
+                b, c = c, b
+            k = [a, b, c].index(min(a, b, c))
+            out.append(tuple([a, b, c][k:] + [a, b, c][:k]))
+    return np.array(sorted(out), dtype=np.int64).reshape(-1, 3)
+
+
 def main():
     cases = []
     for name, alpha in CASES:
@@ -119,16 +171,22 @@ def main():
             if tie:
                 ties.append(f)
         out = np.array(sorted(out), dtype=np.int64).reshape(-1, 3)
+        solid = solid_boundary(pts, simp, tri.neighbors, radius <= alpha, faces, empty & (r <= alpha))
         cases.append(
             {
                 "input": name,
                 "alpha": alpha,
                 "triangles": out.ravel().tolist(),
                 "pieces": pieces(out),
+                "solid": solid.ravel().tolist(),
+                "solid_pieces": pieces(np.sort(solid, axis=1)),
                 "ties": np.array(sorted(ties), dtype=np.int64).ravel().tolist(),
             }
         )
-        print(f"{name} alpha {alpha}: {len(out)} triangles, {cases[-1]['pieces']} pieces, {len(ties)} ties")
+        print(
+            f"{name} alpha {alpha}: {len(out)} triangles, {cases[-1]['pieces']} pieces; solid "
+            f"{len(solid)} triangles, {cases[-1]['solid_pieces']} pieces; {len(ties)} ties"
+        )
     doc = {
         "tool": "scipy.spatial.Delaunay + brute-force smallest-circumsphere emptiness (CGAL GENERAL rule)",
         "versions": {"scipy": scipy.__version__, "numpy": np.__version__},

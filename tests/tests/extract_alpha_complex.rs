@@ -1,4 +1,5 @@
-//! The alpha complex (`extract::alpha_complex`, CGAL's GENERAL rule) against an independent
+//! The alpha complex (`extract::alpha_complex`, CGAL's GENERAL rule, and the boundary of its
+//! solid) against an independent
 //! reference (`tests/reference/ref_alpha_complex.py`: scipy's Qhull Delaunay and a brute-force
 //! emptiness test of each triangle's smallest circumsphere against every point): the same
 //! output triangles as sets of sorted index triples and the same piece count. Triangles the
@@ -9,7 +10,9 @@ use std::collections::BTreeSet;
 
 use glam::Vec3;
 use serde::Deserialize;
-use trisplat_extract::alpha_complex::{AlphaComplex, AlphaSearch, smallest_connected_alpha};
+use trisplat_extract::alpha_complex::{
+    AlphaComplex, AlphaSearch, Surface, smallest_connected_alpha,
+};
 use trisplat_extract::delaunay3d::Delaunay3d;
 use trisplat_geometry::io::read_points;
 
@@ -24,6 +27,8 @@ struct Case {
     alpha: f64,
     triangles: Vec<u32>,
     pieces: usize,
+    solid: Vec<u32>,
+    solid_pieces: usize,
     ties: Vec<u32>,
 }
 
@@ -49,7 +54,9 @@ fn complex_matches_the_reference() {
         let points = load(&case.input);
         let delaunay = Delaunay3d::new(&points).expect("finite points");
         let complex = AlphaComplex::new(&delaunay);
-        let shape = complex.shape(case.alpha).expect("valid alpha");
+        let shape = complex
+            .shape(case.alpha, Surface::General)
+            .expect("valid alpha");
         let ties = triples(&case.ties);
         let ours: BTreeSet<[u32; 3]> = shape
             .mesh
@@ -82,7 +89,41 @@ fn complex_matches_the_reference() {
             theirs.len()
         );
         if ties.is_empty() {
-            assert_eq!(complex.pieces(case.alpha), case.pieces, "{}", case.input);
+            assert_eq!(
+                complex.pieces(case.alpha, Surface::General),
+                case.pieces,
+                "{}",
+                case.input
+            );
+            // The solid's boundary: the same oriented triangles (each rotated to start at its
+            // smallest input index) and pieces.
+            let solid = complex
+                .shape(case.alpha, Surface::Solid)
+                .expect("valid alpha");
+            let ours: BTreeSet<[u32; 3]> = solid
+                .mesh
+                .triangles()
+                .iter()
+                .map(|t| {
+                    let v = t.map(|i| solid.vertex_ids[i as usize]);
+                    let k = (0..3).min_by_key(|&k| v[k]).unwrap_or(0);
+                    [v[k], v[(k + 1) % 3], v[(k + 2) % 3]]
+                })
+                .collect();
+            assert_eq!(ours.len(), solid.mesh.triangle_count());
+            assert_eq!(
+                ours,
+                triples(&case.solid),
+                "{} alpha {}: solid boundary",
+                case.input,
+                case.alpha
+            );
+            assert_eq!(
+                complex.pieces(case.alpha, Surface::Solid),
+                case.solid_pieces,
+                "{}",
+                case.input
+            );
         }
     }
 }
@@ -98,6 +139,7 @@ fn search_stops_at_the_first_connected_alpha_on_real_samples() {
         ceiling: 0.08,
         steps_per_doubling: 4,
         max_pieces: 1,
+        surface: Surface::General,
     };
     let choice = smallest_connected_alpha(&complex, &search).expect("valid search");
     assert!(choice.met);

@@ -50,12 +50,14 @@ so fewer charts are redone per frame (CesiumMan at 0.1: 4.1% -> 0.3% of the char
 to a third less time) but a frame may differ from a from-scratch triangulation until the next \
 rebuild. report.json/report.md record per frame the Gaussians that hopped, the charts redone \
 and whether the frame was rebuilt.
-  alpha     alpha complex of the deformed Gaussian means (CGAL's GENERAL rule: the faces of \
-exactly one tetrahedron of circumradius <= alpha, plus the triangles whose own smallest \
-circumsphere is empty and of radius <= alpha), per frame at the smallest alpha from 1.5 to 12 x \
-the mean nearest-neighbour spacing of the rest-pose means whose mesh has at most --alpha-pieces \
-(default 10) pieces; --alpha A fixes it; --alpha-rule open3d is Open3D's alpha shape (default 6 \
-spacings, hundreds of pieces on surface samples).
+  alpha     the boundary of the solid enclosed by the alpha complex of the deformed Gaussian \
+means (CGAL's GENERAL rule: the faces of exactly one tetrahedron of circumradius <= alpha, plus \
+the triangles whose own smallest circumsphere is empty and of radius <= alpha; the solid is what \
+the outside cannot reach without crossing them, so folds and inner sheets are dropped), per \
+frame at the smallest alpha from 1.5 to 12 x the mean nearest-neighbour spacing of the \
+rest-pose means whose mesh has at most --alpha-pieces (default 10) pieces; --alpha A fixes it; \
+--alpha-rule complex outputs the whole complex (not manifold); --alpha-rule open3d is Open3D's \
+alpha shape (default 6 spacings, hundreds of pieces on surface samples).
 
 --gt GT: a mesh file (a static ground truth for every frame), the word `template`: each \
 frame's deformed template, or the word `gaussians`: each frame's surface of the Gaussians' \

@@ -15,7 +15,8 @@ pub enum Method {
     /// Incremental Delaunay of the bound Gaussians: per-chart triangulations in the canonical
     /// domain, lifted each frame.
     Delaunay,
-    /// Alpha complex of the deformed Gaussian means (the smallest alpha that makes it one piece).
+    /// Boundary of the solid the alpha complex of the deformed Gaussian means encloses (at the
+    /// smallest alpha that makes it at most `--alpha-pieces` pieces).
     Alpha,
     /// The deformed Gaussians' opacity field (Gaussian Opacity Fields): centres and 3-sigma
     /// box corners tetrahedralised, the field the minimum over the tsdf rig's views, marching

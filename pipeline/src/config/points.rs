@@ -1,6 +1,7 @@
 //! Options of the point methods (delaunay, alpha) and of the rule that decides which
 //! Gaussians they mesh, with their defaults.
 
+use trisplat_extract::alpha_complex::Surface;
 use trisplat_extract::incremental_delaunay::DEFAULT_HOP_THRESHOLD;
 
 /// Default alpha of the alpha-shape method, in multiples of the mean spacing of the Gaussians
@@ -35,12 +36,29 @@ pub enum AlphaRule {
     /// of radius <= alpha; without --alpha, the smallest alpha (1.5 to 12 mean spacings, 4
     /// steps per doubling) whose mesh has at most --alpha-pieces pieces, per frame. One piece
     /// or few, but not manifold (folds: its area exceeds the surface's).
-    #[default]
     Complex,
+    /// The boundary of the solid the alpha complex encloses (docs/conventions.md §6 "Alpha
+    /// complex"): the complex's triangles between a tetrahedron reachable from outside and one
+    /// that is not, oriented outward; folds, interior sheets and fins are dropped. Without
+    /// --alpha, searched as `complex`. The default: one piece, about the surface's area.
+    #[default]
+    Solid,
     /// Open3D's regularised alpha shape (faces of exactly one tetrahedron of circumradius <=
     /// alpha); without --alpha, 6 mean spacings. Hundreds of pieces on surface samples.
     Open3d,
 }
+impl AlphaRule {
+    /// The alpha complex's output for the complex rules, `None` for Open3D's shape.
+    #[must_use]
+    pub fn surface(self) -> Option<Surface> {
+        match self {
+            Self::Complex => Some(Surface::General),
+            Self::Solid => Some(Surface::Solid),
+            Self::Open3d => None,
+        }
+    }
+}
+
 /// Default [`VisibilityRule::min_contribution`]: one step of an 8-bit image.
 pub const DEFAULT_MIN_CONTRIBUTION: f32 = 1.0 / 255.0;
 /// Default [`VisibilityRule::floater_neighbors`] (Open3D's tutorial value).
@@ -134,7 +152,7 @@ pub struct AlphaOptions {
     pub alpha: Option<f64>,
     /// Alpha: which triangles form the mesh.
     #[cfg_attr(feature = "cli", arg(long = "alpha-rule", value_name = "RULE",
-        value_enum, default_value_t = AlphaRule::Complex))]
+        value_enum, default_value_t = AlphaRule::Solid))]
     pub rule: AlphaRule,
     /// Alpha, without --alpha: the piece count the alpha search stops at (if no alpha up to
     /// 12 spacings reaches it, the one with the fewest pieces is used).
@@ -159,7 +177,7 @@ impl Default for AlphaOptions {
     fn default() -> Self {
         Self {
             alpha: None,
-            rule: AlphaRule::Complex,
+            rule: AlphaRule::Solid,
             pieces: DEFAULT_ALPHA_PIECES,
             keep_clusters: 0,
         }
