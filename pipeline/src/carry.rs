@@ -78,8 +78,9 @@ pub struct CarriedMesh {
     coords: Vec<DVec3>,
     /// Area of each key-mesh triangle at the key frame.
     key_area: Vec<f64>,
-    /// Probes: (Gaussian index in the kept means, key-mesh triangle, distance at the key).
-    probes: Vec<(u32, u32, f64)>,
+    /// Probes: (Gaussian index in the kept means, key-mesh triangle, distance at the key,
+    /// position at the key).
+    probes: Vec<(u32, u32, f64, Vec3)>,
     /// The largest distance from a key vertex to the Gaussian it was bound by.
     farthest: f64,
 }
@@ -218,20 +219,28 @@ impl CarriedMesh {
     #[must_use]
     pub fn drift(&self, vertices: &[DVec3], probes: &[Vec3], tolerance: f64) -> Drift {
         let triangles = self.key.triangles();
-        let hops = self
+        // Per probe: whether it hops, and how far its distance changed (0 where not finite).
+        // Per probe: whether it hops, how far its distance changed (0 where not finite), and
+        // how far it moved since the key.
+        let (hops, offset, moved) = self
             .probes
             .par_iter()
-            .filter(|&&(g, t, d0)| {
+            .map(|&(g, t, d0, at_key)| {
                 let Some(p) = probes.get(g as usize) else {
-                    return true;
+                    return (1usize, 0.0, 0.0);
                 };
                 let [a, b, c] = triangles[t as usize].map(|i| vertices[i as usize]);
                 let (q, _) = closest_point_on_triangle(p.as_dvec3(), a, b, c);
-                let d = (q - p.as_dvec3()).length();
+                let change = ((q - p.as_dvec3()).length() - d0).abs();
+                let moved = f64::from((*p - at_key).length());
                 // A non-finite distance (a collapsed triangle) counts as a hop.
-                (d - d0).abs() > tolerance || !d.is_finite()
+                if change.is_finite() && moved.is_finite() {
+                    (usize::from(change > tolerance), change, moved)
+                } else {
+                    (1, 0.0, 0.0)
+                }
             })
-            .count();
+            .reduce(|| (0, 0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
         let areas = triangle_areas(vertices, triangles);
         let (stretched, total) =
             self.key_area
@@ -248,6 +257,16 @@ impl CarriedMesh {
                 hops as f64 / self.probes.len() as f64
             },
             stretched: if total > 0.0 { stretched / total } else { 0.0 },
+            offset: if self.probes.is_empty() {
+                0.0
+            } else {
+                offset / self.probes.len() as f64
+            },
+            moved: if self.probes.is_empty() {
+                0.0
+            } else {
+                moved / self.probes.len() as f64
+            },
             probes: self.probes.len(),
         }
     }
@@ -260,6 +279,14 @@ pub struct Drift {
     pub hops: f64,
     /// Share of the key mesh's area in triangles stretched or shrunk more than twofold.
     pub stretched: f64,
+    /// Mean over the probes of how far (scene units) each one's distance to its carried
+    /// triangle changed since the key: how far the surface the Gaussians make has moved off
+    /// the carried mesh, however small (a hop is a change past a tolerance).
+    pub offset: f64,
+    /// Mean distance (scene units) the probes moved since the key: how far the surface has
+    /// travelled through space, which a method sampling a grid fixed in space (tsdf) sees as a
+    /// new sampling of it even where the carried mesh follows it.
+    pub moved: f64,
     /// Number of probe Gaussians.
     pub probes: usize,
 }
@@ -275,13 +302,13 @@ fn triangle_areas(positions: &[DVec3], triangles: &[[u32; 3]]) -> Vec<f64> {
         .collect()
 }
 
-/// The probes of `key`: each point within `reach` of it, with its nearest triangle and
-/// distance.
+/// The probes of `key`: each point within `reach` of it, with its nearest triangle, distance
+/// and position.
 fn probes_of(
     key: &TriMesh,
     points: &[Vec3],
     reach: f64,
-) -> Result<Vec<(u32, u32, f64)>, CarryError> {
+) -> Result<Vec<(u32, u32, f64, Vec3)>, CarryError> {
     if key.triangle_count() == 0 || points.is_empty() {
         return Ok(Vec::new());
     }
@@ -294,7 +321,7 @@ fn probes_of(
         .iter()
         .enumerate()
         .filter(|(_, h)| h.distance <= reach)
-        .map(|(g, h)| (g as u32, h.triangle, h.distance))
+        .map(|(g, h)| (g as u32, h.triangle, h.distance, points[g]))
         .collect())
 }
 
@@ -458,6 +485,43 @@ mod tests {
             .count();
         assert_eq!(drift.hops, hopped as f64 / drift.probes as f64);
         assert!(drift.hops > 0.0 && drift.hops < 1.0, "{drift:?}");
+    }
+
+    #[test]
+    fn the_offset_is_the_mean_change_of_the_probes_distances() {
+        let (positions, triangles) = grid();
+        let (means, owners) = gaussians(&positions, &triangles, 0.0);
+        // A flat key mesh 0.3 above the grid, over every Gaussian.
+        let lid = TriMesh::new(
+            vec![
+                DVec3::new(-1.0, -1.0, 0.3),
+                DVec3::new(5.0, -1.0, 0.3),
+                DVec3::new(5.0, 5.0, 0.3),
+                DVec3::new(-1.0, 5.0, 0.3),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let carried = CarriedMesh::bind(lid, &positions, &triangles, &means, &owners, &means, 1.0)
+            .expect("bind");
+        let mut out = Vec::new();
+        carried.place(&positions, &triangles, &mut out);
+        let drift = carried.drift(&out, &means, 0.1);
+        assert_eq!((drift.probes, drift.offset), (means.len(), 0.0));
+        // Every third Gaussian 0.02 farther from the key mesh: below the hop tolerance, so
+        // nothing hops, yet the offset is their share of 0.02.
+        let probes: Vec<Vec3> = means
+            .iter()
+            .enumerate()
+            .map(|(i, m)| if i % 3 == 0 { *m - Vec3::Z * 0.02 } else { *m })
+            .collect();
+        let drift = carried.drift(&out, &probes, 0.1);
+        assert_eq!(drift.hops, 0.0);
+        let moved = means.len().div_ceil(3);
+        let expected = 0.02 * moved as f64 / means.len() as f64;
+        assert!(
+            (drift.offset - expected).abs() < 1e-6,
+            "{drift:?} vs {expected}"
+        );
     }
 
     #[test]

@@ -40,6 +40,16 @@ pub(crate) fn check_options(config: &ExtractConfig) -> Result<(), PipelineError>
             });
         }
     }
+    let motion = t.key_motion.map(|m| ("key-motion", m));
+    for (name, value) in std::iter::once(("key-offset", t.key_offset)).chain(motion) {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(PipelineError::BadOption {
+                name,
+                value,
+                expected: "a finite number >= 0 of mean template edges",
+            });
+        }
+    }
     if !(t.hop_distance.is_finite() && t.hop_distance > 0.0) {
         return Err(PipelineError::BadOption {
             name: "hop-distance",

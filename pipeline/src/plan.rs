@@ -250,9 +250,16 @@ impl Plan {
                 Topology::Adaptive => format!(
                     "{why}; --topology adaptive: the track's first frame and each frame where \
                      over {} of the probe Gaussians move {} mean template edges off the carried \
-                     mesh (or {} of its area stretches twofold) start a key, the mesh carried \
-                     between keys",
-                    t.key_hops, t.hop_distance, t.key_stretch
+                     mesh, their distances to it change by {} mean template edges on average, \
+                     or {} of its area stretches twofold start a key{}, the mesh carried between \
+                     keys",
+                    t.key_hops,
+                    t.hop_distance,
+                    t.key_offset,
+                    t.key_stretch,
+                    t.key_motion.map_or_else(String::new, |m| format!(
+                        " (tsdf: also where they move {m} mean template edges on average)"
+                    ))
                 ),
             };
             push(Stage::Mesh(m), true, why);

@@ -144,6 +144,14 @@ pub struct TopologyFrame {
     pub hops: f64,
     /// Share of the key mesh's area in triangles stretched or shrunk more than twofold.
     pub stretched: f64,
+    /// Mean change (scene units) of the probe Gaussians' distances to the carried mesh since
+    /// the key (measured before a new key replaced it; 0 on the track's first key).
+    #[serde(default)]
+    pub offset: f64,
+    /// Mean distance (scene units) the probe Gaussians moved since the key (measured before
+    /// a new key replaced it; 0 on the track's first key).
+    #[serde(default)]
+    pub moved: f64,
     /// Where a key starts: the largest distance from a key-mesh vertex to the Gaussian whose
     /// triangle it was bound to (a vertex far from every Gaussian follows the template
     /// loosely).

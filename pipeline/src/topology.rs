@@ -143,6 +143,8 @@ impl Carrier {
                 key: frame,
                 hops: 0.0,
                 stretched: 0.0,
+                offset: 0.0,
+                moved: 0.0,
                 farthest: Some(carried.farthest()),
             };
             self.set_key(frame, carried);
@@ -157,10 +159,7 @@ impl Carrier {
         carried.place(input.positions, context.triangles, &mut vertices);
         let tolerance = context.options.hop_distance * context.mean_edge;
         let drift = carried.drift(&vertices, input.means, tolerance);
-        let options = context.options;
-        if self.topology == Topology::Adaptive
-            && (drift.hops > options.key_hops || drift.stretched > options.key_stretch)
-        {
+        if self.topology == Topology::Adaptive && drifted(method, &drift, context) {
             let output = mesh(method, mesher, input, context)?;
             let carried = bind(method, frame, &output, input, context)?;
             let record = TopologyFrame {
@@ -204,12 +203,28 @@ fn mesh(
     Ok(output)
 }
 
+/// Whether a frame carried with `drift` starts a new key (`adaptive`): too many probes hop,
+/// too much area stretches, the probes' distances to the carried mesh changed too much on
+/// average, or (tsdf, which samples a grid and a rig fixed in space, with `--key-motion`) they
+/// moved too far.
+fn drifted(method: Method, drift: &Drift, context: &CarryContext<'_>) -> bool {
+    let o = context.options;
+    drift.hops > o.key_hops
+        || drift.stretched > o.key_stretch
+        || drift.offset > o.key_offset * context.mean_edge
+        || (method == Method::Tsdf
+            && o.key_motion
+                .is_some_and(|m| drift.moved > m * context.mean_edge))
+}
+
 /// The record of a frame carried from `key` with `drift`.
 fn record(key: usize, drift: Drift) -> TopologyFrame {
     TopologyFrame {
         key,
         hops: drift.hops,
         stretched: drift.stretched,
+        offset: drift.offset,
+        moved: drift.moved,
         farthest: None,
     }
 }
@@ -251,4 +266,53 @@ pub fn mean_edge(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
         )
     });
     if n > 0 { sum / n as f64 } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_signal_starts_a_key_past_its_threshold_and_motion_only_for_tsdf() {
+        let mut options = TopologyOptions::default();
+        let finish = Finish::default();
+        let still = Drift::default();
+        let past = |f: fn(&mut Drift, f64), limit: f64| {
+            let (mut below, mut above) = (still, still);
+            f(&mut below, limit * 0.99);
+            f(&mut above, limit * 1.01);
+            (below, above)
+        };
+        let cases = [
+            past(|d, v| d.hops = v, options.key_hops),
+            past(|d, v| d.stretched = v, options.key_stretch),
+            past(|d, v| d.offset = v, options.key_offset * 2.0),
+        ];
+        let (slow, fast) = past(|d, v| d.moved = v, 0.3 * 2.0);
+        for motion in [None, Some(0.3)] {
+            options.key_motion = motion;
+            let context = CarryContext {
+                options: &options,
+                triangles: &[],
+                gaussian_triangles: &[],
+                all_means: &[],
+                mean_edge: 2.0,
+                finish: &finish,
+            };
+            for method in [Method::Tsdf, Method::Delaunay, Method::Alpha] {
+                assert!(!drifted(method, &still, &context));
+                for (below, above) in cases {
+                    assert!(!drifted(method, &below, &context), "{method}: {below:?}");
+                    assert!(drifted(method, &above, &context), "{method}: {above:?}");
+                }
+                assert!(!drifted(method, &slow, &context), "{method} {motion:?}");
+                let tsdf_with_motion = method == Method::Tsdf && motion.is_some();
+                assert_eq!(
+                    drifted(method, &fast, &context),
+                    tsdf_with_motion,
+                    "{method}"
+                );
+            }
+        }
+    }
 }

@@ -49,6 +49,9 @@ pub const DEFAULT_KEY_HOPS: f64 = 0.05;
 /// Default [`TopologyOptions::key_stretch`]: a new key once 2% of the key mesh's area sits in
 /// triangles stretched or shrunk more than twofold.
 pub const DEFAULT_KEY_STRETCH: f64 = 0.02;
+/// Default [`TopologyOptions::key_offset`], in multiples of the mean template edge: a new key
+/// once the probe Gaussians' distances to the carried mesh have changed by this much on average.
+pub const DEFAULT_KEY_OFFSET: f64 = 0.1;
 /// Default [`TopologyOptions::hop_distance`], in multiples of the mean template edge. On LAM
 /// (mean edge about 3 mm) 0.1 edges started a key every 3-4 frames for delaunay and alpha
 /// although frame 0's meshes carried to frame 300 stayed within 0.07 and 0.13 mm (Chamfer L1)
@@ -76,6 +79,19 @@ pub struct TopologyOptions {
     #[cfg_attr(feature = "cli", arg(long, value_name = "SHARE",
         default_value_t = DEFAULT_KEY_STRETCH))]
     pub key_stretch: f64,
+    /// adaptive: start a new key when the probe Gaussians' distances to the carried mesh have
+    /// changed since the key by more than this many mean template edges on average (the
+    /// surface they make moving off the carried mesh, hop or not).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "EDGES",
+        default_value_t = DEFAULT_KEY_OFFSET))]
+    pub key_offset: f64,
+    /// adaptive, tsdf only: start a new key when the probe Gaussians have moved more than this
+    /// many mean template edges on average since the key (off unless given; 0.3 keeps LAM's
+    /// tsdf within 0.5 mm of each frame's own extraction at a key every 5-10 frames). A TSDF
+    /// samples a voxel grid and a camera rig fixed in space, so a frame's own extraction is a
+    /// new sampling of a surface that moved through them, which no carried mesh follows.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "EDGES"))]
+    pub key_motion: Option<f64>,
     /// How far (multiples of the mean template edge) a Gaussian's distance to its carried
     /// triangle may change before it counts as hopping.
     #[cfg_attr(feature = "cli", arg(long, value_name = "EDGES",
@@ -89,6 +105,8 @@ impl Default for TopologyOptions {
             topology: Topology::Adaptive,
             key_hops: DEFAULT_KEY_HOPS,
             key_stretch: DEFAULT_KEY_STRETCH,
+            key_offset: DEFAULT_KEY_OFFSET,
+            key_motion: None,
             hop_distance: DEFAULT_HOP_DISTANCE,
         }
     }

@@ -356,7 +356,8 @@ impl Report {
         if !m.mean.keys.is_empty() {
             v.push(format!(
                 "topology: one mesh carried from {} key frame(s) ({}); most probe Gaussians \
-                 hopping off a carried mesh: {}",
+                 hopping off a carried mesh: {}; largest mean change of their distances to it: \
+                 {}",
                 m.mean.keys.len(),
                 m.mean
                     .keys
@@ -364,7 +365,10 @@ impl Report {
                     .map(ToString::to_string)
                     .collect::<Vec<_>>()
                     .join(", "),
-                pct(m.mean.max_hops)
+                pct(m.mean.max_hops),
+                m.mean
+                    .max_offset
+                    .map_or_else(|| "-".to_owned(), |o| format!("{o:.3e}"))
             ));
         }
         if let Some(note) = simplify_note(m) {

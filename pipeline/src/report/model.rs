@@ -131,6 +131,10 @@ pub struct Summary {
     /// The largest share of probe Gaussians that hopped off a carried mesh.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_hops: Option<f64>,
+    /// The largest mean change (scene units) of the probe Gaussians' distances to a carried
+    /// mesh since its key.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_offset: Option<f64>,
 }
 
 pub(super) fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
@@ -205,6 +209,10 @@ impl Summary {
             max_hops: records
                 .iter()
                 .filter_map(|r| r.topology.map(|t| t.hops))
+                .reduce(f64::max),
+            max_offset: records
+                .iter()
+                .filter_map(|r| r.topology.map(|t| t.offset))
                 .reduce(f64::max),
         }
     }
