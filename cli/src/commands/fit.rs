@@ -530,7 +530,7 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
     let seconds = started.elapsed().as_secs_f64();
     let views: usize = frames.iter().map(|f| f.targets.len()).sum();
     let eval_views: usize = held_out.iter().map(|f| f.targets.len()).sum();
-    if !json {
+    if !ctx.json {
         for r in &fitted.refines {
             println!(
                 "refine after iteration {}: {} -> {} Gaussians ({:.0} ms)",

@@ -234,7 +234,7 @@ pub fn run_brdf(
         return Err(e.into());
     }
     let seconds = started.elapsed().as_secs_f64();
-    if !json {
+    if !ctx.json {
         println!(
             "fit (brdf{}): {} Gaussians, {} iterations{}, {:.1} ms per iteration, {seconds:.2} s; \
              wrote {}",

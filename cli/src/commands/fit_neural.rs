@@ -69,7 +69,7 @@ pub fn run_mlp(
         bail!(e);
     }
     let seconds = started.elapsed().as_secs_f64();
-    if !json {
+    if !ctx.json {
         println!(
             "fit (mlp): {} Gaussians, {} iterations{}, {:.1} ms per iteration, {seconds:.2} s; \
              wrote {} and {}",
