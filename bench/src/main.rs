@@ -8,6 +8,7 @@
 //! timings are printed.
 
 mod alpha;
+mod brdf;
 mod deform;
 mod delaunay;
 mod eval;
@@ -41,6 +42,8 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Bench {
+    /// A synthetic-materials avatar for the relightable fit, and its scores (HRAvatar Table 3).
+    BrdfAvatar(brdf::BrdfAvatarArgs),
     /// Deforming 100k bound Gaussians per frame (binding and jacobian modes); trisplat only.
     Deform(deform::DeformBenchArgs),
     /// Incremental Delaunay of ~100k bound Gaussians: frame update vs rebuild, error vs time.
@@ -65,6 +68,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let python = (!args.no_python).then_some(args.python.as_str());
     match args.bench {
+        Bench::BrdfAvatar(a) => brdf::run(&a),
         Bench::Deform(a) => deform::run(&a),
         Bench::Delaunay(a) => delaunay::run(&a),
         Bench::Alpha(a) => alpha::run(&a, python),

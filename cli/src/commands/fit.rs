@@ -28,7 +28,8 @@ use trisplat_splat::render::SURFEL_NEAR;
 use trisplat_splat::render::{RenderMode, RenderOptions};
 
 use super::fit_brdf::{BrdfArgs, open_environment, run_brdf};
-use super::fit_neural::{MlpPaths, print_checkpoint, run_mlp};
+use super::fit_neural::run_mlp;
+use super::fit_run::{MlpPaths, out_of_time_note, with_progress};
 use super::render::parse_rgb;
 use super::{
     Context, MAX_IMAGE_PIXELS, UsageError, parse_max_pixels, read_camera_file, refuse_to_overwrite,
@@ -494,24 +495,18 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
         sh_up_every: args.sh_up_every.map(usize::try_from).transpose()?,
         time_budget: args.time_budget,
     };
+    let paths = MlpPaths {
+        gaussians: &args.gaussians,
+        template: &args.template,
+        cameras: &args.cameras,
+        output: &args.output,
+    };
     if let Some(env) = &env {
-        let paths = MlpPaths {
-            gaussians: &args.gaussians,
-            template: &args.template,
-            cameras: &args.cameras,
-            output: &args.output,
-        };
         return run_brdf(
             &paths, &args.brdf, env, ctx, &set, &template, &frames, &held_out, &options,
         );
     }
     if args.appearance == Appearance::Mlp {
-        let paths = MlpPaths {
-            gaussians: &args.gaussians,
-            template: &args.template,
-            cameras: &args.cameras,
-            output: &args.output,
-        };
         let lr = NeuralLearningRates {
             mlp: args.mlp_lr,
             tables: args.hash_lr,
@@ -520,23 +515,14 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             &paths, lr, ctx, &set, &template, &frames, &held_out, &options, origin,
         );
     }
-    let bar = ctx.progress.bar(args.iterations, "fitting");
-    let json = ctx.json;
-    let fitted = fit(&set, &template, &frames, &held_out, &options, |c| {
-        bar.set_position(c.iteration as u64);
-        if !json {
-            bar.suspend(|| print_checkpoint(c));
-        }
-    })
-    .with_context(|| {
-        format!(
-            "{} (template {})",
-            args.gaussians.display(),
-            args.template.display()
-        )
-    });
-    bar.finish_and_clear();
-    let fitted = fitted?;
+    let fitted = with_progress(
+        ctx,
+        args.iterations,
+        "fitting",
+        &args.gaussians,
+        &args.template,
+        |on_checkpoint| fit(&set, &template, &frames, &held_out, &options, on_checkpoint),
+    )?;
     if !fitted.set.is_empty() && fitted.set.binding().is_none() {
         bail!("internal: the fitted set lost its binding");
     }
@@ -544,7 +530,7 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
     let seconds = started.elapsed().as_secs_f64();
     let views: usize = frames.iter().map(|f| f.targets.len()).sum();
     let eval_views: usize = held_out.iter().map(|f| f.targets.len()).sum();
-    if !json {
+    if !ctx.json {
         for r in &fitted.refines {
             println!(
                 "refine after iteration {}: {} -> {} Gaussians ({:.0} ms)",
@@ -567,11 +553,7 @@ pub fn run(args: FitArgs, ctx: &Context) -> anyhow::Result<()> {
             set.len(),
             fitted.set.len(),
             fitted.iterations,
-            if fitted.out_of_time {
-                " (the time budget ran out)"
-            } else {
-                ""
-            },
+            out_of_time_note(fitted.out_of_time),
             frames.len(),
             fitted.seconds_per_iteration * 1e3,
             args.output.display()

@@ -10,14 +10,14 @@ use anyhow::{Context as _, bail};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::envmap::EnvMap;
 use trisplat_pipeline::fit::{
-    BrdfFitOptions, BrdfLearningRates, CommonOptions, DEFAULT_ENV_FIT_GREY, DEFAULT_ENV_FIT_LR,
+    BrdfFitOptions, BrdfLearningRates, DEFAULT_ENV_FIT_GREY, DEFAULT_ENV_FIT_LR,
     DEFAULT_ENV_FIT_WIDTH, EnvFit, FitFrame, FitOptions, MAX_ENV_FIT_WIDTH, fit_brdf,
 };
 use trisplat_splat::GaussianSet;
 use trisplat_splat::material::{EnvOptions, Environment};
 use trisplat_splat::ply::{PlyWriteOptions, write_gaussians};
 
-use super::fit_neural::{MlpPaths, print_checkpoint};
+use super::fit_run::{MlpPaths, out_of_time_note, refuse_sh_options, with_progress};
 use super::{Context, UsageError};
 
 /// The options of `fit --appearance brdf`.
@@ -178,30 +178,12 @@ pub fn run_brdf(
     held_out: &[FitFrame],
     options: &FitOptions,
 ) -> anyhow::Result<()> {
-    let sh_only = [
-        ("--densify", options.densify.is_some()),
-        ("--refine-every", options.refine_every.is_some()),
-        ("--sh-up-every", options.sh_up_every.is_some()),
-        ("--depth-weight", options.depth_weight > 0.0),
-        ("--normal-weight", options.normal_weight > 0.0),
-        ("--distortion-weight", options.distortion_weight > 0.0),
-    ];
-    if let Some((name, _)) = sh_only.iter().find(|(_, on)| *on) {
-        return Err(UsageError(format!(
-            "{name} is an option of the SH fit; --appearance brdf fits the materials (and with \
-             --fit-normals the rotations and scales) only"
-        ))
-        .into());
-    }
-    let common = CommonOptions {
-        iterations: options.iterations,
-        lambda_dssim: options.lambda_dssim,
-        alpha_weight: options.alpha_weight,
-        render: options.render,
-        seed: options.seed,
-        eval_every: options.eval_every,
-        time_budget: options.time_budget,
-    };
+    refuse_sh_options(
+        options,
+        "is an option of the SH fit; --appearance brdf fits the materials (and with \
+         --fit-normals the rotations and scales) only",
+    )?;
+    let common = options.common();
     let brdf = BrdfFitOptions {
         lr: BrdfLearningRates {
             albedo: args.lr_albedo,
@@ -221,34 +203,25 @@ pub fn run_brdf(
         );
     }
     let started = std::time::Instant::now();
-    let bar = ctx
-        .progress
-        .bar(options.iterations as u64, "fitting (brdf)");
-    let json = ctx.json;
-    let fitted = fit_brdf(
-        set,
-        template,
-        frames,
-        held_out,
-        &env.env,
-        &common,
-        &brdf,
-        |c| {
-            bar.set_position(c.iteration as u64);
-            if !json {
-                bar.suspend(|| print_checkpoint(c));
-            }
+    let fitted = with_progress(
+        ctx,
+        options.iterations as u64,
+        "fitting (brdf)",
+        paths.gaussians,
+        paths.template,
+        |on_checkpoint| {
+            fit_brdf(
+                set,
+                template,
+                frames,
+                held_out,
+                &env.env,
+                &common,
+                &brdf,
+                on_checkpoint,
+            )
         },
-    )
-    .with_context(|| {
-        format!(
-            "{} (template {})",
-            paths.gaussians.display(),
-            paths.template.display()
-        )
-    });
-    bar.finish_and_clear();
-    let fitted = fitted?;
+    )?;
     if !fitted.set.is_empty() && fitted.set.binding().is_none() {
         bail!("internal: the fitted set lost its binding");
     }
@@ -261,18 +234,14 @@ pub fn run_brdf(
         return Err(e.into());
     }
     let seconds = started.elapsed().as_secs_f64();
-    if !json {
+    if !ctx.json {
         println!(
             "fit (brdf{}): {} Gaussians, {} iterations{}, {:.1} ms per iteration, {seconds:.2} s; \
              wrote {}",
             if args.fit_normals { ", normals" } else { "" },
             set.len(),
             fitted.iterations,
-            if fitted.out_of_time {
-                " (the time budget ran out)"
-            } else {
-                ""
-            },
+            out_of_time_note(fitted.out_of_time),
             fitted.seconds_per_iteration * 1e3,
             paths.output.display()
         );

@@ -13,6 +13,7 @@ pub mod extract;
 pub mod fit;
 pub mod fit_brdf;
 pub mod fit_neural;
+pub mod fit_run;
 pub mod gaussian_io;
 pub mod init;
 pub mod man;

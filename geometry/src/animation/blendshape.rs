@@ -634,6 +634,41 @@ impl GltfMorphAnimation {
         })
     }
 
+    /// Hands frame `frame`'s clip time, its weights by (mesh, morph target) and the head turn
+    /// (with a head pose and a head joint) to `f`, the way the frame's mesh and its rig pose
+    /// are both made.
+    ///
+    /// # Errors
+    /// [`AnimationError::FrameOutOfRange`] past the track.
+    fn drive<R>(
+        &self,
+        frame: usize,
+        f: impl FnOnce(f64, &dyn Fn(usize, usize) -> Option<f64>, Option<JointTurn>) -> R,
+    ) -> Result<R, AnimationError> {
+        let (Some(w), Some(t)) = (self.track.weights(frame), self.track.time(frame)) else {
+            return Err(AnimationError::FrameOutOfRange {
+                frame,
+                count: self.track.frame_count(),
+            });
+        };
+        let lookup = |mesh: usize, target: usize| -> Option<f64> {
+            self.mapping
+                .get(mesh)?
+                .get(target)
+                .copied()
+                .flatten()
+                .map(|c| w[c])
+        };
+        let turn = self
+            .head
+            .zip(self.track.head_pose(frame))
+            .map(|(node, r)| JointTurn {
+                node,
+                rotation: DQuat::from_scaled_axis(r),
+            });
+        Ok(f(self.template.clip_time(t), &lookup, turn))
+    }
+
     /// The glTF template.
     #[must_use]
     pub fn template(&self) -> &GltfTemplate {
@@ -668,29 +703,9 @@ impl AnimatedTemplate for GltfMorphAnimation {
     }
 
     fn frame(&self, frame: usize) -> Result<Vec<DVec3>, AnimationError> {
-        let (Some(w), Some(t)) = (self.track.weights(frame), self.track.time(frame)) else {
-            return Err(AnimationError::FrameOutOfRange {
-                frame,
-                count: self.track.frame_count(),
-            });
-        };
-        let lookup = |mesh: usize, target: usize| -> Option<f64> {
-            self.mapping
-                .get(mesh)?
-                .get(target)
-                .copied()
-                .flatten()
-                .map(|c| w[c])
-        };
-        let turn = self
-            .head
-            .zip(self.track.head_pose(frame))
-            .map(|(node, r)| JointTurn {
-                node,
-                rotation: DQuat::from_scaled_axis(r),
-            });
-        self.template
-            .evaluate_turned(Some(self.template.clip_time(t)), &lookup, turn)
+        self.drive(frame, |t, lookup, turn| {
+            self.template.evaluate_turned(Some(t), lookup, turn)
+        })?
     }
 
     fn gltf_rig(&self) -> Option<&GltfTemplate> {
@@ -698,32 +713,9 @@ impl AnimatedTemplate for GltfMorphAnimation {
     }
 
     fn frame_rig_pose(&self, frame: usize) -> Option<Result<RigPose, AnimationError>> {
-        let (Some(w), Some(t)) = (self.track.weights(frame), self.track.time(frame)) else {
-            return Some(Err(AnimationError::FrameOutOfRange {
-                frame,
-                count: self.track.frame_count(),
-            }));
-        };
-        let lookup = |mesh: usize, target: usize| -> Option<f64> {
-            self.mapping
-                .get(mesh)?
-                .get(target)
-                .copied()
-                .flatten()
-                .map(|c| w[c])
-        };
-        let turn = self
-            .head
-            .zip(self.track.head_pose(frame))
-            .map(|(node, r)| JointTurn {
-                node,
-                rotation: DQuat::from_scaled_axis(r),
-            });
-        Some(Ok(self.template.rig_pose(
-            Some(self.template.clip_time(t)),
-            &lookup,
-            turn,
-        )))
+        Some(self.drive(frame, |t, lookup, turn| {
+            self.template.rig_pose(Some(t), lookup, turn)
+        }))
     }
 }
 

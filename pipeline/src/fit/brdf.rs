@@ -40,19 +40,18 @@ use trisplat_geometry::rng::Rng;
 use trisplat_splat::GaussianSet;
 use trisplat_splat::SH_C0;
 use trisplat_splat::fit::bound::{BoundParams, TriangleFrames, grads_to_local, to_world};
-use trisplat_splat::fit::loss::{Ssim, l1, psnr};
 use trisplat_splat::material::{
     EnvGrad, EnvOptions, Environment, Material, MaterialEdits, color_grads_from_sh,
     effective_material, relit_backward, relit_env_backward, shade_params,
 };
-use trisplat_splat::render::{
-    GaussianGrads, GaussianParams, ImageGrads, RenderMode, backward_into, render_with_grad,
-};
+use trisplat_splat::render::{GaussianGrads, GaussianParams};
 
 use super::checkpoint::Checkpoint;
 use super::inputs::{FitError, FitFrame};
-use super::neural::{CommonOptions, training_pairs};
-use super::photometric::{SsimCache, photometric_loss};
+use super::step::{
+    CommonOptions, Running, StepBuffers, check_rates, draw, held_out_scores, photometric_step,
+    render_rgb, training_pairs,
+};
 
 /// Adam's learning rates of the BRDF fit (material logits; local rotations and log-scales).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -224,41 +223,17 @@ fn activate(logits: &[f64], out: &mut Material) {
 
 fn check(o: &CommonOptions, b: &BrdfFitOptions) -> Result<(), FitError> {
     let bad = |m: String| Err(FitError::BadOption(m));
-    if o.iterations == 0 || o.eval_every == 0 {
-        return bad("--iterations and --eval-every must be at least 1".into());
-    }
-    if o.render.mode == RenderMode::Perspective {
-        return bad("fitting in perspective mode is not supported: use 3dgs or 2dgs".into());
-    }
-    if !(o.lambda_dssim.is_finite() && (0.0..=1.0).contains(&o.lambda_dssim)) {
-        return bad(format!("--lambda-dssim {}: expected 0..1", o.lambda_dssim));
-    }
-    if !(o.alpha_weight.is_finite() && o.alpha_weight >= 0.0) {
-        return bad(format!("--alpha-weight {}: expected >= 0", o.alpha_weight));
-    }
-    if let Some(t) = o.time_budget
-        && !(t.is_finite() && t > 0.0)
-    {
-        return bad(format!(
-            "--time-budget {t}: expected a number of seconds > 0"
-        ));
-    }
+    o.check()?;
     let lr = b.lr;
-    for (name, v) in [
+    check_rates(&[
         ("lr-albedo", lr.albedo),
         ("lr-roughness", lr.roughness),
         ("lr-f0", lr.f0),
         ("lr-rotations", lr.rotations),
         ("lr-scales", lr.log_scales),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return bad(format!("--{name} {v}: expected a finite number >= 0"));
-        }
-    }
+    ])?;
     if let Some(e) = &b.env_fit {
-        if !(e.lr.is_finite() && e.lr >= 0.0) {
-            return bad(format!("--lr-env {}: expected a finite number >= 0", e.lr));
-        }
+        check_rates(&[("lr-env", e.lr)])?;
         if e.initial.width() > MAX_ENV_FIT_WIDTH {
             return bad(format!(
                 "the environment to fit is {} texels wide; at most {MAX_ENV_FIT_WIDTH}",
@@ -293,8 +268,7 @@ struct Buffers {
     material: Material,
     g_world: GaussianGrads,
     g_local: GaussianGrads,
-    g_rgb: Vec<f32>,
-    g_alpha: Vec<f32>,
+    step: StepBuffers,
     d_colors: Vec<[f32; 3]>,
     g_logits: Vec<f64>,
 }
@@ -389,112 +363,44 @@ pub fn fit_brdf(
     let mut adam_scales = FlatAdam::new(3 * n);
     let mut b = Buffers::default();
     let mut rng = Rng::new(options.seed);
-    let mut ssim = SsimCache::default();
-    let (mut acc_loss, mut acc_l1, mut acc_psnr, mut acc_n) = (0.0, 0.0, 0.0, 0usize);
+    let mut running = Running::default();
     let mut train_s = 0.0;
     let mut checkpoints = Vec::new();
     let mut score = |bound: &BoundParams,
                      logits: &[f64],
                      env: &Environment,
                      b: &mut Buffers,
+                     running: &mut Running,
                      iteration: usize,
-                     seconds: f64,
-                     acc: (f64, f64, f64, usize)|
-     -> Checkpoint {
-        let (mut ps, mut ss, mut count) = (0.0, 0.0, 0usize);
-        for (f, fr) in held_out.iter().enumerate() {
-            for t in &fr.targets {
-                b.place(bound, &eval_frames[f], logits, t.camera.position(), env);
-                let Ok(out) = render_with_grad::<f32, _>(&b.world, &t.camera, &options.render)
-                else {
-                    continue;
-                };
-                ps += psnr(&out.rgb, &t.rgb);
-                let mut s = Ssim::new(t.camera.width as usize, t.camera.height as usize);
-                ss += s.ssim(&out.rgb, &t.rgb, 3, 0.0, None);
-                count += 1;
-            }
-        }
-        let (loss, l1v, p, k) = acc;
-        let mean = |v: f64, n: usize| (n > 0).then(|| v / n as f64);
-        let c = Checkpoint {
-            iteration,
-            loss: mean(loss, k),
-            train_l1: mean(l1v, k),
-            train_psnr: mean(p, k),
-            eval_psnr: mean(ps, count),
-            eval_ssim: mean(ss, count),
-            eval_depth_l1: None,
-            eval_normal_deg: None,
-            gaussians: bound.len(),
-            sh_degree: 0,
-            seconds,
-        };
+                     seconds: f64|
+     -> Result<Checkpoint, FitError> {
+        let eval = held_out_scores(held_out, |f, t| {
+            b.place(bound, &eval_frames[f], logits, t.camera.position(), env);
+            Ok(render_rgb(&b.world, t, &options.render))
+        })?;
+        let c = running.checkpoint(iteration, eval, bound.len(), seconds);
         on_checkpoint(&c);
-        c
+        Ok(c)
     };
     checkpoints.push(score(
         &bound,
         &logits,
         fitted_env.as_ref().unwrap_or(env),
         &mut b,
+        &mut running,
         0,
         0.0,
-        (0.0, 0.0, 0.0, 0),
-    ));
+    )?);
     let mut last = options.iterations;
     let mut out_of_time = false;
     for it in 0..options.iterations {
         let start = Instant::now();
-        let (f, v) =
-            pairs[((rng.uniform_f64() * pairs.len() as f64) as usize).min(pairs.len() - 1)];
+        let (f, v) = draw(&mut rng, &pairs);
         let target = &frames[f].targets[v];
-        let camera = &target.camera;
-        let eye = camera.position();
+        let eye = target.camera.position();
         let env_now = fitted_env.as_ref().unwrap_or(env);
         b.place(&bound, &train_frames[f], &logits, eye, env_now);
-        let render_err = |source| FitError::Render {
-            iteration: it,
-            view: camera.name.clone(),
-            source,
-        };
-        let fwd =
-            render_with_grad::<f32, _>(&b.world, camera, &options.render).map_err(render_err)?;
-        let size = (camera.width as usize, camera.height as usize);
-        let photometric = photometric_loss(
-            &fwd.rgb,
-            &target.rgb,
-            size,
-            options.lambda_dssim,
-            &mut ssim,
-            &mut b.g_rgb,
-        );
-        let mut loss = photometric.loss;
-        let alpha_term = options.alpha_weight > 0.0;
-        if alpha_term && let Some(a) = &target.alpha {
-            b.g_alpha.clear();
-            b.g_alpha.resize(size.0 * size.1, 0.0);
-            loss += options.alpha_weight * l1(&fwd.alpha, a, options.alpha_weight, &mut b.g_alpha);
-        }
-        let image_grads = ImageGrads {
-            rgb: Some(&b.g_rgb[..]),
-            alpha: alpha_term.then_some(&b.g_alpha[..]),
-            ..ImageGrads::default()
-        };
-        if b.g_world.len() != n || b.g_world.sh.len() != 3 * n {
-            b.g_world = GaussianGrads::zeros(n, 0);
-        } else {
-            b.g_world.clear();
-        }
-        backward_into(
-            &b.world,
-            camera,
-            &options.render,
-            &fwd,
-            &image_grads,
-            &mut b.g_world,
-        )
-        .map_err(render_err)?;
+        let step = photometric_step(&b.world, target, options, it, &mut b.step, &mut b.g_world)?;
         color_grads_from_sh(&b.g_world.sh, &mut b.d_colors);
         let grads = relit_backward(
             &b.world,
@@ -557,10 +463,7 @@ pub fn fit_brdf(
                 &[lr.log_scales],
             );
         }
-        acc_loss += loss;
-        acc_l1 += photometric.l1;
-        acc_psnr += psnr(&fwd.rgb, &target.rgb);
-        acc_n += 1;
+        running.add(step);
         train_s += start.elapsed().as_secs_f64();
         let done = it + 1;
         if options.time_budget.is_some_and(|t| train_s >= t) {
@@ -584,17 +487,15 @@ pub fn fit_brdf(
             if !finite {
                 return Err(FitError::NonFinite(done));
             }
-            let acc = (acc_loss, acc_l1, acc_psnr, acc_n);
             checkpoints.push(score(
                 &bound,
                 &logits,
                 fitted_env.as_ref().unwrap_or(env),
                 &mut b,
+                &mut running,
                 done,
                 train_s,
-                acc,
-            ));
-            (acc_loss, acc_l1, acc_psnr, acc_n) = (0.0, 0.0, 0.0, 0);
+            )?);
         }
         if out_of_time {
             break;

@@ -61,6 +61,8 @@ mod inputs;
 mod neural;
 mod photometric;
 mod score;
+mod step;
+mod synthetic;
 mod targets;
 
 pub use brdf::{
@@ -70,9 +72,11 @@ pub use brdf::{
 pub use brdf_score::{LMSE_WINDOW, MaterialScores, lmse, material_scores};
 pub use checkpoint::Checkpoint;
 pub use inputs::{FitError, FitFrame, Target};
-pub use neural::{CommonOptions, NeuralFitOptions, NeuralFitted, fit_neural};
+pub use neural::{NeuralFitOptions, NeuralFitted, fit_neural};
 use photometric::{SsimCache, photometric_loss};
 use score::evaluate;
+pub use step::CommonOptions;
+pub use synthetic::{rest_world, synthetic_materials, synthetic_scores};
 pub use targets::{TargetColor, mesh_targets, read_image_targets};
 pub use trisplat_splat::fit::density::DensifyOptions;
 
@@ -116,6 +120,38 @@ pub struct FitOptions {
     /// densify and refine; scoring excluded), or at `iterations`, whichever comes first; the
     /// means' learning rate then decays with the larger of the two fractions done.
     pub time_budget: Option<f64>,
+}
+
+impl FitOptions {
+    /// The options the appearance fits ([`fit_brdf`], [`fit_neural`]) share with this one.
+    #[must_use]
+    pub fn common(&self) -> CommonOptions {
+        CommonOptions {
+            iterations: self.iterations,
+            lambda_dssim: self.lambda_dssim,
+            alpha_weight: self.alpha_weight,
+            render: self.render,
+            seed: self.seed,
+            eval_every: self.eval_every,
+            time_budget: self.time_budget,
+        }
+    }
+
+    /// The first option set that only the SH fit takes (the appearance fits refuse it), by its
+    /// command-line name.
+    #[must_use]
+    pub fn sh_only_option(&self) -> Option<&'static str> {
+        [
+            ("--densify", self.densify.is_some()),
+            ("--refine-every", self.refine_every.is_some()),
+            ("--sh-up-every", self.sh_up_every.is_some()),
+            ("--depth-weight", self.depth_weight > 0.0),
+            ("--normal-weight", self.normal_weight > 0.0),
+            ("--distortion-weight", self.distortion_weight > 0.0),
+        ]
+        .into_iter()
+        .find_map(|(name, on)| on.then_some(name))
+    }
 }
 
 impl Default for FitOptions {

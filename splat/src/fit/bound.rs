@@ -7,6 +7,19 @@
 //! `∂L/∂μ' = k_f R_fᵀ ∂L/∂μ`, `∂L/∂log s' = ∂L/∂log s`, `∂L/∂q' = L(q_f)ᵀ ∂L/∂q` with `L(a)` the
 //! matrix of `b ↦ a ⊗ b`. The triangle frames are held fixed (the template is given, not
 //! fitted). Jacobian-mode (SurFhead) sets are not supported here.
+//!
+//! **The shading normal** (`fit --appearance brdf --fit-normals`, issue #33): the deformer's
+//! normal is `J⁻ᵀ` of the local shortest axis ([`crate::Deformer::shading_normals`]); in this
+//! binding mode `J = k_f R_f`, so `normalize(J⁻ᵀ R' e_k) = R_f R' e_k`, the shortest axis of the
+//! placed quaternion `q_f ⊗ q'`. The material backward differentiates that axis with respect to
+//! the world quaternion and [`grads_to_local`] applies `L(q_f)ᵀ`: that is the `J⁻ᵀ` chain, no
+//! separate term (checked against central differences of the deformer's own normals on a posed
+//! template: `pipeline/tests/fit_brdf.rs`, `the_normal_gradient_follows_the_deformed_normal`).
+//! The log-scales reach the normal only through which axis is shortest (piecewise constant), so
+//! they get its gradient from the footprint alone. A Jacobian-mode `J` (not a similarity) would
+//! need `∂/∂q' normalize(J⁻ᵀ R(q') e_k)` and, for the footprint, the gradient through the SVD
+//! that turns `J Σ Jᵀ` into a rotation and scales; neither is implemented, since these bound
+//! parameters are binding mode's only.
 
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;

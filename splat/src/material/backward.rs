@@ -15,8 +15,9 @@
 //!
 //! In a bound or deformed set the world quaternion is what the placing produced (binding mode:
 //! the triangle's frame times the local one; the caller carries the world gradient back, as
-//! for the renderer's). Jacobian-mode deformation moves the normal by `J⁻ᵀ` and is not
-//! differentiated here.
+//! for the renderer's; in binding mode that chain is the deformer's `J⁻ᵀ`, see
+//! [`crate::fit::bound`]). Jacobian-mode deformation moves the normal by a general `J⁻ᵀ` and is
+//! not differentiated here (the fits place sets in binding mode only).
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
