@@ -105,7 +105,7 @@ pub(super) fn fit(
             let evaluated = basis.evaluate(&block[from..]);
             let failing = evaluated
                 .iter()
-                .position(|(_, error)| !(*error <= limits.tolerance));
+                .position(|(_, error)| error.is_nan() || *error > limits.tolerance);
             let passed = failing.unwrap_or(evaluated.len());
             for (w, error) in &evaluated[..passed] {
                 weights.push(w.clone());
@@ -357,7 +357,7 @@ impl Basis {
             row.push((g - known) / self.cholesky[i][i]);
         }
         let pivot_sq = length_sq - row.iter().map(|x| x * x).sum::<f64>();
-        if !(pivot_sq > MIN_PIVOT_SHARE * length_sq) {
+        if pivot_sq.is_nan() || pivot_sq <= MIN_PIVOT_SHARE * length_sq {
             return false;
         }
         row.push(pivot_sq.sqrt());

@@ -111,9 +111,9 @@
 //! would need more than [`MorphBasis::max_components`] vectors (default 128) or as many as
 //! it has frames after its first keeps one target per frame. Every run's basis size and
 //! measured largest error are returned by [`write_sequence_parts_summarised`]. On LAM's
-//! 973-frame track (TSDF, 157,580 vertices) this cut the `.glb` from 178 MB to ... (see
-//! docs/benchmarks.md). `Quantize` lays the buffer out in two passes, so it fits each
-//! basis twice; `None` keeps one `f32` target per frame.
+//! 973-frame track the greedy fit halves the alpha `.glb` but the TSDF run needs more than
+//! 128 vectors and keeps its targets (docs/benchmarks.md). `Quantize` lays the buffer out
+//! in two passes, so it fits each basis twice; `None` keeps one `f32` target per frame.
 //!
 //! Validity: outputs of both layouts (`.glb` and `.gltf`, with and without normals, one and
 //! many frames) were checked with the Khronos glTF-Validator 2.0.0-dev.3.10 (npm
