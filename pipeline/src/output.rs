@@ -7,16 +7,16 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 use trisplat_geometry::io::{
-    FrameFiles, FrameSource, GLB_PART_LIMIT, GltfCompression, SequenceLayout, SequenceOptions,
-    write_sequence_parts_with, write_usd_sequence,
+    FrameFiles, FrameSource, GLB_PART_LIMIT, GltfCompression, MorphBasis, SequenceLayout,
+    SequenceOptions, SequenceSummary, write_sequence_parts_summarised, write_usd_sequence,
 };
 
 use crate::config::{ExtractConfig, Method, OutputTarget};
 use crate::error::{PipelineError, first_error_in_order};
 use crate::journal::JOURNAL;
 use crate::report::{
-    GT_THUMBNAIL, PLOT_PNG, PLOT_SVG, REPORT_HTML, REPORT_JSON, REPORT_MD, Report, THUMBNAIL_DIR,
-    Thumbnails, html, plot, thumbnail_file,
+    GT_THUMBNAIL, GlbStorage, PLOT_PNG, PLOT_SVG, REPORT_HTML, REPORT_JSON, REPORT_MD, Report,
+    THUMBNAIL_DIR, Thumbnails, html, plot, thumbnail_file,
 };
 
 /// Name of frame `frame`'s file in an output folder (`frame_000042.ply`).
@@ -268,7 +268,7 @@ pub fn check_outputs(
 /// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
 /// report), one USD mesh cache per method when asked (`<method>.usda`), the report files
 /// (JSON, Markdown, HTML) and the plot (SVG, PNG). `compression`: how the glTF stores its
-/// data.
+/// data (with the default morph basis, [`MorphBasis::default`]).
 pub fn write_outputs(
     out: &Path,
     report: &mut Report,
@@ -276,25 +276,56 @@ pub fn write_outputs(
     targets: &[OutputTarget],
     compression: GltfCompression,
 ) -> Result<(), PipelineError> {
+    write_outputs_with(
+        out,
+        report,
+        frames,
+        targets,
+        compression,
+        MorphBasis::default(),
+    )
+}
+
+/// [`write_outputs`] with the glTF's morph basis chosen too (`--gltf-morph-tolerance`); what
+/// each method's glTF became is recorded in the report ([`Report::glb_storage`]).
+pub fn write_outputs_with(
+    out: &Path,
+    report: &mut Report,
+    frames: &SequenceSources<'_>,
+    targets: &[OutputTarget],
+    compression: GltfCompression,
+    morph_basis: MorphBasis,
+) -> Result<(), PipelineError> {
+    report.glb_storage.clear();
     if targets.contains(&OutputTarget::Glb) {
         // One method per task: reading the frame files back is most of the work.
-        let written: Vec<(Method, Vec<PathBuf>)> =
+        let written: Vec<(Method, SequenceSummary)> =
             first_error_in_order(frames.par_iter().map(|(m, source)| {
                 let glb = out.join(format!("{}.glb", m.name()));
                 let options = SequenceOptions {
                     layout: SequenceLayout::Auto,
                     compression,
+                    morph_basis,
                 };
-                write_sequence_parts_with(
+                write_sequence_parts_summarised(
                     &glb,
                     &**source,
                     &report.frame_times,
                     &options,
                     GLB_PART_LIMIT,
                 )
-                .map(|parts| (*m, parts))
+                .map(|summary| (*m, summary))
             }))?;
-        for (m, parts) in written {
+        for (m, summary) in written {
+            let tolerance = if compression.quantizes() && morph_basis.enabled() {
+                morph_basis.tolerance
+            } else {
+                0.0
+            };
+            report
+                .glb_storage
+                .insert(m.name().to_owned(), glb_storage(&summary, tolerance));
+            let parts = summary.parts;
             if parts.len() > 1
                 && let Some(r) = report.methods.get_mut(m.name())
             {
@@ -320,4 +351,36 @@ pub fn write_outputs(
         html::write_html(&out.join(REPORT_HTML), report, &svg)?;
     }
     Ok(())
+}
+
+/// The report's record of one method's glTF from what the writer made of it.
+fn glb_storage(summary: &SequenceSummary, tolerance: f64) -> GlbStorage {
+    let runs = &summary.segments;
+    let basis: Vec<usize> = runs.iter().filter_map(|r| r.basis).collect();
+    let mut frame_errors: Vec<f64> = runs.iter().flat_map(|r| r.frame_errors.clone()).collect();
+    frame_errors.sort_by(f64::total_cmp);
+    let median = match frame_errors.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => frame_errors[n / 2],
+        n => 0.5 * (frame_errors[n / 2 - 1] + frame_errors[n / 2]),
+    };
+    GlbStorage {
+        runs: runs.len(),
+        basis_runs: basis.len(),
+        basis_vectors: basis.iter().sum(),
+        largest_basis: basis.iter().copied().max().unwrap_or(0),
+        frame_targets: runs
+            .iter()
+            .filter(|r| r.basis.is_none())
+            .map(|r| r.frames.len().saturating_sub(1))
+            .sum(),
+        tolerance,
+        max_error: runs.iter().map(|r| r.max_error).fold(0.0, f64::max),
+        max_error_relative: runs
+            .iter()
+            .filter(|r| r.diagonal > 0.0)
+            .map(|r| r.max_error / r.diagonal)
+            .fold(0.0, f64::max),
+        median_frame_error: median,
+    }
 }

@@ -20,7 +20,7 @@ use crate::lock::FolderLock;
 use crate::metrics::GtSamples;
 use crate::output::{
     SequenceSources, check_outputs, file_sources, frame_file, frame_files, refuse_used_output,
-    remove_frame_files, remove_stale_temporaries, rig_file, thumbnails_of, write_outputs,
+    remove_frame_files, remove_stale_temporaries, rig_file, thumbnails_of, write_outputs_with,
 };
 use crate::records::{DelaunayFrame, FailedFrame, FrameEntry, FrameRecord};
 use crate::report::thumbnail::{self, Colouring, Picture};
@@ -177,12 +177,13 @@ pub fn run(
         write_carried_outputs(&mut session, out, &mut report, o)?;
     } else {
         let sources = file_sources(&frame_files);
-        write_outputs(
+        write_outputs_with(
             out,
             &mut report,
             &sources,
             &o.outputs.targets,
             o.outputs.gltf_compression,
+            o.outputs.morph_basis(),
         )?;
     }
     if frame_files_wanted && !o.outputs.writes(OutputTarget::Meshes) {
@@ -233,12 +234,13 @@ fn write_carried_outputs(
         );
         sources.insert(m.method, Box::new(frames));
     }
-    write_outputs(
+    write_outputs_with(
         out,
         report,
         &sources,
         &o.outputs.targets,
         o.outputs.gltf_compression,
+        o.outputs.morph_basis(),
     )
 }
 

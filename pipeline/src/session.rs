@@ -604,6 +604,7 @@ impl Session {
             serial_methods: self.serial_methods,
             shard: self.shard,
             methods: BTreeMap::new(),
+            glb_storage: BTreeMap::new(),
             thumbnails: None,
         };
         Event::Started {

@@ -77,6 +77,7 @@ fn carried_sequences_equal_those_assembled_from_frame_files_and_resume() {
     let options = SequenceOptions {
         layout: SequenceLayout::Auto,
         compression: OutputOptions::default().gltf_compression,
+        morph_basis: OutputOptions::default().morph_basis(),
     };
     for m in METHODS {
         let files = frame_files(&all, m, 0..10);

@@ -13,7 +13,7 @@ use glam::{DVec3, Vec3};
 use serde_json::Value;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{
-    GltfCompression, SequenceLayout, SequenceOptions, write_sequence_with,
+    GltfCompression, MorphBasis, SequenceLayout, SequenceOptions, write_sequence_with,
 };
 
 /// The documented position bound, as a fraction of the sequence's bounding-box diagonal.
@@ -395,6 +395,7 @@ fn write(
         &SequenceOptions {
             layout,
             compression,
+            morph_basis: MorphBasis::OFF,
         },
     )
     .expect("write");
@@ -517,6 +518,7 @@ fn compressed_parts_only_when_the_compressed_buffer_does_not_fit() {
     let options = SequenceOptions {
         layout: SequenceLayout::Auto,
         compression: GltfCompression::Meshopt,
+        morph_basis: MorphBasis::OFF,
     };
     // One frame's plain bound: positions, normals (24 bytes a vertex), indices, keys.
     let frame_bytes = (24 * frames[0].vertex_count() + 12 * frames[0].triangle_count() + 64) as u64;
@@ -613,6 +615,7 @@ fn a_frame_changed_while_writing_is_an_error_and_nothing_is_left() {
         let options = SequenceOptions {
             layout: SequenceLayout::Auto,
             compression,
+            morph_basis: MorphBasis::OFF,
         };
         let err = write_sequence_with(&path, &source, &[0.0, 1.0, 2.0], &options)
             .expect_err("a changed frame");
@@ -628,4 +631,134 @@ fn a_frame_changed_while_writing_is_an_error_and_nothing_is_left() {
             left.len()
         );
     }
+}
+
+/// `wave(n)` without normals (a morph basis is fitted only then), and each frame's own
+/// bounding-box diagonal.
+fn wave_points(n: usize) -> Vec<TriMesh> {
+    wave(n)
+        .into_iter()
+        .map(|f| TriMesh::new(f.positions().to_vec(), f.triangles().to_vec()))
+        .collect()
+}
+
+/// The largest distance of a vertex of any frame from its place, as a fraction of that
+/// frame's own bounding-box diagonal (what the glTF clients check), evaluated independently.
+fn worst_relative(file: &Decoded, frames: &[TriMesh], times: &[f64]) -> f64 {
+    let mut worst = 0.0f64;
+    for (k, frame) in frames.iter().enumerate() {
+        let (got, _) = file.visible(times[k]);
+        assert_eq!(got.len(), frame.vertex_count(), "frame {k}: vertex count");
+        let diag = diagonal(std::slice::from_ref(frame));
+        for (a, b) in got.iter().zip(frame.positions()) {
+            worst = worst.max((*a - *b).length() / diag);
+        }
+    }
+    worst
+}
+
+#[test]
+fn a_morph_basis_reproduces_every_frame_within_its_tolerance() {
+    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
+    let dir = tempfile::tempdir().expect("folder");
+    // The wave spans three shapes (x: sin and cos of 3y, y: cos 2z) over 40 frames; two hold
+    // it within the tolerance.
+    let frames = wave_points(40);
+    let times: Vec<f64> = (0..frames.len()).map(|k| k as f64 / 30.0).collect();
+    let options = SequenceOptions::default();
+    assert!(options.morph_basis.enabled(), "the basis is the default");
+    let path = dir.path().join("basis.glb");
+    let summary = write_sequence_parts_summarised(
+        &path,
+        &frames.as_slice(),
+        &times,
+        &options,
+        GLB_PART_LIMIT,
+    )
+    .expect("write");
+    let file = decode(&path);
+    let targets = file.json["meshes"][0]["primitives"][0]["targets"]
+        .as_array()
+        .expect("targets")
+        .len();
+    assert!((2..=6).contains(&targets), "{targets} basis vectors");
+    assert_eq!(
+        file.json["meshes"][0]["extras"]["targetNames"][0],
+        "basis_000"
+    );
+    assert_eq!(summary.segments.len(), 1);
+    let run = &summary.segments[0];
+    assert_eq!(run.basis, Some(targets));
+    assert_eq!(run.frame_errors.len(), frames.len());
+    let tolerance = options.morph_basis.tolerance;
+    let worst = worst_relative(&file, &frames, &times);
+    assert!(
+        worst <= tolerance,
+        "{worst:e} over the tolerance {tolerance:e}"
+    );
+    // The writer's own measure is what an independent evaluator finds (f32 arithmetic apart).
+    let reported = run.max_error / run.diagonal;
+    assert!(
+        (reported - worst).abs() <= 1e-3 * tolerance + 0.02 * worst,
+        "reported {reported:e}, evaluated {worst:e}"
+    );
+    // Smaller than one target per frame, and byte-identical when written again.
+    let per_frame = dir.path().join("per_frame.glb");
+    let off = SequenceOptions {
+        morph_basis: MorphBasis::OFF,
+        ..SequenceOptions::default()
+    };
+    write_sequence_with(&per_frame, &frames.as_slice(), &times, &off).expect("write");
+    let (a, b) = (
+        std::fs::metadata(&path).expect("basis").len(),
+        std::fs::metadata(&per_frame).expect("per frame").len(),
+    );
+    assert!(a < b, "basis {a} bytes, per-frame targets {b}");
+    let again = dir.path().join("again.glb");
+    write_sequence_with(&again, &frames.as_slice(), &times, &options).expect("write");
+    assert_eq!(std::fs::read(&path).ok(), std::fs::read(&again).ok());
+}
+
+#[test]
+fn frames_a_basis_cannot_hold_keep_one_target_per_frame() {
+    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
+    let dir = tempfile::tempdir().expect("folder");
+    // Every frame moves each vertex its own way (no shared shape): a basis needs a vector per
+    // frame, so the writer keeps one target per frame.
+    let base = wave_points(1).pop().expect("frame");
+    let frames: Vec<TriMesh> = (0..6u64)
+        .map(|k| {
+            let mut rng = trisplat_geometry::rng::Rng::new(k + 1);
+            let p = base
+                .positions()
+                .iter()
+                .map(|p| {
+                    *p + 0.02
+                        * DVec3::new(
+                            rng.uniform_f64() - 0.5,
+                            rng.uniform_f64() - 0.5,
+                            rng.uniform_f64(),
+                        )
+                })
+                .collect();
+            TriMesh::new(p, base.triangles().to_vec())
+        })
+        .collect();
+    let times: Vec<f64> = (0..frames.len()).map(|k| k as f64).collect();
+    let path = dir.path().join("noise.glb");
+    let summary = write_sequence_parts_summarised(
+        &path,
+        &frames.as_slice(),
+        &times,
+        &SequenceOptions::default(),
+        GLB_PART_LIMIT,
+    )
+    .expect("write");
+    assert_eq!(summary.segments[0].basis, None);
+    let file = decode(&path);
+    assert_eq!(
+        file.json["meshes"][0]["extras"]["targetNames"][0],
+        "frame_000001"
+    );
+    check_frames(&file, &frames, &times);
 }

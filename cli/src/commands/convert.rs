@@ -82,6 +82,14 @@ pub struct ConvertArgs {
     /// uncompressed), none (plain f32 glTF 2.0, every reader; largest).
     #[arg(long, value_enum, value_name = "KIND", default_value_t = io::GltfCompression::Meshopt)]
     pub gltf_compression: io::GltfCompression,
+    /// A frame sequence's morph basis (meshopt and quantize; frames without normals): the
+    /// frames as a few basis shapes and a weight per shape and frame, the fewest (up to 128,
+    /// fewer than the frames) that put every vertex of every frame within E of the frame's
+    /// bounding-box diagonal of its place; else one morph target per frame. 0: one morph
+    /// target per frame.
+    #[arg(long, value_name = "E", default_value_t = io::DEFAULT_MORPH_BASIS_TOLERANCE,
+        value_parser = parse_share)]
+    pub gltf_morph_tolerance: f64,
     /// Gaussian formats.
     #[command(flatten)]
     pub gaussian: GaussianFormatArgs,
@@ -106,7 +114,7 @@ fn parse_faces(s: &str) -> Result<usize, String> {
     }
 }
 
-/// A `--simplify-error` value: finite and 0 or more.
+/// A `--simplify-error` or `--gltf-morph-tolerance` value: finite and 0 or more.
 fn parse_share(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
@@ -418,6 +426,10 @@ fn convert_sequence(args: &ConvertArgs, ctx: &Context) -> anyhow::Result<()> {
                 SequenceLayout::MorphTargets
             },
             compression: args.gltf_compression,
+            morph_basis: io::MorphBasis {
+                tolerance: args.gltf_morph_tolerance,
+                ..io::MorphBasis::default()
+            },
         };
         io::write_sequence_with(&args.output, &io::FrameFiles(files), &times, &options)
     };

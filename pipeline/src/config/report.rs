@@ -1,7 +1,7 @@
 //! Options of the metrics and of what a run writes, with their defaults and the resource
 //! limits checked before anything is allocated.
 
-use trisplat_geometry::io::GltfCompression;
+use trisplat_geometry::io::{DEFAULT_MORPH_BASIS_TOLERANCE, GltfCompression, MorphBasis};
 use trisplat_geometry::metrics::Tau;
 
 /// Default points sampled on each mesh for the metrics.
@@ -167,6 +167,15 @@ pub struct OutputOptions {
     #[cfg_attr(feature = "cli", arg(long, value_enum, value_name = "KIND",
         default_value_t = GltfCompression::Meshopt))]
     pub gltf_compression: GltfCompression,
+    /// The glb's morph basis (meshopt and quantize): each run of frames between key frames
+    /// is stored as a few basis shapes and a weight per shape and frame, the fewest (up to
+    /// 128, fewer than the run's frames) that put every vertex of every frame within E of its
+    /// frame's bounding-box diagonal of its place; a run that needs more keeps one morph
+    /// target per frame. 0: one morph target per frame. The report records the basis sizes
+    /// and the largest error (glb_storage).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "E",
+        default_value_t = DEFAULT_MORPH_BASIS_TOLERANCE, value_parser = super::arg::parse_share))]
+    pub gltf_morph_tolerance: f64,
 }
 
 impl Default for OutputOptions {
@@ -176,11 +185,21 @@ impl Default for OutputOptions {
             view_axes: trisplat_splat::Axes::Luf,
             targets: OutputTarget::ALL.to_vec(),
             gltf_compression: GltfCompression::default(),
+            gltf_morph_tolerance: DEFAULT_MORPH_BASIS_TOLERANCE,
         }
     }
 }
 
 impl OutputOptions {
+    /// The glb's morph basis ([`Self::gltf_morph_tolerance`], the default vector limit).
+    #[must_use]
+    pub fn morph_basis(&self) -> MorphBasis {
+        MorphBasis {
+            tolerance: self.gltf_morph_tolerance,
+            ..MorphBasis::default()
+        }
+    }
+
     /// Whether `target` is among the outputs asked for.
     #[must_use]
     pub fn writes(&self, target: OutputTarget) -> bool {

@@ -9,7 +9,7 @@ use trisplat_geometry::io::{IoError, write_atomically};
 use trisplat_geometry::metrics::Relation;
 
 use super::files::{PLOT_PNG, PLOT_SVG, REPORT_HTML};
-use super::model::{MethodReport, Report, mean};
+use super::model::{GlbStorage, MethodReport, Report, mean};
 use super::table::{Cell, Table, fixed, opt, optf, pct, scored_as, significant};
 use crate::records::DelaunayFrame;
 
@@ -458,9 +458,34 @@ impl Report {
             for note in Self::method_notes(m) {
                 let _ = writeln!(s, "{note}\n");
             }
+            if let Some(g) = self.glb_storage.get(m.method.name()) {
+                let _ = writeln!(s, "{}\n", Self::glb_note(g));
+            }
             s.push_str(&Self::frame_table(m).markdown());
         }
         s
+    }
+
+    /// How a method's glTF stores its frames, one sentence.
+    fn glb_note(g: &GlbStorage) -> String {
+        let basis = if g.basis_runs > 0 {
+            format!(
+                "{} of {} run(s) between keys as a morph basis, {} vectors in all (at most {} \
+                 in one run)",
+                g.basis_runs, g.runs, g.basis_vectors, g.largest_basis
+            )
+        } else {
+            format!("{} run(s) between keys, no morph basis", g.runs)
+        };
+        format!(
+            "glb: {basis}; {} per-frame morph targets; largest vertex error {} ({} of the \
+             frame's diagonal; tolerance {}), median frame {}",
+            g.frame_targets,
+            significant(g.max_error),
+            significant(g.max_error_relative),
+            significant(g.tolerance),
+            significant(g.median_frame_error),
+        )
     }
 
     /// The threshold as report.md states it.

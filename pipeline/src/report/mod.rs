@@ -20,5 +20,5 @@ pub use files::{
     GT_THUMBNAIL, PLOT_PNG, PLOT_SVG, REPORT_HTML, REPORT_JSON, REPORT_MD, THUMBNAIL_DIR,
     thumbnail_file,
 };
-pub use model::{DelaunayStats, MethodReport, Report, RigRecord, Summary, Thumbnails};
+pub use model::{DelaunayStats, GlbStorage, MethodReport, Report, RigRecord, Summary, Thumbnails};
 pub use table::{Cell, Table};

@@ -260,6 +260,34 @@ pub struct MethodReport {
     pub rig: Option<RigRecord>,
 }
 
+/// How a method's animated glTF stores its frames: each run of frames of one topology (one
+/// per key frame) holds a morph basis (a few basis shapes, a weight per shape and frame) or
+/// one morph target per frame; distances in the template's units.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GlbStorage {
+    /// Runs of frames of one topology.
+    pub runs: usize,
+    /// Runs stored as a morph basis.
+    pub basis_runs: usize,
+    /// Basis vectors (morph targets) over all basis runs.
+    pub basis_vectors: usize,
+    /// The most basis vectors of one run.
+    pub largest_basis: usize,
+    /// Morph targets of runs stored one per frame.
+    pub frame_targets: usize,
+    /// The tolerance asked: the largest distance of a vertex from its place, as a fraction of
+    /// its run's smallest frame diagonal (0: no basis asked).
+    pub tolerance: f64,
+    /// The largest distance of a vertex of any frame from its place as the frame was made:
+    /// measured for basis runs (the weights as stored), the grid's bound (half a step per
+    /// axis) for quantised per-frame targets, 0 for plain `f32`.
+    pub max_error: f64,
+    /// `max_error` as a fraction of the run's smallest frame diagonal (the largest over runs).
+    pub max_error_relative: f64,
+    /// The median over frames of each frame's largest distance.
+    pub median_frame_error: f64,
+}
+
 /// `<method>_rig.glb` (`--targets rig`): the template's skin and morph targets moved onto the
 /// method's first key mesh, and how far the rig played by geometry's glTF evaluator is from
 /// the carried key mesh at each frame (distances in the template's units).
@@ -353,6 +381,10 @@ pub struct Report {
     pub shard: Option<ShardRecord>,
     /// One entry per method, by name.
     pub methods: BTreeMap<String, MethodReport>,
+    /// How each method's animated glTF stores its frames (morph basis, error), by method name;
+    /// empty without the `glb` target and in reports of older versions.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub glb_storage: BTreeMap<String, GlbStorage>,
     /// Thumbnails of one frame's meshes, shown in report.html (absent when that frame
     /// failed or the report was written by an older version).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -566,6 +598,7 @@ mod tests {
                 alpha: 0.6,
             },
             gaussians_used: None,
+            glb_storage: BTreeMap::new(),
             serial_methods: false,
             shard: None,
             methods: BTreeMap::from([

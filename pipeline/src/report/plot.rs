@@ -653,6 +653,7 @@ pub(crate) mod tests {
                 alpha: 0.6,
             },
             gaussians_used: None,
+            glb_storage: BTreeMap::new(),
             serial_methods: false,
             shard: None,
             methods: BTreeMap::from([

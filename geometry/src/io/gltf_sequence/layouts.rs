@@ -10,9 +10,10 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 
+use super::basis::{BasisFit, BasisLimits, fit};
 use super::blocks::{byte_block, float_block, frame_name, short_block, unit_normals, vec3_block};
 use super::builder::{Builder, Document, Primitive};
-use super::options::SEQUENCE_NAME;
+use super::options::{MorphBasis, SEQUENCE_NAME, SegmentSummary};
 use super::quantize::{Grid, delta, normal_bytes, normal_delta_bytes};
 use super::source::FrameSource;
 use crate::io::error::IoError;
@@ -25,6 +26,21 @@ pub(super) struct Segment {
     pub(super) frames: Range<usize>,
     /// Its vertices' bounding box over all its frames.
     pub(super) bounds: (DVec3, DVec3),
+    /// The smallest bounding-box diagonal of one of its frames (the basis tolerance's unit).
+    pub(super) diagonal: f64,
+}
+
+/// What every segment's mesh is built with: the frames and their keys, the sequence's
+/// diagonal (the grid's unit), whether targets carry normals, the morph basis asked for, and
+/// where each segment's summary goes.
+pub(super) struct Context<'a> {
+    pub(super) path: &'a Path,
+    pub(super) frames: &'a dyn FrameSource,
+    pub(super) keys: &'a [f32],
+    pub(super) diagonal: f64,
+    pub(super) with_normals: bool,
+    pub(super) basis: MorphBasis,
+    pub(super) summaries: Vec<SegmentSummary>,
 }
 
 /// The morph targets of frames `run` against the base `primitive` of `base` (their topology
@@ -143,44 +159,113 @@ fn with_targets(
     weights
 }
 
-/// A segment's mesh index and, when it has morph targets, the STEP weights of its keys.
-type SegmentMesh = (usize, Option<Vec<f32>>);
+/// A segment's mesh: its index, the STEP weights of its frames' keys when it has morph
+/// targets, and the grid it is quantised on.
+struct SegmentMesh {
+    mesh: usize,
+    weights: Option<Vec<f32>>,
+    grid: Option<Grid>,
+}
 
-/// The mesh of `segment` (its first frame, morph targets for the others when it has more than
-/// one), appended to `meshes`; returns the mesh index and the STEP weights of its frames'
-/// keys, if it has targets, or `None` when its first frame has no triangles (no mesh). `shared` is the index accessor of the last mesh, reused when the
-/// triangles repeat (updated here).
-#[expect(clippy::too_many_arguments, reason = "the two layouts' shared step")]
+/// Gives `mesh` (whose primitive is `primitive`) the basis vectors of `fit` as morph targets
+/// (named `basis_000`, ...); returns the STEP weights of its frames' keys (the fit's).
+fn with_basis(
+    mesh: &mut Value,
+    primitive: &mut Value,
+    targets: Vec<Value>,
+    fit: BasisFit,
+) -> Vec<f32> {
+    let n = targets.len();
+    primitive["targets"] = json!(targets);
+    mesh["weights"] = json!(vec![0.0f32; n]);
+    mesh["extras"] =
+        json!({"targetNames": (0..n).map(|i| format!("basis_{i:03}")).collect::<Vec<_>>()});
+    fit.weights
+}
+
+/// Fits a morph basis to `segment` when `ctx` asks for one and it can hold the run (quantised,
+/// three frames or more, no normal targets): its base (on the finer basis grid) and the fit,
+/// or `None` (one target per frame).
+fn try_basis(
+    ctx: &Context<'_>,
+    segment: &Segment,
+    base: &TriMesh,
+    quantized: bool,
+) -> Result<Option<(Grid, BasisFit)>, IoError> {
+    let run = segment.frames.clone();
+    if !(quantized && ctx.basis.enabled() && run.len() >= 3 && !ctx.with_normals) {
+        return Ok(None);
+    }
+    let grid = Grid::for_basis(segment.bounds, ctx.diagonal);
+    let tolerance = ctx.basis.tolerance * segment.diagonal / grid.step();
+    if !(tolerance.is_finite() && tolerance > 0.0) {
+        return Ok(None);
+    }
+    let steps = grid.quantize(ctx.path, run.start, base.positions())?;
+    let limits = BasisLimits {
+        tolerance,
+        max_vectors: ctx.basis.max_components.min(run.len() - 2),
+    };
+    Ok(fit(ctx.path, ctx.frames, run, &grid, &steps, limits)?.map(|f| (grid, f)))
+}
+
+/// The mesh of `segment` (its first frame; morph targets for the others when it has more
+/// than one: a basis when [`try_basis`] gives one, else one target per frame), appended to
+/// `meshes`, its summary to `ctx.summaries`; `None` when its first frame has no triangles (no
+/// mesh). `shared` is the index accessor of the last mesh, reused when the triangles repeat
+/// (updated here).
 fn segment_mesh(
     builder: &mut Builder<'_>,
-    path: &Path,
-    frames: &dyn FrameSource,
+    ctx: &mut Context<'_>,
     segment: &Segment,
-    grid: Option<&Grid>,
-    with_normals: bool,
     meshes: &mut Vec<Value>,
     shared: &mut Option<(Vec<[u32; 3]>, usize)>,
 ) -> Result<Option<SegmentMesh>, IoError> {
     let run = segment.frames.clone();
+    let path = ctx.path;
+    let frames = ctx.frames;
     let base = frames.frame(run.start)?;
+    let quantized = builder.compression().quantizes();
+    let mut summary = SegmentSummary {
+        frames: run.clone(),
+        basis: None,
+        max_error: 0.0,
+        frame_errors: vec![0.0; run.len()],
+        diagonal: segment.diagonal,
+    };
     if base.triangle_count() == 0 {
+        ctx.summaries.push(summary);
         return Ok(None);
     }
+    let basis = try_basis(ctx, segment, &base, quantized)?;
+    let grid = match &basis {
+        Some((grid, _)) => Some(*grid),
+        None => quantized.then(|| Grid::new(segment.bounds, ctx.diagonal)),
+    };
     let reuse = shared
         .as_ref()
         .filter(|(triangles, _)| triangles.as_slice() == base.triangles())
         .map(|(_, accessor)| *accessor);
     // A one-frame segment keeps its normals; a longer one only when every frame has them
     // (its targets carry their deltas).
-    let normals = run.len() == 1 || with_normals;
-    let mut primitive = builder.primitive(&base, run.start, normals, grid, reuse)?;
+    let normals = run.len() == 1 || ctx.with_normals;
+    let mut primitive = builder.primitive(&base, run.start, normals, grid.as_ref(), reuse)?;
     if reuse.is_none() {
         *shared = Some((base.triangles().to_vec(), primitive.indices));
     }
     let mut mesh = json!({"name": frame_name(run.start)});
     let mut weights = None;
-    if run.len() > 1 {
-        let base_normals = if with_normals {
+    if let Some((grid, fit)) = basis {
+        let targets = fit
+            .vectors
+            .iter()
+            .map(|v| Ok(json!({"POSITION": builder.push(short_block(v))?})))
+            .collect::<Result<Vec<_>, IoError>>()?;
+        summary.basis = Some(targets.len());
+        summary.frame_errors = fit.errors.iter().map(|e| e * grid.step()).collect();
+        weights = Some(with_basis(&mut mesh, &mut primitive.json, targets, fit));
+    } else if run.len() > 1 {
+        let base_normals = if ctx.with_normals {
             base.normals().map(unit_normals)
         } else {
             None
@@ -191,7 +276,7 @@ fn segment_mesh(
             frames,
             &base,
             &primitive,
-            grid,
+            grid.as_ref(),
             run.start + 1..run.end,
             base_normals.as_deref(),
         )?;
@@ -202,9 +287,22 @@ fn segment_mesh(
             run.start,
         ));
     }
+    if summary.basis.is_none()
+        && let Some(grid) = &grid
+    {
+        // Every position rounded to the grid: at most half a step per axis.
+        let bound = 3f64.sqrt() / 2.0 * grid.step();
+        summary.frame_errors = vec![bound; run.len()];
+    }
+    summary.max_error = summary.frame_errors.iter().copied().fold(0.0, f64::max);
+    ctx.summaries.push(summary);
     mesh["primitives"] = json!([primitive.json]);
     meshes.push(mesh);
-    Ok(Some((meshes.len() - 1, weights)))
+    Ok(Some(SegmentMesh {
+        mesh: meshes.len() - 1,
+        weights,
+        grid,
+    }))
 }
 
 /// The leaf node that holds mesh `mesh` quantised on `grid`, named after its parent.
@@ -216,52 +314,36 @@ fn leaf(name: &str, mesh: usize, grid: &Grid) -> Value {
 
 /// The morph-target layout (topology already checked), frame by frame.
 pub(super) fn build_morph_targets(
-    path: &Path,
-    frames: &dyn FrameSource,
-    keys: &[f32],
+    ctx: &mut Context<'_>,
     segment: &Segment,
-    diagonal: f64,
-    with_normals: bool,
     builder: Builder<'_>,
 ) -> Result<Document, IoError> {
     let mut builder = builder;
-    let grid = builder
-        .compression()
-        .quantizes()
-        .then(|| Grid::new(segment.bounds, diagonal));
     let mut meshes = Vec::with_capacity(1);
-    let (mesh, weights) = segment_mesh(
-        &mut builder,
-        path,
-        frames,
-        segment,
-        grid.as_ref(),
-        with_normals,
-        &mut meshes,
-        &mut None,
-    )?
-    .ok_or_else(|| {
-        IoError::malformed(
-            path,
-            "frame 0",
-            "has no triangles (morph targets need a base mesh)",
-        )
-    })?;
-    meshes[mesh]["name"] = json!(SEQUENCE_NAME);
+    let built =
+        segment_mesh(&mut builder, ctx, segment, &mut meshes, &mut None)?.ok_or_else(|| {
+            IoError::malformed(
+                ctx.path,
+                "frame 0",
+                "has no triangles (morph targets need a base mesh)",
+            )
+        })?;
+    meshes[built.mesh]["name"] = json!(SEQUENCE_NAME);
     // Quantised, the mesh (and its weights track) is on leaf node 1 under node 0.
     let mut nodes = vec![json!({"name": SEQUENCE_NAME})];
-    let mesh_node = match &grid {
+    let mesh_node = match &built.grid {
         Some(grid) => {
             nodes[0]["children"] = json!([1]);
-            nodes.push(leaf(SEQUENCE_NAME, mesh, grid));
+            nodes.push(leaf(SEQUENCE_NAME, built.mesh, grid));
             1
         }
         None => {
-            nodes[0]["mesh"] = json!(mesh);
+            nodes[0]["mesh"] = json!(built.mesh);
             0
         }
     };
-    let (sampler, channel) = match weights {
+    let keys = ctx.keys;
+    let (sampler, channel) = match built.weights {
         None => (
             builder.sampler(keys, &[1.0; 3], 3)?,
             json!({"sampler": 0, "target": {"node": 0, "path": "scale"}}),
@@ -277,16 +359,12 @@ pub(super) fn build_morph_targets(
 /// The node-per-segment layout (one node per frame when every segment is one frame), segment
 /// by segment.
 pub(super) fn build_segments(
-    path: &Path,
-    frames: &dyn FrameSource,
-    keys: &[f32],
+    ctx: &mut Context<'_>,
     segments: &[Segment],
-    diagonal: f64,
-    with_normals: bool,
     builder: Builder<'_>,
 ) -> Result<Document, IoError> {
     let mut builder = builder;
-    let quantized = builder.compression().quantizes();
+    let keys = ctx.keys;
     let mut nodes =
         vec![json!({"name": SEQUENCE_NAME, "children": (1..=segments.len()).collect::<Vec<_>>()})];
     let mut leaves = Vec::new();
@@ -301,27 +379,17 @@ pub(super) fn build_segments(
         let mut node = json!({"name": name});
         let mut weights_node = None;
         let mut weights = None;
-        let grid = quantized.then(|| Grid::new(segment.bounds, diagonal));
-        if let Some((mesh, w)) = segment_mesh(
-            &mut builder,
-            path,
-            frames,
-            segment,
-            grid.as_ref(),
-            with_normals,
-            &mut meshes,
-            &mut shared,
-        )? {
-            weights = w;
-            match &grid {
+        if let Some(built) = segment_mesh(&mut builder, ctx, segment, &mut meshes, &mut shared)? {
+            weights = built.weights;
+            match &built.grid {
                 Some(grid) => {
                     let index = segments.len() + 1 + leaves.len();
                     node["children"] = json!([index]);
-                    leaves.push(leaf(&name, mesh, grid));
+                    leaves.push(leaf(&name, built.mesh, grid));
                     weights_node = Some(index);
                 }
                 None => {
-                    node["mesh"] = json!(mesh);
+                    node["mesh"] = json!(built.mesh);
                     weights_node = Some(s + 1);
                 }
             }

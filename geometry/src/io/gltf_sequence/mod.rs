@@ -97,6 +97,24 @@
 //!   at the end), then copied after the JSON chunk: frames are read twice (survey, bytes), not
 //!   three times.
 //!
+//! **Morph basis** ([`MorphBasis`], on by default with quantised storage; module `basis`): a
+//! run of three frames or more without normal targets is stored as a few basis shapes
+//! instead of one target per frame. Its base is its first frame on a grid twice as fine
+//! (60,000 steps per diagonal: the base is its only position data), its morph targets
+//! `basis_000`, ... are `SHORT` vectors each scaled to ±32767, and its STEP `weights` track
+//! gives each frame a weight per vector (`f32`). The vectors are fitted greedily in one pass
+//! over the run: a frame's weights are the least-squares fit of its offsets from the base on
+//! the vectors as stored, and when some vertex of it lies farther than the tolerance from its
+//! place (evaluated as stored, `f32` weights) its residual becomes a new vector. The
+//! tolerance is a fraction of the run's smallest frame diagonal ([`MorphBasis::tolerance`],
+//! default 8e-5, measured as stored, against the 1e-4 the glTF clients are checked with); a run whose basis
+//! would need more than [`MorphBasis::max_components`] vectors (default 128) or as many as
+//! it has frames after its first keeps one target per frame. Every run's basis size and
+//! measured largest error are returned by [`write_sequence_parts_summarised`]. On LAM's
+//! 973-frame track the greedy fit halves the alpha `.glb` but the TSDF run needs more than
+//! 128 vectors and keeps its targets (docs/benchmarks.md). `Quantize` lays the buffer out
+//! in two passes, so it fits each basis twice; `None` keeps one `f32` target per frame.
+//!
 //! Validity: outputs of both layouts (`.glb` and `.gltf`, with and without normals, one and
 //! many frames) were checked with the Khronos glTF-Validator 2.0.0-dev.3.10 (npm
 //! `gltf-validator`): 0 errors, 0 warnings; the only message is an info, `NODE_EMPTY`, for
@@ -112,6 +130,7 @@
 //! their views, exact `min`/`max` where required, view targets, index ranges, unit normals,
 //! morph target counts, the node tree, key times and sampler output sizes.
 
+mod basis;
 mod blocks;
 mod builder;
 mod codec;
@@ -127,8 +146,11 @@ use std::path::{Path, PathBuf};
 
 use self::builder::{Builder, Document};
 use self::container::{write_glb, write_glb_spooled, write_gltf};
-use self::layouts::{Segment, build_morph_targets, build_segments};
-pub use self::options::{GltfCompression, SequenceLayout, SequenceOptions};
+use self::layouts::{Context, Segment, build_morph_targets, build_segments};
+pub use self::options::{
+    DEFAULT_MORPH_BASIS_MAX_COMPONENTS, DEFAULT_MORPH_BASIS_TOLERANCE, GltfCompression, MorphBasis,
+    SegmentSummary, SequenceLayout, SequenceOptions, SequenceSummary,
+};
 pub use self::quantize::POSITION_STEPS_PER_DIAGONAL;
 use self::sink::{Counted, Sink, Spool};
 use self::source::FrameRun;
@@ -177,6 +199,7 @@ pub fn write_sequence(
     let options = SequenceOptions {
         layout,
         compression: GltfCompression::None,
+        morph_basis: MorphBasis::OFF,
     };
     write_sequence_with(path, frames, frame_times, &options)
 }
@@ -207,11 +230,11 @@ pub fn write_sequence_with(
         keys: &keys,
         survey: &survey,
         segments: &segments,
-        compression: options.compression,
+        options,
     };
     match format {
         Format::Glb => job.write_glb(None).map(|_| ()),
-        _ => job.write_gltf(),
+        _ => job.write_gltf().map(|_| ()),
     }
 }
 
@@ -220,7 +243,11 @@ fn segments(survey: &Survey, run: std::ops::Range<usize>) -> Vec<Segment> {
     survey
         .segments_in(&run)
         .into_iter()
-        .map(|(frames, bounds)| Segment { frames, bounds })
+        .map(|(frames, bounds, diagonal)| Segment {
+            frames,
+            bounds,
+            diagonal,
+        })
         .collect()
 }
 
@@ -231,57 +258,57 @@ struct Job<'a> {
     keys: &'a [f32],
     survey: &'a Survey,
     segments: &'a [Segment],
-    compression: GltfCompression,
+    options: &'a SequenceOptions,
 }
 
 impl Job<'_> {
-    /// The document, its buffer going to `sink`.
-    fn build(&self, sink: &mut dyn Sink) -> Result<Document, IoError> {
-        let builder = Builder::new(sink, self.path, self.compression);
-        let (path, frames, keys) = (self.path, self.frames, self.keys);
-        let (diagonal, normals) = (self.survey.diagonal, self.survey.normals);
-        match (self.survey.morph, self.segments.first()) {
-            (true, Some(segment)) => {
-                build_morph_targets(path, frames, keys, segment, diagonal, normals, builder)
-            }
-            _ => build_segments(
-                path,
-                frames,
-                keys,
-                self.segments,
-                diagonal,
-                normals,
-                builder,
-            ),
-        }
+    /// The document, its buffer going to `sink`, and each segment's summary.
+    fn build(&self, sink: &mut dyn Sink) -> Result<(Document, Vec<SegmentSummary>), IoError> {
+        let builder = Builder::new(sink, self.path, self.options.compression);
+        let mut ctx = Context {
+            path: self.path,
+            frames: self.frames,
+            keys: self.keys,
+            diagonal: self.survey.diagonal,
+            with_normals: self.survey.normals,
+            basis: self.options.morph_basis,
+            summaries: Vec::with_capacity(self.segments.len()),
+        };
+        let doc = match (self.survey.morph, self.segments.first()) {
+            (true, Some(segment)) => build_morph_targets(&mut ctx, segment, builder),
+            _ => build_segments(&mut ctx, self.segments, builder),
+        }?;
+        Ok((doc, ctx.summaries))
     }
 
-    /// Writes the `.glb`: plain or quantised in two passes (lay out, then stream), compressed
-    /// through a spool. With `limit`, a compressed buffer over it is not written and `false`
-    /// is returned.
-    fn write_glb(&self, limit: Option<u64>) -> Result<bool, IoError> {
-        if self.compression == GltfCompression::Meshopt {
+    /// Writes the `.glb`: plain or quantised in two passes (lay out, then stream; a basis is
+    /// fitted in each), compressed through a spool. With `limit`, a compressed buffer over it
+    /// is not written and `None` is returned; else the segments' summaries.
+    fn write_glb(&self, limit: Option<u64>) -> Result<Option<Vec<SegmentSummary>>, IoError> {
+        if self.options.compression == GltfCompression::Meshopt {
             let mut spool = Spool::beside(self.path)?;
-            let doc = self.build(&mut spool)?;
+            let (doc, summaries) = self.build(&mut spool)?;
             if limit.is_some_and(|limit| spool.len as u64 > limit) {
-                return Ok(false);
+                return Ok(None);
             }
             write_glb_spooled(self.path, &doc, spool)?;
+            Ok(Some(summaries))
         } else {
             let mut counted = Counted(0);
-            let doc = self.build(&mut counted)?;
+            let (doc, summaries) = self.build(&mut counted)?;
             write_glb(self.path, &doc, counted.0, |sink| {
                 self.build(sink).map(|_| ())
             })?;
+            Ok(Some(summaries))
         }
-        Ok(true)
     }
 
-    /// Writes the `.gltf` (its buffer in memory).
-    fn write_gltf(&self) -> Result<(), IoError> {
+    /// Writes the `.gltf` (its buffer in memory); returns the segments' summaries.
+    fn write_gltf(&self) -> Result<Vec<SegmentSummary>, IoError> {
         let mut bin = Vec::new();
-        let doc = self.build(&mut bin)?;
-        write_gltf(self.path, doc, &bin)
+        let (doc, summaries) = self.build(&mut bin)?;
+        write_gltf(self.path, doc, &bin)?;
+        Ok(summaries)
     }
 }
 
@@ -310,6 +337,7 @@ pub fn write_sequence_parts(
     let options = SequenceOptions {
         layout,
         compression: GltfCompression::None,
+        morph_basis: MorphBasis::OFF,
     };
     write_sequence_parts_with(path, frames, frame_times, &options, max_bytes)
 }
@@ -327,6 +355,22 @@ pub fn write_sequence_parts_with(
     options: &SequenceOptions,
     max_bytes: u64,
 ) -> Result<Vec<PathBuf>, IoError> {
+    write_sequence_parts_summarised(path, frames, frame_times, options, max_bytes)
+        .map(|summary| summary.parts)
+}
+
+/// [`write_sequence_parts_with`], returning what each run of one topology became too (its
+/// morph basis, its largest error; [`SequenceSummary`]), for a report.
+///
+/// # Errors
+/// As [`write_sequence_parts`].
+pub fn write_sequence_parts_summarised(
+    path: &Path,
+    frames: &dyn FrameSource,
+    frame_times: &[f64],
+    options: &SequenceOptions,
+    max_bytes: u64,
+) -> Result<SequenceSummary, IoError> {
     if Format::from_path(path)? != Format::Glb {
         return Err(IoError::Unsupported {
             path: path.to_path_buf(),
@@ -343,7 +387,7 @@ pub fn write_sequence_parts_with(
         keys: &keys,
         survey: &survey,
         segments: &whole,
-        compression: options.compression,
+        options,
     };
     let one_file = if runs.len() == 1 {
         job.write_glb(None)?
@@ -351,15 +395,19 @@ pub fn write_sequence_parts_with(
         // The compressed buffer is usually far below the plain bound: try one file first.
         job.write_glb(Some(max_bytes))?
     } else {
-        false
+        None
     };
-    if one_file {
-        return Ok(vec![path.to_path_buf()]);
+    if let Some(segments) = one_file {
+        return Ok(SequenceSummary {
+            parts: vec![path.to_path_buf()],
+            segments,
+        });
     }
     let stem = path
         .file_stem()
         .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
     let mut written = Vec::with_capacity(runs.len());
+    let mut summaries = Vec::new();
     for (i, run) in runs.into_iter().enumerate() {
         let part = path.with_file_name(format!("{stem}_part{:03}.glb", i + 1));
         let part_segments = segments(&survey, run.clone());
@@ -367,16 +415,24 @@ pub fn write_sequence_parts_with(
             frames,
             run: run.clone(),
         };
-        Job {
+        let part_summaries = Job {
             path: &part,
             frames: &part_frames,
-            keys: &keys[run],
+            keys: &keys[run.clone()],
             survey: &survey,
             segments: &part_segments,
-            compression: options.compression,
+            options,
         }
-        .write_glb(None)?;
+        .write_glb(None)?
+        .unwrap_or_default();
+        summaries.extend(part_summaries.into_iter().map(|mut s| {
+            s.frames = s.frames.start + run.start..s.frames.end + run.start;
+            s
+        }));
         written.push(part);
     }
-    Ok(written)
+    Ok(SequenceSummary {
+        parts: written,
+        segments: summaries,
+    })
 }

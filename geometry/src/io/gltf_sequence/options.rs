@@ -48,11 +48,89 @@ impl GltfCompression {
     }
 }
 
+/// The default [`MorphBasis::tolerance`]: 8e-5 of a frame's bounding-box diagonal. The error
+/// is measured on the data as stored (base and vectors quantised, `f32` weights), so the 20%
+/// left to the `1e-4` the glTF clients are checked against covers only a viewer's own `f32`
+/// evaluation (about 1e-7 of the size).
+pub const DEFAULT_MORPH_BASIS_TOLERANCE: f64 = 8e-5;
+
+/// The default [`MorphBasis::max_components`]: 128 (128 vectors of a 157,580-vertex mesh
+/// hold 242 MB while they are fitted).
+pub const DEFAULT_MORPH_BASIS_MAX_COMPONENTS: usize = 128;
+
+/// A compact morph basis per run of frames of one topology (see the module docs, "Morph
+/// basis"): the run's morph targets are a few basis shapes and each frame is a weighted sum of
+/// them, instead of one target per frame. Quantised storage only (`Quantize`, `Meshopt`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MorphBasis {
+    /// The largest distance a vertex of any frame may lie from its true place, as a fraction
+    /// of the smallest bounding-box diagonal of the run's frames; 0 turns the basis off (one
+    /// target per frame). A run whose basis would not meet it within `max_components`
+    /// vectors keeps one target per frame.
+    pub tolerance: f64,
+    /// The most basis vectors a run may have; a run needing more, or as many as it has frames
+    /// after its first, keeps one target per frame.
+    pub max_components: usize,
+}
+
+impl Default for MorphBasis {
+    fn default() -> Self {
+        Self {
+            tolerance: DEFAULT_MORPH_BASIS_TOLERANCE,
+            max_components: DEFAULT_MORPH_BASIS_MAX_COMPONENTS,
+        }
+    }
+}
+
+impl MorphBasis {
+    /// One morph target per frame (no basis).
+    pub const OFF: Self = Self {
+        tolerance: 0.0,
+        max_components: 0,
+    };
+
+    /// Whether a basis is tried at all.
+    #[must_use]
+    pub fn enabled(&self) -> bool {
+        self.tolerance > 0.0 && self.tolerance.is_finite() && self.max_components > 0
+    }
+}
+
 /// Everything [`super::write_sequence_with`] takes besides the frames and their times.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SequenceOptions {
     /// Morph targets, one node per run of one topology, or one node per frame.
     pub layout: SequenceLayout,
     /// Plain, quantised, or quantised and compressed.
     pub compression: GltfCompression,
+    /// Quantised storage: a morph basis per run instead of one target per frame (the
+    /// default; [`MorphBasis::OFF`] for one target per frame).
+    pub morph_basis: MorphBasis,
+}
+
+/// What one run of frames of one topology became in the file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SegmentSummary {
+    /// Its frames (indices into the written sequence).
+    pub frames: std::ops::Range<usize>,
+    /// Its number of basis vectors (morph targets), or `None` when it holds one target per
+    /// frame after its first (a run of one frame has none).
+    pub basis: Option<usize>,
+    /// The largest distance of a vertex of one of its frames from its true place, in the
+    /// frames' units: measured for a basis (as stored, `f32` weights), the grid's bound
+    /// (half a step per axis) for quantised targets, 0 for plain `f32` storage.
+    pub max_error: f64,
+    /// Per frame of the run, the largest such distance (measured for a basis, else the bound).
+    pub frame_errors: Vec<f64>,
+    /// The smallest bounding-box diagonal of its frames (the tolerance's unit).
+    pub diagonal: f64,
+}
+
+/// What [`super::write_sequence_parts_summarised`] wrote.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SequenceSummary {
+    /// The files written, in order.
+    pub parts: Vec<std::path::PathBuf>,
+    /// Each run of one topology, in frame order (of the whole sequence).
+    pub segments: Vec<SegmentSummary>,
 }

@@ -19,20 +19,41 @@ pub const POSITION_STEPS_PER_DIAGONAL: f64 = 16384.0;
 /// The largest |step count| a position may have, so that deltas fit `SHORT` too.
 const MAX_STEPS: f64 = 16383.0;
 
+/// Grid steps per bounding-box diagonal of the base of a run stored as a morph basis: the base
+/// is its only position data (the basis vectors are scaled on their own), so it may use
+/// nearly the whole `SHORT` range (a run's box is at most one diagonal across, so its steps
+/// from the centre stay within ±30,001), and its rounding, at most
+/// `sqrt(3) / 2 / 60000 = 1.4e-5` of the diagonal, leaves most of the tolerance to the basis.
+pub(super) const BASIS_STEPS_PER_DIAGONAL: f64 = 60000.0;
+
+/// The largest |step count| of a basis run's base (no deltas are taken of it).
+const MAX_BASIS_STEPS: f64 = 32767.0;
+
 /// One segment's grid: `position = origin + step × q` for integer `q`, `origin` and `step`
 /// being exactly the `f32` values written to the node's `translation` and `scale`.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Grid {
     origin: DVec3,
     step: f64,
+    /// The largest |step count| a position may have.
+    limit: f64,
 }
 
 impl Grid {
     /// The grid of a segment whose vertices lie in `bounds` (min, max), for a sequence whose
     /// bounding box has `diagonal`.
     pub(super) fn new(bounds: (DVec3, DVec3), diagonal: f64) -> Self {
+        Self::with_steps(bounds, diagonal, POSITION_STEPS_PER_DIAGONAL, MAX_STEPS)
+    }
+
+    /// The finer grid of a run stored as a morph basis ([`BASIS_STEPS_PER_DIAGONAL`]).
+    pub(super) fn for_basis(bounds: (DVec3, DVec3), diagonal: f64) -> Self {
+        Self::with_steps(bounds, diagonal, BASIS_STEPS_PER_DIAGONAL, MAX_BASIS_STEPS)
+    }
+
+    fn with_steps(bounds: (DVec3, DVec3), diagonal: f64, steps: f64, limit: f64) -> Self {
         let step = if diagonal.is_finite() && diagonal > 0.0 {
-            diagonal / POSITION_STEPS_PER_DIAGONAL
+            diagonal / steps
         } else {
             1.0
         };
@@ -44,7 +65,18 @@ impl Grid {
         Self {
             origin: centre.as_vec3().as_dvec3(),
             step: f64::from(as_f32(step)),
+            limit,
         }
+    }
+
+    /// The grid's origin (exactly the `f32` node translation).
+    pub(super) fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// The grid's step (exactly the `f32` node scale).
+    pub(super) fn step(&self) -> f64 {
+        self.step
     }
 
     /// The node `translation` that undoes the quantisation.
@@ -72,7 +104,7 @@ impl Grid {
             .par_iter()
             .map(|p| {
                 let q = ((*p - self.origin) / self.step).round();
-                if q.abs().max_element() <= MAX_STEPS {
+                if q.abs().max_element() <= self.limit {
                     #[expect(clippy::cast_possible_truncation, reason = "checked to fit")]
                     Some([q.x as i16, q.y as i16, q.z as i16])
                 } else {

@@ -55,6 +55,8 @@ pub(super) struct Survey {
     pub(super) segments: Vec<Range<usize>>,
     /// Per segment, the bounding box (min, max) of its vertices over all its frames.
     pub(super) bounds: Vec<(DVec3, DVec3)>,
+    /// Per segment, the smallest bounding-box diagonal of one of its frames.
+    pub(super) diagonals: Vec<f64>,
     /// The diagonal of the bounding box of every vertex of every frame (0 without vertices).
     pub(super) diagonal: f64,
 }
@@ -83,6 +85,7 @@ impl Survey {
         let mut normals = base.normals().is_some();
         let empty = (DVec3::INFINITY, DVec3::NEG_INFINITY);
         let mut bounds = vec![empty];
+        let mut diagonals = vec![f64::INFINITY];
         let mut all = empty;
         let mut sizes = Vec::with_capacity(frames.frame_count());
         for k in 0..frames.frame_count() {
@@ -111,22 +114,30 @@ impl Survey {
             sizes.push(
                 (per_vertex * frame.vertex_count() + 12 * frame.triangle_count() + 64) as u64,
             );
+            let frame_diagonal = if frame_box.0.x <= frame_box.1.x {
+                (frame_box.1 - frame_box.0).length()
+            } else {
+                0.0
+            };
             if k == 0 {
                 bounds[0] = frame_box;
+                diagonals[0] = frame_diagonal;
                 continue;
             }
             let current = segment_base.as_ref().unwrap_or(&base);
             let joins = layout != SequenceLayout::NodePerFrame
                 && current.triangle_count() > 0
                 && topology_difference(current, &frame).is_none();
-            match (segments.last_mut(), bounds.last_mut()) {
-                (Some(segment), Some(b)) if joins => {
+            match (segments.last_mut(), bounds.last_mut(), diagonals.last_mut()) {
+                (Some(segment), Some(b), Some(d)) if joins => {
                     segment.end = k + 1;
                     *b = (b.0.min(frame_box.0), b.1.max(frame_box.1));
+                    *d = d.min(frame_diagonal);
                 }
                 _ => {
                     segments.push(k..k + 1);
                     bounds.push(frame_box);
+                    diagonals.push(frame_diagonal);
                     segment_base = Some(frame.clone().into_owned());
                 }
             }
@@ -150,6 +161,7 @@ impl Survey {
             sizes,
             segments,
             bounds,
+            diagonals,
             diagonal: if all.0.x <= all.1.x {
                 (all.1 - all.0).length()
             } else {
@@ -158,16 +170,22 @@ impl Survey {
         })
     }
 
-    /// The segments of frames `run`, cut to it and counted from its first frame.
-    pub(super) fn segments_in(&self, run: &Range<usize>) -> Vec<(Range<usize>, (DVec3, DVec3))> {
+    /// The segments of frames `run`, cut to it and counted from its first frame, with their
+    /// bounding boxes and smallest frame diagonals (over the whole segment).
+    pub(super) fn segments_in(
+        &self,
+        run: &Range<usize>,
+    ) -> Vec<(Range<usize>, (DVec3, DVec3), f64)> {
         self.segments
             .iter()
             .zip(&self.bounds)
-            .filter(|(s, _)| s.start < run.end && s.end > run.start)
-            .map(|(s, b)| {
+            .zip(&self.diagonals)
+            .filter(|((s, _), _)| s.start < run.end && s.end > run.start)
+            .map(|((s, b), d)| {
                 (
                     s.start.max(run.start) - run.start..s.end.min(run.end) - run.start,
                     *b,
+                    *d,
                 )
             })
             .collect()
