@@ -267,28 +267,10 @@ pub fn check_outputs(
 
 /// Writes one animated glTF per method (in parts past glTF's 4 GiB limit, recorded in the
 /// report), one USD mesh cache per method when asked (`<method>.usda`), the report files
-/// (JSON, Markdown, HTML) and the plot (SVG, PNG). `compression`: how the glTF stores its
-/// data (with the default morph basis, [`MorphBasis::default`]).
+/// (JSON, Markdown, HTML) and the plot (SVG, PNG). `compression` and `morph_basis`: how the glTF
+/// stores its data (`--gltf-compression`, `--gltf-morph-tolerance`); what each method's glTF
+/// became is recorded in the report ([`Report::glb_storage`]).
 pub fn write_outputs(
-    out: &Path,
-    report: &mut Report,
-    frames: &SequenceSources<'_>,
-    targets: &[OutputTarget],
-    compression: GltfCompression,
-) -> Result<(), PipelineError> {
-    write_outputs_with(
-        out,
-        report,
-        frames,
-        targets,
-        compression,
-        MorphBasis::default(),
-    )
-}
-
-/// [`write_outputs`] with the glTF's morph basis chosen too (`--gltf-morph-tolerance`); what
-/// each method's glTF became is recorded in the report ([`Report::glb_storage`]).
-pub fn write_outputs_with(
     out: &Path,
     report: &mut Report,
     frames: &SequenceSources<'_>,

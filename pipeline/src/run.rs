@@ -20,7 +20,7 @@ use crate::lock::FolderLock;
 use crate::metrics::GtSamples;
 use crate::output::{
     SequenceSources, check_outputs, file_sources, frame_file, frame_files, refuse_used_output,
-    remove_frame_files, remove_stale_temporaries, rig_file, thumbnails_of, write_outputs_with,
+    remove_frame_files, remove_stale_temporaries, rig_file, thumbnails_of, write_outputs,
 };
 use crate::records::{DelaunayFrame, FailedFrame, FrameEntry, FrameRecord};
 use crate::report::thumbnail::{self, Colouring, Picture};
@@ -177,7 +177,7 @@ pub fn run(
         write_carried_outputs(&mut session, out, &mut report, o)?;
     } else {
         let sources = file_sources(&frame_files);
-        write_outputs_with(
+        write_outputs(
             out,
             &mut report,
             &sources,
@@ -234,7 +234,7 @@ fn write_carried_outputs(
         );
         sources.insert(m.method, Box::new(frames));
     }
-    write_outputs_with(
+    write_outputs(
         out,
         report,
         &sources,

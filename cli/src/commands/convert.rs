@@ -85,10 +85,9 @@ pub struct ConvertArgs {
     /// A frame sequence's morph basis (meshopt and quantize; frames without normals): the
     /// frames as a few basis shapes and a weight per shape and frame, the fewest (up to 128,
     /// fewer than the frames) that put every vertex of every frame within E of the frame's
-    /// bounding-box diagonal of its place; else one morph target per frame. 0: one morph
-    /// target per frame.
-    #[arg(long, value_name = "E", default_value_t = io::DEFAULT_MORPH_BASIS_TOLERANCE,
-        value_parser = parse_share)]
+    /// bounding-box diagonal of its place; else one morph target per frame. 0 (the default,
+    /// as extract's): one morph target per frame; the basis is made for 8e-5.
+    #[arg(long, value_name = "E", default_value_t = 0.0, value_parser = parse_share)]
     pub gltf_morph_tolerance: f64,
     /// Gaussian formats.
     #[command(flatten)]
@@ -115,7 +114,7 @@ fn parse_faces(s: &str) -> Result<usize, String> {
 }
 
 /// A `--simplify-error` or `--gltf-morph-tolerance` value: finite and 0 or more.
-fn parse_share(s: &str) -> Result<f64, String> {
+pub(crate) fn parse_share(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
         _ => Err(format!(

@@ -1,4 +1,4 @@
-//! `trisplat merge SHARD... -o DIR [--force] [--targets LIST] [--gltf-compression KIND]`: joins `extract` runs over disjoint frame ranges
+//! `trisplat merge SHARD... -o DIR [--force] [--targets LIST] [--gltf-compression KIND] [--gltf-morph-tolerance E]`: joins `extract` runs over disjoint frame ranges
 //! into one run folder.
 
 use std::path::PathBuf;
@@ -44,6 +44,11 @@ pub struct MergeArgs {
     /// is not recorded: give the job's).
     #[arg(long, value_enum, value_name = "KIND", default_value_t = GltfCompression::Meshopt)]
     pub gltf_compression: GltfCompression,
+    /// The glb's morph basis, as extract's --gltf-morph-tolerance (not recorded by the shards:
+    /// give the job's; 0, the default, is one morph target per frame).
+    #[arg(long, value_name = "E", default_value_t = 0.0,
+        value_parser = super::convert::parse_share)]
+    pub gltf_morph_tolerance: f64,
 }
 
 /// Runs `trisplat merge`.
@@ -57,6 +62,7 @@ pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
     let outputs = MergeOutputs {
         targets: args.targets.clone(),
         gltf_compression: args.gltf_compression,
+        gltf_morph_tolerance: args.gltf_morph_tolerance,
     };
     let result = trisplat_pipeline::merge_with(&args.shards, &args.output, args.force, &outputs);
     spinner.finish_and_clear();

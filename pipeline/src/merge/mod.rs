@@ -18,7 +18,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use trisplat_geometry::io::{GltfCompression, IoError};
+use trisplat_geometry::io::{GltfCompression, IoError, MorphBasis};
 
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
@@ -47,15 +47,17 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Report, Pipe
     merge_with(shards, out, force, &MergeOutputs::default())
 }
 
-/// What a merge writes: `extract`'s `--targets` and `--gltf-compression` (the shards' reports
-/// do not record theirs).
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// What a merge writes: `extract`'s `--targets`, `--gltf-compression` and
+/// `--gltf-morph-tolerance` (the shards' reports do not record theirs).
+#[derive(Clone, Debug, PartialEq)]
 pub struct MergeOutputs {
     /// The outputs; without [`OutputTarget::Meshes`] the linked frame files are removed once
     /// the glTF and USD cache are assembled.
     pub targets: Vec<OutputTarget>,
     /// How the glTF stores its data.
     pub gltf_compression: GltfCompression,
+    /// The glTF's morph basis tolerance, as extract's `--gltf-morph-tolerance` (0: none).
+    pub gltf_morph_tolerance: f64,
 }
 
 impl Default for MergeOutputs {
@@ -64,6 +66,7 @@ impl Default for MergeOutputs {
         Self {
             targets: OutputTarget::ALL.to_vec(),
             gltf_compression: GltfCompression::default(),
+            gltf_morph_tolerance: 0.0,
         }
     }
 }
@@ -157,6 +160,10 @@ pub fn merge_with(
         &file_sources(&frame_files),
         &outputs.targets,
         outputs.gltf_compression,
+        MorphBasis {
+            tolerance: outputs.gltf_morph_tolerance,
+            ..MorphBasis::default()
+        },
     )?;
     if !outputs.targets.contains(&OutputTarget::Meshes) {
         // Linked only to assemble the glTF or the USD cache.

@@ -97,7 +97,7 @@
 //!   at the end), then copied after the JSON chunk: frames are read twice (survey, bytes), not
 //!   three times.
 //!
-//! **Morph basis** ([`MorphBasis`], on by default with quantised storage; module `basis`): a
+//! **Morph basis** ([`MorphBasis`], the library's default with quantised storage, opt-in on the command line; module `basis`): a
 //! run of three frames or more without normal targets is stored as a few basis shapes
 //! instead of one target per frame. Its base is its first frame on a grid twice as fine
 //! (60,000 steps per diagonal: the base is its only position data), its morph targets
