@@ -19,6 +19,9 @@ use rayon::prelude::*;
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::spatial::{PointIndex, SurfaceIndex, closest_point_on_triangle};
 
+/// Probes summed together before the partial sums are added in order ([`CarriedMesh::drift`]).
+const DRIFT_CHUNK: usize = 1024;
+
 /// Why a mesh cannot be carried.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum CarryError {
@@ -219,28 +222,32 @@ impl CarriedMesh {
     #[must_use]
     pub fn drift(&self, vertices: &[DVec3], probes: &[Vec3], tolerance: f64) -> Drift {
         let triangles = self.key.triangles();
-        // Per probe: whether it hops, and how far its distance changed (0 where not finite).
         // Per probe: whether it hops, how far its distance changed (0 where not finite), and
-        // how far it moved since the key.
+        // how far it moved since the key. Summed per fixed chunk, then the chunks in order, so
+        // that the sums do not depend on the thread count (shards must equal one run).
+        let per_probe = |&(g, t, d0, at_key): &(u32, u32, f64, Vec3)| {
+            let Some(p) = probes.get(g as usize) else {
+                return (1usize, 0.0, 0.0);
+            };
+            let [a, b, c] = triangles[t as usize].map(|i| vertices[i as usize]);
+            let (q, _) = closest_point_on_triangle(p.as_dvec3(), a, b, c);
+            let change = ((q - p.as_dvec3()).length() - d0).abs();
+            let moved = f64::from((*p - at_key).length());
+            // A non-finite distance (a collapsed triangle) counts as a hop.
+            if change.is_finite() && moved.is_finite() {
+                (usize::from(change > tolerance), change, moved)
+            } else {
+                (1, 0.0, 0.0)
+            }
+        };
+        let add = |x: (usize, f64, f64), y: (usize, f64, f64)| (x.0 + y.0, x.1 + y.1, x.2 + y.2);
         let (hops, offset, moved) = self
             .probes
-            .par_iter()
-            .map(|&(g, t, d0, at_key)| {
-                let Some(p) = probes.get(g as usize) else {
-                    return (1usize, 0.0, 0.0);
-                };
-                let [a, b, c] = triangles[t as usize].map(|i| vertices[i as usize]);
-                let (q, _) = closest_point_on_triangle(p.as_dvec3(), a, b, c);
-                let change = ((q - p.as_dvec3()).length() - d0).abs();
-                let moved = f64::from((*p - at_key).length());
-                // A non-finite distance (a collapsed triangle) counts as a hop.
-                if change.is_finite() && moved.is_finite() {
-                    (usize::from(change > tolerance), change, moved)
-                } else {
-                    (1, 0.0, 0.0)
-                }
-            })
-            .reduce(|| (0, 0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
+            .par_chunks(DRIFT_CHUNK)
+            .map(|chunk| chunk.iter().map(per_probe).fold((0, 0.0, 0.0), add))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold((0, 0.0, 0.0), add);
         let areas = triangle_areas(vertices, triangles);
         let (stretched, total) =
             self.key_area
