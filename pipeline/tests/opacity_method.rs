@@ -1,39 +1,15 @@
 //! `extract --method opacity`: the opacity field of every deformed Gaussian meshed per frame
 //! (docs/conventions.md §6), on two frames of the LAM fixture's expression track, beside alpha.
 
-use trisplat_pipeline::avatar::AvatarFolder;
-use trisplat_pipeline::config::{BindOptions, GaussianLayout, OutputOptions, OutputTarget};
-use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Plan, RunControl, Stage, run};
+mod common;
+
+use trisplat_pipeline::{Method, Plan, RunControl, Stage, run};
 
 #[test]
 fn opacity_meshes_every_frame_closed_and_is_measured() {
-    let avatar = AvatarFolder::open(&trisplat_fixtures::path("lam_mini")).expect("fixture");
-    let out = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("opacity_method");
-    let _ = std::fs::remove_dir_all(&out);
-    let config = ExtractConfig {
-        template: avatar.template,
-        animation: Some(
-            trisplat_fixtures::path("lam_mini/expression.json")
-                .display()
-                .to_string(),
-        ),
-        gaussians: Some(avatar.gaussians),
-        methods: vec![Method::Opacity, Method::Alpha],
-        output: out.clone(),
-        frames: Some("7..9".to_owned()),
-        gt: None,
-        options: ExtractOptions {
-            bind: BindOptions {
-                layout: GaussianLayout::Lam,
-                ..BindOptions::default()
-            },
-            outputs: OutputOptions {
-                targets: vec![OutputTarget::Meshes, OutputTarget::Report],
-                ..OutputOptions::default()
-            },
-            ..ExtractOptions::default()
-        },
-    };
+    let out = common::fresh_dir("opacity_method", "lam_mini");
+    let track = trisplat_fixtures::path("lam_mini/expression.json");
+    let config = common::lam_mini_config(&track, &[Method::Opacity, Method::Alpha], "7..9", &out);
     let plan = Plan::new(&config);
     assert!(plan.runs(Stage::Mesh(Method::Opacity)));
     let report = run(&config, RunControl::default(), &mut |_| {}).expect("run");

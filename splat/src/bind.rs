@@ -287,12 +287,7 @@ fn attach_with_distances(
     mesh: &TriMesh,
     convention: Convention,
 ) -> Result<(GaussianSet, Vec<f64>), BindError> {
-    if world.space() != ParameterSpace::World {
-        return Err(BindError::NotWorld);
-    }
-    if mesh.triangles().is_empty() {
-        return Err(BindError::NoTriangles);
-    }
+    check_world_and_triangles(world, mesh)?;
     let nearest = if world.is_empty() {
         Vec::new()
     } else {
@@ -320,12 +315,7 @@ pub fn attach_to_triangles(
     triangles: &[TriId],
     convention: Convention,
 ) -> Result<GaussianSet, BindError> {
-    if world.space() != ParameterSpace::World {
-        return Err(BindError::NotWorld);
-    }
-    if mesh.triangles().is_empty() {
-        return Err(BindError::NoTriangles);
-    }
+    check_world_and_triangles(world, mesh)?;
     if triangles.len() != world.len() {
         return Err(BindError::VertexMap(format!(
             "{} triangles for {} Gaussians",
@@ -347,6 +337,17 @@ pub fn attach_to_triangles(
     Ok(express_locally(world, mesh, convention, triangles.to_vec()))
 }
 
+/// The inputs every `attach*` needs: world-space Gaussians and a template with triangles.
+fn check_world_and_triangles(world: &GaussianSet, mesh: &TriMesh) -> Result<(), BindError> {
+    if world.space() != ParameterSpace::World {
+        return Err(BindError::NotWorld);
+    }
+    if mesh.triangles().is_empty() {
+        return Err(BindError::NoTriangles);
+    }
+    Ok(())
+}
+
 /// Attaches world-space Gaussians that belong to mesh vertices (one vertex per Gaussian,
 /// `vertex_of[i]` for Gaussian `i`, as in LAM's per-vertex avatars) to a triangle around their
 /// vertex: of the triangles using the vertex, the one whose surface is nearest the Gaussian's
@@ -364,12 +365,7 @@ pub fn attach_to_vertices(
     vertex_of: &[u32],
     convention: Convention,
 ) -> Result<GaussianSet, BindError> {
-    if world.space() != ParameterSpace::World {
-        return Err(BindError::NotWorld);
-    }
-    if mesh.triangles().is_empty() {
-        return Err(BindError::NoTriangles);
-    }
+    check_world_and_triangles(world, mesh)?;
     if vertex_of.len() != world.len() {
         return Err(BindError::VertexMap(format!(
             "{} vertices given for {} Gaussians",

@@ -573,19 +573,7 @@ pub fn normal_inconsistency_mask(
     k: usize,
     threshold: f64,
 ) -> Result<Vec<bool>, DensifyError> {
-    let Some(index) = index_of(set)? else {
-        return Ok(Vec::new());
-    };
-    let normals: Vec<DVec3> = (0..set.len())
-        .into_par_iter()
-        .map(|i| shortest_axis(set, i))
-        .collect();
-    Ok(
-        mean_over_neighbours(set, &index, k, |i, j, _| normals[i].dot(normals[j]).abs())
-            .into_iter()
-            .map(|mean| mean.is_some_and(|m| m < threshold))
-            .collect(),
-    )
+    normal_mean_mask(set, k, |abs_cos| abs_cos, |mean| mean < threshold)
 }
 
 /// The seed's (GSDHuman's) normal-consistency mask: the mean normal deviation `1 - |cos|`
@@ -600,6 +588,17 @@ pub fn normal_deviation_mask(
     k: usize,
     eps_n: f64,
 ) -> Result<Vec<bool>, DensifyError> {
+    normal_mean_mask(set, k, |abs_cos| 1.0 - abs_cos, |mean| mean > eps_n)
+}
+
+/// For every Gaussian, whether `keep` holds for the mean of `pair(|cos|)` between its normal
+/// (shortest axis) and those of its `k` nearest other Gaussians (false when it has none).
+fn normal_mean_mask(
+    set: &GaussianSet,
+    k: usize,
+    pair: impl Fn(f64) -> f64 + Sync,
+    keep: impl Fn(f64) -> bool,
+) -> Result<Vec<bool>, DensifyError> {
     let Some(index) = index_of(set)? else {
         return Ok(Vec::new());
     };
@@ -608,10 +607,10 @@ pub fn normal_deviation_mask(
         .map(|i| shortest_axis(set, i))
         .collect();
     Ok(mean_over_neighbours(set, &index, k, |i, j, _| {
-        1.0 - normals[i].dot(normals[j]).abs()
+        pair(normals[i].dot(normals[j]).abs())
     })
     .into_iter()
-    .map(|mean| mean.is_some_and(|m| m > eps_n))
+    .map(|mean| mean.is_some_and(&keep))
     .collect())
 }
 

@@ -1,5 +1,6 @@
 //! What the LAM-fixture tests share: a track that opens the mouth, fresh folders, and the
-//! fixture's run configuration.
+//! fixture's run configuration. Each test binary uses some of them.
+#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 
