@@ -52,9 +52,10 @@ const F32_SLACK: f32 = 1e-5;
 /// Queries answered one after another, each bounded by the previous answer.
 const RUN: usize = 256;
 
-/// Depth of the traversal stack: a split on a Morton bit leaves at most 63 levels, then
-/// halving at most 32 (`u32::MAX` triangles), and a search holds at most one entry a level.
-const STACK: usize = 96;
+/// Initial capacity of a traversal stack (it grows if ever needed): a split on a Morton bit
+/// leaves at most 63 levels, then halving at most 32 (`u32::MAX` triangles), and a 4-wide
+/// search holds at most three entries per wide level, i.e. per two binary levels.
+const STACK: usize = 160;
 
 /// A node: its padded box, and either its children (`left` is the next node, `right` given)
 /// or its triangles (`count > 0`: slots `first..first + count`).
@@ -368,7 +369,16 @@ impl SurfaceIndex {
         if !query.is_finite() {
             return None;
         }
-        let (d2, slot) = self.search(query, None, &mut Vec::new());
+        // One traversal stack per thread, kept between calls (no allocation per query).
+        thread_local! {
+            static STACK_OF_THREAD: std::cell::RefCell<Vec<(u32, f32)>> =
+                std::cell::RefCell::new(Vec::with_capacity(STACK));
+        }
+        let (d2, slot) = STACK_OF_THREAD.with(|stack| match stack.try_borrow_mut() {
+            Ok(mut stack) => self.search(query, None, &mut stack),
+            // Re-entered on this thread (not done by this module): a stack of its own.
+            Err(_) => self.search(query, None, &mut Vec::with_capacity(STACK)),
+        });
         Some(SurfaceHit {
             distance: d2.sqrt(),
             triangle: self.slots[slot as usize].id,
