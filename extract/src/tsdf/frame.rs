@@ -191,30 +191,27 @@ impl<'a> Prepared<'a> {
     /// pixel centres at `j + ½`) and the index of the pixel whose centre is nearest: the
     /// bilinear interpolation of the 2 x 2 pixel centres around the point when all four are
     /// valid and their depths differ by at most [`Self::max_spread`] of the nearest, else the
-    /// nearest pixel's depth (0: none).
-    #[inline]
+    /// nearest pixel's depth (0: none). Without branches: both are computed (three loads from
+    /// neighbouring entries) and one is selected, so the lanes of a row do not wait on each
+    /// other's mispredictions.
+    #[inline(always)]
     pub(super) fn sample(&self, u: f64, v: f64) -> (f64, usize) {
         let w = self.width;
-        let nearest = ((v as usize) * w + u as usize).min(self.cells.len() - 2);
+        let last = self.cells.len() - 2;
+        let nearest = ((v as usize) * w + u as usize).min(last);
         let (x, y) = ((u - 0.5).max(0.0), (v - 0.5).max(0.0));
         let (j, i) = (x as usize, y as usize);
-        let c = (i * w + j).min(self.cells.len() - 2);
+        let c = (i * w + j).min(last);
         let (tx, ty) = (x - j as f64, y - i as f64);
         let ([a, d10], [b, d11]) = (self.cells[c], self.cells[c + 1]);
         let (d00, d01) = (f64::from(a.abs()), f64::from(b.abs()));
         let (d10, d11) = (f64::from(d10), f64::from(d11));
+        let top = d00 + tx * (d01 - d00);
+        let bottom = d10 + tx * (d11 - d10);
+        let bilinear = top + ty * (bottom - top);
+        let near = f64::from(self.cells[nearest][0].abs());
         let interpolated = a.is_sign_positive() & (u >= 0.5) & (v >= 0.5);
-        let depth = if interpolated {
-            let top = d00 + tx * (d01 - d00);
-            let bottom = d10 + tx * (d11 - d10);
-            top + ty * (bottom - top)
-        } else {
-            // The nearest pixel centre is the cell's corner nearest the point.
-            let top = if tx < 0.5 { d00 } else { d01 };
-            let bottom = if tx < 0.5 { d10 } else { d11 };
-            if ty < 0.5 { top } else { bottom }
-        };
-        (depth, nearest)
+        (if interpolated { bilinear } else { near }, nearest)
     }
 
     /// The depth of the pixel whose centre is nearest image point `(u, v)` (inside
@@ -257,7 +254,8 @@ impl<'a> Prepared<'a> {
     /// the image, or lies more than `trunc` behind the farthest depth of the pixels it covers;
     /// tsdf = 1 for every voxel when the whole box projects inside the image onto valid
     /// pixels and lies at least `trunc` in front of the nearest of them; otherwise it must be
-    /// looked at voxel by voxel.
+    /// looked at voxel by voxel, with [`RowBounds`] that settle the rows lying wholly behind
+    /// or in front of the truncation band.
     pub(super) fn visit(&self, lo: DVec3, hi: DVec3, trunc: f64) -> Visit {
         let mut z_min = f64::INFINITY;
         let mut z_max = f64::NEG_INFINITY;
@@ -285,7 +283,7 @@ impl<'a> Prepared<'a> {
         }
         if z_min <= 0.0 {
             // Straddles the camera plane: the projection is unbounded.
-            return Visit::Voxels;
+            return Visit::Voxels(RowBounds::NONE);
         }
         let (w, h) = (self.width as f64, self.height as f64);
         if u_max < PIXEL_MARGIN
@@ -324,7 +322,17 @@ impl<'a> Prepared<'a> {
         {
             return Visit::Free;
         }
-        Visit::Voxels
+        let (d_min, d_max) = (f64::from(range.min), f64::from(range.max));
+        let margin = SHORTCUT_MARGIN * (d_max + trunc);
+        let free_z = if inside && range.all_valid {
+            (d_min - trunc - margin).min(f64::from(range.limit_min))
+        } else {
+            f64::NEG_INFINITY
+        };
+        Visit::Voxels(RowBounds {
+            skip_z: d_max + trunc + margin,
+            free_z,
+        })
     }
 
     /// The depth range of the pixels `[j0, j1] × [i0, i1]`, read one by one.
@@ -381,14 +389,39 @@ pub(super) fn cell_range(c: [f32; 4]) -> (f32, f32) {
 const RECT_SCAN_MAX: usize = 64;
 
 /// What a frame does to a block ([`Prepared::visit`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Visit {
     /// Nothing: no voxel is integrated.
     Skip,
     /// Every voxel is integrated with tsdf = 1 (free space in front of the surface).
     Free,
-    /// Each voxel must be projected.
-    Voxels,
+    /// Each voxel must be projected, except in the rows the bounds settle.
+    Voxels(RowBounds),
+}
+
+/// Relative margin (of the depth) by which [`RowBounds`] keep clear of the truncation band's
+/// edges: far above the rounding of a depth read (about 1e-16 of it), far below any distance
+/// that matters, so that a row they settle is settled the same way voxel by voxel.
+const SHORTCUT_MARGIN: f64 = 1e-9;
+
+/// Camera depths that settle a whole row of a block's voxels from the depth range of the
+/// pixels the block covers (every depth a voxel of the block reads lies in that range; the
+/// ray-length factor is ≥ 1): a row whose nearest voxel lies at or beyond `skip_z` is behind
+/// the band in every voxel (none is updated); a row whose farthest voxel lies at or before
+/// `free_z` is in front of it in every voxel, inside the image on valid pixels and in front of
+/// every free-space limit (tsdf = 1 in all).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct RowBounds {
+    pub(super) skip_z: f64,
+    pub(super) free_z: f64,
+}
+
+impl RowBounds {
+    /// Bounds that settle no row.
+    pub(super) const NONE: Self = Self {
+        skip_z: f64::INFINITY,
+        free_z: f64::NEG_INFINITY,
+    };
 }
 
 /// Depths seen over some pixels: the largest (0 when none is valid), the smallest valid

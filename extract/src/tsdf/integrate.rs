@@ -3,7 +3,7 @@
 
 use glam::{DVec3, IVec3};
 
-use super::frame::{PIXEL_MARGIN, Prepared, Visit};
+use super::frame::{PIXEL_MARGIN, Prepared, RowBounds, Visit};
 use super::params::{DepthLookup, TsdfParams};
 use crate::block_grid::{BLOCK, BLOCK_VOXELS, local_coords};
 
@@ -42,14 +42,15 @@ pub(super) fn integrate_block(
     let lo = origin + base.as_dvec3() * voxel;
     let hi = lo + DVec3::splat(f64::from(BLOCK - 1) * voxel);
     for f in frames {
-        match f.visit(lo, hi, trunc) {
+        let bounds = match f.visit(lo, hi, trunc) {
             Visit::Skip => continue,
             Visit::Free if block.color.is_none() => {
                 integrate_free(block.value, block.weight);
                 continue;
             }
-            Visit::Free | Visit::Voxels => {}
-        }
+            Visit::Free => RowBounds::NONE,
+            Visit::Voxels(bounds) => bounds,
+        };
         let step = f.world_to_camera * DVec3::new(voxel, 0.0, 0.0);
         if block.color.is_none() {
             let row = match (lookup, f.limits.is_some()) {
@@ -63,6 +64,15 @@ pub(super) fn integrate_block(
                 let p = origin + (base + l).as_dvec3() * voxel;
                 let q = f.world_to_camera * (p - f.center);
                 let voxels = start..start + ROW;
+                // The lanes' depths are `q.z + k · step.z` (as in the row), monotone in k.
+                let z_last = q.z + (ROW - 1) as f64 * step.z;
+                if q.z.min(z_last) >= bounds.skip_z {
+                    continue;
+                }
+                if q.z.max(z_last) <= bounds.free_z {
+                    integrate_free(&mut block.value[voxels.clone()], &mut block.weight[voxels]);
+                    continue;
+                }
                 row(
                     f,
                     q,
@@ -152,10 +162,12 @@ fn ray_factor(q: DVec3) -> f64 {
 }
 
 /// Integrates one frame into one row of [`ROW`] voxels whose first voxel is at camera-space `q`
-/// and whose next ones follow by `step`: project the lanes without branches, read the depth
-/// of the lanes inside the image ([`Prepared::sample`], or [`Prepared::sample_nearest`] when
-/// `NEAREST`), then update the lanes that pass without branches (with `LIMIT`, free space
-/// only in front of each pixel's [`Prepared::limit`]). All in f64, as the plain rule.
+/// and whose next ones follow by `step`, in four passes over the lanes, none with a branch:
+/// project them; find the 2 x 2 cell of pixel centres around each projection (and, when
+/// `NEAREST`, only the pixel whose centre is nearest); read the cells and select the bilinear
+/// or the nearest depth ([`Prepared::sample`]'s rule); update the lanes that pass (with
+/// `LIMIT`, free space only in front of each pixel's [`Prepared::limit`]). All in f64, as
+/// the plain rule.
 #[inline]
 fn integrate_row<const NEAREST: bool, const LIMIT: bool>(
     f: &Prepared<'_>,
@@ -169,7 +181,8 @@ fn integrate_row<const NEAREST: bool, const LIMIT: bool>(
         f.width as f64 - PIXEL_MARGIN,
         f.height as f64 - PIXEL_MARGIN,
     );
-    let mut uv = [[0.0f64; 2]; ROW];
+    let mut u = [0.0f64; ROW];
+    let mut v = [0.0f64; ROW];
     let mut inside = [false; ROW];
     let mut z = [0.0f64; ROW];
     let mut ray = [0.0f64; ROW];
@@ -178,30 +191,69 @@ fn integrate_row<const NEAREST: bool, const LIMIT: bool>(
         let (qx, qy, qz) = (q.x + kf * step.x, q.y + kf * step.y, q.z + kf * step.z);
         let inv_z = 1.0 / qz;
         let (x, y) = (qx * inv_z, qy * inv_z);
-        let u = f.fx * x + f.cx;
-        let v = f.fy * y + f.cy;
-        let ok = (qz > 0.0) & (u >= PIXEL_MARGIN) & (u < u_end) & (v >= PIXEL_MARGIN) & (v < v_end);
-        uv[k] = [u, v];
-        inside[k] = ok;
+        u[k] = f.fx * x + f.cx;
+        v[k] = f.fy * y + f.cy;
         z[k] = qz;
         ray[k] = (1.0 + x * x + y * y).sqrt();
+    }
+    for k in 0..ROW {
+        inside[k] = (z[k] > 0.0)
+            & (u[k] >= PIXEL_MARGIN)
+            & (u[k] < u_end)
+            & (v[k] >= PIXEL_MARGIN)
+            & (v[k] < v_end);
     }
     if !inside.iter().any(|&b| b) {
         return;
     }
-    // Every lane reads (at indices clamped into the image, without branches); lanes outside
-    // the image then select 0.
+    let w = f.width;
+    let last = f.cells.len() - 2;
     let mut depth = [0.0f64; ROW];
+    let mut pixel = [0usize; ROW];
+    if NEAREST {
+        for k in 0..ROW {
+            let (d, p) = f.sample_nearest(u[k], v[k]);
+            depth[k] = d;
+            pixel[k] = p;
+        }
+    } else {
+        // The cell's first pixel centre (i, j) and the point's offsets from it. Lanes
+        // outside the image read clamped indices and are dropped below; inside, x and y lie
+        // in [0, size) and the casts are floors (u − 0.5 is exact there).
+        let mut cell = [0usize; ROW];
+        let mut t = [[0.0f64; 2]; ROW];
+        for k in 0..ROW {
+            let (x, y) = ((u[k] - 0.5).max(0.0), (v[k] - 0.5).max(0.0));
+            let (j, i) = (x as i32, y as i32);
+            t[k] = [x - f64::from(j), y - f64::from(i)];
+            cell[k] = (i as u32 as usize * w + j as u32 as usize).min(last);
+        }
+        for k in 0..ROW {
+            let c = cell[k];
+            let [tx, ty] = t[k];
+            let ([a, d10], [b, d11]) = (f.cells[c], f.cells[c + 1]);
+            let (d00, d01) = (f64::from(a.abs()), f64::from(b.abs()));
+            let (d10, d11) = (f64::from(d10), f64::from(d11));
+            let top = d00 + tx * (d01 - d00);
+            let bottom = d10 + tx * (d11 - d10);
+            let bilinear = top + ty * (bottom - top);
+            // The nearest pixel centre is the cell's corner nearest the point (the last row
+            // and column have ty, tx < ½).
+            let (right, down) = (tx >= 0.5, ty >= 0.5);
+            let nearest_top = if right { d01 } else { d00 };
+            let nearest_bottom = if right { d11 } else { d10 };
+            let nearest = if down { nearest_bottom } else { nearest_top };
+            let interpolated = a.is_sign_positive() & (u[k] >= 0.5) & (v[k] >= 0.5);
+            depth[k] = if interpolated { bilinear } else { nearest };
+            if LIMIT {
+                pixel[k] = (c + usize::from(right) + w * usize::from(down)).min(last);
+            }
+        }
+    }
     let mut limit = [f64::INFINITY; ROW];
-    for k in 0..ROW {
-        let (d, pixel) = if NEAREST {
-            f.sample_nearest(uv[k][0], uv[k][1])
-        } else {
-            f.sample(uv[k][0], uv[k][1])
-        };
-        depth[k] = if inside[k] { d } else { 0.0 };
-        if LIMIT {
-            limit[k] = f.limit(pixel);
+    if LIMIT {
+        for k in 0..ROW {
+            limit[k] = f.limit(pixel[k]);
         }
     }
     let inv_trunc = 1.0 / trunc;
