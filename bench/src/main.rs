@@ -14,6 +14,7 @@ mod delaunay;
 mod eval;
 mod harness;
 mod render;
+mod scene;
 mod score;
 mod smooth;
 mod sweep;
@@ -54,6 +55,8 @@ enum Bench {
     Eval(eval::EvalBenchArgs),
     /// 3DGS CPU rendering of a 75k-Gaussian avatar at 512x512 (1 and 2 threads, stage split).
     Render(render::RenderBenchArgs),
+    /// A static scene of flat Gaussians bound densely to a scanned mesh (opacity-mesh at scale).
+    GaussianScene(scene::SceneArgs),
     /// What scoring one frame of `extract --gt gaussians` costs, stage by stage (LAM).
     Score(score::ScoreArgs),
     /// Laplacian/Taubin x10 on a 1.5M-face mesh and 1M/100k sampling vs Open3D.
@@ -74,6 +77,7 @@ fn main() -> anyhow::Result<()> {
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
         Bench::Render(a) => render::run(&a),
+        Bench::GaussianScene(a) => scene::run(&a),
         Bench::Score(a) => score::run(&a),
         Bench::Smooth => smooth::run(python),
         Bench::Sweep(a) => sweep::run(&a),

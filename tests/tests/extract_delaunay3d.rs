@@ -304,3 +304,34 @@ fn random_degenerate_sets_are_always_valid() {
         }
     }
 }
+
+/// The tetrahedra-only build (large inputs) gives the full build's finite tetrahedra in the
+/// same order, and its dimension, on generic, co-spherical, duplicated and flat inputs; bad
+/// coordinates are the same errors.
+#[test]
+fn finite_tetrahedra_equal_the_full_build() {
+    let to64 = |pts: &[Vec3]| -> Vec<[f64; 3]> {
+        pts.iter()
+            .map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)])
+            .collect()
+    };
+    let mut dup = random_cube(300, 9);
+    let head = dup[..40].to_vec();
+    dup.extend(head);
+    let flat: Vec<Vec3> = (0..50)
+        .map(|i| Vec3::new((i % 7) as f32, (i / 7) as f32, 0.0))
+        .collect();
+    for pts in [random_cube(3000, 5), grid(7), dup, flat] {
+        let coords = to64(&pts);
+        let full = Delaunay3d::from_f64(coords.clone()).expect("full");
+        let (tets, dimension) = Delaunay3d::finite_tetrahedra(&coords).expect("tets only");
+        assert_eq!(dimension, full.dimension());
+        assert_eq!(tets, full.tetrahedra());
+    }
+    let mut bad = to64(&random_cube(10, 1));
+    bad[3][2] = f64::NAN;
+    assert!(matches!(
+        Delaunay3d::finite_tetrahedra(&bad),
+        Err(DelaunayError::NonFinite { index: 3, .. })
+    ));
+}

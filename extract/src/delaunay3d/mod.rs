@@ -228,6 +228,32 @@ impl Delaunay3d {
         })
     }
 
+    /// Only the finite tetrahedra of `points` (as [`Self::tetrahedra`] of
+    /// [`Self::from_f64`], in the same order) and the affine dimension, without the neighbours,
+    /// the infinite tetrahedra or a copy of the points: for large inputs that need only the
+    /// tetrahedra (at 9M points the neighbours and the compaction's copies are ~2 GB).
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn finite_tetrahedra(points: &[[f64; 3]]) -> Result<(Vec<[u32; 4]>, u8), DelaunayError> {
+        if points.len() > MAX_POINTS {
+            return Err(DelaunayError::TooManyPoints {
+                count: points.len(),
+            });
+        }
+        validate(points)?;
+        let (unique, _) = dedupe(points);
+        let order = sort::brio_order(points, &unique);
+        drop(unique);
+        let mut builder = Builder::new(points);
+        let dimension = builder.build(&order);
+        drop(order);
+        if builder.overflow {
+            return Err(DelaunayError::TooManyTetrahedra);
+        }
+        Ok((builder.into_finite(), dimension))
+    }
+
     /// The input points (as `f64`), indexed like the input.
     #[must_use]
     pub fn points(&self) -> &[[f64; 3]] {
@@ -821,6 +847,27 @@ impl<'a> Builder<'a> {
                 }
             }
         }
+    }
+
+    /// The live finite tetrahedra in slot order (the order [`Self::compact`] gives them),
+    /// freeing the builder's other arrays first.
+    fn into_finite(mut self) -> Vec<[u32; 4]> {
+        self.marks = Vec::new();
+        self.free = Vec::new();
+        self.edges = Vec::new();
+        let count = self
+            .cells
+            .iter()
+            .filter(|c| c.v[0] != DEAD && !c.v.contains(&INF))
+            .count();
+        let mut out = Vec::with_capacity(count);
+        out.extend(
+            self.cells
+                .iter()
+                .filter(|c| c.v[0] != DEAD && !c.v.contains(&INF))
+                .map(|c| c.v),
+        );
+        out
     }
 
     /// Final arrays: live tetrahedra, finite first, with remapped neighbours.

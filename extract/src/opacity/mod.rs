@@ -264,16 +264,23 @@ fn tetrahedralise(
             }
         }
     }
+    let Some(t) = track.filter(|t| !t.given_up) else {
+        // Nothing to carry: only the finite tetrahedra, without neighbours or copies.
+        let (out, dimension) = Delaunay3d::finite_tetrahedra(&coords)?;
+        if dimension < 3 {
+            return Err(OpacityError::Degenerate { dimension });
+        }
+        stats.tetrahedra = out.len();
+        return Ok(out);
+    };
     let delaunay = Delaunay3d::from_f64(coords)?;
     if delaunay.dimension() < 3 {
         return Err(OpacityError::Degenerate {
             dimension: delaunay.dimension(),
         });
     }
-    if let Some(t) = track.filter(|t| !t.given_up) {
-        t.tets = CarriedTets::new(&delaunay);
-        t.source = source.to_vec();
-    }
+    t.tets = CarriedTets::new(&delaunay);
+    t.source = source.to_vec();
     let out = delaunay.tetrahedra().to_vec();
     stats.tetrahedra = out.len();
     Ok(out)

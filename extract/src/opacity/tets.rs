@@ -17,24 +17,35 @@ pub(crate) struct Crossings {
     pub triangles: Vec<[u32; 3]>,
 }
 
-/// Marching tetrahedra on `tets` over `points` whose side is `inside[i]`.
+/// Tetrahedra marched per parallel task: fixed, so the output order (concatenated chunk by
+/// chunk) does not depend on the thread count.
+const MARCH_CHUNK: usize = 1 << 16;
+
+/// Marching tetrahedra on `tets` over `points` whose side is `inside[i]`. Only the crossing
+/// tetrahedra's triangles are held (memory grows with the surface, not the volume: at 1M
+/// Gaussians, ~60M tetrahedra, of which a few percent cross).
 pub(crate) fn march(points: &[DVec3], tets: &[[u32; 4]], inside: &[bool]) -> Crossings {
-    // Per tetrahedron: its triangles as point pairs, oriented.
-    let local: Vec<([[[u32; 2]; 3]; 2], u8)> = tets
-        .par_iter()
-        .with_min_len(4096)
-        .map(|tet| tet_triangles(points, tet, inside))
+    // Per chunk of tetrahedra: the triangles of its crossing ones as point pairs, oriented.
+    let chunks: Vec<Vec<[[u32; 2]; 3]>> = tets
+        .par_chunks(MARCH_CHUNK)
+        .map(|chunk| {
+            let mut out = Vec::new();
+            for tet in chunk {
+                let (tris, n) = tet_triangles(points, tet, inside);
+                out.extend_from_slice(&tris[..usize::from(n)]);
+            }
+            out
+        })
         .collect();
-    let mut edges: Vec<[u32; 2]> = local
-        .iter()
-        .flat_map(|(tris, n)| tris[..usize::from(*n)].iter().flatten().copied())
-        .collect();
+    let local: Vec<[[u32; 2]; 3]> = chunks.concat();
+    drop(chunks);
+    let mut edges: Vec<[u32; 2]> = local.iter().flatten().copied().collect();
     edges.par_sort_unstable();
     edges.dedup();
+    edges.shrink_to_fit();
     let find = |e: [u32; 2]| edges.binary_search(&e).map_or(0, |i| i as u32);
     let mut triangles: Vec<[u32; 3]> = local
-        .iter()
-        .flat_map(|(tris, n)| tris[..usize::from(*n)].iter())
+        .par_iter()
         .map(|t| {
             // Smallest edge first, the orientation kept.
             let [a, b, c] = [find(t[0]), find(t[1]), find(t[2])];
@@ -47,6 +58,7 @@ pub(crate) fn march(points: &[DVec3], tets: &[[u32; 4]], inside: &[bool]) -> Cro
             }
         })
         .collect();
+    drop(local);
     triangles.par_sort_unstable();
     Crossings { edges, triangles }
 }
@@ -69,6 +81,9 @@ fn tet_triangles(points: &[DVec3], tet: &[u32; 4], inside: &[bool]) -> ([[[u32; 
         }
     }
     let mut tris = [[[0u32; 2]; 3]; 2];
+    if ni == 0 || ni == 4 {
+        return (tris, 0);
+    }
     let n = match ni {
         1 => {
             tris[0] = [[ins[0], outs[0]], [ins[0], outs[1]], [ins[0], outs[2]]];
