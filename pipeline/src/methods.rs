@@ -576,7 +576,8 @@ pub enum Mesher {
 
 impl Mesher {
     /// A mesher for `method` on the rest template `rest` and the Gaussians' rest-pose means
-    /// `rest_means` (deformed once by the caller).
+    /// `rest_means` (deformed once by the caller; the point methods' kept means, or every
+    /// Gaussian's for tsdf, whose anchored rig frames them).
     /// `first_frame` only labels errors.
     ///
     /// # Errors
