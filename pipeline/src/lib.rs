@@ -73,6 +73,7 @@
 // Modules whose items callers address by path (options and their defaults, the stages'
 // building blocks, the report's model); the rest are private, their public items re-exported
 // below.
+pub mod anchor;
 pub mod avatar;
 pub mod config;
 pub mod consistency;

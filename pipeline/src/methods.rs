@@ -3,7 +3,9 @@
 //! [`crate::Visibility`] keeps; tsdf renders every Gaussian of the frame.
 //!
 //! - **tsdf**: a sphere rig of `views` cameras (geometry's `sphere_rig`, 40° field of view)
-//!   around the bounding sphere of the frame (deformed template and every Gaussian's mean),
+//!   and a voxel grid anchored to the avatar's best-fitting rigid motion ([`crate::anchor`],
+//!   `--tsdf-anchor rigid`), or in world space around the bounding sphere of the frame
+//!   (deformed template and every Gaussian's mean; `--tsdf-anchor world`),
 //!   expected or median depth ([`DepthKind`]) rendered from the deformed Gaussians (3DGS,
 //!   gsplat rules) and masked where the rendered alpha is below `tsdf_alpha_cut` (default
 //!   [`RENDERED_ALPHA_MIN`]), fused with the extract crate's TSDF at
@@ -49,11 +51,12 @@ use trisplat_geometry::{bounding_sphere, sphere_rig};
 use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{Outputs, RenderError, RenderOptions, render, render_front};
 
+use crate::anchor::AnchoredRig;
 use crate::config::{
     ALPHA_STEPS_PER_DOUBLING, AlphaRule, COARSEST_VOXELS_PER_RADIUS,
     DEFAULT_ALPHA_CEILING_SPACINGS, DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_SPACINGS,
     DEFAULT_FOV_DEG, DEFAULT_FRONT_ALPHA, DEFAULT_VOXELS_PER_RADIUS, DepthKind, ExtractOptions,
-    Method, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule, VertexColors,
+    Method, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule, TsdfAnchor, VertexColors,
 };
 use crate::error::PipelineError;
 use crate::opacity::{opacity_gaussians, opacity_rig};
@@ -126,6 +129,10 @@ pub fn parameters(
             parameters.insert("colors".to_owned(), f64::from(u8::from(o.tsdf.colors)));
             parameters.insert("alpha_cut".to_owned(), f64::from(o.tsdf.alpha_cut));
             parameters.insert("front_alpha".to_owned(), f64::from(o.tsdf.front_alpha));
+            parameters.insert(
+                "anchored".to_owned(),
+                f64::from(u8::from(o.tsdf.anchor == TsdfAnchor::Rigid)),
+            );
         }
         Method::Delaunay => {
             parameters.insert("rebuild_every".to_owned(), o.delaunay.rebuild_every as f64);
@@ -417,13 +424,16 @@ pub fn rendered_view(
 }
 
 /// TSDF mesher settings.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct TsdfMesher {
     voxel: f64,
     views: usize,
     resolution: u32,
     depth: DepthRules,
     colors: bool,
+    /// The rig in the rest template's frame (`--tsdf-anchor rigid`, [`crate::anchor`]);
+    /// `None`: in world space around each frame.
+    anchored: Option<AnchoredRig>,
 }
 
 impl TsdfMesher {
@@ -444,20 +454,46 @@ impl TsdfMesher {
                 simplify: None,
             });
         };
-        let cameras = sphere_rig(
-            center,
-            radius,
-            self.views,
-            (self.resolution, self.resolution),
-            DEFAULT_FOV_DEG,
-        )
-        .map_err(|source| PipelineError::Cameras {
+        let cameras_error = |source| PipelineError::Cameras {
             frame,
             cause: source,
-        })?;
+        };
+        // `cameras` fuse (anchor frame), `seen_by` render (world); `motion` maps the first
+        // to the second and the fused mesh back.
+        let (cameras, seen_by, motion) = match &self.anchored {
+            Some(anchored) => {
+                let anchor = anchored
+                    .frame(
+                        input.positions,
+                        world.means(),
+                        self.views,
+                        self.resolution,
+                        DEFAULT_FOV_DEG,
+                    )
+                    .map_err(cameras_error)?;
+                let seen_by = anchor
+                    .cameras
+                    .iter()
+                    .map(|c| anchor.motion.camera(c))
+                    .collect::<Result<Vec<_>, _>>()
+                    .map_err(cameras_error)?;
+                (anchor.cameras, seen_by, Some(anchor.motion))
+            }
+            None => {
+                let cameras = sphere_rig(
+                    center,
+                    radius,
+                    self.views,
+                    (self.resolution, self.resolution),
+                    DEFAULT_FOV_DEG,
+                )
+                .map_err(cameras_error)?;
+                (cameras.clone(), cameras, None)
+            }
+        };
         let mut depths = Vec::with_capacity(cameras.len());
         let mut colors = Vec::with_capacity(if self.colors { cameras.len() } else { 0 });
-        for camera in &cameras {
+        for camera in &seen_by {
             let (image, color) =
                 rendered_view(world, camera, &self.depth, self.colors).map_err(|e| match e {
                     RenderedDepthError::Render(source) => PipelineError::Render {
@@ -488,8 +524,12 @@ impl TsdfMesher {
             frame,
             cause: source,
         })?;
+        let mesh = match motion {
+            Some(motion) => motion.mesh(fused.mesh),
+            None => fused.mesh,
+        };
         Ok(MethodOutput {
-            mesh: fused.mesh,
+            mesh,
             ms: start.elapsed().as_secs_f64() * 1e3,
             render_ms: Some(render_ms),
             delaunay: None,
@@ -536,7 +576,8 @@ pub enum Mesher {
 
 impl Mesher {
     /// A mesher for `method` on the rest template `rest` and the Gaussians' rest-pose means
-    /// `rest_means` (deformed once by the caller).
+    /// `rest_means` (deformed once by the caller; the point methods' kept means, or every
+    /// Gaussian's for tsdf, whose anchored rig frames them).
     /// `first_frame` only labels errors.
     ///
     /// # Errors
@@ -561,6 +602,10 @@ impl Mesher {
                     front_alpha: options.tsdf.front_alpha,
                 },
                 colors: options.tsdf.colors,
+                anchored: match options.tsdf.anchor {
+                    TsdfAnchor::Rigid => AnchoredRig::new(rest.positions(), rest_means),
+                    TsdfAnchor::World => None,
+                },
             }),
             Method::Delaunay => {
                 let d_options = DelaunayOptions {
@@ -805,6 +850,106 @@ mod tests {
             };
             let out = mesher.mesh(&input).expect("alpha shape");
             assert_eq!(out.mesh.triangle_count(), triangles, "keep {keep}");
+        }
+    }
+
+    /// Isotropic Gaussians on an ellipsoid (a Fibonacci lattice, vertex `i` the mean of
+    /// Gaussian `i`), moved by `motion`.
+    fn ellipsoid(motion: &crate::anchor::Rigid) -> (Vec<DVec3>, GaussianSet) {
+        use trisplat_splat::{GaussianParts, ParameterSpace, ScaleDims};
+        let n = 1500;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let rest: Vec<DVec3> = (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - y * y).sqrt();
+                let phi = golden * i as f64;
+                DVec3::new(r * phi.cos(), 0.8 * y, 0.6 * r * phi.sin())
+            })
+            .collect();
+        let moved: Vec<DVec3> = rest.iter().map(|&p| motion.apply(p)).collect();
+        let parts = GaussianParts {
+            means: moved.iter().map(|p| p.as_vec3()).collect(),
+            log_scales: vec![Vec3::splat(0.05f32.ln()); n],
+            scale_dims: ScaleDims::Three,
+            rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
+            opacity_logits: vec![4.0; n],
+            sh_degree: 0,
+            sh: vec![0.0; 3 * n],
+            binding: None,
+            material: None,
+            space: ParameterSpace::World,
+            extras: Vec::new(),
+            property_order: None,
+        };
+        (moved, GaussianSet::try_new(parts).expect("valid set"))
+    }
+
+    /// Largest distance from a vertex of `a` to the nearest vertex of `b` (brute force).
+    fn farthest_nearest(a: &TriMesh, b: &TriMesh) -> f64 {
+        a.positions()
+            .iter()
+            .map(|p| {
+                b.positions()
+                    .iter()
+                    .map(|q| (*p - *q).length_squared())
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max)
+            .sqrt()
+    }
+
+    #[test]
+    fn an_anchored_tsdf_moves_with_a_rigidly_moving_surface() {
+        use crate::anchor::Rigid;
+        use glam::{DMat3, DQuat};
+        let still = Rigid::IDENTITY;
+        // A turn and a shift that is no multiple of the voxel.
+        let turn = Rigid {
+            rotation: DMat3::from_quat(DQuat::from_axis_angle(
+                DVec3::new(0.2, 1.0, 0.3).normalize(),
+                0.45,
+            )),
+            translation: DVec3::new(0.0371, -0.0213, 0.0157),
+        };
+        let (rest, _) = ellipsoid(&still);
+        let mesh = |mesher: &TsdfMesher, motion: &Rigid| {
+            let (positions, world) = ellipsoid(motion);
+            let input = FrameInput {
+                frame: 0,
+                positions: &positions,
+                means: world.means(),
+                world: Some(&world),
+            };
+            mesher.mesh(&input).expect("tsdf").mesh
+        };
+        let voxel = 0.05;
+        let rigid = TsdfMesher {
+            voxel,
+            views: 8,
+            resolution: 64,
+            depth: DepthRules::default(),
+            colors: false,
+            anchored: crate::anchor::AnchoredRig::new(&rest, &[]),
+        };
+        let world = TsdfMesher {
+            anchored: None,
+            ..rigid.clone()
+        };
+        for (mesher, anchored) in [(&rigid, true), (&world, false)] {
+            let key = mesh(mesher, &still);
+            let own = mesh(mesher, &turn);
+            assert!(key.vertex_count() > 500, "{}", key.vertex_count());
+            let carried = turn.mesh(key);
+            let gap = farthest_nearest(&carried, &own).max(farthest_nearest(&own, &carried));
+            if anchored {
+                // The same sampling, moved: equal to the renderer's f32 rounding.
+                assert_eq!(carried.vertex_count(), own.vertex_count());
+                assert!(gap < 1e-3 * voxel, "anchored: {gap}");
+            } else {
+                // Resampled on the world grid: a new mesh, a sizeable part of a voxel away.
+                assert!(gap > 0.05 * voxel, "world: {gap}");
+            }
         }
     }
 

@@ -466,7 +466,12 @@ impl Session {
                     o,
                     &session.resolved,
                     session.template(),
-                    &kept_rest_means,
+                    // The tsdf renders every Gaussian, so its rig frames them all.
+                    if m == Method::Tsdf {
+                        &session.rest_means
+                    } else {
+                        &kept_rest_means
+                    },
                     session.frames.start,
                 )
                 .map_err(|e| e.on_vertices_of(&config.template.display().to_string()))?;

@@ -249,6 +249,7 @@ impl Session {
                 colors: tsdf_colors,
                 alpha_cut: tsdf_alpha_cut.unwrap_or(defaults.tsdf.alpha_cut),
                 front_alpha: defaults.tsdf.front_alpha,
+                anchor: defaults.tsdf.anchor,
                 voxel,
                 views: views.unwrap_or(defaults.tsdf.views),
                 resolution: resolution.unwrap_or(defaults.tsdf.resolution),

@@ -52,7 +52,7 @@ pub use topology::{
 pub use tsdf::{
     COARSEST_VOXELS_PER_RADIUS, DEFAULT_FOV_DEG, DEFAULT_FRONT_ALPHA, DEFAULT_RESOLUTION,
     DEFAULT_VIEWS, DEFAULT_VOXELS_PER_RADIUS, DepthKind, RENDERED_ALPHA_MIN, SplatDepthRule,
-    TsdfOptions,
+    TsdfAnchor, TsdfOptions,
 };
 
 /// The ground truth of the metrics.

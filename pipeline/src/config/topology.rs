@@ -86,10 +86,11 @@ pub struct TopologyOptions {
         default_value_t = DEFAULT_KEY_OFFSET))]
     pub key_offset: f64,
     /// adaptive, tsdf only: start a new key when the probe Gaussians have moved more than this
-    /// many mean template edges on average since the key (off unless given; 0.3 keeps LAM's
-    /// tsdf within 0.5 mm of each frame's own extraction at a key every 5-10 frames). A TSDF
-    /// samples a voxel grid and a camera rig fixed in space, so a frame's own extraction is a
-    /// new sampling of a surface that moved through them, which no carried mesh follows.
+    /// many mean template edges on average since the key (off unless given). For
+    /// `--tsdf-anchor world`, whose voxel grid and camera rig stay fixed in space so that a
+    /// frame's own extraction is a new sampling of a surface that moved through them: 0.3
+    /// keeps LAM's tsdf within 0.5 mm of each frame's own extraction at a key every 5-10
+    /// frames. The default rigid anchor does not need it.
     #[cfg_attr(feature = "cli", arg(long, value_name = "EDGES"))]
     pub key_motion: Option<f64>,
     /// How far (multiples of the mean template edge) a Gaussian's distance to its carried

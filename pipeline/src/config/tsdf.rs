@@ -92,6 +92,33 @@ impl From<SplatDepthRule> for trisplat_splat::render::SplatDepth {
     }
 }
 
+/// Where the tsdf method's voxel grid and camera rig sit (`extract --tsdf-anchor`,
+/// docs/conventions.md §6, "The tsdf method's anchor").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum TsdfAnchor {
+    /// Moving rigidly with the avatar (the rigid motion that best maps the rest template onto
+    /// the frame's): a rigidly moving surface is sampled alike in every frame, so a frame's
+    /// own extraction agrees with a mesh carried from a key. The default.
+    #[default]
+    Rigid,
+    /// Fixed in world space around each frame's bounding sphere (the rule before issue #31):
+    /// a moving surface is resampled every frame.
+    World,
+}
+
+impl TsdfAnchor {
+    /// The anchor's name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rigid => "rigid",
+            Self::World => "world",
+        }
+    }
+}
+
 /// The tsdf method's rig, depth maps and fusion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "cli", derive(clap::Args))]
@@ -136,6 +163,12 @@ pub struct TsdfOptions {
     #[cfg_attr(feature = "cli", arg(id = "tsdf_front_alpha", long = "tsdf-front-alpha",
         value_name = "A", default_value_t = DEFAULT_FRONT_ALPHA))]
     pub front_alpha: f32,
+    /// TSDF: where the voxel grid and camera rig sit: rigid (they move with the avatar's
+    /// best-fitting rigid motion from the rest template, so a turning head is sampled alike
+    /// in every frame) or world (fixed in space around each frame, the earlier rule).
+    #[cfg_attr(feature = "cli", arg(id = "tsdf_anchor", long = "tsdf-anchor", value_enum,
+        value_name = "ANCHOR", default_value_t = TsdfAnchor::default()))]
+    pub anchor: TsdfAnchor,
 }
 
 impl Default for TsdfOptions {
@@ -149,6 +182,7 @@ impl Default for TsdfOptions {
             colors: false,
             alpha_cut: RENDERED_ALPHA_MIN,
             front_alpha: DEFAULT_FRONT_ALPHA,
+            anchor: TsdfAnchor::default(),
         }
     }
 }
