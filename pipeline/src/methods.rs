@@ -28,7 +28,9 @@
 //!   (`alpha_keep_clusters`).
 //! - **opacity**: the opacity field of every deformed Gaussian (Gaussian Opacity Fields, the
 //!   extract crate's `opacity`) from the tsdf method's rig (`views`, `resolution`), framed
-//!   around the Gaussians and their 3-sigma boxes; every piece.
+//!   around the Gaussians and their 3-sigma boxes: by default each point's side read from the
+//!   rig's rendered median-depth maps (`--opacity-field median`; `gof`: GOF's opacity along
+//!   rays), and only the largest piece (`--opacity-pieces`).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -40,7 +42,8 @@ use trisplat_extract::delaunay3d::Delaunay3d;
 use trisplat_extract::incremental_delaunay::{DelaunayOptions, FrameStats, IncrementalDelaunay};
 use trisplat_extract::opacity::{
     DEFAULT_BISECTION_STEPS as OPACITY_BISECTION_STEPS, DEFAULT_LEVEL as OPACITY_LEVEL,
-    OpacityOptions, OpacityTrack, opacity_mesh_tracked,
+    DepthRules as MedianRules, KeepPieces, MAJOR_PIECE_FRACTION, OpacityOptions, OpacityTrack,
+    median_depth_mesh, opacity_mesh_tracked,
 };
 use trisplat_extract::tsdf::{ColorImage, DepthImage, TsdfError, TsdfOptions, fuse};
 use trisplat_geometry::Camera;
@@ -56,10 +59,11 @@ use crate::config::{
     ALPHA_STEPS_PER_DOUBLING, AlphaRule, COARSEST_VOXELS_PER_RADIUS,
     DEFAULT_ALPHA_CEILING_SPACINGS, DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_SPACINGS,
     DEFAULT_FOV_DEG, DEFAULT_FRONT_ALPHA, DEFAULT_VOXELS_PER_RADIUS, DepthKind, ExtractOptions,
-    Method, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule, TsdfAnchor, VertexColors,
+    Method, OpacityField, OpacityPieces, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule,
+    TsdfAnchor, VertexColors,
 };
 use crate::error::PipelineError;
-use crate::opacity::{opacity_gaussians, opacity_rig};
+use crate::opacity::{median_depth_views, opacity_gaussians, opacity_rig};
 use crate::records::{Resolved, SimplifyFrame};
 
 /// One deformed frame, as every mesher sees it.
@@ -165,11 +169,28 @@ pub fn parameters(
         Method::Opacity => {
             parameters.insert("views".to_owned(), o.tsdf.views as f64);
             parameters.insert("resolution".to_owned(), f64::from(o.tsdf.resolution));
-            parameters.insert("level".to_owned(), f64::from(OPACITY_LEVEL));
             parameters.insert(
                 "bisection_steps".to_owned(),
                 f64::from(OPACITY_BISECTION_STEPS),
             );
+            let median = o.opacity.field == OpacityField::Median;
+            parameters.insert("median_field".to_owned(), f64::from(u8::from(median)));
+            if median {
+                let rules = MedianRules::default();
+                parameters.insert("margin".to_owned(), f64::from(rules.margin));
+                parameters.insert("carve_views".to_owned(), f64::from(rules.carve_views));
+                parameters.insert("surface".to_owned(), f64::from(rules.surface));
+            } else {
+                parameters.insert("level".to_owned(), f64::from(OPACITY_LEVEL));
+            }
+            // The smallest share of the surface's area a kept piece has (0: every piece; 1:
+            // only the largest).
+            let share = match o.opacity.pieces {
+                OpacityPieces::All => 0.0,
+                OpacityPieces::Major => MAJOR_PIECE_FRACTION,
+                OpacityPieces::Largest => 1.0,
+            };
+            parameters.insert("min_piece_share".to_owned(), share);
         }
     }
     if let Some(n) = o.finish.faces {
@@ -567,6 +588,10 @@ pub enum Mesher {
         /// Whether vertices get the field's composited colours (not with
         /// `--vertex-colors off`).
         colors: bool,
+        /// The field (`--opacity-field`).
+        field: OpacityField,
+        /// The pieces kept (`--opacity-pieces`).
+        keep: KeepPieces,
         /// The tetrahedralisation carried from frame to frame when `OpacityOptions::carry` asks
         /// for it (off by default: on LAM a repair costs more than a rebuild, so every frame
         /// is rebuilt); equal to a rebuild either way.
@@ -645,6 +670,12 @@ impl Mesher {
                 views: options.tsdf.views,
                 resolution: options.tsdf.resolution,
                 colors: options.finish.vertex_colors != VertexColors::Off,
+                field: options.opacity.field,
+                keep: match options.opacity.pieces {
+                    OpacityPieces::All => KeepPieces::All,
+                    OpacityPieces::Major => KeepPieces::Major,
+                    OpacityPieces::Largest => KeepPieces::Largest,
+                },
                 track: Box::default(),
             },
         })
@@ -701,6 +732,8 @@ impl Mesher {
                 views,
                 resolution,
                 colors,
+                field,
+                keep,
                 track,
             } => {
                 let start = Instant::now();
@@ -708,20 +741,35 @@ impl Mesher {
                     what: "the opacity method without the frame's deformed Gaussians",
                 })?;
                 let cameras = opacity_rig(world, *views, *resolution)?;
-                let meshed = opacity_mesh_tracked(
-                    &opacity_gaussians(world),
-                    &cameras,
-                    &OpacityOptions {
-                        colors: *colors,
-                        ..OpacityOptions::default()
-                    },
-                    track,
-                )
-                .map_err(|cause| PipelineError::Opacity { frame, cause })?;
+                let options = OpacityOptions {
+                    colors: *colors,
+                    keep: *keep,
+                    ..OpacityOptions::default()
+                };
+                let gaussians = opacity_gaussians(world);
+                let (meshed, render_ms) = match field {
+                    OpacityField::Gof => (
+                        opacity_mesh_tracked(&gaussians, &cameras, &options, track),
+                        None,
+                    ),
+                    OpacityField::Median => {
+                        let maps = median_depth_views(world, &cameras, *colors, frame)?;
+                        let render_ms = start.elapsed().as_secs_f64() * 1e3;
+                        let meshed = median_depth_mesh(
+                            &gaussians,
+                            &maps,
+                            MedianRules::default(),
+                            &options,
+                            Some(track),
+                        );
+                        (meshed, Some(render_ms))
+                    }
+                };
+                let meshed = meshed.map_err(|cause| PipelineError::Opacity { frame, cause })?;
                 Ok(MethodOutput {
                     mesh: meshed.mesh,
                     ms: start.elapsed().as_secs_f64() * 1e3,
-                    render_ms: None,
+                    render_ms,
                     delaunay: None,
                     simplify: None,
                 })

@@ -92,7 +92,7 @@ pub struct FrameRecord {
     pub time: f64,
     /// Wall time of the method, milliseconds.
     pub ms: f64,
-    /// Of which rendering (tsdf only).
+    /// Of which rendering (tsdf, and the opacity method's median-depth field).
     pub render_ms: Option<f64>,
     /// Mesh vertices.
     pub vertices: usize,

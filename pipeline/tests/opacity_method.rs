@@ -15,6 +15,10 @@ fn opacity_meshes_every_frame_closed_and_is_measured() {
     let report = run(&config, RunControl::default(), &mut |_| {}).expect("run");
     let opacity = &report.methods["opacity"];
     assert_eq!(opacity.parameters["bisection_steps"], 8.0);
+    // The defaults: the median-depth field, one piece (issue #34).
+    assert_eq!(opacity.parameters["median_field"], 1.0);
+    assert_eq!(opacity.parameters["min_piece_share"], 1.0);
+    assert_eq!(opacity.parameters["surface"], 0.0);
     assert_eq!(opacity.frames.len(), 2);
     for f in &opacity.frames {
         // Marching tetrahedra over a closed tetrahedralisation: a closed surface.
@@ -22,7 +26,9 @@ fn opacity_meshes_every_frame_closed_and_is_measured() {
         let c = f.consistency.expect("render consistency");
         assert!(c.iou > 0.1 && c.depth_error_median.is_some(), "{c:?}");
         let file = out.join(format!("opacity/frame_{:06}.ply", f.frame));
-        assert!(file.is_file(), "{}", file.display());
+        let mesh = trisplat_geometry::io::read_mesh(&file).expect("the frame's mesh");
+        let stats = trisplat_geometry::mesh_stats::MeshStats::of(&mesh);
+        assert_eq!(stats.components, 1, "frame {}: one piece", f.frame);
     }
     // Methods run in report order, opacity last.
     let names: Vec<&String> = report.methods.keys().collect();

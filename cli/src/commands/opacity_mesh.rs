@@ -1,5 +1,6 @@
 //! `trisplat opacity-mesh GAUSSIANS.ply [--cameras C.json] -o MESH.ply [--views N]
-//! [--resolution R] [--keep-pieces all|major|largest] [--field gof|peak|median]`: mesh the Gaussians' opacity field
+//! [--resolution R] [--keep-pieces all|major|largest] [--field gof|peak|median [--surface PX]]`: mesh the
+//! Gaussians' opacity field
 //! (docs/conventions.md §6).
 
 use std::path::PathBuf;
@@ -7,8 +8,8 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use trisplat_extract::opacity::{
     AlphaRules, DEFAULT_BISECTION_STEPS, DEFAULT_CARVE_VIEWS, DEFAULT_LEVEL, DEFAULT_MARGIN,
-    DEFAULT_SAMPLE_STRIDE, DepthRules, KeepPieces, MAX_CARVE_VIEWS, OpacityOptions, RayModel,
-    median_depth_mesh, opacity_mesh,
+    DEFAULT_SAMPLE_STRIDE, DEFAULT_SURFACE, DepthRules, KeepPieces, MAX_CARVE_VIEWS,
+    OpacityOptions, RayModel, median_depth_mesh, opacity_mesh,
 };
 use trisplat_geometry::io::{WriteOptions, write_mesh};
 use trisplat_pipeline::config::{DEFAULT_RESOLUTION, DEFAULT_VIEWS};
@@ -44,7 +45,7 @@ Views: --cameras, or the tsdf method's rig (--views cameras of --resolution pixe
 field of view, on a sphere around the bounding sphere of the means and box corners). Views are streamed: memory does \
 not grow with their number. --field median: the same points and marching, a point outside when at least \
 --carve-views views see it more than --margin pixels in front of their rendered median depth (or see no \
-median depth there); vertex colours from the renders.")]
+median depth there), then each vertex of a thick part moved along its inward normal to where the field reaches --surface (default 0: onto the median depth; --surface equal to --margin: no move); vertex colours from the renders.")]
 pub struct OpacityMeshArgs {
     /// World-space Gaussians (3DGS PLY).
     pub gaussians: PathBuf,
@@ -85,6 +86,11 @@ pub struct OpacityMeshArgs {
     /// that view to carve it, in pixel footprints at the point's depth.
     #[arg(long, value_name = "PX", default_value_t = DEFAULT_MARGIN, value_parser = parse_margin)]
     pub margin: f32,
+    /// With `--field median`: where the vertices go, in pixel footprints in front of the
+    /// median depth (0..=--margin; each crossing edge is bisected for this level, or its inside
+    /// end's value when that is lower; --margin: the margin's own level set).
+    #[arg(long, value_name = "PX", default_value_t = DEFAULT_SURFACE, value_parser = parse_margin)]
+    pub surface: f32,
     /// With `--field median`: how many views must carve a point for it to be outside.
     #[arg(long, value_name = "K", default_value_t = DEFAULT_CARVE_VIEWS,
         value_parser = clap::value_parser!(u16).range(1..=i64::from(MAX_CARVE_VIEWS)))]
@@ -179,6 +185,7 @@ pub fn run(args: OpacityMeshArgs, ctx: &Context) -> anyhow::Result<()> {
             margin: args.margin,
             carve_views: args.carve_views,
             sample_stride: args.depth_samples,
+            surface: args.surface,
         };
         median_depth_mesh(&gaussians, &views, rules, &options, None)
     } else {

@@ -49,6 +49,16 @@ pub struct DepthRules {
     /// `margin + 1/2` footprints in front of it, so the marching sees the surface where the
     /// Gaussians' own points are too sparse (thin or fuzzy layers); 0: GOF's points only.
     pub sample_stride: u32,
+    /// Where the vertices settle, in pixel footprints in front of the median depth (0..=
+    /// `margin`): the margin decides which points are inside (so that a layer one Gaussian
+    /// thick keeps an inside) and puts the level set `margin` footprints in front of the
+    /// median depth; each vertex is then moved along the surface's inward normal, by at most
+    /// `margin - surface` footprints, to the first point where the field reaches `-surface`,
+    /// when the field stays at or above it for another `margin - surface` footprints behind
+    /// (a thick part). Vertices of thin layers (which the margin keeps) and on the silhouette
+    /// (carved by an uncovered pixel just outside them) stay. `margin`: no move (the level set
+    /// of the inside test, the behaviour before this rule).
+    pub surface: f32,
 }
 
 /// Default [`DepthRules::margin`], pixel footprints (with [`DEFAULT_CARVE_VIEWS`] the setting
@@ -58,6 +68,9 @@ pub const DEFAULT_MARGIN: f32 = 3.0;
 pub const DEFAULT_SAMPLE_STRIDE: u32 = 0;
 /// Default [`DepthRules::carve_views`].
 pub const DEFAULT_CARVE_VIEWS: u16 = 2;
+/// Default [`DepthRules::surface`]: on the median depth itself, the depth render consistency
+/// measures.
+pub const DEFAULT_SURFACE: f32 = 0.0;
 
 impl Default for DepthRules {
     fn default() -> Self {
@@ -65,6 +78,7 @@ impl Default for DepthRules {
             margin: DEFAULT_MARGIN,
             carve_views: DEFAULT_CARVE_VIEWS,
             sample_stride: DEFAULT_SAMPLE_STRIDE,
+            surface: DEFAULT_SURFACE,
         }
     }
 }
@@ -97,10 +111,14 @@ impl<'a> DepthViews<'a> {
         if views.is_empty() {
             return Err(OpacityError::NoCameras);
         }
-        let margin_ok = rules.margin.is_finite() && rules.margin >= 0.0;
+        let margin_ok = rules.margin.is_finite()
+            && rules.margin >= 0.0
+            && rules.surface.is_finite()
+            && (0.0..=rules.margin).contains(&rules.surface);
         if !margin_ok || !(1..=MAX_CARVE_VIEWS).contains(&rules.carve_views) {
             return Err(OpacityError::BadDepthRules {
                 margin: rules.margin,
+                surface: rules.surface,
                 carve_views: rules.carve_views,
             });
         }
@@ -153,7 +171,81 @@ impl<'a> DepthViews<'a> {
     pub fn level(&self) -> f64 {
         -f64::from(self.rules.margin)
     }
+
+    /// The settling of [`DepthRules::surface`]: `vertices` (on the level set) moved along
+    /// `-normals` (unit, outward) as that rule says.
+    pub fn settle(&self, vertices: &[DVec3], normals: &[DVec3]) -> Vec<DVec3> {
+        let target = -f64::from(self.rules.surface);
+        let reach = f64::from(self.rules.margin - self.rules.surface);
+        if reach <= 0.0 {
+            return vertices.to_vec();
+        }
+        vertices
+            .par_iter()
+            .zip(normals)
+            .with_min_len(512)
+            .map(|(&x, &n)| self.settle_one(x, n, target, reach))
+            .collect()
+    }
+
+    /// One vertex of [`Self::settle`].
+    fn settle_one(&self, x: DVec3, n: DVec3, target: f64, reach: f64) -> DVec3 {
+        if n == DVec3::ZERO {
+            return x;
+        }
+        let Some(fp) = self.footprint(x) else {
+            return x;
+        };
+        // Silhouette: just outside the vertex some view sees no median depth.
+        if field_at(self, x + n * (0.5 * fp)).0 == f64::NEG_INFINITY {
+            return x;
+        }
+        let step = reach * fp / f64::from(SETTLE_SAMPLES);
+        let at = |t: f64| field_at(self, x - n * t).0;
+        if at(0.0) >= target {
+            return x;
+        }
+        for i in 1..=SETTLE_SAMPLES {
+            let t = step * f64::from(i);
+            let f = at(t);
+            if f >= target {
+                let (mut lo, mut hi) = (t - step, t);
+                for _ in 0..SETTLE_BISECTIONS {
+                    let mid = 0.5 * (lo + hi);
+                    if at(mid) >= target {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                let t = 0.5 * (lo + hi);
+                // Only where the inside goes on behind the target (a thick part): a thin layer
+                // keeps the margin that gives it an inside, so it is not thinned away.
+                let thick = (1..=2).all(|k| at(t + f64::from(k) * 0.5 * reach * fp) >= target);
+                return if thick { x - n * t } else { x };
+            }
+        }
+        x
+    }
+
+    /// A pixel footprint at `x` (`z / f`), averaged over the views that see it.
+    fn footprint(&self, x: DVec3) -> Option<f64> {
+        let (mut sum, mut count) = (0.0, 0u32);
+        for v in &self.views {
+            if let Some((z, _, _)) = locate(v, x) {
+                sum += z / v.focal;
+                count += 1;
+            }
+        }
+        (count > 0).then(|| sum / f64::from(count))
+    }
 }
+
+/// Samples along the inward normal of [`DepthViews::settle`].
+pub const SETTLE_SAMPLES: u32 = 8;
+/// Bisection steps of [`DepthViews::settle`] between the last sample below the target and the
+/// first at or above it.
+pub const SETTLE_BISECTIONS: u32 = 4;
 
 /// Where `x` falls in `v`: camera z and pixel coordinates (u, v), `None` behind the near plane
 /// or outside the image.
@@ -320,7 +412,7 @@ pub(crate) fn depth_colors(views: &DepthViews, points: &[DVec3]) -> Vec<[f32; 3]
 #[cfg(test)]
 mod tests {
     use glam::{DVec3, Vec3};
-    use trisplat_geometry::sphere_rig;
+    use trisplat_geometry::{TriMesh, sphere_rig};
 
     use super::*;
     use crate::opacity::{OpacityGaussians, OpacityOptions, median_depth_mesh};
@@ -442,6 +534,7 @@ mod tests {
                 margin: 0.5,
                 carve_views: k,
                 sample_stride: 0,
+                surface: 0.5,
             };
             let prepared = DepthViews::new(&views, rules).expect("views");
             let (value, seen) = depth_field(&prepared, &points);
@@ -491,6 +584,17 @@ mod tests {
             ),
             Err(OpacityError::BadDepthRules { .. })
         ));
+        assert!(matches!(
+            DepthViews::new(
+                &views,
+                DepthRules {
+                    margin: 1.0,
+                    surface: 2.0,
+                    ..DepthRules::default()
+                }
+            ),
+            Err(OpacityError::BadDepthRules { .. })
+        ));
         views[2].depth[5] = f32::NAN;
         let err = DepthViews::new(&views, DepthRules::default())
             .err()
@@ -510,14 +614,9 @@ mod tests {
         ));
     }
 
-    /// Exact depth maps of a sphere (ray cast): the mesh of Gaussians on it lies on the sphere,
-    /// `margin` footprints in front of it at most, and is one closed piece.
-    #[test]
-    fn sphere_mesh_lies_at_the_median_depth() {
-        let radius = 0.3;
-        let cams = sphere_rig(DVec3::ZERO, 0.4, 20, (96, 96), 40.0).expect("rig");
-        let views: Vec<DepthView> = cams
-            .into_iter()
+    /// Exact median-depth maps of a sphere of `radius` at the origin (ray cast) from `cams`.
+    fn sphere_views(cams: Vec<trisplat_geometry::Camera>, radius: f64) -> Vec<DepthView> {
+        cams.into_iter()
             .map(|camera| {
                 let (w, h) = (camera.width, camera.height);
                 let mut depth = vec![0.0f32; (w * h) as usize];
@@ -539,7 +638,11 @@ mod tests {
                     rgb: Vec::new(),
                 }
             })
-            .collect();
+            .collect()
+    }
+
+    /// 600 isotropic Gaussians (scale 0.02, opacity 0.9) on a Fibonacci sphere of `radius`.
+    fn sphere_gaussians(radius: f64) -> OpacityGaussians {
         let n = 600;
         let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
         let means: Vec<Vec3> = (0..n)
@@ -550,39 +653,99 @@ mod tests {
                 (DVec3::new(r * a.cos(), y, r * a.sin()) * radius).as_vec3()
             })
             .collect();
-        let g = OpacityGaussians {
+        OpacityGaussians {
             scales: vec![Vec3::splat(0.02); n],
             rotations: vec![[1.0, 0.0, 0.0, 0.0]; n],
             opacities: vec![0.9; n],
             colors: vec![[0.5; 3]; n],
             means,
-        };
-        let margin = 0.5;
+        }
+    }
+
+    /// Radial errors of `mesh`'s vertices whose direction has a z above `min_z` (all: -1), in
+    /// units of `footprint`, sorted; positive outside the sphere.
+    fn radial_errors(mesh: &TriMesh, radius: f64, footprint: f64, min_z: f64) -> Vec<f64> {
+        let mut err: Vec<f64> = mesh
+            .positions()
+            .iter()
+            .filter(|p| p.normalize().z > min_z)
+            .map(|p| (p.length() - radius) / footprint)
+            .collect();
+        err.sort_by(f64::total_cmp);
+        err
+    }
+
+    /// Exact depth maps of a sphere from all around: the silhouettes carve it tightly, so the
+    /// mesh lies on the sphere within half a footprint, one closed piece.
+    #[test]
+    fn sphere_mesh_lies_at_the_median_depth() {
+        let radius = 0.3;
+        let cams = sphere_rig(DVec3::ZERO, 0.4, 20, (96, 96), 40.0).expect("rig");
+        let views = sphere_views(cams, radius);
         let rules = DepthRules {
-            margin,
+            margin: 0.5,
             carve_views: 1,
             sample_stride: 0,
+            surface: 0.0,
         };
         let options = OpacityOptions {
             colors: false,
             ..OpacityOptions::default()
         };
+        let g = sphere_gaussians(radius);
         let out = median_depth_mesh(&g, &views, rules, &options, None).expect("mesh");
         assert_eq!(out.stats.pieces, 1);
-        // A footprint at the nearest camera distance (~1.17) at 96 px, 40 degrees: ~6 mm.
+        // A footprint at the nearest camera distance (~1.17) at 96 px, 40 degrees: ~9 mm.
         let footprint = 1.17 / (48.0 / 20f64.to_radians().tan());
-        let mut err: Vec<f64> = out
-            .mesh
-            .positions()
-            .iter()
-            .map(|p| p.length() - radius)
-            .collect();
-        err.sort_by(f64::total_cmp);
+        let err = radial_errors(&out.mesh, radius, footprint, -1.0);
         let median = err[err.len() / 2];
         let (lo, hi) = (err[0], err[err.len() - 1]);
         assert!(
-            median.abs() < 0.5 * footprint && lo > -2.0 * footprint && hi < 0.5 * footprint,
-            "radial error median {median}, range {lo}..{hi}, footprint {footprint}"
+            median.abs() < 0.5 && lo > -2.0 && hi < 0.5,
+            "radial error median {median}, range {lo}..{hi} footprints"
+        );
+    }
+
+    /// Views of the sphere's front cap only (no silhouette carves its front): the margin's own
+    /// level set (`surface` = `margin`, the rule before `surface`) lies ~`margin` footprints in
+    /// front of the median depth; settled (`surface` 0, the default) the front vertices lie on
+    /// it within half a footprint.
+    #[test]
+    fn settled_vertices_lie_on_the_median_depth() {
+        let radius = 0.3;
+        let cams: Vec<_> = sphere_rig(DVec3::ZERO, 0.4, 80, (96, 96), 40.0)
+            .expect("rig")
+            .into_iter()
+            .filter(|c| c.position().normalize().z > 0.8)
+            .collect();
+        assert!(cams.len() >= 6, "{} views", cams.len());
+        let views = sphere_views(cams, radius);
+        let options = OpacityOptions {
+            colors: false,
+            ..OpacityOptions::default()
+        };
+        let g = sphere_gaussians(radius);
+        // A footprint at the front of the sphere (camera distance ~1.17 - 0.3).
+        let footprint = 0.87 / (48.0 / 20f64.to_radians().tan());
+        let margin = 3.0;
+        let mut medians = Vec::new();
+        for surface in [0.0, margin] {
+            let rules = DepthRules {
+                margin,
+                carve_views: 2,
+                sample_stride: 0,
+                surface,
+            };
+            let out = median_depth_mesh(&g, &views, rules, &options, None).expect("mesh");
+            let err = radial_errors(&out.mesh, radius, footprint, 0.9);
+            assert!(err.len() > 20, "{} front vertices", err.len());
+            medians.push(err[err.len() / 2]);
+        }
+        assert!(
+            medians[0].abs() < 0.5 && medians[1] > 1.5,
+            "front radial error, settled {} / margin's level set {} footprints",
+            medians[0],
+            medians[1]
         );
     }
 }

@@ -73,11 +73,13 @@ pub enum OpacityError {
     },
     /// The median-depth rules are out of range.
     #[error(
-        "median-depth rules: margin {margin} must be finite and >= 0, carve views {carve_views} in 1..=16"
+        "median-depth rules: margin {margin} must be finite and >= 0, surface {surface} in 0..=margin, carve views {carve_views} in 1..=16"
     )]
     BadDepthRules {
         /// The margin, pixel footprints.
         margin: f32,
+        /// Where the vertices go, pixel footprints in front of the median depth.
+        surface: f32,
         /// Views that must carve a point.
         carve_views: u16,
     },

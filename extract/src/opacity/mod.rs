@@ -41,8 +41,8 @@ use view::CertifyAt;
 use views::{HELD_BYTES, Views};
 
 pub use depth::{
-    BLEND_SPREAD, DEFAULT_CARVE_VIEWS, DEFAULT_MARGIN, DEFAULT_SAMPLE_STRIDE, DepthRules,
-    DepthView, MAX_CARVE_VIEWS,
+    BLEND_SPREAD, DEFAULT_CARVE_VIEWS, DEFAULT_MARGIN, DEFAULT_SAMPLE_STRIDE, DEFAULT_SURFACE,
+    DepthRules, DepthView, MAX_CARVE_VIEWS,
 };
 pub use error::OpacityError;
 pub use field::{AlphaRules, RayModel};
@@ -381,7 +381,8 @@ fn opacity_mesh_within(
 
 /// [`opacity_mesh`] with the median-depth field (module `depth`, docs/conventions.md §6):
 /// the same points, tetrahedralisation, marching and bisection, with each point's side read
-/// from the views' rendered median-depth maps; vertex colours from the rendered colours of the
+/// from the views' rendered median-depth maps, then the vertices of thick parts settled onto
+/// the median depth ([`DepthRules::surface`]); vertex colours from the rendered colours of the
 /// view whose median depth lies closest to the vertex. `options.rules` and `options.level` are
 /// not used (the level is `-rules.margin`).
 ///
@@ -444,6 +445,7 @@ pub fn median_depth_mesh(
                 .collect()
         },
     )?;
+    let vertices = maps.settle(&vertices, &vertex_normals(&vertices, &triangles));
     let clock = Instant::now();
     let (mut mesh, _) = keep_pieces(vertices, triangles, options.keep, &mut stats);
     if options.colors {
@@ -606,6 +608,23 @@ fn keep_pieces(
         .map(|t| t.map(|v| remap[v as usize]))
         .collect();
     (TriMesh::new(used, triangles), kept)
+}
+
+/// Area-weighted unit vertex normals of `triangles` (zero where they cancel or no triangle
+/// uses the vertex).
+fn vertex_normals(vertices: &[DVec3], triangles: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut normals = vec![DVec3::ZERO; vertices.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|v| vertices[v as usize]);
+        let n = (b - a).cross(c - a);
+        for &v in t {
+            normals[v as usize] += n;
+        }
+    }
+    for n in &mut normals {
+        *n = n.normalize_or_zero();
+    }
+    normals
 }
 
 /// `mesh` with `colors` clamped to [0, 1] as its vertex colours (alpha 1).

@@ -11,6 +11,7 @@
 //! - `report`: metrics ([`MetricOptions`]), outputs ([`OutputOptions`]) and [`Limits`];
 //! - `shard`: the part of the frames a run takes ([`ShardOptions`], [`Shard`]);
 //! - `topology`: per-frame meshes or one carried through the track ([`TopologyOptions`]);
+//! - `opacity`: the opacity method's field and pieces ([`OpacityMethodOptions`]);
 //! - `finish`: decimation and vertex colours of every mesh ([`FinishOptions`]).
 //!
 //! This module composes them ([`ExtractOptions`], [`ExtractConfig`], [`RunControl`]); the
@@ -23,6 +24,7 @@ mod arg;
 mod finish;
 mod input;
 mod method;
+mod opacity;
 mod points;
 mod report;
 mod shard;
@@ -35,6 +37,7 @@ pub use input::{
     DEFAULT_PER_TRIANGLE, GaussianLayout, Mode,
 };
 pub use method::Method;
+pub use opacity::{OpacityField, OpacityMethodOptions, OpacityPieces};
 pub use points::{
     ALPHA_STEPS_PER_DOUBLING, AlphaOptions, AlphaRule, DEFAULT_ALPHA_CEILING_SPACINGS,
     DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_PIECES, DEFAULT_ALPHA_SPACINGS,
@@ -115,6 +118,9 @@ pub struct ExtractOptions {
     /// The alpha method.
     #[cfg_attr(feature = "cli", command(flatten))]
     pub alpha: AlphaOptions,
+    /// The opacity method.
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub opacity: OpacityMethodOptions,
     /// Which Gaussians delaunay and alpha mesh.
     #[cfg_attr(feature = "cli", command(flatten))]
     pub visibility: VisibilityRule,
