@@ -1,30 +1,19 @@
-//! A compact morph basis for one run of frames of one topology: a few basis shapes (the run's
-//! morph targets) and per-frame weights that put every vertex of every frame within a
-//! tolerance of its true place, fitted in one pass over the frames.
+//! A run's morph basis as the file stores it, and its evaluation: basis vectors (the run's
+//! morph targets, `SHORT`, each scaled to ±32767) and per-frame `f32` weights, measured
+//! against every frame's true offsets. Module `pca` chooses the vectors.
 //!
-//! The fit is greedy and measures what is stored. Frame `k`'s offsets from the run's base (its
-//! first frame on the basis grid), in grid steps, are `d_k` (`f32`, 3 per vertex). Its weights
-//! are the least-squares coefficients of `d_k` on the basis vectors as stored (integers),
-//! solved in `f64` through a Cholesky factor of their Gram matrix (exact: integer products
+//! Frame `k`'s offsets from the run's base (its first frame on the basis grid), in grid steps,
+//! are `d_k` (`f32`, 3 per vertex). Its weights on the first `r` vectors are the least-squares
+//! coefficients of `d_k` on those vectors as stored (integers), solved in `f64` through the
+//! leading `r × r` block of a Cholesky factor of their Gram matrix (exact: integer products
 //! summed in `f64` stay below 2^53), then rounded to `f32`, as the file holds them. Its error
 //! is the largest distance of a vertex from its place, `max_v |d_k,v − Σ_i w_i b_i,v|`,
-//! evaluated in `f32` as a viewer evaluates morph targets. When it is over the tolerance, the
-//! frame's residual becomes a new basis vector (scaled to the `SHORT` range ±32767 and
-//! rounded) and the frame is evaluated again. A frame's weights are fixed when it passes;
-//! vectors added later get weight 0 for it, which leaves its evaluation unchanged. A new
-//! vector is the residual of a least-squares fit, so nearly orthogonal to the others: the Gram
-//! matrix stays well conditioned.
+//! evaluated in `f32` as a viewer evaluates morph targets.
 //!
-//! The fit gives up (the caller keeps one target per frame) when a run needs more vectors than
-//! allowed, when a frame still fails right after its own residual was added, or when a
-//! residual lies in the span of the basis (numerically).
-//!
-//! Cost: per frame one sweep over the basis for the dot products and one for the errors,
-//! `2 × 3V × r` multiply-adds for `V` vertices and `r` vectors. Frames are evaluated in blocks
-//! (one sweep serves the whole block; a block shrinks after it needed a vector and grows after
-//! it did not), chunks of vertices in parallel with rayon. Dot products accumulate in `f32`
-//! over a chunk of 1,536 coordinates and in `f64` across chunks, summed in chunk order, so the
-//! result does not depend on the number of threads.
+//! Frames are evaluated in blocks (one sweep over the basis serves the whole block), chunks of
+//! vertices in parallel with rayon. Dot products accumulate in `f32` over a chunk of 1,536
+//! coordinates and in `f64` across chunks, summed in chunk order; errors are a maximum over
+//! chunks: neither depends on the number of threads.
 
 use std::ops::Range;
 use std::path::Path;
@@ -36,16 +25,13 @@ use super::source::FrameSource;
 use crate::io::error::IoError;
 
 /// Coordinates per parallel chunk (512 vertices: a multiple of 3, so vertices stay whole).
-const CHUNK: usize = 3 * 512;
-
-/// The most frames evaluated in one sweep over the basis.
-const MAX_BLOCK: usize = 32;
+pub(super) const CHUNK: usize = 3 * 512;
 
 /// The largest |component| of a stored basis vector (`SHORT`).
 const VECTOR_RANGE: f32 = 32767.0;
 
-/// A residual whose part outside the span of the basis has less than this share of its
-/// squared length is not added: it would make the Gram matrix (numerically) singular.
+/// A vector whose part outside the span of the basis has less than this share of its squared
+/// length is not added: it would make the Gram matrix (numerically) singular.
 const MIN_PIVOT_SHARE: f64 = 1e-12;
 
 /// A run's fitted basis.
@@ -68,95 +54,20 @@ pub(super) struct BasisLimits {
     pub(super) max_vectors: usize,
 }
 
-/// The basis under construction: its vectors as `f32` (integer values) and the Cholesky
-/// factor of their Gram matrix.
+/// Basis vectors as stored (integers, 3 per vertex) and the Cholesky factor of their Gram
+/// matrix.
 #[derive(Default)]
-struct Basis {
-    vectors: Vec<Vec<f32>>,
+pub(super) struct Basis {
+    vectors: Vec<Vec<i16>>,
     /// Lower-triangular rows: row `i` holds `i + 1` entries.
     cholesky: Vec<Vec<f64>>,
 }
 
-/// Fits a basis to frames `run` of `frames`, whose base (the run's first frame) is `base` on
-/// `grid`; `None` when it does not meet `limits` (the caller keeps one target per frame).
+/// Frame `k`'s offsets from `base`, in steps of `grid`, 3 per vertex.
 ///
 /// # Errors
 /// The source's errors; a frame whose vertex count differs from the base's.
-pub(super) fn fit(
-    path: &Path,
-    frames: &dyn FrameSource,
-    run: Range<usize>,
-    grid: &Grid,
-    base: &[[i16; 3]],
-    limits: BasisLimits,
-) -> Result<Option<BasisFit>, IoError> {
-    let mut basis = Basis::default();
-    let mut weights: Vec<Vec<f32>> = Vec::with_capacity(run.len());
-    let mut errors = Vec::with_capacity(run.len());
-    let mut block_len = 1;
-    let mut next = run.start;
-    while next < run.end {
-        let end = (next + block_len).min(run.end);
-        let block = (next..end)
-            .map(|k| offsets(path, frames, k, grid, base))
-            .collect::<Result<Vec<_>, _>>()?;
-        let (mut from, mut grew, mut just_added) = (0, false, None);
-        while from < block.len() {
-            let evaluated = basis.evaluate(&block[from..]);
-            let failing = evaluated
-                .iter()
-                .position(|(_, error)| error.is_nan() || *error > limits.tolerance);
-            let passed = failing.unwrap_or(evaluated.len());
-            for (w, error) in &evaluated[..passed] {
-                weights.push(w.clone());
-                errors.push(*error);
-            }
-            let Some(j) = failing else { break };
-            let at = from + j;
-            if just_added == Some(at) || basis.vectors.len() >= limits.max_vectors {
-                return Ok(None);
-            }
-            let residual = basis.residual(&block[at], &evaluated[j].0);
-            if !basis.add(residual) {
-                return Ok(None);
-            }
-            (from, grew, just_added) = (at, true, Some(at));
-        }
-        next = end;
-        block_len = if grew {
-            (block_len / 2).max(1)
-        } else {
-            (block_len * 2).min(MAX_BLOCK)
-        };
-    }
-    let r = basis.vectors.len();
-    let vectors = basis
-        .vectors
-        .iter()
-        .map(|v| {
-            v.chunks_exact(3)
-                .map(|c| {
-                    #[expect(clippy::cast_possible_truncation, reason = "integers within ±32767")]
-                    let e = [c[0] as i16, c[1] as i16, c[2] as i16];
-                    e
-                })
-                .collect()
-        })
-        .collect();
-    let mut flat = Vec::with_capacity(r * weights.len());
-    for w in &weights {
-        flat.extend_from_slice(w);
-        flat.extend(std::iter::repeat_n(0.0f32, r - w.len()));
-    }
-    Ok(Some(BasisFit {
-        vectors,
-        weights: flat,
-        errors,
-    }))
-}
-
-/// Frame `k`'s offsets from `base`, in steps of `grid`, 3 per vertex.
-fn offsets(
+pub(super) fn offsets(
     path: &Path,
     frames: &dyn FrameSource,
     k: usize,
@@ -193,12 +104,12 @@ fn offsets(
 }
 
 /// The coordinates of chunk `c` of `m`.
-fn chunk(c: usize, m: usize) -> Range<usize> {
+pub(super) fn chunk(c: usize, m: usize) -> Range<usize> {
     c * CHUNK..((c + 1) * CHUNK).min(m)
 }
 
 /// `a · b`: eight `f32` lanes over the slice (a chunk), summed in `f64`.
-fn dot(a: &[f32], b: &[f32]) -> f64 {
+pub(super) fn dot(a: &[f32], b: &[f32]) -> f64 {
     let mut lanes = [0.0f32; 8];
     let (a8, b8) = (a.chunks_exact(8), b.chunks_exact(8));
     let (ra, rb) = (a8.remainder(), b8.remainder());
@@ -215,8 +126,18 @@ fn dot(a: &[f32], b: &[f32]) -> f64 {
     lanes.iter().map(|&x| f64::from(x)).sum::<f64>() + tail
 }
 
+/// `a · b` over whole vectors: [`dot`] per chunk, the chunks summed in order in `f64`.
+pub(super) fn chunked_dot(a: &[f32], b: &[f32]) -> f64 {
+    (0..a.len().div_ceil(CHUNK))
+        .map(|c| {
+            let range = chunk(c, a.len());
+            dot(&a[range.clone()], &b[range])
+        })
+        .sum()
+}
+
 /// The largest length of a vertex (3 coordinates) of `residual`.
-fn max_vertex_length(residual: &[f32]) -> f64 {
+pub(super) fn max_vertex_length(residual: &[f32]) -> f64 {
     residual
         .chunks_exact(3)
         .map(|v| {
@@ -234,63 +155,95 @@ fn subtract_scaled(out: &mut [f32], v: &[f32], w: f32) {
 }
 
 impl Basis {
-    /// Each of `frames`' weights (as stored, `f32`) and error (grid steps).
-    fn evaluate(&self, frames: &[Vec<f32>]) -> Vec<(Vec<f32>, f64)> {
-        let (r, n) = (self.vectors.len(), frames.len());
-        let Some(m) = frames.first().map(Vec::len) else {
+    /// The number of vectors.
+    pub(super) fn len(&self) -> usize {
+        self.vectors.len()
+    }
+
+    /// The first `r` vectors as stored: one `SHORT` VEC3 per vertex each.
+    pub(super) fn stored(&self, r: usize) -> Vec<Vec<[i16; 3]>> {
+        self.vectors[..r]
+            .iter()
+            .map(|v| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+            .collect()
+    }
+
+    /// Chunk `c` (of `m` coordinates) of the first `r` vectors, as `f32`, one after another.
+    fn chunk_f32(&self, c: usize, m: usize, r: usize, out: &mut Vec<f32>) {
+        out.clear();
+        let range = chunk(c, m);
+        for v in &self.vectors[..r] {
+            out.extend(v[range.clone()].iter().map(|&x| f32::from(x)));
+        }
+    }
+
+    /// Each frame of `block` dotted with every vector: `block.len() × len()`, frame-major.
+    pub(super) fn dots(&self, block: &[Vec<f32>]) -> Vec<f64> {
+        let (r, n) = (self.len(), block.len());
+        let Some(m) = block.first().map(Vec::len) else {
             return Vec::new();
         };
-        let chunks = m.div_ceil(CHUNK);
-        let weights: Vec<Vec<f32>> = if r == 0 {
-            vec![Vec::new(); n]
-        } else {
-            let partial: Vec<Vec<f64>> = (0..chunks)
-                .into_par_iter()
-                .map(|c| {
-                    let range = chunk(c, m);
-                    let mut out = vec![0.0; n * r];
-                    for (i, v) in self.vectors.iter().enumerate() {
-                        let v = &v[range.clone()];
-                        for (f, d) in frames.iter().enumerate() {
-                            out[f * r + i] = dot(v, &d[range.clone()]);
-                        }
+        let partial: Vec<Vec<f64>> = (0..m.div_ceil(CHUNK))
+            .into_par_iter()
+            .map_init(Vec::new, |scratch, c| {
+                self.chunk_f32(c, m, r, scratch);
+                let range = chunk(c, m);
+                let len = range.len();
+                let mut out = vec![0.0; n * r];
+                for i in 0..r {
+                    let v = &scratch[i * len..(i + 1) * len];
+                    for (f, d) in block.iter().enumerate() {
+                        out[f * r + i] = dot(v, &d[range.clone()]);
                     }
-                    out
-                })
-                .collect();
-            let mut sums = vec![0.0f64; n * r];
-            for p in &partial {
-                for (s, x) in sums.iter_mut().zip(p) {
-                    *s += x;
                 }
+                out
+            })
+            .collect();
+        let mut sums = vec![0.0f64; n * r];
+        for p in &partial {
+            for (s, x) in sums.iter_mut().zip(p) {
+                *s += x;
             }
-            sums.chunks_exact(r)
-                .map(|c| {
-                    self.solve(c)
-                        .into_iter()
-                        .map(|w| {
-                            #[expect(clippy::cast_possible_truncation, reason = "stored as f32")]
-                            let w = w as f32;
-                            w
-                        })
-                        .collect()
-                })
-                .collect()
+        }
+        sums
+    }
+
+    /// The stored (`f32`) least-squares weights on the first `r` vectors of a frame whose
+    /// dot products with every vector are `dots`.
+    pub(super) fn weights(&self, dots: &[f64], r: usize) -> Vec<f32> {
+        self.solve(&dots[..r])
+            .into_iter()
+            .map(|w| {
+                #[expect(clippy::cast_possible_truncation, reason = "stored as f32")]
+                let w = w as f32;
+                w
+            })
+            .collect()
+    }
+
+    /// Each frame of `block`'s error (grid steps) with `weights` (one list per frame, on the
+    /// first vectors), evaluated in `f32`.
+    pub(super) fn errors(&self, block: &[Vec<f32>], weights: &[Vec<f32>]) -> Vec<f64> {
+        let Some(m) = block.first().map(Vec::len) else {
+            return Vec::new();
         };
-        let per_chunk: Vec<Vec<f64>> = (0..chunks)
+        let r = weights.iter().map(Vec::len).max().unwrap_or(0);
+        let per_chunk: Vec<Vec<f64>> = (0..m.div_ceil(CHUNK))
             .into_par_iter()
             .map_init(
-                || vec![0.0f32; CHUNK],
-                |buffer, c| {
+                || (Vec::new(), vec![0.0f32; CHUNK]),
+                |(scratch, buffer), c| {
+                    self.chunk_f32(c, m, r, scratch);
                     let range = chunk(c, m);
-                    let buffer = &mut buffer[..range.len()];
-                    frames
+                    let len = range.len();
+                    let buffer = &mut buffer[..len];
+                    block
                         .iter()
-                        .zip(&weights)
+                        .zip(weights)
                         .map(|(d, w)| {
                             buffer.copy_from_slice(&d[range.clone()]);
-                            for (v, &wi) in self.vectors.iter().zip(w) {
-                                subtract_scaled(buffer, &v[range.clone()], wi);
+                            for (i, &wi) in w.iter().enumerate() {
+                                subtract_scaled(buffer, &scratch[i * len..(i + 1) * len], wi);
                             }
                             max_vertex_length(buffer)
                         })
@@ -298,43 +251,49 @@ impl Basis {
                 },
             )
             .collect();
-        weights
-            .into_iter()
-            .enumerate()
-            .map(|(f, w)| {
-                let error = per_chunk.iter().map(|e| e[f]).fold(0.0, f64::max);
-                (w, error)
-            })
+        (0..block.len())
+            .map(|f| per_chunk.iter().map(|e| e[f]).fold(0.0, f64::max))
             .collect()
     }
 
-    /// `d − Σ w_i v_i`, as [`Self::evaluate`] measures it.
-    fn residual(&self, d: &[f32], w: &[f32]) -> Vec<f32> {
+    /// `d − Σ w_i v_i` (on the first `w.len()` vectors), as [`Self::errors`] measures it.
+    pub(super) fn residual(&self, d: &[f32], w: &[f32]) -> Vec<f32> {
+        let m = d.len();
         let mut out = d.to_vec();
-        out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
-            let range = chunk(c, d.len());
-            for (v, &wi) in self.vectors.iter().zip(w) {
-                subtract_scaled(out, &v[range.clone()], wi);
-            }
-        });
+        out.par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each_init(Vec::new, |scratch, (c, out)| {
+                self.chunk_f32(c, m, w.len(), scratch);
+                let len = out.len();
+                for (i, &wi) in w.iter().enumerate() {
+                    subtract_scaled(out, &scratch[i * len..(i + 1) * len], wi);
+                }
+            });
         out
     }
 
-    /// Adds `residual`, scaled to the `SHORT` range and rounded; `false` (nothing added) when
-    /// it is zero or (numerically) in the span of the basis.
-    fn add(&mut self, residual: Vec<f32>) -> bool {
-        let largest = residual.iter().fold(0.0f32, |a, x| a.max(x.abs()));
+    /// Adds `vector` × `scale` (at most the scale that fills the `SHORT` range), rounded;
+    /// `false` (nothing added) when it is zero, not finite or (numerically) in the span of the
+    /// basis. A small scale keeps small integers (they compress well) where the vector's
+    /// rounding costs little.
+    pub(super) fn add(&mut self, vector: &[f32], scale: f32) -> bool {
+        let largest = vector.iter().fold(0.0f32, |a, x| a.max(x.abs()));
         if !(largest > 0.0 && largest.is_finite()) {
             return false;
         }
-        let scale = VECTOR_RANGE / largest;
-        let mut v = residual;
-        for x in &mut v {
-            *x = (*x * scale).round().clamp(-VECTOR_RANGE, VECTOR_RANGE);
-        }
+        let scale = if scale > 0.0 && scale.is_finite() {
+            scale.min(VECTOR_RANGE / largest)
+        } else {
+            VECTOR_RANGE / largest
+        };
+        #[expect(clippy::cast_possible_truncation, reason = "rounded within ±32767")]
+        let v: Vec<i16> = vector
+            .par_iter()
+            .map(|x| (x * scale).round().clamp(-VECTOR_RANGE, VECTOR_RANGE) as i16)
+            .collect();
         let m = v.len();
         // Exact integer dot products (|products| ≤ 2^30, sums below 2^53).
-        let exact = |a: &[f32], b: &[f32]| -> f64 {
+        let exact = |a: &[i16], b: &[i16]| -> f64 {
             (0..m.div_ceil(CHUNK))
                 .into_par_iter()
                 .map(|c| {
@@ -342,7 +301,7 @@ impl Basis {
                     a[range.clone()]
                         .iter()
                         .zip(&b[range])
-                        .map(|(x, y)| f64::from(*x) * f64::from(*y))
+                        .map(|(x, y)| f64::from(i32::from(*x) * i32::from(*y)))
                         .sum::<f64>()
                 })
                 .collect::<Vec<f64>>()
@@ -366,8 +325,8 @@ impl Basis {
         true
     }
 
-    /// The least-squares weights of dot products `c` (`B^T d`): `(B^T B)^{-1} c` through the
-    /// Cholesky factor.
+    /// The least-squares weights of dot products `c` (`B^T d`) on the first `c.len()` vectors:
+    /// `(B^T B)^{-1} c` through the leading block of the Cholesky factor.
     fn solve(&self, c: &[f64]) -> Vec<f64> {
         let r = c.len();
         let l = &self.cholesky;
@@ -389,24 +348,51 @@ impl Basis {
 mod tests {
     use super::*;
 
-    /// The normal equations solved through the factor reproduce a known combination.
+    /// The normal equations solved through the factor reproduce a known combination, on all
+    /// the vectors and on a leading subset.
     #[test]
-    fn solve_recovers_known_weights() {
+    fn weights_recover_a_known_combination() {
         let mut basis = Basis::default();
         let m = 3 * 700;
         let a: Vec<f32> = (0..m).map(|j| ((j * 7919) % 201) as f32 - 100.0).collect();
         let b: Vec<f32> = (0..m).map(|j| ((j * 104_729) % 97) as f32 - 48.0).collect();
-        assert!(basis.add(a.clone()));
-        assert!(basis.add(b.clone()));
-        assert!(!basis.add(a.clone()), "a dependent vector is refused");
-        let (va, vb) = (&basis.vectors[0], &basis.vectors[1]);
-        let d: Vec<f32> = va.iter().zip(vb).map(|(x, y)| 0.25 * x - 0.5 * y).collect();
-        let evaluated = basis.evaluate(&[d]);
-        let (w, error) = &evaluated[0];
+        assert!(basis.add(&a, f32::INFINITY));
+        assert!(basis.add(&b, 4.0));
+        assert!(
+            !basis.add(&a, f32::INFINITY),
+            "a dependent vector is refused"
+        );
+        assert!(!basis.add(&vec![0.0; m], 1.0), "a zero vector is refused");
+        let stored = basis.stored(2);
+        let flat = |i: usize| -> Vec<f32> {
+            stored[i]
+                .iter()
+                .flat_map(|v| v.map(f32::from))
+                .collect::<Vec<_>>()
+        };
+        let (va, vb) = (flat(0), flat(1));
+        assert_eq!(va.iter().fold(0.0f32, |a, x| a.max(x.abs())), 32767.0);
+        assert!(vb.iter().zip(&b).all(|(x, y)| *x == 4.0 * y), "scaled by 4");
+        let d: Vec<f32> = va
+            .iter()
+            .zip(&vb)
+            .map(|(x, y)| 0.25 * x - 0.5 * y)
+            .collect();
+        let block = [d.clone()];
+        let dots = basis.dots(&block);
+        let w = basis.weights(&dots, 2);
         assert!(
             (w[0] - 0.25).abs() < 1e-6 && (w[1] + 0.5).abs() < 1e-6,
             "{w:?}"
         );
-        assert!(*error < 1e-3, "{error}");
+        let error = basis.errors(&block, &[w])[0];
+        assert!(error < 1e-3, "{error}");
+        // On the first vector alone: the least-squares fit, and the residual it leaves.
+        let w1 = basis.weights(&dots, 1);
+        let expected = chunked_dot(&va, &d) / chunked_dot(&va, &va);
+        assert!((f64::from(w1[0]) - expected).abs() < 1e-6, "{w1:?}");
+        let residual: Vec<f32> = d.iter().zip(&va).map(|(x, v)| x - w1[0] * v).collect();
+        let error1 = basis.errors(&block, &[w1])[0];
+        assert!((error1 - max_vertex_length(&residual)).abs() < 1e-3);
     }
 }

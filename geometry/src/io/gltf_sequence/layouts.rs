@@ -10,10 +10,11 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 
-use super::basis::{BasisFit, BasisLimits, fit};
+use super::basis::{BasisFit, BasisLimits};
 use super::blocks::{byte_block, float_block, frame_name, short_block, unit_normals, vec3_block};
 use super::builder::{Builder, Document, Primitive};
 use super::options::{MorphBasis, SEQUENCE_NAME, SegmentSummary};
+use super::pca::fit;
 use super::quantize::{Grid, delta, normal_bytes, normal_delta_bytes};
 use super::source::FrameSource;
 use crate::io::error::IoError;

@@ -101,18 +101,20 @@
 //! run of three frames or more without normal targets is stored as a few basis shapes
 //! instead of one target per frame. Its base is its first frame on a grid twice as fine
 //! (60,000 steps per diagonal: the base is its only position data), its morph targets
-//! `basis_000`, ... are `SHORT` vectors each scaled to ±32767, and its STEP `weights` track
-//! gives each frame a weight per vector (`f32`). The vectors are fitted greedily in one pass
-//! over the run: a frame's weights are the least-squares fit of its offsets from the base on
-//! the vectors as stored, and when some vertex of it lies farther than the tolerance from its
-//! place (evaluated as stored, `f32` weights) its residual becomes a new vector. The
+//! `basis_000`, ... are `SHORT` vectors (each in 1/16 grid steps at its largest weight), and its
+//! STEP `weights` track gives each frame a weight per vector (`f32`). The vectors are the run's
+//! principal components (module `pca`: a sketch of every frame, its frames × frames Gram matrix
+//! and leading eigenvectors, the vectors built from the full frames, three streaming passes),
+//! truncated at the smallest of a few ranks whose every frame, weighted by least squares on the
+//! vectors as stored (`f32` weights), has every vertex within the tolerance; a frame still over
+//! it adds its residual as a vector. The
 //! tolerance is a fraction of the run's smallest frame diagonal ([`MorphBasis::tolerance`],
 //! default 8e-5, measured as stored, against the 1e-4 the glTF clients are checked with); a run whose basis
 //! would need more than [`MorphBasis::max_components`] vectors (default 128) or as many as
 //! it has frames after its first keeps one target per frame. Every run's basis size and
 //! measured largest error are returned by [`write_sequence_parts_summarised`]. On LAM's
-//! 973-frame track the greedy fit halves the alpha `.glb` but the TSDF run needs more than
-//! 128 vectors and keeps its targets (docs/benchmarks.md). `Quantize` lays the buffer out
+//! 973-frame track it makes the TSDF `.glb` 26.5 MB instead of 178.1 (110 vectors;
+//! docs/benchmarks.md). `Quantize` lays the buffer out
 //! in two passes, so it fits each basis twice; `None` keeps one `f32` target per frame.
 //!
 //! Validity: outputs of both layouts (`.glb` and `.gltf`, with and without normals, one and
@@ -135,8 +137,10 @@ mod blocks;
 mod builder;
 mod codec;
 mod container;
+mod eigen;
 mod layouts;
 mod options;
+mod pca;
 mod quantize;
 mod sink;
 mod source;
