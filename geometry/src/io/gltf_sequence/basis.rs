@@ -21,7 +21,7 @@ use std::path::Path;
 use rayon::prelude::*;
 
 use super::quantize::Grid;
-use super::source::FrameSource;
+use super::source::{FrameSource, surveyed_frame};
 use crate::io::error::IoError;
 
 /// Coordinates per parallel chunk (512 vertices: a multiple of 3, so vertices stay whole).
@@ -63,7 +63,8 @@ pub(super) struct Basis {
     cholesky: Vec<Vec<f64>>,
 }
 
-/// Frame `k`'s offsets from `base`, in steps of `grid`, 3 per vertex.
+/// Frame `k`'s offsets from `base`, in steps of `grid`, 3 per vertex, at every `stride`-th
+/// vertex (1: all).
 ///
 /// # Errors
 /// The source's errors; a frame whose vertex count differs from the base's.
@@ -73,25 +74,15 @@ pub(super) fn offsets(
     k: usize,
     grid: &Grid,
     base: &[[i16; 3]],
+    stride: usize,
 ) -> Result<Vec<f32>, IoError> {
-    let frame = frames.frame(k)?;
-    if frame.vertex_count() != base.len() {
-        return Err(IoError::malformed(
-            path,
-            format!("frame {k}"),
-            format!(
-                "has {} vertices, {} when the sequence was surveyed \
-                 (a frame changed while the sequence was written)",
-                frame.vertex_count(),
-                base.len()
-            ),
-        ));
-    }
+    let frame = surveyed_frame(path, frames, k, base.len())?;
     let (origin, step) = (grid.origin(), grid.step());
     Ok(frame
         .positions()
         .par_iter()
         .zip(base)
+        .step_by(stride)
         .flat_map_iter(|(p, q)| {
             let s = (*p - origin) / step;
             (0..3).map(move |c| {

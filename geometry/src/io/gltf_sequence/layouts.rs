@@ -16,7 +16,7 @@ use super::builder::{Builder, Document, Primitive};
 use super::options::{MorphBasis, SEQUENCE_NAME, SegmentSummary};
 use super::pca::fit;
 use super::quantize::{Grid, delta, normal_bytes, normal_delta_bytes};
-use super::source::FrameSource;
+use super::source::{FrameSource, surveyed_frame};
 use crate::io::error::IoError;
 use crate::io::gltf_codes::ARRAY_BUFFER;
 use crate::mesh::TriMesh;
@@ -61,21 +61,9 @@ fn morph_targets(
 ) -> Result<Vec<Value>, IoError> {
     let mut targets = Vec::with_capacity(run.len());
     for k in run {
-        let frame = frames.frame(k)?;
-        if frame.vertex_count() != base.vertex_count() {
-            // The survey saw the base's count: the file changed since (a compressed file is
-            // written in one pass, with no second reading to compare).
-            return Err(IoError::malformed(
-                path,
-                format!("frame {k}"),
-                format!(
-                    "has {} vertices, {} when the sequence was surveyed \
-                     (a frame changed while the sequence was written)",
-                    frame.vertex_count(),
-                    base.vertex_count()
-                ),
-            ));
-        }
+        // The survey saw the base's count: a compressed file is written in one pass, with no
+        // second reading to compare.
+        let frame = surveyed_frame(path, frames, k, base.vertex_count())?;
         let mut target = Map::new();
         let positions = match (grid, &primitive.steps) {
             (Some(grid), Some(base_steps)) => {

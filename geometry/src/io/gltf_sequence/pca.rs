@@ -75,7 +75,7 @@ pub(super) fn fit(
     let stride = base.len().div_ceil(SKETCH_VERTICES);
     let sketch = run
         .clone()
-        .map(|k| sketch_row(path, frames, k, grid, base, stride))
+        .map(|k| offsets(path, frames, k, grid, base, stride))
         .collect::<Result<Vec<_>, _>>()?;
     let gram = gram(&sketch);
     let pairs = leading(&gram, n, (limits.max_vectors + OVERSAMPLING).min(n));
@@ -105,45 +105,6 @@ pub(super) fn fit(
         weights: weights.concat(),
         errors,
     }))
-}
-
-/// Frame `k`'s offsets from `base` (grid steps) at every `stride`-th vertex, 3 per vertex.
-fn sketch_row(
-    path: &Path,
-    frames: &dyn FrameSource,
-    k: usize,
-    grid: &Grid,
-    base: &[[i16; 3]],
-    stride: usize,
-) -> Result<Vec<f32>, IoError> {
-    let frame = frames.frame(k)?;
-    if frame.vertex_count() != base.len() {
-        return Err(IoError::malformed(
-            path,
-            format!("frame {k}"),
-            format!(
-                "has {} vertices, {} when the sequence was surveyed \
-                 (a frame changed while the sequence was written)",
-                frame.vertex_count(),
-                base.len()
-            ),
-        ));
-    }
-    let (origin, step) = (grid.origin(), grid.step());
-    Ok(frame
-        .positions()
-        .iter()
-        .zip(base)
-        .step_by(stride)
-        .flat_map(|(p, q)| {
-            let s = (*p - origin) / step;
-            (0..3).map(move |c| {
-                #[expect(clippy::cast_possible_truncation, reason = "f32 offsets")]
-                let d = (s[c] - f64::from(q[c])) as f32;
-                d
-            })
-        })
-        .collect())
 }
 
 /// The frames × frames Gram matrix of the sketch (row-major, symmetric).
@@ -264,7 +225,7 @@ fn vectors(
     while next < run.end {
         let end = (next + BLOCK).min(run.end);
         let block = (next..end)
-            .map(|k| offsets(path, frames, k, grid, base))
+            .map(|k| offsets(path, frames, k, grid, base, 1))
             .collect::<Result<Vec<_>, _>>()?;
         let coefficients: Vec<Vec<f32>> = (0..r)
             .map(|i| {
@@ -348,7 +309,7 @@ fn check(
     while next < run.end && (whole.is_some() || !smaller.is_empty()) {
         let end = (next + BLOCK).min(run.end);
         let mut block = (next..end)
-            .map(|k| offsets(path, frames, k, grid, base))
+            .map(|k| offsets(path, frames, k, grid, base, 1))
             .collect::<Result<Vec<_>, _>>()?;
         let mut first = true;
         while !block.is_empty() {

@@ -22,6 +22,32 @@ pub trait FrameSource {
     fn frame(&self, k: usize) -> Result<Cow<'_, TriMesh>, IoError>;
 }
 
+/// Frame `k` of `frames`, which the survey saw with `vertices` vertices.
+///
+/// # Errors
+/// The source's errors; a frame whose vertex count is no longer `vertices` (the frame
+/// changed while the sequence was written), named by `path` and the frame.
+pub(super) fn surveyed_frame<'a>(
+    path: &Path,
+    frames: &'a dyn FrameSource,
+    k: usize,
+    vertices: usize,
+) -> Result<Cow<'a, TriMesh>, IoError> {
+    let frame = frames.frame(k)?;
+    if frame.vertex_count() != vertices {
+        return Err(IoError::malformed(
+            path,
+            format!("frame {k}"),
+            format!(
+                "has {} vertices, {vertices} when the sequence was surveyed \
+                 (a frame changed while the sequence was written)",
+                frame.vertex_count(),
+            ),
+        ));
+    }
+    Ok(frame)
+}
+
 impl FrameSource for &[TriMesh] {
     fn frame_count(&self) -> usize {
         self.len()
