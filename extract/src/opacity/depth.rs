@@ -564,37 +564,30 @@ mod tests {
     #[test]
     fn bad_maps_and_rules_are_refused() {
         let mut views = random_views(1);
-        assert!(matches!(
-            DepthViews::new(
-                &views,
-                DepthRules {
-                    margin: -1.0,
-                    ..DepthRules::default()
-                }
-            ),
-            Err(OpacityError::BadDepthRules { .. })
-        ));
-        assert!(matches!(
-            DepthViews::new(
-                &views,
-                DepthRules {
-                    carve_views: 0,
-                    ..DepthRules::default()
-                }
-            ),
-            Err(OpacityError::BadDepthRules { .. })
-        ));
-        assert!(matches!(
-            DepthViews::new(
-                &views,
-                DepthRules {
-                    margin: 1.0,
-                    surface: 2.0,
-                    ..DepthRules::default()
-                }
-            ),
-            Err(OpacityError::BadDepthRules { .. })
-        ));
+        let bad_rules = [
+            DepthRules {
+                margin: -1.0,
+                ..DepthRules::default()
+            },
+            DepthRules {
+                carve_views: 0,
+                ..DepthRules::default()
+            },
+            DepthRules {
+                margin: 1.0,
+                surface: 2.0,
+                ..DepthRules::default()
+            },
+        ];
+        for rules in bad_rules {
+            assert!(
+                matches!(
+                    DepthViews::new(&views, rules),
+                    Err(OpacityError::BadDepthRules { .. })
+                ),
+                "{rules:?}"
+            );
+        }
         views[2].depth[5] = f32::NAN;
         let err = DepthViews::new(&views, DepthRules::default())
             .err()
