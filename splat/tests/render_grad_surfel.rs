@@ -8,19 +8,20 @@
 //! pixel, plus `λ` times the summed depth distortion. The error of a parameter group is
 //! `max |analytic − fd| / max |fd|` over the group.
 
+mod grad_check;
+
 use glam::DVec3;
+use grad_check::{
+    GROUPS, Group, Loss, assert_within_bound, f32_against_f64, group_errors, max_abs_diff,
+};
 use trisplat_geometry::Camera;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::rng::Rng;
 use trisplat_splat::render::{
-    GaussianGrads, GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward,
-    render, render_with_grad,
+    GaussianParams, GradError, ImageGrads, RenderMode, RenderOptions, backward, render,
+    render_with_grad,
 };
 
-/// The issue's bound on the relative error of each parameter group.
-const MAX_REL_ERR: f64 = 1e-3;
-/// Central-difference step.
-const STEP: f64 = 1e-6;
 /// Weight of the distortion term in the test loss (the distortion is small: `m` lies in [0, 1)
 /// and varies little across a scene of depth ~1 at distance 3).
 const LAMBDA: f64 = 50.0;
@@ -32,106 +33,6 @@ fn surfel_options(frame: NormalFrame) -> RenderOptions {
         near: 0.2,
         background: [0.2, 0.5, 0.9],
         ..RenderOptions::default()
-    }
-}
-
-/// Seeded random per-pixel loss weights.
-struct Loss {
-    rgb: Vec<f64>,
-    alpha: Vec<f64>,
-    depth: Vec<f64>,
-    normal: Vec<f64>,
-    lambda: f64,
-}
-
-impl Loss {
-    fn new(pixels: usize, seed: u64, lambda: f64) -> Self {
-        let mut rng = Rng::new(seed);
-        let mut draw = |n: usize| (0..n).map(|_| rng.uniform_f64() - 0.5).collect::<Vec<_>>();
-        Self {
-            rgb: draw(3 * pixels),
-            alpha: draw(pixels),
-            depth: draw(pixels),
-            normal: draw(3 * pixels),
-            lambda,
-        }
-    }
-
-    fn value(&self, params: &GaussianParams, camera: &Camera, options: &RenderOptions) -> f64 {
-        let out = render_with_grad::<f64, _>(params, camera, options).unwrap();
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        dot(&out.rgb, &self.rgb)
-            + dot(&out.alpha, &self.alpha)
-            + dot(&out.depth, &self.depth)
-            + dot(&out.normal, &self.normal)
-            + self.lambda * out.distortion_total()
-    }
-
-    fn image_grads(&self) -> ImageGrads<'_, f64> {
-        ImageGrads {
-            rgb: Some(&self.rgb),
-            alpha: Some(&self.alpha),
-            depth: Some(&self.depth),
-            normal: Some(&self.normal),
-            distortion: self.lambda,
-        }
-    }
-
-    fn grads(
-        &self,
-        params: &GaussianParams,
-        camera: &Camera,
-        options: &RenderOptions,
-    ) -> GaussianGrads {
-        let fwd = render_with_grad::<f64, _>(params, camera, options).unwrap();
-        backward(params, camera, options, &fwd, &self.image_grads()).unwrap()
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Group {
-    Means,
-    LogScales,
-    Rotations,
-    Opacity,
-    Sh,
-}
-
-const GROUPS: [Group; 5] = [
-    Group::Means,
-    Group::LogScales,
-    Group::Rotations,
-    Group::Opacity,
-    Group::Sh,
-];
-
-fn slot(p: &mut GaussianParams, group: Group, i: usize, c: usize) -> &mut f64 {
-    let k = p.sh_per_gaussian();
-    match group {
-        Group::Means => &mut p.means[i][c],
-        Group::LogScales => &mut p.log_scales[i][c],
-        Group::Rotations => &mut p.rotations[i][c],
-        Group::Opacity => &mut p.opacity_logits[i],
-        Group::Sh => &mut p.sh[i * k + c],
-    }
-}
-
-fn analytic(g: &GaussianGrads, group: Group, i: usize, c: usize, k: usize) -> f64 {
-    match group {
-        Group::Means => g.means[i][c],
-        Group::LogScales => g.log_scales[i][c],
-        Group::Rotations => g.rotations[i][c],
-        Group::Opacity => g.opacity_logits[i],
-        Group::Sh => g.sh[i * k + c],
-    }
-}
-
-fn components(group: Group, k: usize) -> usize {
-    match group {
-        Group::Means | Group::LogScales => 3,
-        Group::Rotations => 4,
-        Group::Opacity => 1,
-        Group::Sh => k,
     }
 }
 
@@ -150,38 +51,8 @@ fn check(
         g.log_scales.iter().all(|s| s[2] == 0.0),
         "{label}: third log-scale"
     );
-    let k = params.sh_per_gaussian();
-    let mut overall = 0.0f64;
-    for &group in groups {
-        let mut worst = 0.0f64;
-        let mut scale = 0.0f64;
-        for &i in which {
-            for c in 0..components(group, k) {
-                let mut p = params.clone();
-                let x = *slot(&mut p, group, i, c);
-                *slot(&mut p, group, i, c) = x + STEP;
-                let up = loss.value(&p, camera, options);
-                *slot(&mut p, group, i, c) = x - STEP;
-                let down = loss.value(&p, camera, options);
-                let fd = (up - down) / (2.0 * STEP);
-                let a = analytic(&g, group, i, c, k);
-                assert!(a.is_finite(), "{label}: {group:?} {i} {c} not finite");
-                worst = worst.max((a - fd).abs());
-                scale = scale.max(fd.abs());
-            }
-        }
-        assert!(scale > 1e-6, "{label}: {group:?} gradients are all ~0");
-        let rel = worst / scale;
-        println!(
-            "{label}: {group:?} max |analytic - fd| / max |fd| = {rel:.2e} (scale {scale:.3e})"
-        );
-        assert!(
-            rel <= MAX_REL_ERR,
-            "{label}: {group:?} relative error {rel:.2e}"
-        );
-        overall = overall.max(rel);
-    }
-    overall
+    let errors = group_errors(params, camera, options, (which, groups), (loss, &g), label);
+    assert_within_bound(&errors, label)
 }
 
 fn camera() -> Camera {
@@ -238,7 +109,7 @@ fn random_scenes_camera_frame() {
     for seed in 0..3 {
         let p = random_scene(10, 3, 200 + seed);
         let all: Vec<usize> = (0..p.means.len()).collect();
-        let loss = Loss::new(pixels, seed, LAMBDA);
+        let loss = Loss::surfel(pixels, seed, LAMBDA);
         let label = format!("surfel random {seed} (camera normals)");
         let options = surfel_options(NormalFrame::Camera);
         check(&p, &camera, &options, (&all, &GROUPS), &loss, &label);
@@ -255,7 +126,7 @@ fn random_scene_world_frame_and_separate_terms() {
     let p = random_scene(10, 2, 300);
     let all: Vec<usize> = (0..p.means.len()).collect();
     let options = surfel_options(NormalFrame::World);
-    let full = Loss::new(pixels, 31, LAMBDA);
+    let full = Loss::surfel(pixels, 31, LAMBDA);
     check(
         &p,
         &camera,
@@ -315,7 +186,7 @@ fn degree3_fixture_scene_as_surfels() {
     .unwrap();
     let camera = &cams[0];
     let options = surfel_options(NormalFrame::Camera);
-    let loss = Loss::new((camera.width * camera.height) as usize, 5, LAMBDA);
+    let loss = Loss::surfel((camera.width * camera.height) as usize, 5, LAMBDA);
     // The scene: the 64 Gaussians (file rows, in file order) with the largest screen-space
     // gradient of the whole file's render, so that each finite difference renders 64, not 1000.
     let by_gradient = |p: &GaussianParams| {
@@ -369,16 +240,10 @@ fn f32_forward_matches_the_renderer_and_f64_backward() {
         };
         let plain = render(&set, camera, &options).unwrap().images;
         let fwd = render_with_grad::<f32, _>(&set, camera, &options).unwrap();
-        let max_diff = |a: &[f32], b: &[f32]| {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0f32, f32::max)
-        };
-        let rgb = max_diff(&fwd.rgb, plain.rgb.as_ref().unwrap());
-        let alpha = max_diff(&fwd.alpha, plain.alpha.as_ref().unwrap());
-        let depth = max_diff(&fwd.depth, plain.depth.as_ref().unwrap());
-        let normal = max_diff(&fwd.normal, plain.normal.as_ref().unwrap());
+        let rgb = max_abs_diff(&fwd.rgb, plain.rgb.as_ref().unwrap());
+        let alpha = max_abs_diff(&fwd.alpha, plain.alpha.as_ref().unwrap());
+        let depth = max_abs_diff(&fwd.depth, plain.depth.as_ref().unwrap());
+        let normal = max_abs_diff(&fwd.normal, plain.normal.as_ref().unwrap());
         println!(
             "{frame:?}: f32 grad forward vs render: rgb {rgb:.2e}, alpha {alpha:.2e}, depth \
              {depth:.2e}, normal {normal:.2e}"
@@ -386,16 +251,10 @@ fn f32_forward_matches_the_renderer_and_f64_backward() {
         assert!(rgb < 1e-4 && alpha < 1e-4 && normal < 1e-4 && depth < 1e-3);
 
         let pixels = (camera.width * camera.height) as usize;
-        let loss = Loss::new(pixels, 9, LAMBDA);
+        let loss = Loss::surfel(pixels, 9, LAMBDA);
         let p = GaussianParams::from_set(&set);
         let g64 = loss.grads(&p, camera, &options);
-        let w32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<_>>();
-        let (r, a, d, n) = (
-            w32(&loss.rgb),
-            w32(&loss.alpha),
-            w32(&loss.depth),
-            w32(&loss.normal),
-        );
+        let [r, a, d, n] = loss.weights_f32();
         let g32 = backward(
             &set,
             camera,
@@ -410,23 +269,7 @@ fn f32_forward_matches_the_renderer_and_f64_backward() {
             },
         )
         .unwrap();
-        let rel = |a: &[f64], b: &[f64]| {
-            let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-            let err = a
-                .iter()
-                .zip(b)
-                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-            err / scale
-        };
-        let flat3 = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
-        let flat4 = |v: &[[f64; 4]]| v.iter().flatten().copied().collect::<Vec<_>>();
-        let errs = [
-            rel(&flat3(&g32.means), &flat3(&g64.means)),
-            rel(&flat3(&g32.log_scales), &flat3(&g64.log_scales)),
-            rel(&flat4(&g32.rotations), &flat4(&g64.rotations)),
-            rel(&g32.opacity_logits, &g64.opacity_logits),
-            rel(&g32.sh, &g64.sh),
-        ];
+        let errs = f32_against_f64(&g32, &g64);
         println!("{frame:?}: f32 vs f64 backward, per group {errs:?}");
         assert!(errs.iter().all(|&e| e < 1e-3));
     }
@@ -437,14 +280,8 @@ fn surfel_gradients_do_not_depend_on_the_thread_count() {
     let camera = camera();
     let p = random_scene(40, 3, 77);
     let options = surfel_options(NormalFrame::Camera);
-    let loss = Loss::new((camera.width * camera.height) as usize, 3, LAMBDA);
-    let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| loss.grads(&p, &camera, &options))
-    };
+    let loss = Loss::surfel((camera.width * camera.height) as usize, 3, LAMBDA);
+    let run = |threads: usize| loss.grads_on(threads, &p, &camera, &options);
     assert_eq!(run(1), run(3));
 }
 
@@ -503,17 +340,11 @@ fn degenerate_surfels_get_finite_gradients() {
     );
     for frame in [NormalFrame::Camera, NormalFrame::World] {
         let options = surfel_options(frame);
-        let loss = Loss::new(pixels, 4, LAMBDA);
+        let loss = Loss::surfel(pixels, 4, LAMBDA);
         for g in [loss.grads(&p, &camera, &options), {
             let set_f32 = render_with_grad::<f32, _>(&p, &camera, &options).unwrap();
             assert!(set_f32.rgb.iter().all(|v| v.is_finite()));
-            let w = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<_>>();
-            let (r, a, d, n) = (
-                w(&loss.rgb),
-                w(&loss.alpha),
-                w(&loss.depth),
-                w(&loss.normal),
-            );
+            let [r, a, d, n] = loss.weights_f32();
             backward(
                 &p,
                 &camera,
