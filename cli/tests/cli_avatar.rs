@@ -5,12 +5,7 @@
 
 mod common;
 
-use common::{fixture, fresh_dir, one_error_line, run, run_ok, s};
-
-fn report(dir: &std::path::Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).expect("report"))
-        .expect("json")
-}
+use common::{fixture, fresh_dir, one_error_line, report, run, run_ok, s};
 
 #[test]
 fn avatar_folder_extracts_and_reports_its_layout() {

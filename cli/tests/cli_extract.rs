@@ -5,9 +5,9 @@
 
 mod common;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use common::{fixture, fresh_dir, one_error_line, run, run_ok, s};
+use common::{fixture, fresh_dir, one_error_line, report, run, run_ok, s};
 use trisplat_geometry::io::{read_mesh, write_mesh};
 
 fn figure() -> PathBuf {
@@ -26,25 +26,40 @@ const TINY: [&str; 8] = [
     "2000",
 ];
 
+/// `extract --template TEMPLATE --method M --frames F -o OUT`, then `extra` and the tiny settings.
+fn tiny_run<'a>(
+    template: &'a Path,
+    (method, frames): (&'a str, &'a str),
+    out: &'a Path,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec![
+        "extract",
+        "--template",
+        s(template),
+        "--method",
+        method,
+        "--frames",
+        frames,
+        "-o",
+        s(out),
+    ];
+    args.extend(extra);
+    args.extend(TINY);
+    args
+}
+
 #[test]
 fn tiny_case_writes_every_promised_output() {
     let dir = fresh_dir("tiny");
     let out = dir.join("out");
     let t = figure();
-    let mut args = vec![
-        "extract",
-        "--template",
-        s(&t),
-        "--method",
-        "tsdf,delaunay,alpha",
-        "--frames",
-        "0..2",
-        "--gt",
-        "template",
-        "-o",
-        s(&out),
-    ];
-    args.extend(TINY);
+    let args = tiny_run(
+        &t,
+        ("tsdf,delaunay,alpha", "0..2"),
+        &out,
+        &["--gt", "template"],
+    );
     let res = run_ok(&args);
     let stdout = String::from_utf8_lossy(&res.stdout);
     for m in ["tsdf", "delaunay", "alpha"] {
@@ -77,9 +92,7 @@ fn tiny_case_writes_every_promised_output() {
     }
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
     assert!(md.contains("| delaunay |"), "{md}");
-    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
-    assert!(!text.contains("NaN"));
-    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let r = report(&out);
     assert_eq!(r["frames"], serde_json::json!([0, 1]));
     assert_eq!(r["ground_truth"], "template");
     for m in ["tsdf", "delaunay", "alpha"] {
@@ -118,26 +131,10 @@ fn delaunay_against_its_own_template_is_self_consistency_tsdf_is_not() {
     let dir = fresh_dir("relation");
     let out = dir.join("out");
     let t = figure();
-    let mut args = vec![
-        "extract",
-        "--template",
-        s(&t),
-        "--method",
-        "tsdf,delaunay,alpha",
-        "--frames",
-        "0..2",
-        "--gt",
-        "template",
-        "--targets",
-        "report",
-        "-o",
-        s(&out),
-    ];
-    args.extend(TINY);
-    run_ok(&args);
+    let extra = ["--gt", "template", "--targets", "report"];
+    run_ok(&tiny_run(&t, ("tsdf,delaunay,alpha", "0..2"), &out, &extra));
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
-    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
-    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let r = report(&out);
     assert_eq!(r["tau_fraction"], 0.005);
     assert!(r["tau"].is_null());
     for (m, relation) in [
@@ -192,24 +189,9 @@ fn without_gt_no_metrics_and_rebuild_every_one() {
     let dir = fresh_dir("nogt");
     let out = dir.join("out");
     let t = figure();
-    let mut args = vec![
-        "extract",
-        "--template",
-        s(&t),
-        "--method",
-        "delaunay",
-        "--frames",
-        "0..=1",
-        "--rebuild-every",
-        "1",
-        "-o",
-        s(&out),
-    ];
-    args.extend(TINY);
-    run_ok(&args);
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("json"))
-            .expect("parse");
+    let extra = ["--rebuild-every", "1"];
+    run_ok(&tiny_run(&t, ("delaunay", "0..=1"), &out, &extra));
+    let r = report(&out);
     assert!(r["ground_truth"].is_null());
     assert!(r["methods"]["delaunay"]["frames"][0]["metrics"].is_null());
     assert!(r["methods"]["tsdf"].is_null(), "only the asked method");
@@ -403,8 +385,7 @@ fn cesium_in_mode(mode: &str, delaunay_max_rel: f64) -> serde_json::Value {
         "-o",
         s(&out),
     ]);
-    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
-    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let r = report(&out);
     assert_eq!(r["mode"], mode);
     assert_eq!(r["frames"], serde_json::json!([0, 1]));
     assert_eq!(r["template_vertices"], 3273);
@@ -482,27 +463,10 @@ fn hop_threshold_is_recorded_with_the_delaunay_statistics() {
     let dir = fresh_dir("hop");
     let out = dir.join("out");
     let t = figure();
-    let mut args = vec![
-        "extract",
-        "--template",
-        s(&t),
-        "--method",
-        "delaunay",
-        "--frames",
-        "0..3",
-        "--hop-threshold",
-        "0.1",
-        // The incremental Delaunay's statistics are per meshed frame.
-        "--topology",
-        "per-frame",
-        "-o",
-        s(&out),
-    ];
-    args.extend(TINY);
-    run_ok(&args);
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("json"))
-            .expect("parse");
+    // The incremental Delaunay's statistics are per meshed frame.
+    let extra = ["--hop-threshold", "0.1", "--topology", "per-frame"];
+    run_ok(&tiny_run(&t, ("delaunay", "0..3"), &out, &extra));
+    let r = report(&out);
     let d = &r["methods"]["delaunay"];
     assert_eq!(d["parameters"]["hop_threshold"], 0.1);
     assert_eq!(d["parameters"]["rebuild_every"], 0.0);
@@ -551,30 +515,15 @@ fn absolute_tau_replaces_the_relative_default() {
     let dir = fresh_dir("tau");
     let t = figure();
     let out = dir.join("abs");
-    let base = |out: &str| {
-        let mut a = vec![
-            "extract",
-            "--template",
-            s(&t),
-            "--method",
-            "delaunay",
-            "--frames",
-            "0",
-            "--gt",
-            "template",
-            "--targets",
-            "report",
-            "-o",
-        ];
-        a.push(out);
-        a.extend(TINY);
-        a.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    let base = |out: &Path| {
+        let extra = ["--gt", "template", "--targets", "report"];
+        let args = tiny_run(&t, ("delaunay", "0"), out, &extra);
+        args.into_iter().map(str::to_owned).collect::<Vec<_>>()
     };
-    let mut args = base(s(&out));
+    let mut args = base(&out);
     args.extend(["--tau".to_owned(), "0.02".to_owned()]);
     run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
-    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
-    let r: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let r = report(&out);
     assert_eq!(r["tau"], 0.02);
     assert!(r["tau_fraction"].is_null());
     let m = &r["methods"]["delaunay"]["frames"][0]["metrics"];
@@ -583,13 +532,13 @@ fn absolute_tau_replaces_the_relative_default() {
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
     assert!(md.contains("at tau 0.02 (absolute)"), "{md}");
     for bad in ["0", "-1", "nan"] {
-        let mut args = base(s(&dir.join("bad")));
+        let mut args = base(&dir.join("bad"));
         args.push(format!("--tau-fraction={bad}"));
         let res = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
         let line = one_error_line(&res);
         assert!(line.contains("--tau-fraction"), "{line}");
     }
-    let mut args = base(s(&dir.join("both")));
+    let mut args = base(&dir.join("both"));
     args.extend(["--tau", "0.02", "--tau-fraction", "0.01"].map(str::to_owned));
     let res = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(res.status.code(), Some(2));
@@ -628,9 +577,7 @@ fn weights_channels_that_drive_nothing_are_listed_or_refused() {
     let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("tongueOut")).collect();
     assert_eq!(warnings.len(), 1, "{stderr}");
     assert!(warnings[0].starts_with("warning: ") && warnings[0].contains("--strict"));
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("json"))
-            .expect("parse");
+    let r = report(&out);
     assert_eq!(r["unused_channels"], serde_json::json!(["tongueOut"]));
     let md = std::fs::read_to_string(out.join("report.md")).expect("md");
     assert!(

@@ -7,7 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{fresh_dir, one_error_line, run, run_ok, s};
+use common::{fresh_dir, one_error_line, report, run, run_ok, s};
 use trisplat_geometry::TriMesh;
 use trisplat_geometry::io::{WriteOptions, read_mesh, write_mesh};
 use trisplat_splat::glam::DVec3;
@@ -54,11 +54,6 @@ fn extract_args<'a>(template: &'a Path, frames: &'a Path, out: &'a Path) -> Vec<
         "-o",
         s(out),
     ]
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
-        .expect("json")
 }
 
 /// Every output file's bytes except the journal, reports and plot (they hold timings).

@@ -69,3 +69,10 @@ pub fn one_error_line(out: &Output) -> String {
     assert!(stderr.starts_with("error: "), "{stderr}");
     stderr
 }
+
+/// The `report.json` an `extract` run wrote into `out`; asserts it holds no NaN.
+pub fn report(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    assert!(!text.contains("NaN"), "{text}");
+    serde_json::from_str(&text).expect("report.json parses")
+}
