@@ -10,7 +10,8 @@ mod grad_check;
 
 use glam::DVec3;
 use grad_check::{
-    GROUPS, Group, Loss, assert_within_bound, f32_against_f64, group_errors, max_abs_diff,
+    GROUPS, Group, Loss, assert_within_bound, by_screen_gradient, f32_against_f64, fixture_scene,
+    group_errors, max_abs_diff,
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::rng::Rng;
@@ -109,22 +110,14 @@ fn random_scene_antialiased_and_original_rules() {
 
 #[test]
 fn degree3_fixture_scene() {
-    let set =
-        trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
-            .unwrap();
-    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
-        "render/random_cameras.json",
-    ))
-    .unwrap();
+    let (set, cams) = fixture_scene();
     let p = GaussianParams::from_set(&set);
     let camera = &cams[0];
     let options = RenderOptions::default();
     // The 24 visible Gaussians with the largest screen-space gradient.
     let loss = Loss::new(camera.width as usize * camera.height as usize, 5);
     let g = loss.grads(&p, camera, &options);
-    let mut order: Vec<usize> = (0..p.means.len()).collect();
-    let norm = |i: usize| g.means2d[i][0].hypot(g.means2d[i][1]);
-    order.sort_by(|&a, &b| norm(b).total_cmp(&norm(a)));
+    let mut order = by_screen_gradient(&g);
     order.truncate(24);
     assert_within_bound(
         &check(&p, camera, &options, &order, 5, "random_deg3.ply"),
@@ -134,13 +127,7 @@ fn degree3_fixture_scene() {
 
 #[test]
 fn f32_forward_matches_the_renderer_and_f64_backward() {
-    let set =
-        trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
-            .unwrap();
-    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
-        "render/random_cameras.json",
-    ))
-    .unwrap();
+    let (set, cams) = fixture_scene();
     for camera in &cams {
         let options = RenderOptions::default();
         let plain = render(&set, camera, &options).unwrap().images;

@@ -12,7 +12,8 @@ mod grad_check;
 
 use glam::DVec3;
 use grad_check::{
-    GROUPS, Group, Loss, assert_within_bound, f32_against_f64, group_errors, max_abs_diff,
+    GROUPS, Group, Loss, assert_within_bound, by_screen_gradient, f32_against_f64, fixture_scene,
+    group_errors, max_abs_diff,
 };
 use trisplat_geometry::Camera;
 use trisplat_geometry::mesh_render::NormalFrame;
@@ -177,25 +178,13 @@ fn random_scene_world_frame_and_separate_terms() {
 
 #[test]
 fn degree3_fixture_scene_as_surfels() {
-    let set =
-        trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
-            .unwrap();
-    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
-        "render/random_cameras.json",
-    ))
-    .unwrap();
+    let (set, cams) = fixture_scene();
     let camera = &cams[0];
     let options = surfel_options(NormalFrame::Camera);
     let loss = Loss::surfel((camera.width * camera.height) as usize, 5, LAMBDA);
     // The scene: the 64 Gaussians (file rows, in file order) with the largest screen-space
     // gradient of the whole file's render, so that each finite difference renders 64, not 1000.
-    let by_gradient = |p: &GaussianParams| {
-        let g = loss.grads(p, camera, &options);
-        let mut order: Vec<usize> = (0..p.means.len()).collect();
-        let norm = |i: usize| g.means2d[i][0].hypot(g.means2d[i][1]);
-        order.sort_by(|&a, &b| norm(b).total_cmp(&norm(a)));
-        order
-    };
+    let by_gradient = |p: &GaussianParams| by_screen_gradient(&loss.grads(p, camera, &options));
     let mut rows = by_gradient(&GaussianParams::from_set(&set));
     rows.truncate(64);
     rows.sort_unstable();
@@ -225,13 +214,7 @@ fn degree3_fixture_scene_as_surfels() {
 
 #[test]
 fn f32_forward_matches_the_renderer_and_f64_backward() {
-    let set =
-        trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
-            .unwrap();
-    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
-        "render/random_cameras.json",
-    ))
-    .unwrap();
+    let (set, cams) = fixture_scene();
     for frame in [NormalFrame::Camera, NormalFrame::World] {
         let camera = &cams[0];
         let options = RenderOptions {

@@ -9,6 +9,7 @@
 
 use trisplat_geometry::Camera;
 use trisplat_geometry::rng::Rng;
+use trisplat_splat::GaussianSet;
 use trisplat_splat::render::{
     GaussianGrads, GaussianParams, ImageGrads, RenderOptions, backward, render_with_grad,
 };
@@ -245,4 +246,24 @@ pub fn f32_against_f64(g32: &GaussianGrads, g64: &GaussianGrads) -> [f64; 5] {
         rel(&g32.opacity_logits, &g64.opacity_logits),
         rel(&g32.sh, &g64.sh),
     ]
+}
+
+/// The degree-3 fixture scene `render/random_deg3.ply` and its cameras.
+pub fn fixture_scene() -> (GaussianSet, Vec<Camera>) {
+    let set =
+        trisplat_splat::ply::read_gaussians(&trisplat_fixtures::path("render/random_deg3.ply"))
+            .unwrap();
+    let cams = trisplat_geometry::read_cameras_json(&trisplat_fixtures::path(
+        "render/random_cameras.json",
+    ))
+    .unwrap();
+    (set, cams)
+}
+
+/// Gaussian indices by their screen-space gradient in `g`, largest first.
+pub fn by_screen_gradient(g: &GaussianGrads) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..g.means2d.len()).collect();
+    let norm = |i: usize| g.means2d[i][0].hypot(g.means2d[i][1]);
+    order.sort_by(|&a, &b| norm(b).total_cmp(&norm(a)));
+    order
 }
