@@ -6,6 +6,9 @@
 //! least 5 from the border) and its mean with the mean of our map over the same pixels; the
 //! zero-padded mean over the whole image is compared with the script's scipy evaluation.
 
+mod reference_json;
+
+use reference_json::floats;
 use serde_json::Value;
 use trisplat_splat::fit::loss::{Ssim, l1};
 
@@ -13,14 +16,6 @@ use trisplat_splat::fit::loss::{Ssim, l1};
 const MAX_ABS_ERR_F64: f64 = 1e-12;
 /// The f32 images (the production path) against the f64 reference.
 const MAX_ABS_ERR_F32: f64 = 1e-5;
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
 
 #[test]
 fn l1_and_ssim_match_scikit_image() {

@@ -5,6 +5,9 @@
 //! quaternion and the mean; and (fixture `relight/split_sum_env_torch.json`) the gradient of the
 //! same loss with respect to every texel of the map, through its preparation.
 
+mod reference_json;
+
+use reference_json::floats;
 use serde_json::Value;
 use trisplat_geometry::envmap::EnvMap;
 use trisplat_geometry::glam::DVec3;
@@ -20,14 +23,6 @@ const FORWARD_TOL: f64 = 1e-4;
 /// The backward: every gradient within 1e-4 of torch's, relative to `max(1, |g|)` (f32 lookups
 /// and interpolation weights; observed 1.4e-6).
 const BACKWARD_TOL: f64 = 1e-4;
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .expect("array")
-        .iter()
-        .map(|x| x.as_f64().expect("number"))
-        .collect()
-}
 
 fn f32s<const N: usize>(v: &Value) -> [f32; N] {
     let a = floats(v);

@@ -8,6 +8,9 @@
 
 use std::path::Path;
 
+mod reference_json;
+
+use reference_json::{floats, max_rel, rows};
 use serde_json::Value;
 use trisplat_geometry::read_cameras_json;
 use trisplat_splat::render::{
@@ -31,32 +34,6 @@ fn weights(pixels: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         .map(|i| 0.2 * (0.05 * i as f64 + 1.0).sin())
         .collect();
     (rgb, alpha, depth)
-}
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
-
-fn rows<const N: usize>(v: &Value) -> Vec<[f64; N]> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|r| floats(r).try_into().unwrap())
-        .collect()
-}
-
-fn rel(ours: &[f64], reference: &[f64]) -> f64 {
-    assert_eq!(ours.len(), reference.len());
-    let scale = reference.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let err = ours
-        .iter()
-        .zip(reference)
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-    if scale > 0.0 { err / scale } else { err }
 }
 
 fn run<F: Real>(
@@ -116,23 +93,26 @@ fn compare(case: &str) {
         let gr = &doc["grads"];
         let im = &doc["images"];
         [
-            ("rgb", rel(&fwd_images[0], &floats(&im["rgb"]))),
-            ("alpha", rel(&fwd_images[1], &floats(&im["alpha"]))),
-            ("depth", rel(&fwd_images[2], &floats(&im["depth"]))),
-            ("d/d means", rel(&flat3(&g.means), &floats(&gr["means"]))),
+            ("rgb", max_rel(&fwd_images[0], &floats(&im["rgb"]))),
+            ("alpha", max_rel(&fwd_images[1], &floats(&im["alpha"]))),
+            ("depth", max_rel(&fwd_images[2], &floats(&im["depth"]))),
+            (
+                "d/d means",
+                max_rel(&flat3(&g.means), &floats(&gr["means"])),
+            ),
             (
                 "d/d log-scales",
-                rel(&flat3(&g.log_scales), &floats(&gr["log_scales"])),
+                max_rel(&flat3(&g.log_scales), &floats(&gr["log_scales"])),
             ),
             (
                 "d/d quaternions",
-                rel(&flat4(&g.rotations), &floats(&gr["rotations"])),
+                max_rel(&flat4(&g.rotations), &floats(&gr["rotations"])),
             ),
             (
                 "d/d opacity logits",
-                rel(&g.opacity_logits, &floats(&gr["opacity_logits"])),
+                max_rel(&g.opacity_logits, &floats(&gr["opacity_logits"])),
             ),
-            ("d/d SH", rel(&g.sh, &floats(&gr["sh"]))),
+            ("d/d SH", max_rel(&g.sh, &floats(&gr["sh"]))),
         ]
     };
     let (f64_fwd, g64) = run::<f64>(&params, camera, &options);

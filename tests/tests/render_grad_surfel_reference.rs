@@ -9,6 +9,9 @@
 //! (below) plus the script's `distortion_weight` times the summed distortion. Errors per
 //! quantity are `max |ours − torch| / max |torch|` over its values.
 
+mod reference_json;
+
+use reference_json::{floats, max_rel, rows};
 use serde_json::Value;
 use trisplat_geometry::mesh_render::NormalFrame;
 use trisplat_geometry::read_cameras_json;
@@ -45,32 +48,6 @@ fn weights(pixels: usize) -> Weights {
             .collect(),
         normal: per_channel(|i, c| 0.3 * (0.07 * i + 0.5 * c).cos()),
     }
-}
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
-
-fn rows<const N: usize>(v: &Value) -> Vec<[f64; N]> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|r| floats(r).try_into().unwrap())
-        .collect()
-}
-
-fn rel(ours: &[f64], reference: &[f64]) -> f64 {
-    assert_eq!(ours.len(), reference.len());
-    let scale = reference.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let err = ours
-        .iter()
-        .zip(reference)
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-    if scale > 0.0 { err / scale } else { err }
 }
 
 fn run<F: Real>(
@@ -143,25 +120,31 @@ fn compare(case: &str) {
         let gr = &doc["grads"];
         let im = &doc["images"];
         [
-            ("rgb", rel(&images[0], &floats(&im["rgb"]))),
-            ("alpha", rel(&images[1], &floats(&im["alpha"]))),
-            ("depth", rel(&images[2], &floats(&im["depth"]))),
-            ("normal", rel(&images[3], &floats(&im["normal"]))),
-            ("distortion", rel(&images[4], &floats(&im["distortion"]))),
-            ("d/d means", rel(&flat3(&g.means), &floats(&gr["means"]))),
+            ("rgb", max_rel(&images[0], &floats(&im["rgb"]))),
+            ("alpha", max_rel(&images[1], &floats(&im["alpha"]))),
+            ("depth", max_rel(&images[2], &floats(&im["depth"]))),
+            ("normal", max_rel(&images[3], &floats(&im["normal"]))),
+            (
+                "distortion",
+                max_rel(&images[4], &floats(&im["distortion"])),
+            ),
+            (
+                "d/d means",
+                max_rel(&flat3(&g.means), &floats(&gr["means"])),
+            ),
             (
                 "d/d log-scales",
-                rel(&flat3(&g.log_scales), &floats(&gr["log_scales"])),
+                max_rel(&flat3(&g.log_scales), &floats(&gr["log_scales"])),
             ),
             (
                 "d/d quaternions",
-                rel(&flat4(&g.rotations), &floats(&gr["rotations"])),
+                max_rel(&flat4(&g.rotations), &floats(&gr["rotations"])),
             ),
             (
                 "d/d opacity logits",
-                rel(&g.opacity_logits, &floats(&gr["opacity_logits"])),
+                max_rel(&g.opacity_logits, &floats(&gr["opacity_logits"])),
             ),
-            ("d/d SH", rel(&g.sh, &floats(&gr["sh"]))),
+            ("d/d SH", max_rel(&g.sh, &floats(&gr["sh"]))),
         ]
     };
     let (f64_fwd, g64) = run::<f64>(&params, camera, &options, lambda);
