@@ -195,6 +195,23 @@ fn depth_at(m: &Maps, focal: f64, u: f64, w: f64) -> f64 {
     (d[0] * (1.0 - a) + d[1] * a) * (1.0 - b) + (d[2] * (1.0 - a) + d[3] * a) * b
 }
 
+/// Where world point `p` falls in `m`: its camera z, `m`'s median depth there ([`depth_at`]; 0
+/// uncovered) and the pixel's index; `None` behind the camera or outside the image.
+fn seen_in(m: &Maps, p: DVec3) -> Option<(f64, f64, usize)> {
+    let cam = &m.camera;
+    let q = cam.world_to_camera(p);
+    if q.z <= 1e-9 {
+        return None;
+    }
+    let uv = cam.project(q);
+    let inside =
+        uv.x >= 0.0 && uv.y >= 0.0 && uv.x < f64::from(cam.width) && uv.y < f64::from(cam.height);
+    inside.then(|| {
+        let pixel = (uv.y as usize) * cam.width as usize + uv.x as usize;
+        (q.z, depth_at(m, 0.5 * (cam.fx + cam.fy), uv.x, uv.y), pixel)
+    })
+}
+
 /// Per region (and all): the pair differences and per-pixel worst conflicts.
 #[derive(Default)]
 struct Tally {
@@ -244,31 +261,19 @@ fn mutual(maps: &[Maps]) -> (Vec<Tally>, Vec<Conflict>) {
                     if b == a {
                         continue;
                     }
-                    let cb = &mb.camera;
-                    let q = cb.world_to_camera(p);
-                    if q.z <= 1e-9 {
+                    let Some((z, db, y)) = seen_in(mb, p) else {
                         continue;
-                    }
-                    let uv = cb.project(q);
-                    if !(uv.x >= 0.0
-                        && uv.y >= 0.0
-                        && uv.x < f64::from(cb.width)
-                        && uv.y < f64::from(cb.height))
-                    {
-                        continue;
-                    }
+                    };
                     t.in_image += 1;
-                    let db = depth_at(mb, 0.5 * (cb.fx + cb.fy), uv.x, uv.y);
                     if db <= 0.0 {
                         t.silhouette += 1;
                         off = true;
                         continue;
                     }
-                    let s = q.z - db;
+                    let s = z - db;
                     t.signed.push(s);
                     worst = worst.max(-s);
                     if -s > MATCH_THRESHOLDS[0] {
-                        let y = (uv.y as usize) * cb.width as usize + uv.x as usize;
                         conflicts.push(Conflict {
                             x: (a * w * h + k) as u32,
                             y: (b * w * h + y) as u32,
@@ -350,24 +355,13 @@ fn conflict_pictures(maps: &[Maps], count: usize, dir: &Path) -> anyhow::Result<
                 cam.camera_to_world(cam.unproject((k % w) as f64 + 0.5, (k / w) as f64 + 0.5) * d);
             let (mut worst, mut off) = (0.0f64, false);
             for (b, mb) in maps.iter().enumerate() {
-                let cb = &mb.camera;
-                let q = cb.world_to_camera(p);
-                if b == a || q.z <= 1e-9 {
+                let Some((z, db, _)) = seen_in(mb, p).filter(|_| b != a) else {
                     continue;
-                }
-                let uv = cb.project(q);
-                if !(uv.x >= 0.0
-                    && uv.y >= 0.0
-                    && uv.x < f64::from(cb.width)
-                    && uv.y < f64::from(cb.height))
-                {
-                    continue;
-                }
-                let db = depth_at(mb, 0.5 * (cb.fx + cb.fy), uv.x, uv.y);
+                };
                 if db <= 0.0 {
                     off = true;
                 } else {
-                    worst = worst.max(db - q.z);
+                    worst = worst.max(db - z);
                 }
             }
             let px = if off {
