@@ -12,6 +12,7 @@ mod brdf;
 mod deform;
 mod delaunay;
 mod eval;
+mod floor;
 mod harness;
 mod render;
 mod scene;
@@ -53,6 +54,9 @@ enum Bench {
     Alpha(alpha::AlphaBenchArgs),
     /// Chamfer/F-score metrics 1M <-> 1M vs scipy cKDTree, surface distances vs trimesh.
     Eval(eval::EvalBenchArgs),
+    /// How well any single surface can score under render consistency: the held-out views'
+    /// mutual consistency and oracle surfaces built from them (issue #34).
+    OpacityFloor(floor::FloorArgs),
     /// 3DGS CPU rendering of a 75k-Gaussian avatar at 512x512 (1 and 2 threads, stage split).
     Render(render::RenderBenchArgs),
     /// A static scene of flat Gaussians bound densely to a scanned mesh (opacity-mesh at scale).
@@ -76,6 +80,7 @@ fn main() -> anyhow::Result<()> {
         Bench::Delaunay(a) => delaunay::run(&a),
         Bench::Alpha(a) => alpha::run(&a, python),
         Bench::Eval(a) => eval::run(&a, python),
+        Bench::OpacityFloor(a) => floor::run(&a),
         Bench::Render(a) => render::run(&a),
         Bench::GaussianScene(a) => scene::run(&a),
         Bench::Score(a) => score::run(&a),
