@@ -40,17 +40,22 @@ def read_points(path):
     return pts, nrm
 
 
-def read_points_plyfile(path):
-    """The vertex element's x y z (and nx ny nz) of a PLY, for machines without Open3D."""
-    from plyfile import PlyData
-
-    v = PlyData.read(path)["vertex"].data
+def positions_and_normals(v):
+    """x y z (and nx ny nz, or None) of a structured vertex array, as float64."""
     names = v.dtype.names
     pts = np.stack([v[c] for c in ("x", "y", "z")], axis=1).astype(np.float64)
     nrm = None
     if all(c in names for c in ("nx", "ny", "nz")):
         nrm = np.stack([v[c] for c in ("nx", "ny", "nz")], axis=1).astype(np.float64)
     return pts, nrm
+
+
+def read_points_plyfile(path):
+    """The vertex element's x y z (and nx ny nz) of a PLY, for machines without Open3D."""
+    from plyfile import PlyData
+
+    v = PlyData.read(path)["vertex"].data
+    return positions_and_normals(v)
 
 
 PLY_TYPES = {
@@ -76,6 +81,8 @@ def read_points_numpy(path):
         words = line.split()
         if words[:2] == ["element", "vertex"]:
             count, in_vertex = int(words[2]), True
+        elif words[:1] == ["element"] and not fields and count == 0 and int(words[2]) > 0:
+            sys.exit(f"{path}: the numpy reader needs the vertex element first")
         elif words[:1] == ["element"]:
             in_vertex = False
         elif in_vertex and words[:1] == ["property"]:
@@ -83,12 +90,7 @@ def read_points_numpy(path):
                 sys.exit(f"{path}: the numpy reader reads scalar vertex properties only")
             fields.append((words[2], order + PLY_TYPES[words[1]]))
     v = np.frombuffer(data, dtype=np.dtype(fields), count=count, offset=end)
-    names = v.dtype.names
-    pts = np.stack([v[c] for c in ("x", "y", "z")], axis=1).astype(np.float64)
-    nrm = None
-    if all(c in names for c in ("nx", "ny", "nz")):
-        nrm = np.stack([v[c] for c in ("nx", "ny", "nz")], axis=1).astype(np.float64)
-    return pts, nrm
+    return positions_and_normals(v)
 
 
 def unit(v):
