@@ -110,25 +110,19 @@ pub fn read_plain_points(path: &Path, bytes: &[u8]) -> Result<Option<PointCloud>
     };
     let (positions, normals) =
         rayon::join(|| column(layout.position), || layout.normal.map(column));
-    let bad = |i: usize, what: &str, p: Vec3| {
-        IoError::malformed(
-            path,
-            format!("vertex {i}"),
-            format!(
-                "non-finite {what} ({}, {}, {})",
-                f64::from(p.x),
-                f64::from(p.y),
-                f64::from(p.z)
-            ),
-        )
+    // The general reader's messages: coordinates widened to f64, normals as f32.
+    let bad = |i: usize, what: String| {
+        IoError::malformed(path, format!("vertex {i}"), format!("non-finite {what}"))
     };
     if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
-        return Err(bad(i, "coordinate", positions[i]));
+        let p = positions[i].as_dvec3();
+        return Err(bad(i, format!("coordinate ({}, {}, {})", p.x, p.y, p.z)));
     }
     if let Some(n) = &normals
         && let Some(i) = n.iter().position(|p| !p.is_finite())
     {
-        return Err(bad(i, "normal", n[i]));
+        let p = n[i];
+        return Err(bad(i, format!("normal ({}, {}, {})", p.x, p.y, p.z)));
     }
     let cloud = PointCloud::new_unchecked(positions);
     Ok(Some(match normals {
