@@ -25,7 +25,7 @@ use rayon::prelude::*;
 /// Most points in a leaf.
 pub(crate) const LEAF: usize = 16;
 const _: () = assert!(
-    LEAF % 4 == 0,
+    LEAF.is_multiple_of(4),
     "leaf scans take the minimum four lanes at a time"
 );
 
