@@ -511,10 +511,16 @@ fn point_sums(
         } else {
             None
         };
+        // Each neighbour's normal, gathered first in a loop of loads alone: the neighbours lie
+        // anywhere in `to`'s normals, and inside the sums' loop (a normalisation and an `acos`
+        // per item) those cache misses were taken one at a time (18% of `eval`'s CPU time on
+        // 1M <-> 1M points). The sums are then those of the same terms in the same order.
+        let gathered = normals.map(|(qn, tn)| (qn, neighbour_normals(found, tn)));
+        let gathered = gathered.as_ref();
         accumulate(
             found.len(),
             |i| found[i].distance,
-            normals.map(|(qn, tn)| move |i: usize| (qn[i], tn[found[i].index as usize])),
+            gathered.map(|(qn, nn)| move |i: usize| (qn[i], nn[i])),
             &options.taus,
         )
     };
@@ -522,6 +528,15 @@ fn point_sums(
         || sums(pred, gt, &gt_index.nearest_to_points_of(&pred_index)),
         || sums(gt, pred, &pred_index.nearest_to_points_of(&gt_index)),
     ))
+}
+
+/// The normal of each query's neighbour, `normals[found[i].index]`, gathered in parallel.
+fn neighbour_normals(found: &[Nearest], normals: &[Vec3]) -> Vec<Vec3> {
+    found
+        .par_iter()
+        .with_min_len(SUM_CHUNK)
+        .map(|n| normals[n.index as usize])
+        .collect()
 }
 
 /// Distances (and neighbour normals) from `from`'s points to `to`, summed.

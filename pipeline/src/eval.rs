@@ -97,7 +97,13 @@ impl EvalInput {
     /// are no valid point cloud.
     pub fn read(path: &Path) -> Result<Self, EvalError> {
         let mesh = if Format::from_path(path).map_err(EvalError::Io)? == Format::Ply {
-            let doc = ply::read_ply_document(path).map_err(EvalError::Io)?;
+            let bytes = std::fs::read(path).map_err(|e| EvalError::Io(IoError::os(path, e)))?;
+            // Float x y z [nx ny nz] clouds straight into vectors; anything else as a document.
+            if let Some(points) = ply::read_plain_points(path, &bytes).map_err(EvalError::Io)? {
+                return Ok(Self::Points(points));
+            }
+            let doc = ply::parse_ply(path, &bytes).map_err(EvalError::Io)?;
+            drop(bytes);
             let has_faces = doc.element("face").is_some_and(|f| f.count > 0)
                 || doc.element("tristrips").is_some_and(|f| f.count > 0);
             if !has_faces {

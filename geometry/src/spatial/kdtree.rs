@@ -68,7 +68,7 @@ struct Copies {
 impl Copies {
     /// Groups equal positions (`-0.0` equals `0.0`); `None` when all are distinct. Returns the
     /// distinct positions with their smallest indices, and the groups.
-    fn of(points: &[Vec3]) -> Option<(Vec<[f32; 3]>, Vec<u32>, Self)> {
+    fn of(points: &[Vec3]) -> Option<(Vec<Vec3>, Vec<u32>, Self)> {
         let key = |p: Vec3| (p + Vec3::ZERO).to_array().map(f32::to_bits);
         // The search is slow only with thousands of copies of one position, which an evenly
         // spaced sample sees: a set whose sample holds no copy is indexed as it is (sorting
@@ -100,7 +100,7 @@ impl Copies {
         for (k, &(bits, i)) in order.iter().enumerate() {
             if k == 0 || order[k - 1].0 != bits {
                 offsets.push(k as u32);
-                distinct.push(points[i as usize].to_array());
+                distinct.push(points[i as usize]);
                 ids.push(i);
             }
             group[i as usize] = (offsets.len() - 1) as u32;
@@ -158,12 +158,8 @@ impl PointIndex {
             });
         }
         let (tree, copies) = match Copies::of(points) {
-            Some((distinct, ids, copies)) => (PointTree::new(&distinct, &ids), Some(copies)),
-            None => {
-                let coords: Vec<[f32; 3]> = points.par_iter().map(|p| p.to_array()).collect();
-                let ids: Vec<u32> = (0..points.len() as u32).collect();
-                (PointTree::new(&coords, &ids), None)
-            }
+            Some((distinct, ids, copies)) => (PointTree::new(&distinct, Some(&ids)), Some(copies)),
+            None => (PointTree::new(points, None), None),
         };
         Ok(Self {
             tree,

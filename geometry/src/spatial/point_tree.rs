@@ -24,6 +24,10 @@ use rayon::prelude::*;
 
 /// Most points in a leaf.
 pub(crate) const LEAF: usize = 16;
+const _: () = assert!(
+    LEAF.is_multiple_of(4),
+    "leaf scans take the minimum four lanes at a time"
+);
 
 /// Subtrees of more points than this are built in parallel.
 const PARALLEL_BUILD: usize = 1 << 15;
@@ -145,9 +149,10 @@ fn dist_sq(q: DVec3, x: f32, y: f32, z: f32) -> f64 {
 }
 
 impl PointTree {
-    /// Builds the tree over `points` (finite, at least one) with the given ids (one per point).
-    pub(crate) fn new(points: &[[f32; 3]], ids: &[u32]) -> Self {
-        debug_assert_eq!(points.len(), ids.len());
+    /// Builds the tree over `points` (finite, at least one) with the given ids (one per point),
+    /// or with ids `0, 1, 2, ...` when `ids` is `None`.
+    pub(crate) fn new(points: &[Vec3], ids: Option<&[u32]>) -> Self {
+        debug_assert!(ids.is_none_or(|ids| ids.len() == points.len()));
         let n = points.len();
         let mut depth = 0u32;
         while n.div_ceil(1 << depth) > LEAF {
@@ -155,8 +160,11 @@ impl PointTree {
         }
         let mut records: Vec<Record> = points
             .par_iter()
-            .zip(ids.par_iter())
-            .map(|(&p, &id)| Record { p, id })
+            .enumerate()
+            .map(|(i, p)| Record {
+                p: p.to_array(),
+                id: ids.map_or(i as u32, |ids| ids[i]),
+            })
             .collect();
         let mut nodes = vec![Node::default(); (2usize << depth) - 1];
         let mut splits = vec![Split::default(); nodes.len()];
@@ -299,11 +307,31 @@ impl PointTree {
         }
     }
 
+    /// Offers the points of slots `lo..hi` (one leaf, at most [`LEAF`]) to `best`. The
+    /// squared distances are computed first, all of them, without a branch (two f64 lanes at
+    /// a time), and the leaf is passed over when none is within `best`; only then are they
+    /// compared one by one, with the ids of ties.
     #[inline]
     fn scan_leaf(&self, lo: usize, hi: usize, q: DVec3, best: &mut Best) {
         let (xs, ys, zs) = (&self.xs[lo..hi], &self.ys[lo..hi], &self.zs[lo..hi]);
-        for (j, ((&x, &y), &z)) in xs.iter().zip(ys).zip(zs).enumerate() {
-            let d = dist_sq(q, x, y, z);
+        let mut dists = [f64::INFINITY; LEAF];
+        for (((d, &x), &y), &z) in dists.iter_mut().zip(xs).zip(ys).zip(zs) {
+            *d = dist_sq(q, x, y, z);
+        }
+        // Four running minima (no chain of dependent comparisons), then the least of them.
+        let mut low = [f64::INFINITY; 4];
+        for four in dists.chunks_exact(4) {
+            for (m, &d) in low.iter_mut().zip(four) {
+                *m = if d < *m { d } else { *m };
+            }
+        }
+        let least = low
+            .iter()
+            .fold(f64::INFINITY, |m, &d| if d < m { d } else { m });
+        if least > best.dist_sq {
+            return;
+        }
+        for (j, &d) in dists[..xs.len()].iter().enumerate() {
             if d <= best.dist_sq {
                 let slot = lo + j;
                 let id = self.ids[slot];
@@ -404,12 +432,11 @@ fn build(
         }
     }
     let mid = records.len() / 2;
-    let (_, median, _) = records.select_nth_unstable_by(mid, |a, b| {
-        a.p[axis]
-            .partial_cmp(&b.p[axis])
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
-    let value = median.p[axis];
+    let value = match axis {
+        0 => select_median::<0>(records, mid),
+        1 => select_median::<1>(records, mid),
+        _ => select_median::<2>(records, mid),
+    };
     splits[0] = Split {
         value,
         axis: axis as u32,
@@ -434,6 +461,17 @@ fn build(
         lo: [0, 1, 2].map(|a| if r.lo[a] < l.lo[a] { r.lo[a] } else { l.lo[a] }),
         hi: [0, 1, 2].map(|a| if r.hi[a] > l.hi[a] { r.hi[a] } else { l.hi[a] }),
     };
+}
+
+/// Puts the record of rank `mid` along axis `A` at `mid` (the less before, the greater after)
+/// and returns its coordinate; one copy per axis, so the comparison reads a fixed field.
+fn select_median<const A: usize>(records: &mut [Record], mid: usize) -> f32 {
+    let (_, median, _) = records.select_nth_unstable_by(mid, |a, b| {
+        a.p[A]
+            .partial_cmp(&b.p[A])
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    median.p[A]
 }
 
 /// The bounding box of the records.

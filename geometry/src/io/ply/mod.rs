@@ -25,12 +25,14 @@
 //! elements verbatim. Comments and `obj_info` lines are kept too.
 //!
 //! One job a file: `model` holds the document types (typed columns, elements, extras),
-//! `header` parses the header and its limits, `read` decodes the body, `write` encodes
+//! `header` parses the header and its limits, `read` decodes the body, `plain` decodes plain
+//! float point clouds straight into vectors (no document), `write` encodes
 //! documents and borrowed columns, and `convert` maps documents to and from meshes and points.
 
 mod convert;
 mod header;
 mod model;
+mod plain;
 mod read;
 mod write;
 
@@ -42,5 +44,6 @@ pub use model::{
     PlyDocument, PlyElement, PlyEncoding, PlyExtras, PlyProperty, PropertyData, ScalarColumn,
     ScalarType,
 };
+pub use plain::read_plain_points;
 pub use read::{parse_ply, read_ply_document};
 pub use write::{ColumnView, write_ply_columns, write_ply_document};

@@ -25,7 +25,7 @@ fn new_data(def: &PropDef, capacity: usize) -> PropertyData {
     }
 }
 
-fn count_limit_error(path: &Path, def: &ElementDef, possible: usize) -> IoError {
+pub(super) fn count_limit_error(path: &Path, def: &ElementDef, possible: usize) -> IoError {
     IoError::malformed(
         path,
         format!("element {}", def.name),
