@@ -159,6 +159,8 @@ struct LeafBlock {
     boxes: [Boxes4; 2],
     first: u32,
     count: u32,
+    /// Its binary node (what a refit writes the leaf's f64 box to).
+    node: u32,
 }
 
 /// A BVH over a mesh's triangles for exact closest-point queries (see the module docs).
@@ -245,6 +247,7 @@ impl SurfaceIndex {
                 boxes: [Boxes4::EMPTY; 2],
                 first: node.first_or_right,
                 count: node.count,
+                node: n,
             });
             return LEAF_BIT | (self.leaves.len() - 1) as u32;
         }
@@ -283,15 +286,8 @@ impl SurfaceIndex {
     /// The f32 boxes of the 4-wide tree and of the leaves' slots, from the binary tree's and
     /// the slots' f64 boxes.
     fn refit_wide(&mut self) {
-        let (nodes, slots) = (&self.nodes, &self.slots);
-        self.wide.par_iter_mut().with_min_len(1024).for_each(|w| {
-            for lane in 0..4 {
-                if w.source[lane] != NO_CHILD {
-                    let n = &nodes[w.source[lane] as usize];
-                    w.boxes.set(lane, n.lo, n.hi);
-                }
-            }
-        });
+        self.refit_wide_nodes();
+        let slots = &self.slots;
         self.leaves
             .par_iter_mut()
             .with_min_len(1024)
@@ -301,6 +297,19 @@ impl SurfaceIndex {
                     leaf.boxes[k / 4].set(k % 4, s.lo, s.hi);
                 }
             });
+    }
+
+    /// The f32 boxes of the 4-wide tree's nodes from the binary tree's f64 boxes.
+    fn refit_wide_nodes(&mut self) {
+        let nodes = &self.nodes;
+        self.wide.par_iter_mut().with_min_len(1024).for_each(|w| {
+            for lane in 0..4 {
+                if w.source[lane] != NO_CHILD {
+                    let n = &nodes[w.source[lane] as usize];
+                    w.boxes.set(lane, n.lo, n.hi);
+                }
+            }
+        });
     }
 
     /// Indexes `triangles` over `positions`, refitting `previous` when it indexes the same
@@ -327,33 +336,61 @@ impl SurfaceIndex {
     /// Moves the indexed triangles' corners to `positions` and recomputes every box bottom-up,
     /// keeping the tree (its order is the build's Morton order: still a valid tree, a looser
     /// one the farther the vertices moved).
+    ///
+    /// One parallel pass over the leaves makes each leaf's slots, its f64 box and its f32
+    /// lane boxes together (the slots are read once, while in cache); then the inner nodes
+    /// bottom-up and the 4-wide nodes. The boxes are those [`SurfaceIndex::new`] makes of
+    /// the same corners, bit for bit.
     fn refit(&mut self, positions: &[DVec3]) -> Result<(), SpatialError> {
         check_dpoints(positions)?;
         super::bvh::check_indices(positions.len(), &self.triangles)?;
         let pad = padding(positions);
         let triangles = &self.triangles;
-        self.slots.par_iter_mut().with_min_len(4096).for_each(|s| {
-            *s = slot(
-                triangles[s.id as usize].map(|i| positions[i as usize]),
-                s.id,
-                pad,
-            );
-        });
+        // The leaves hold consecutive runs of slots, in slot order (both are the binary
+        // tree's depth-first order): hand each leaf its own run.
+        let mut runs: Vec<(&mut LeafBlock, &mut [Slot])> = Vec::with_capacity(self.leaves.len());
+        let mut rest: &mut [Slot] = &mut self.slots;
+        let mut at = 0;
+        for leaf in &mut self.leaves {
+            let (skip, tail) = std::mem::take(&mut rest).split_at_mut(leaf.first as usize - at);
+            debug_assert!(skip.is_empty(), "leaves cover the slots in order");
+            let (own, tail) = tail.split_at_mut(leaf.count as usize);
+            at = (leaf.first + leaf.count) as usize;
+            rest = tail;
+            runs.push((leaf, own));
+        }
+        let leaf_boxes: Vec<(u32, DVec3, DVec3)> = runs
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|(leaf, own)| {
+                for (k, s) in own.iter_mut().enumerate() {
+                    *s = slot(
+                        triangles[s.id as usize].map(|i| positions[i as usize]),
+                        s.id,
+                        pad,
+                    );
+                    leaf.boxes[k / 4].set(k % 4, s.lo, s.hi);
+                }
+                let (lo, hi) = leaf_box(own);
+                (leaf.node, lo, hi)
+            })
+            .collect();
+        for (node, lo, hi) in leaf_boxes {
+            let n = &mut self.nodes[node as usize];
+            n.lo = lo;
+            n.hi = hi;
+        }
         // Children follow their parent (depth first), so a reverse pass meets them first.
         for i in (0..self.nodes.len()).rev() {
             let n = self.nodes[i];
-            let (lo, hi) = if n.count > 0 {
-                leaf_box(
-                    &self.slots[n.first_or_right as usize..(n.first_or_right + n.count) as usize],
-                )
-            } else {
+            if n.count == 0 {
                 let (l, r) = (&self.nodes[i + 1], &self.nodes[n.first_or_right as usize]);
-                (l.lo.min(r.lo), l.hi.max(r.hi))
-            };
-            self.nodes[i].lo = lo;
-            self.nodes[i].hi = hi;
+                let (lo, hi) = (l.lo.min(r.lo), l.hi.max(r.hi));
+                self.nodes[i].lo = lo;
+                self.nodes[i].hi = hi;
+            }
         }
-        self.refit_wide();
+        self.refit_wide_nodes();
         Ok(())
     }
 
@@ -737,6 +774,60 @@ mod tests {
         let one = SurfaceIndex::new(&p, &t[..1]).expect("valid");
         let hits = one.closest_batch(&queries).expect("finite");
         assert!(hits.iter().all(|h| h.triangle == 0));
+    }
+
+    /// Every box of `index` recomputed from its slots (brute force): what a refit must give.
+    fn assert_boxes_fit_the_slots(index: &SurfaceIndex) {
+        // The leaves cover the slots in order, each run once (what the refit relies on).
+        let mut at = 0;
+        for leaf in &index.leaves {
+            assert_eq!(leaf.first as usize, at);
+            at += leaf.count as usize;
+            let n = index.nodes[leaf.node as usize];
+            assert_eq!((n.first_or_right, n.count), (leaf.first, leaf.count));
+        }
+        assert_eq!(at, index.slots.len());
+        for (i, n) in index.nodes.iter().enumerate() {
+            let (lo, hi) = if n.count > 0 {
+                leaf_box(&index.slots[n.first_or_right as usize..][..n.count as usize])
+            } else {
+                let (l, r) = (index.nodes[i + 1], index.nodes[n.first_or_right as usize]);
+                (l.lo.min(r.lo), l.hi.max(r.hi))
+            };
+            assert_eq!((n.lo, n.hi), (lo, hi), "node {i}");
+        }
+        for leaf in &index.leaves {
+            for k in 0..leaf.count as usize {
+                let s = &index.slots[leaf.first as usize + k];
+                let b = &leaf.boxes[k / 4];
+                for a in 0..3 {
+                    assert_eq!(b.lo[a][k % 4], down(s.lo[a]));
+                    assert_eq!(b.hi[a][k % 4], up(s.hi[a]));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_refit_gives_the_boxes_of_its_slots() {
+        let (p, t) = soup(700, 11);
+        let mut index = SurfaceIndex::new(&p, &t).expect("valid");
+        assert_boxes_fit_the_slots(&index);
+        for step in 1..4 {
+            let moved: Vec<DVec3> = p
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| {
+                    x + DVec3::new((i % 7) as f64, (i % 3) as f64, 1.0) * 0.01 * f64::from(step)
+                })
+                .collect();
+            index = SurfaceIndex::reuse(Some(index), &moved, &t).expect("valid");
+            assert_boxes_fit_the_slots(&index);
+            for s in &index.slots {
+                let c = t[s.id as usize].map(|i| moved[i as usize]);
+                assert_eq!(s.corners, c);
+            }
+        }
     }
 
     #[test]
