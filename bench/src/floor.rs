@@ -100,9 +100,9 @@ const RIM_PX: i64 = 2;
 
 /// One rig's renders.
 struct Maps {
-    camera: Camera,
-    /// Median z-depth where alpha > 1/2, else 0 (what render consistency compares with).
-    depth: Vec<f32>,
+    /// The camera and its median z-depth where alpha > 1/2, else 0 (what render consistency
+    /// compares with).
+    view: DepthView,
     /// Region of each covered pixel (index into [`REGIONS`]); `u8::MAX` where uncovered.
     region: Vec<u8>,
 }
@@ -158,47 +158,21 @@ fn render_maps(set: &GaussianSet, cameras: &[Camera], fuzzy: f64) -> anyhow::Res
                 })
                 .collect();
             Ok(Maps {
-                camera: camera.clone(),
-                depth,
+                view: DepthView {
+                    camera: camera.clone(),
+                    depth,
+                    rgb: Vec::new(),
+                },
                 region,
             })
         })
         .collect()
 }
 
-/// `v`'s median depth at pixel coordinates (u, w): bilinear over the four pixel centres
-/// around it when all are covered and spread by at most 8 footprints, else the pixel's own; 0
-/// where that pixel is uncovered (the rule of the median-depth field, `BLEND_SPREAD`).
-fn depth_at(m: &Maps, focal: f64, u: f64, w: f64) -> f64 {
-    let (width, height) = (m.camera.width as usize, m.camera.height as usize);
-    let own = f64::from(m.depth[(w as usize) * width + u as usize]);
-    let (fu, fw) = (u - 0.5, w - 0.5);
-    if own <= 0.0 || fu < 0.0 || fw < 0.0 {
-        return own;
-    }
-    let (i, j) = (fu as usize, fw as usize);
-    if i + 1 >= width || j + 1 >= height {
-        return own;
-    }
-    let d = [
-        f64::from(m.depth[j * width + i]),
-        f64::from(m.depth[j * width + i + 1]),
-        f64::from(m.depth[(j + 1) * width + i]),
-        f64::from(m.depth[(j + 1) * width + i + 1]),
-    ];
-    let lo = d.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = d.iter().copied().fold(0.0, f64::max);
-    if lo <= 0.0 || (hi - lo) * focal > 8.0 * own {
-        return own;
-    }
-    let (a, b) = (fu - i as f64, fw - j as f64);
-    (d[0] * (1.0 - a) + d[1] * a) * (1.0 - b) + (d[2] * (1.0 - a) + d[3] * a) * b
-}
-
-/// Where world point `p` falls in `m`: its camera z, `m`'s median depth there ([`depth_at`]; 0
+/// Where world point `p` falls in `m`: its camera z, `m`'s median depth there ([`DepthView::median_at`]; 0
 /// uncovered) and the pixel's index; `None` behind the camera or outside the image.
 fn seen_in(m: &Maps, p: DVec3) -> Option<(f64, f64, usize)> {
-    let cam = &m.camera;
+    let cam = &m.view.camera;
     let q = cam.world_to_camera(p);
     if q.z <= 1e-9 {
         return None;
@@ -208,7 +182,11 @@ fn seen_in(m: &Maps, p: DVec3) -> Option<(f64, f64, usize)> {
         uv.x >= 0.0 && uv.y >= 0.0 && uv.x < f64::from(cam.width) && uv.y < f64::from(cam.height);
     inside.then(|| {
         let pixel = (uv.y as usize) * cam.width as usize + uv.x as usize;
-        (q.z, depth_at(m, 0.5 * (cam.fx + cam.fy), uv.x, uv.y), pixel)
+        (
+            q.z,
+            m.view.median_at(0.5 * (cam.fx + cam.fy), uv.x, uv.y),
+            pixel,
+        )
     })
 }
 
@@ -243,12 +221,12 @@ fn mutual(maps: &[Maps]) -> (Vec<Tally>, Vec<Conflict>) {
         .into_par_iter()
         .map(|a| {
             let ma = &maps[a];
-            let cam = &ma.camera;
+            let cam = &ma.view.camera;
             let (w, h) = (cam.width as usize, cam.height as usize);
             let mut tallies: Vec<Tally> = (0..REGIONS.len()).map(|_| Tally::default()).collect();
             let mut conflicts = Vec::new();
             for k in 0..w * h {
-                let d = f64::from(ma.depth[k]);
+                let d = f64::from(ma.view.depth[k]);
                 if d <= 0.0 {
                     continue;
                 }
@@ -342,11 +320,11 @@ fn matching(edges: &[Conflict], pixels: usize, threshold: f64) -> usize {
 fn conflict_pictures(maps: &[Maps], count: usize, dir: &Path) -> anyhow::Result<()> {
     for a in 0..count.min(maps.len()) {
         let ma = &maps[a];
-        let cam = &ma.camera;
+        let cam = &ma.view.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
         let mut ppm = format!("P6\n{w} {h}\n255\n").into_bytes();
         for k in 0..w * h {
-            let d = f64::from(ma.depth[k]);
+            let d = f64::from(ma.view.depth[k]);
             if d <= 0.0 {
                 ppm.extend_from_slice(&[0, 0, 64]);
                 continue;
@@ -407,8 +385,8 @@ fn split_score(mesh: &TriMesh, maps: &[Maps]) -> anyhow::Result<String> {
     let mut covered = vec![0usize; REGIONS.len()];
     let mut extra = 0usize;
     for m in maps {
-        let r = renderer.render(&m.camera);
-        for (k, (&g, &z)) in m.depth.iter().zip(&r.depth).enumerate() {
+        let r = renderer.render(&m.view.camera);
+        for (k, (&g, &z)) in m.view.depth.iter().zip(&r.depth).enumerate() {
             match (g > 0.0, z > 0.0) {
                 (true, true) => {
                     let reg = usize::from(m.region[k]);
@@ -557,7 +535,7 @@ pub fn run(args: &FloorArgs) -> anyhow::Result<()> {
             100.0 * t.silhouette_pixels as f64 / pixels.max(1) as f64,
         )?;
     }
-    let all_pixels: usize = maps.iter().map(|m| m.depth.len()).sum();
+    let all_pixels: usize = maps.iter().map(|m| m.view.depth.len()).sum();
     let covered = tallies[REGIONS.len()].worst.len();
     for threshold in MATCH_THRESHOLDS {
         let m = matching(&edges, all_pixels, threshold);
@@ -585,7 +563,13 @@ pub fn run(args: &FloorArgs) -> anyhow::Result<()> {
         let clock = Instant::now();
         let depths: Vec<DepthImage> = maps
             .iter()
-            .map(|m| DepthImage::try_new(m.camera.width, m.camera.height, m.depth.clone()))
+            .map(|m| {
+                DepthImage::try_new(
+                    m.view.camera.width,
+                    m.view.camera.height,
+                    m.view.depth.clone(),
+                )
+            })
             .collect::<Result<_, _>>()?;
         let options = TsdfOptions {
             voxel: Some(voxel),
@@ -601,14 +585,7 @@ pub fn run(args: &FloorArgs) -> anyhow::Result<()> {
         ));
     }
     let g = opacity_gaussians(&set);
-    let depth_views: Vec<DepthView> = maps
-        .iter()
-        .map(|m| DepthView {
-            camera: m.camera.clone(),
-            depth: m.depth.clone(),
-            rgb: Vec::new(),
-        })
-        .collect();
+    let depth_views: Vec<DepthView> = maps.iter().map(|m| m.view.clone()).collect();
     let carved: Vec<(u16, f32)> = if args.no_oracles {
         Vec::new()
     } else {

@@ -264,39 +264,42 @@ fn locate(v: &Prepared, x: DVec3) -> Option<(f64, f64, f64)> {
     Some((c.z, u, w))
 }
 
-/// The median depth `v` shows at pixel coordinates (u, w): bilinear over the four pixel
-/// centres around it when all four are covered and their depths spread by at most
-/// [`BLEND_SPREAD`] footprints, else the depth of the pixel it falls in; 0 when that pixel is
-/// not covered.
-#[inline]
-pub(crate) fn median_at(v: &DepthView, focal: f64, u: f64, w: f64) -> f64 {
-    let (width, height) = (v.camera.width as usize, v.camera.height as usize);
-    let own = f64::from(v.depth[(w as usize) * width + u as usize]);
-    if own <= 0.0 {
-        return 0.0;
+impl DepthView {
+    /// The median depth this view shows at pixel coordinates (u, w), inside the image: bilinear over the four pixel
+    /// centres around it when all four are covered and their depths spread by at most
+    /// [`BLEND_SPREAD`] footprints, else the depth of the pixel it falls in; 0 when that pixel is
+    /// not covered.
+    #[inline]
+    #[must_use]
+    pub fn median_at(&self, focal: f64, u: f64, w: f64) -> f64 {
+        let (width, height) = (self.camera.width as usize, self.camera.height as usize);
+        let own = f64::from(self.depth[(w as usize) * width + u as usize]);
+        if own <= 0.0 {
+            return 0.0;
+        }
+        let (fu, fw) = (u - 0.5, w - 0.5);
+        if fu < 0.0 || fw < 0.0 {
+            return own;
+        }
+        let (i, j) = (fu as usize, fw as usize);
+        if i + 1 >= width || j + 1 >= height {
+            return own;
+        }
+        let d = [
+            f64::from(self.depth[j * width + i]),
+            f64::from(self.depth[j * width + i + 1]),
+            f64::from(self.depth[(j + 1) * width + i]),
+            f64::from(self.depth[(j + 1) * width + i + 1]),
+        ];
+        let (lo, hi) = d.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+        if lo <= 0.0 || (hi - lo) * focal > BLEND_SPREAD * own {
+            return own;
+        }
+        let (a, b) = (fu - i as f64, fw - j as f64);
+        (d[0] * (1.0 - a) + d[1] * a) * (1.0 - b) + (d[2] * (1.0 - a) + d[3] * a) * b
     }
-    let (fu, fw) = (u - 0.5, w - 0.5);
-    if fu < 0.0 || fw < 0.0 {
-        return own;
-    }
-    let (i, j) = (fu as usize, fw as usize);
-    if i + 1 >= width || j + 1 >= height {
-        return own;
-    }
-    let d = [
-        f64::from(v.depth[j * width + i]),
-        f64::from(v.depth[j * width + i + 1]),
-        f64::from(v.depth[(j + 1) * width + i]),
-        f64::from(v.depth[(j + 1) * width + i + 1]),
-    ];
-    let (lo, hi) = d.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
-        (lo.min(x), hi.max(x))
-    });
-    if lo <= 0.0 || (hi - lo) * focal > BLEND_SPREAD * own {
-        return own;
-    }
-    let (a, b) = (fu - i as f64, fw - j as f64);
-    (d[0] * (1.0 - a) + d[1] * a) * (1.0 - b) + (d[2] * (1.0 - a) + d[3] * a) * b
 }
 
 /// The signed depth of `x` in `v`, in pixel footprints (`(z - D) f / z`; −∞ where the pixel is
@@ -304,7 +307,7 @@ pub(crate) fn median_at(v: &DepthView, focal: f64, u: f64, w: f64) -> f64 {
 #[inline]
 fn signed(v: &Prepared, x: DVec3) -> Option<f64> {
     let (z, u, w) = locate(v, x)?;
-    let d = median_at(v.view, v.focal, u, w);
+    let d = v.view.median_at(v.focal, u, w);
     Some(if d > 0.0 {
         (z - d) * v.focal / z
     } else {
