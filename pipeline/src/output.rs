@@ -299,11 +299,12 @@ pub fn write_outputs(
                 .map(|summary| (*m, summary))
             }))?;
         for (m, summary) in written {
-            let tolerance = if compression.quantizes() && morph_basis.enabled() {
-                morph_basis.tolerance
-            } else {
-                0.0
-            };
+            let tolerance =
+                if compression.quantizes() && morph_basis.applies_to(summary.target_payload) {
+                    morph_basis.tolerance
+                } else {
+                    0.0
+                };
             report
                 .glb_storage
                 .insert(m.name().to_owned(), glb_storage(&summary, tolerance));

@@ -153,6 +153,7 @@ fn shard_flags_split_the_track_and_merge_refuses_an_incomplete_split() {
         targets: vec![OutputTarget::Glb, OutputTarget::Usd],
         gltf_compression: GltfCompression::None,
         gltf_morph_tolerance: 0.0,
+        gltf_morph_above: 0.0,
     };
     let plain_dir = dir.join("merged_plain");
     merge_with(&shards, &plain_dir, false, &outputs).expect("merge with outputs");

@@ -762,3 +762,59 @@ fn frames_a_basis_cannot_hold_keep_one_target_per_frame() {
     );
     check_frames(&file, &frames, &times);
 }
+
+#[test]
+fn the_basis_is_fitted_only_for_a_file_over_its_payload_threshold() {
+    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
+    let dir = tempfile::tempdir().expect("folder");
+    let frames = wave_points(40);
+    let times: Vec<f64> = (0..frames.len()).map(|k| k as f64 / 30.0).collect();
+    // One target per frame after the first: 8 bytes per vertex and frame.
+    let payload = 8 * (frames.len() as u64 - 1) * frames[0].vertex_count() as u64;
+    let write = |name: &str, min_payload: u64| {
+        let options = SequenceOptions {
+            morph_basis: MorphBasis {
+                min_payload,
+                ..MorphBasis::default()
+            },
+            ..SequenceOptions::default()
+        };
+        let path = dir.path().join(name);
+        let summary = write_sequence_parts_summarised(
+            &path,
+            &frames.as_slice(),
+            &times,
+            &options,
+            GLB_PART_LIMIT,
+        )
+        .expect("write");
+        assert_eq!(summary.target_payload, payload, "{name}");
+        assert_eq!(
+            options.morph_basis.applies_to(payload),
+            payload > min_payload
+        );
+        (
+            summary.segments[0].basis,
+            std::fs::read(&path).expect("glb"),
+        )
+    };
+    let (over, basis_bytes) = write("over.glb", payload - 1);
+    assert!(over.is_some(), "a payload over the threshold gets a basis");
+    let (at, at_bytes) = write("at.glb", payload);
+    assert_eq!(
+        at, None,
+        "a payload at the threshold keeps one target per frame"
+    );
+    let off = dir.path().join("off.glb");
+    let plain = SequenceOptions {
+        morph_basis: MorphBasis::OFF,
+        ..SequenceOptions::default()
+    };
+    write_sequence_with(&off, &frames.as_slice(), &times, &plain).expect("write");
+    assert_eq!(
+        Some(at_bytes),
+        std::fs::read(&off).ok(),
+        "as with the basis off"
+    );
+    assert_ne!(basis_bytes, std::fs::read(&off).expect("off"));
+}

@@ -45,10 +45,17 @@ pub struct MergeArgs {
     #[arg(long, value_enum, value_name = "KIND", default_value_t = GltfCompression::Meshopt)]
     pub gltf_compression: GltfCompression,
     /// The glb's morph basis, as extract's --gltf-morph-tolerance (not recorded by the shards:
-    /// give the job's; 0, the default, is one morph target per frame).
-    #[arg(long, value_name = "E", default_value_t = 0.0,
+    /// give the job's; default 8e-5 as extract's, 0 is one morph target per frame).
+    #[arg(long, value_name = "E",
+        default_value_t = trisplat_geometry::io::DEFAULT_MORPH_BASIS_TOLERANCE,
         value_parser = super::convert::parse_share)]
     pub gltf_morph_tolerance: f64,
+    /// The glbs given a morph basis, as extract's --gltf-morph-above (megabytes of
+    /// one-target-per-frame deltas; default 300 as extract's).
+    #[arg(long, value_name = "MB",
+        default_value_t = trisplat_pipeline::config::DEFAULT_MORPH_ABOVE_MB,
+        value_parser = super::convert::parse_share)]
+    pub gltf_morph_above: f64,
 }
 
 /// Runs `trisplat merge`.
@@ -63,6 +70,7 @@ pub fn run(args: MergeArgs, ctx: &Context) -> anyhow::Result<()> {
         targets: args.targets.clone(),
         gltf_compression: args.gltf_compression,
         gltf_morph_tolerance: args.gltf_morph_tolerance,
+        gltf_morph_above: args.gltf_morph_above,
     };
     let result = trisplat_pipeline::merge_with(&args.shards, &args.output, args.force, &outputs);
     spinner.finish_and_clear();

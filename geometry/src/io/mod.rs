@@ -35,10 +35,11 @@ pub use files::{
 pub use format::Format;
 pub use gltf_material::{MAX_TEXTURE_PIXELS, read_gltf_base_color};
 pub use gltf_sequence::{
-    DEFAULT_MORPH_BASIS_MAX_COMPONENTS, DEFAULT_MORPH_BASIS_TOLERANCE, FrameFiles, FrameSource,
-    GLB_PART_LIMIT, GltfCompression, MorphBasis, SegmentSummary, SequenceLayout, SequenceOptions,
-    SequenceSummary, write_mesh_sequence, write_sequence, write_sequence_parts,
-    write_sequence_parts_summarised, write_sequence_parts_with, write_sequence_with,
+    DEFAULT_MORPH_BASIS_MAX_COMPONENTS, DEFAULT_MORPH_BASIS_MIN_PAYLOAD,
+    DEFAULT_MORPH_BASIS_TOLERANCE, FrameFiles, FrameSource, GLB_PART_LIMIT, GltfCompression,
+    MorphBasis, SegmentSummary, SequenceLayout, SequenceOptions, SequenceSummary,
+    write_mesh_sequence, write_sequence, write_sequence_parts, write_sequence_parts_summarised,
+    write_sequence_parts_with, write_sequence_with,
 };
 pub use npy::{NpyArray, parse_npy, read_npy, write_npy};
 pub use obj::ObjVertices;

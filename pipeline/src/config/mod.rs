@@ -45,8 +45,8 @@ pub use points::{
 };
 pub use report::{
     DEFAULT_CONSISTENCY_RESOLUTION, DEFAULT_CONSISTENCY_VIEWS, DEFAULT_MAX_SAMPLES,
-    DEFAULT_MAX_VIEWS, DEFAULT_MAX_VOXELS, DEFAULT_SAMPLES, DEFAULT_TAU, DEFAULT_TAU_FRACTION,
-    Limits, MetricOptions, OutputOptions, OutputTarget,
+    DEFAULT_MAX_VIEWS, DEFAULT_MAX_VOXELS, DEFAULT_MORPH_ABOVE_MB, DEFAULT_SAMPLES, DEFAULT_TAU,
+    DEFAULT_TAU_FRACTION, Limits, MetricOptions, OutputOptions, OutputTarget, morph_basis,
 };
 pub use shard::{KUBERNETES_INDEX, SLURM_VARIABLES, Shard, ShardOptions, ShardSpec};
 pub use topology::{

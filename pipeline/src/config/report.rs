@@ -1,7 +1,7 @@
 //! Options of the metrics and of what a run writes, with their defaults and the resource
 //! limits checked before anything is allocated.
 
-use trisplat_geometry::io::{GltfCompression, MorphBasis};
+use trisplat_geometry::io::{DEFAULT_MORPH_BASIS_MIN_PAYLOAD, GltfCompression, MorphBasis};
 use trisplat_geometry::metrics::Tau;
 
 /// Default points sampled on each mesh for the metrics.
@@ -169,15 +169,44 @@ pub struct OutputOptions {
     pub gltf_compression: GltfCompression,
     /// The glb's morph basis (meshopt and quantize): each run of frames between key frames
     /// is stored as a few basis shapes and a weight per shape and frame, the fewest (up to
-    /// 128, fewer than the run's frames) that put every vertex of every frame within E of its
+    /// 192, fewer than the run's frames) that put every vertex of every frame within E of its
     /// frame's bounding-box diagonal of its place; a run that needs more keeps one morph
-    /// target per frame. 0 (the default): one morph target per frame; 8e-5 is the tolerance
-    /// the basis is made for (the glTF clients are checked to 1e-4). Off by default because on
-    /// LAM's track the fit costs half again the run's CPU time for a smaller alpha glb only.
-    /// The report records the basis sizes and the largest error (glb_storage).
-    #[cfg_attr(feature = "cli", arg(long, value_name = "E", default_value_t = 0.0,
+    /// target per frame. 8e-5 (the default; the glTF clients are checked to 1e-4); 0: one
+    /// morph target per frame. Fitted only for a glb over --gltf-morph-above. The report
+    /// records the basis sizes and the largest error (glb_storage).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "E",
+        default_value_t = trisplat_geometry::io::DEFAULT_MORPH_BASIS_TOLERANCE,
         value_parser = super::arg::parse_share))]
     pub gltf_morph_tolerance: f64,
+    /// The morph basis is fitted only for a glb whose one-morph-target-per-frame position
+    /// deltas (quantised, 8 bytes per vertex and frame, before compression) exceed MB
+    /// megabytes (default 300: about 100 MB compressed at the worst ratio measured, 3x; on
+    /// LAM's track the TSDF glb's 1.2 GB gets a basis, delaunay's 0.28 GB and alpha's do not);
+    /// 0: every glb.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "MB", default_value_t = 300.0,
+        value_parser = super::arg::parse_share))]
+    pub gltf_morph_above: f64,
+}
+
+/// The default of `--gltf-morph-above` (megabytes): [`DEFAULT_MORPH_BASIS_MIN_PAYLOAD`].
+#[expect(clippy::cast_precision_loss, reason = "300 MB, exact")]
+pub const DEFAULT_MORPH_ABOVE_MB: f64 = DEFAULT_MORPH_BASIS_MIN_PAYLOAD as f64 / 1e6;
+
+/// The morph basis of tolerance `tolerance` for glbs over `above_mb` megabytes of
+/// one-target-per-frame deltas (`--gltf-morph-tolerance`, `--gltf-morph-above`).
+#[must_use]
+pub fn morph_basis(tolerance: f64, above_mb: f64) -> MorphBasis {
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "finite and non-negative (parse_share); saturates"
+    )]
+    let min_payload = (above_mb * 1e6).round() as u64;
+    MorphBasis {
+        tolerance,
+        min_payload,
+        ..MorphBasis::default()
+    }
 }
 
 impl Default for OutputOptions {
@@ -187,19 +216,18 @@ impl Default for OutputOptions {
             view_axes: trisplat_splat::Axes::Luf,
             targets: OutputTarget::ALL.to_vec(),
             gltf_compression: GltfCompression::default(),
-            gltf_morph_tolerance: 0.0,
+            gltf_morph_tolerance: trisplat_geometry::io::DEFAULT_MORPH_BASIS_TOLERANCE,
+            gltf_morph_above: DEFAULT_MORPH_ABOVE_MB,
         }
     }
 }
 
 impl OutputOptions {
-    /// The glb's morph basis ([`Self::gltf_morph_tolerance`], the default vector limit).
+    /// The glb's morph basis ([`Self::gltf_morph_tolerance`], [`Self::gltf_morph_above`],
+    /// the default vector limit).
     #[must_use]
     pub fn morph_basis(&self) -> MorphBasis {
-        MorphBasis {
-            tolerance: self.gltf_morph_tolerance,
-            ..MorphBasis::default()
-        }
+        morph_basis(self.gltf_morph_tolerance, self.gltf_morph_above)
     }
 
     /// Whether `target` is among the outputs asked for.

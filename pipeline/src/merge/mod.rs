@@ -18,7 +18,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use trisplat_geometry::io::{GltfCompression, IoError, MorphBasis};
+use trisplat_geometry::io::{GltfCompression, IoError};
 
 use crate::config::OutputTarget;
 use crate::error::PipelineError;
@@ -58,6 +58,8 @@ pub struct MergeOutputs {
     pub gltf_compression: GltfCompression,
     /// The glTF's morph basis tolerance, as extract's `--gltf-morph-tolerance` (0: none).
     pub gltf_morph_tolerance: f64,
+    /// The glTFs given a morph basis, as extract's `--gltf-morph-above` (megabytes).
+    pub gltf_morph_above: f64,
 }
 
 impl Default for MergeOutputs {
@@ -66,7 +68,8 @@ impl Default for MergeOutputs {
         Self {
             targets: OutputTarget::ALL.to_vec(),
             gltf_compression: GltfCompression::default(),
-            gltf_morph_tolerance: 0.0,
+            gltf_morph_tolerance: trisplat_geometry::io::DEFAULT_MORPH_BASIS_TOLERANCE,
+            gltf_morph_above: crate::config::DEFAULT_MORPH_ABOVE_MB,
         }
     }
 }
@@ -160,10 +163,7 @@ pub fn merge_with(
         &file_sources(&frame_files),
         &outputs.targets,
         outputs.gltf_compression,
-        MorphBasis {
-            tolerance: outputs.gltf_morph_tolerance,
-            ..MorphBasis::default()
-        },
+        crate::config::morph_basis(outputs.gltf_morph_tolerance, outputs.gltf_morph_above),
     )?;
     if !outputs.targets.contains(&OutputTarget::Meshes) {
         // Linked only to assemble the glTF or the USD cache.

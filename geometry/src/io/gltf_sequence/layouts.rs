@@ -41,6 +41,9 @@ pub(super) struct Context<'a> {
     pub(super) diagonal: f64,
     pub(super) with_normals: bool,
     pub(super) basis: MorphBasis,
+    /// Whether the basis is tried for this file (asked for, and its one-target-per-frame
+    /// payload over [`MorphBasis::min_payload`]).
+    pub(super) basis_applies: bool,
     pub(super) summaries: Vec<SegmentSummary>,
 }
 
@@ -182,7 +185,7 @@ fn try_basis(
     quantized: bool,
 ) -> Result<Option<(Grid, BasisFit)>, IoError> {
     let run = segment.frames.clone();
-    if !(quantized && ctx.basis.enabled() && run.len() >= 3 && !ctx.with_normals) {
+    if !(quantized && ctx.basis_applies && run.len() >= 3 && !ctx.with_normals) {
         return Ok(None);
     }
     let grid = Grid::for_basis(segment.bounds, ctx.diagonal);

@@ -97,7 +97,9 @@
 //!   at the end), then copied after the JSON chunk: frames are read twice (survey, bytes), not
 //!   three times.
 //!
-//! **Morph basis** ([`MorphBasis`], the library's default with quantised storage, opt-in on the command line; module `basis`): a
+//! **Morph basis** ([`MorphBasis`], the library's default with quantised storage; on the
+//! command line the default of `extract` and `merge` for a file whose one-target-per-frame
+//! deltas exceed [`MorphBasis::min_payload`], 300 MB there; module `basis`): a
 //! run of three frames or more without normal targets is stored as a few basis shapes
 //! instead of one target per frame. Its base is its first frame on a grid twice as fine
 //! (60,000 steps per diagonal: the base is its only position data), its morph targets
@@ -152,8 +154,9 @@ use self::builder::{Builder, Document};
 use self::container::{write_glb, write_glb_spooled, write_gltf};
 use self::layouts::{Context, Segment, build_morph_targets, build_segments};
 pub use self::options::{
-    DEFAULT_MORPH_BASIS_MAX_COMPONENTS, DEFAULT_MORPH_BASIS_TOLERANCE, GltfCompression, MorphBasis,
-    SegmentSummary, SequenceLayout, SequenceOptions, SequenceSummary,
+    DEFAULT_MORPH_BASIS_MAX_COMPONENTS, DEFAULT_MORPH_BASIS_MIN_PAYLOAD,
+    DEFAULT_MORPH_BASIS_TOLERANCE, GltfCompression, MorphBasis, SegmentSummary, SequenceLayout,
+    SequenceOptions, SequenceSummary,
 };
 pub use self::quantize::POSITION_STEPS_PER_DIAGONAL;
 use self::sink::{Counted, Sink, Spool};
@@ -276,6 +279,10 @@ impl Job<'_> {
             diagonal: self.survey.diagonal,
             with_normals: self.survey.normals,
             basis: self.options.morph_basis,
+            basis_applies: self
+                .options
+                .morph_basis
+                .applies_to(self.survey.target_payload),
             summaries: Vec::with_capacity(self.segments.len()),
         };
         let doc = match (self.survey.morph, self.segments.first()) {
@@ -405,6 +412,7 @@ pub fn write_sequence_parts_summarised(
         return Ok(SequenceSummary {
             parts: vec![path.to_path_buf()],
             segments,
+            target_payload: survey.target_payload,
         });
     }
     let stem = path
@@ -438,5 +446,6 @@ pub fn write_sequence_parts_summarised(
     Ok(SequenceSummary {
         parts: written,
         segments: summaries,
+        target_payload: survey.target_payload,
     })
 }

@@ -71,13 +71,26 @@ pub struct MorphBasis {
     /// The most basis vectors a run may have; a run needing more, or as many as it has frames
     /// after its first, keeps one target per frame.
     pub max_components: usize,
+    /// A file whose one-target-per-frame position deltas (quantised: 8 bytes per vertex and
+    /// frame after a run's first, before compression) are at most this many bytes keeps one
+    /// target per frame: the basis is fitted only where that payload is larger (0: wherever
+    /// it can be). See [`DEFAULT_MORPH_BASIS_MIN_PAYLOAD`].
+    pub min_payload: u64,
 }
+
+/// The [`MorphBasis::min_payload`] of `extract` and `merge` (`--gltf-morph-above`): 300 MB.
+/// meshoptimizer's codec compressed the LAM track's quantised deltas 3.1x (alpha, 45 MB to
+/// 14.7), 3.9x (delaunay) and 6.8x (tsdf), so a file at most this large stays within about
+/// 100 MB with one target per frame at the worst of these ratios; a larger one (the TSDF
+/// mesh's 1.2 GB) gets the basis (docs/benchmarks.md, "One command").
+pub const DEFAULT_MORPH_BASIS_MIN_PAYLOAD: u64 = 300_000_000;
 
 impl Default for MorphBasis {
     fn default() -> Self {
         Self {
             tolerance: DEFAULT_MORPH_BASIS_TOLERANCE,
             max_components: DEFAULT_MORPH_BASIS_MAX_COMPONENTS,
+            min_payload: 0,
         }
     }
 }
@@ -87,12 +100,20 @@ impl MorphBasis {
     pub const OFF: Self = Self {
         tolerance: 0.0,
         max_components: 0,
+        min_payload: 0,
     };
 
     /// Whether a basis is tried at all.
     #[must_use]
     pub fn enabled(&self) -> bool {
         self.tolerance > 0.0 && self.tolerance.is_finite() && self.max_components > 0
+    }
+
+    /// Whether a basis is tried for a file whose one-target-per-frame position deltas take
+    /// `payload` bytes ([`Self::min_payload`]).
+    #[must_use]
+    pub fn applies_to(&self, payload: u64) -> bool {
+        self.enabled() && payload > self.min_payload
     }
 }
 
@@ -133,4 +154,8 @@ pub struct SequenceSummary {
     pub parts: Vec<std::path::PathBuf>,
     /// Each run of one topology, in frame order (of the whole sequence).
     pub segments: Vec<SegmentSummary>,
+    /// The quantised position deltas one morph target per frame would take (8 bytes per
+    /// vertex and frame after a run's first): what [`MorphBasis::min_payload`] is compared
+    /// with ([`MorphBasis::applies_to`]).
+    pub target_payload: u64,
 }

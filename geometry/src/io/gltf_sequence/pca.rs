@@ -28,7 +28,8 @@ use std::path::Path;
 use rayon::prelude::*;
 
 use super::basis::{
-    Basis, BasisFit, BasisLimits, CHUNK, chunk, chunked_dot, max_vertex_length, offsets,
+    Basis, BasisFit, BasisLimits, CHUNK, add_scaled_all, chunk, chunked_dot, chunked_dots4,
+    max_vertex_length, offsets,
 };
 use super::eigen::{Eigenpair, leading};
 use super::quantize::Grid;
@@ -113,9 +114,15 @@ fn gram(sketch: &[Vec<f32>]) -> Vec<f64> {
     let rows: Vec<Vec<f64>> = (0..n)
         .into_par_iter()
         .map(|i| {
-            (0..=i)
-                .map(|j| chunked_dot(&sketch[i], &sketch[j]))
-                .collect()
+            let mut row = Vec::with_capacity(i + 1);
+            let mut j = 0;
+            while j + 4 <= i + 1 {
+                let four = [j, j + 1, j + 2, j + 3].map(|j| sketch[j].as_slice());
+                row.extend(chunked_dots4(&sketch[i], four));
+                j += 4;
+            }
+            row.extend((j..=i).map(|j| chunked_dot(&sketch[i], &sketch[j])));
+            row
         })
         .collect();
     let mut g = vec![0.0; n * n];
@@ -244,11 +251,11 @@ fn vectors(
                 let range = chunk(c, m);
                 let len = range.len();
                 for (i, out) in slab.chunks_exact_mut(len).enumerate() {
-                    for (d, &w) in block.iter().zip(&coefficients[i]) {
-                        for (o, x) in out.iter_mut().zip(&d[range.clone()]) {
-                            *o += w * x;
-                        }
-                    }
+                    let terms = block
+                        .iter()
+                        .zip(&coefficients[i])
+                        .map(|(d, &w)| (&d[range.clone()], w));
+                    add_scaled_all(out, terms);
                 }
             });
         next = end;

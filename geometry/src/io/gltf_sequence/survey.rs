@@ -59,6 +59,9 @@ pub(super) struct Survey {
     pub(super) diagonals: Vec<f64>,
     /// The diagonal of the bounding box of every vertex of every frame (0 without vertices).
     pub(super) diagonal: f64,
+    /// The quantised position deltas of one morph target per frame after each segment's first
+    /// (8 bytes per vertex), before compression: what a morph basis would replace.
+    pub(super) target_payload: u64,
 }
 
 impl Survey {
@@ -88,6 +91,7 @@ impl Survey {
         let mut diagonals = vec![f64::INFINITY];
         let mut all = empty;
         let mut sizes = Vec::with_capacity(frames.frame_count());
+        let mut target_payload = 0u64;
         for k in 0..frames.frame_count() {
             let frame = if k == 0 {
                 Cow::Borrowed(base.as_ref())
@@ -130,6 +134,7 @@ impl Survey {
                 && topology_difference(current, &frame).is_none();
             match (segments.last_mut(), bounds.last_mut(), diagonals.last_mut()) {
                 (Some(segment), Some(b), Some(d)) if joins => {
+                    target_payload += 8 * frame.vertex_count() as u64;
                     segment.end = k + 1;
                     *b = (b.0.min(frame_box.0), b.1.max(frame_box.1));
                     *d = d.min(frame_diagonal);
@@ -167,6 +172,7 @@ impl Survey {
             } else {
                 0.0
             },
+            target_payload,
         })
     }
 
