@@ -183,7 +183,7 @@ pub struct OutputOptions {
     /// megabytes (default 300: about 100 MB compressed at the worst ratio measured, 3x; on
     /// LAM's track the TSDF glb's 1.2 GB gets a basis, delaunay's 0.28 GB and alpha's do not);
     /// 0: every glb.
-    #[cfg_attr(feature = "cli", arg(long, value_name = "MB", default_value_t = 300.0,
+    #[cfg_attr(feature = "cli", arg(long, value_name = "MB", default_value_t = DEFAULT_MORPH_ABOVE_MB,
         value_parser = super::arg::parse_share))]
     pub gltf_morph_above: f64,
 }
