@@ -657,9 +657,19 @@ fn worst_relative(file: &Decoded, frames: &[TriMesh], times: &[f64]) -> f64 {
     worst
 }
 
+/// Writes `frames` as one glb within the part limit and returns the writer's summary.
+fn write_summarised(
+    path: &std::path::Path,
+    frames: &[TriMesh],
+    times: &[f64],
+    options: &SequenceOptions,
+) -> trisplat_geometry::io::SequenceSummary {
+    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
+    write_sequence_parts_summarised(path, &frames, times, options, GLB_PART_LIMIT).expect("write")
+}
+
 #[test]
 fn a_morph_basis_reproduces_every_frame_within_its_tolerance() {
-    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
     let dir = tempfile::tempdir().expect("folder");
     // The wave spans three shapes (x: sin and cos of 3y, y: cos 2z) over 40 frames; two hold
     // it within the tolerance.
@@ -668,14 +678,7 @@ fn a_morph_basis_reproduces_every_frame_within_its_tolerance() {
     let options = SequenceOptions::default();
     assert!(options.morph_basis.enabled(), "the basis is the default");
     let path = dir.path().join("basis.glb");
-    let summary = write_sequence_parts_summarised(
-        &path,
-        &frames.as_slice(),
-        &times,
-        &options,
-        GLB_PART_LIMIT,
-    )
-    .expect("write");
+    let summary = write_summarised(&path, &frames, &times, &options);
     let file = decode(&path);
     let targets = file.json["meshes"][0]["primitives"][0]["targets"]
         .as_array()
@@ -721,7 +724,6 @@ fn a_morph_basis_reproduces_every_frame_within_its_tolerance() {
 
 #[test]
 fn frames_a_basis_cannot_hold_keep_one_target_per_frame() {
-    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
     let dir = tempfile::tempdir().expect("folder");
     // Every frame moves each vertex its own way (no shared shape): a basis needs a vector per
     // frame, so the writer keeps one target per frame.
@@ -746,14 +748,7 @@ fn frames_a_basis_cannot_hold_keep_one_target_per_frame() {
         .collect();
     let times: Vec<f64> = (0..frames.len()).map(|k| k as f64).collect();
     let path = dir.path().join("noise.glb");
-    let summary = write_sequence_parts_summarised(
-        &path,
-        &frames.as_slice(),
-        &times,
-        &SequenceOptions::default(),
-        GLB_PART_LIMIT,
-    )
-    .expect("write");
+    let summary = write_summarised(&path, &frames, &times, &SequenceOptions::default());
     assert_eq!(summary.segments[0].basis, None);
     let file = decode(&path);
     assert_eq!(
@@ -765,7 +760,6 @@ fn frames_a_basis_cannot_hold_keep_one_target_per_frame() {
 
 #[test]
 fn the_basis_is_fitted_only_for_a_file_over_its_payload_threshold() {
-    use trisplat_geometry::io::{GLB_PART_LIMIT, write_sequence_parts_summarised};
     let dir = tempfile::tempdir().expect("folder");
     let frames = wave_points(40);
     let times: Vec<f64> = (0..frames.len()).map(|k| k as f64 / 30.0).collect();
@@ -780,14 +774,7 @@ fn the_basis_is_fitted_only_for_a_file_over_its_payload_threshold() {
             ..SequenceOptions::default()
         };
         let path = dir.path().join(name);
-        let summary = write_sequence_parts_summarised(
-            &path,
-            &frames.as_slice(),
-            &times,
-            &options,
-            GLB_PART_LIMIT,
-        )
-        .expect("write");
+        let summary = write_summarised(&path, &frames, &times, &options);
         assert_eq!(summary.target_payload, payload, "{name}");
         assert_eq!(
             options.morph_basis.applies_to(payload),
