@@ -62,6 +62,14 @@ pub(super) struct Prepared<'a> {
     /// Whether every pixel of the tile is valid.
     pub(super) tile_full: Vec<bool>,
     pub(super) tiles_x: usize,
+    /// Per [`WINDOW`] x [`WINDOW`] window of pixels starting at every even pixel (i, j)
+    /// (row-major over `(i / 2, j / 2)`, clipped at the image's edges): the largest depth and
+    /// the smallest, invalid pixels counting as 0 (so the smallest is 0 unless all are
+    /// valid). Any rectangle of pixels is covered by a few windows reaching at most one
+    /// pixel past it ([`Prepared::window_depths`]).
+    pub(super) windows: Vec<[f32; 2]>,
+    /// Windows per row of [`Prepared::windows`]: `⌈width / 2⌉`.
+    pub(super) windows_x: usize,
     pub(super) color: Option<&'a [[f32; 3]]>,
     /// Per pixel (and one more), the depth beyond which it marks no free space: its front
     /// depth ([`DepthImage::with_front`]) when that lies before its depth, else its depth;
@@ -127,6 +135,7 @@ impl<'a> Prepared<'a> {
                 }
             }
         }
+        let (windows, windows_x) = window_table(&depth, width, height);
         let spread_per_depth = MAX_CELL_SPREAD_PIXELS / cam.fx.min(cam.fy);
         let mut cells = vec![[0.0f32; 2]; width * height + 1];
         for i in 0..height {
@@ -181,6 +190,8 @@ impl<'a> Prepared<'a> {
             tile_min,
             tile_full,
             tiles_x,
+            windows,
+            windows_x,
             color: frame.color.map(ColorImage::data),
             limits,
             tile_limit_min,
@@ -303,7 +314,12 @@ impl<'a> Prepared<'a> {
         let row = |v: f64| (v - 0.5).clamp(0.0, h - 1.0) as usize;
         let (col_end, row_end) = (|u: f64| col(u + 1.0), |v: f64| row(v + 1.0));
         let (j0, j1, i0, i1) = (col(u_min), col_end(u_max), row(v_min), row_end(v_max));
-        let range = if (j1 - j0 + 1) * (i1 - i0 + 1) <= RECT_SCAN_MAX {
+        let (cols, rows) = (j1 - j0 + 1, i1 - i0 + 1);
+        let range = if self.limits.is_none()
+            && cols.div_ceil(WINDOW) * rows.div_ceil(WINDOW) <= WINDOW_SCAN_MAX
+        {
+            self.window_depths(j0, j1, i0, i1)
+        } else if cols * rows <= RECT_SCAN_MAX {
             self.rect_depths(j0, j1, i0, i1)
         } else {
             self.tile_depths(j0, j1, i0, i1)
@@ -356,6 +372,27 @@ impl<'a> Prepared<'a> {
         range
     }
 
+    /// A depth range containing that of the pixels `[j0, j1] × [i0, i1]` (and at most one
+    /// more column and row on each side), from the windows that cover them; no free-space
+    /// limits (use it only without them).
+    fn window_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
+        let (mut max, mut min) = (0.0f32, f32::INFINITY);
+        for si in window_starts(i0, i1) {
+            let row = &self.windows[(si / 2) * self.windows_x..];
+            for sj in window_starts(j0, j1) {
+                let [hi, lo] = row[sj / 2];
+                max = max.max(hi);
+                min = min.min(lo);
+            }
+        }
+        DepthRange {
+            max,
+            min,
+            all_valid: min > 0.0,
+            limit_min: f32::INFINITY,
+        }
+    }
+
     /// A depth range containing that of the pixels `[j0, j1] × [i0, i1]`, from the tiles
     /// that cover them.
     fn tile_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
@@ -373,6 +410,56 @@ impl<'a> Prepared<'a> {
         }
         range
     }
+}
+
+/// Side of the windows of [`Prepared::windows`].
+const WINDOW: usize = 4;
+
+/// Most windows read by [`Prepared::visit`] for one block (larger rectangles use the tiles).
+const WINDOW_SCAN_MAX: usize = 64;
+
+/// The window table of [`Prepared::windows`] for a `width` x `height` depth map (0 =
+/// invalid), and its row length.
+fn window_table(depth: &[f32], width: usize, height: usize) -> (Vec<[f32; 2]>, usize) {
+    let windows_x = width.div_ceil(2);
+    let windows_y = height.div_ceil(2);
+    // Rows first: each row's windows of WINDOW pixels at even columns.
+    let mut rows = vec![[0.0f32, f32::INFINITY]; height * windows_x];
+    for (row, out) in depth
+        .chunks_exact(width)
+        .zip(rows.chunks_exact_mut(windows_x))
+    {
+        for (x, o) in out.iter_mut().enumerate() {
+            let run = &row[2 * x..(2 * x + WINDOW).min(width)];
+            *o = run.iter().fold([0.0f32, f32::INFINITY], |[hi, lo], &d| {
+                [hi.max(d), lo.min(d)]
+            });
+        }
+    }
+    let mut windows = vec![[0.0f32, f32::INFINITY]; windows_y * windows_x];
+    for (y, out) in windows.chunks_exact_mut(windows_x).enumerate() {
+        for r in 2 * y..(2 * y + WINDOW).min(height) {
+            for (o, &[hi, lo]) in out
+                .iter_mut()
+                .zip(&rows[r * windows_x..(r + 1) * windows_x])
+            {
+                *o = [o[0].max(hi), o[1].min(lo)];
+            }
+        }
+    }
+    (windows, windows_x)
+}
+
+/// Even starts of [`WINDOW`]-pixel windows whose union covers `[a, b]` (`a ≤ b`) and reaches
+/// at most one pixel before `a` and one past `b`.
+fn window_starts(a: usize, b: usize) -> impl Iterator<Item = usize> {
+    let last = (b.saturating_sub(WINDOW - 1) + 1) & !1;
+    let mut next = Some(a & !1);
+    std::iter::from_fn(move || {
+        let s = next?;
+        next = (s + WINDOW - 1 < b).then(|| (s + WINDOW).min(last));
+        Some(s)
+    })
 }
 
 /// The smallest and largest of a cell's four depths.
@@ -452,5 +539,76 @@ impl DepthRange {
         } else {
             self.all_valid = false;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+    use trisplat_geometry::sphere_rig;
+
+    use super::*;
+
+    #[test]
+    fn window_starts_cover_the_range_and_reach_one_pixel_past_it() {
+        for a in 0..24 {
+            for b in a..40 {
+                let starts: Vec<usize> = window_starts(a, b).collect();
+                assert_eq!(starts[0], a & !1, "[{a}, {b}]");
+                for pair in starts.windows(2) {
+                    assert!(pair[0] < pair[1] && pair[1] <= pair[0] + WINDOW, "{starts:?}");
+                }
+                let last = *starts.last().unwrap();
+                assert!(starts.iter().all(|s| s % 2 == 0), "{starts:?}");
+                assert!(last + WINDOW > b && last + WINDOW <= b + 2, "[{a}, {b}]: {starts:?}");
+            }
+        }
+    }
+
+    /// The window ranges contain the exact range of every rectangle (pixel by pixel, as
+    /// `rect_depths`) and lie within that of the rectangle grown by a pixel on each side, on
+    /// a depth map with invalid pixels (odd sizes, so windows are clipped at the edges).
+    #[test]
+    fn window_depths_bound_the_rectangle_within_a_pixel() {
+        let cam = sphere_rig(DVec3::ZERO, 1.0, 1, (37, 29), 50.0).unwrap()[0].clone();
+        let mut state = 7u64;
+        let data: Vec<f32> = (0..37 * 29)
+            .map(|_| {
+                state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                let r = (state >> 40) as f32 / (1u64 << 24) as f32;
+                if r < 0.03 { 0.0 } else { 1.0 + r }
+            })
+            .collect();
+        let depth = DepthImage::try_new(37, 29, data).unwrap();
+        let frame = Frame {
+            camera: &cam,
+            depth: &depth,
+            color: None,
+        };
+        let f = Prepared::new(&frame, f64::INFINITY, 0.1, DepthLookup::Bilinear).unwrap();
+        let (mut tight_max, mut all_valid_seen) = (0, 0);
+        for (j0, i0) in [(0, 0), (1, 3), (5, 2), (6, 7), (20, 11), (30, 20)] {
+            for j1 in j0..(j0 + 14).min(37) {
+                for i1 in i0..(i0 + 9).min(29) {
+                    let exact = f.rect_depths(j0, j1, i0, i1);
+                    let grown = f.rect_depths(
+                        j0.saturating_sub(1),
+                        (j1 + 1).min(36),
+                        i0.saturating_sub(1),
+                        (i1 + 1).min(28),
+                    );
+                    let w = f.window_depths(j0, j1, i0, i1);
+                    assert!(w.max >= exact.max && w.max <= grown.max);
+                    tight_max += usize::from(w.max == exact.max);
+                    assert!(!w.all_valid || exact.all_valid);
+                    assert!(!grown.all_valid || w.all_valid);
+                    if w.all_valid {
+                        all_valid_seen += 1;
+                        assert!(w.min <= exact.min && w.min >= grown.min);
+                    }
+                }
+            }
+        }
+        assert!(tight_max > 0 && all_valid_seen > 0, "{tight_max} {all_valid_seen}");
     }
 }

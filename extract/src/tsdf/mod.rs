@@ -31,8 +31,10 @@
 //! Values are stored in f32, computed in f64. Blocks are integrated in parallel, each looping
 //! over the frames in order, so the result does not depend on the thread count.
 //!
-//! Per block and frame, the depth range of the pixels the block projects onto (read pixel by
-//! pixel when the block covers at most `frame::RECT_SCAN_MAX` of them, else from 16-pixel tiles)
+//! Per block and frame, the depth range of the pixels the block projects onto (from a per-view
+//! table of the depth range of 4 x 4 pixel windows at every even pixel, a few windows that
+//! reach at most a pixel past the block's rectangle; with front depths, pixel by pixel when the
+//! block covers at most `frame::RECT_SCAN_MAX` of them; else from 16-pixel tiles)
 //! decides the work: nothing when the block is behind the camera, outside the image or
 //! `trunc` behind every depth; tsdf = 1 for all its voxels without projecting them when it
 //! projects inside the image onto valid pixels only and lies `trunc` in front of all of them

@@ -41,14 +41,14 @@ fn frames_of<'a>(
 }
 
 /// Memory for the per-view tables of one batch of [`TsdfVolume::integrate_streamed`] (the
-/// images, their depth-pair and tile tables: about 13 bytes per pixel, 25 with colour): 60
+/// images, their depth-pair, window and tile tables: about 15 bytes per pixel, 27 with colour): 60
 /// views of 512² make one batch, read once for both passes.
 pub const STREAM_BUDGET_BYTES: usize = 256 << 20;
 
 /// Views per batch of [`TsdfVolume::integrate_streamed`]: as many of the largest camera's
 /// size as fit in [`STREAM_BUDGET_BYTES`], at least one.
 fn views_per_batch(cameras: &[Camera], with_color: bool) -> usize {
-    let per_pixel = if with_color { 25 } else { 13 };
+    let per_pixel = if with_color { 27 } else { 15 };
     let largest = cameras
         .iter()
         .map(|c| c.width as usize * c.height as usize)
