@@ -66,7 +66,8 @@ pub(super) struct Prepared<'a> {
     /// (row-major over `(i / 2, j / 2)`, clipped at the image's edges): the largest depth and
     /// the smallest, invalid pixels counting as 0 (so the smallest is 0 unless all are
     /// valid). Any rectangle of pixels is covered by a few windows reaching at most one
-    /// pixel past it ([`Prepared::window_depths`]).
+    /// pixel past it on each side when it is at least 3 pixels wide and high
+    /// ([`Prepared::window_depths`]).
     pub(super) windows: Vec<[f32; 2]>,
     /// Windows per row of [`Prepared::windows`]: `⌈width / 2⌉`.
     pub(super) windows_x: usize,
@@ -372,9 +373,10 @@ impl<'a> Prepared<'a> {
         range
     }
 
-    /// A depth range containing that of the pixels `[j0, j1] × [i0, i1]` (and at most one
-    /// more column and row on each side), from the windows that cover them; no free-space
-    /// limits (use it only without them).
+    /// A depth range containing that of the pixels `[j0, j1] × [i0, i1]` (and of at most one
+    /// more column and row on each side, or of the 4 x 4 pixels from `(i0 & !1, j0 & !1)` for
+    /// a smaller rectangle: [`window_starts`]), from the windows that cover them; no
+    /// free-space limits (use it only without them).
     fn window_depths(&self, j0: usize, j1: usize, i0: usize, i1: usize) -> DepthRange {
         let (mut max, mut min) = (0.0f32, f32::INFINITY);
         for si in window_starts(i0, i1) {
@@ -450,8 +452,9 @@ fn window_table(depth: &[f32], width: usize, height: usize) -> (Vec<[f32; 2]>, u
     (windows, windows_x)
 }
 
-/// Even starts of [`WINDOW`]-pixel windows whose union covers `[a, b]` (`a ≤ b`) and reaches
-/// at most one pixel before `a` and one past `b`.
+/// Even starts of [`WINDOW`]-pixel windows whose union covers `[a, b]` (`a ≤ b`) and lies in
+/// `[a & !1, max(b + 1, (a & !1) + 3)]`: at most one pixel before `a`, and one past `b` unless the
+/// range is narrower than a window.
 fn window_starts(a: usize, b: usize) -> impl Iterator<Item = usize> {
     let last = (b.saturating_sub(WINDOW - 1) + 1) & !1;
     let mut next = Some(a & !1);
@@ -549,18 +552,29 @@ mod tests {
 
     use super::*;
 
+    /// The last pixel the windows of [`window_starts`]`(a, b)` may reach.
+    fn window_end(a: usize, b: usize) -> usize {
+        (b + 1).max((a & !1) + WINDOW - 1)
+    }
+
     #[test]
-    fn window_starts_cover_the_range_and_reach_one_pixel_past_it() {
+    fn window_starts_cover_the_range_and_reach_at_most_a_pixel_past_it() {
         for a in 0..24 {
             for b in a..40 {
                 let starts: Vec<usize> = window_starts(a, b).collect();
                 assert_eq!(starts[0], a & !1, "[{a}, {b}]");
                 for pair in starts.windows(2) {
-                    assert!(pair[0] < pair[1] && pair[1] <= pair[0] + WINDOW, "{starts:?}");
+                    assert!(
+                        pair[0] < pair[1] && pair[1] <= pair[0] + WINDOW,
+                        "{starts:?}"
+                    );
                 }
                 let last = *starts.last().unwrap();
                 assert!(starts.iter().all(|s| s % 2 == 0), "{starts:?}");
-                assert!(last + WINDOW > b && last + WINDOW <= b + 2, "[{a}, {b}]: {starts:?}");
+                assert!(
+                    last + WINDOW > b && last + WINDOW - 1 <= window_end(a, b),
+                    "[{a}, {b}]: {starts:?}"
+                );
             }
         }
     }
@@ -574,7 +588,9 @@ mod tests {
         let mut state = 7u64;
         let data: Vec<f32> = (0..37 * 29)
             .map(|_| {
-                state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1);
                 let r = (state >> 40) as f32 / (1u64 << 24) as f32;
                 if r < 0.03 { 0.0 } else { 1.0 + r }
             })
@@ -592,13 +608,14 @@ mod tests {
                 for i1 in i0..(i0 + 9).min(29) {
                     let exact = f.rect_depths(j0, j1, i0, i1);
                     let grown = f.rect_depths(
-                        j0.saturating_sub(1),
-                        (j1 + 1).min(36),
-                        i0.saturating_sub(1),
-                        (i1 + 1).min(28),
+                        j0 & !1,
+                        window_end(j0, j1).min(36),
+                        i0 & !1,
+                        window_end(i0, i1).min(28),
                     );
                     let w = f.window_depths(j0, j1, i0, i1);
-                    assert!(w.max >= exact.max && w.max <= grown.max);
+                    assert!(w.max >= exact.max, "{j0}..={j1} x {i0}..={i1}");
+                    assert!(w.max <= grown.max, "{j0}..={j1} x {i0}..={i1}");
                     tight_max += usize::from(w.max == exact.max);
                     assert!(!w.all_valid || exact.all_valid);
                     assert!(!grown.all_valid || w.all_valid);
@@ -609,6 +626,9 @@ mod tests {
                 }
             }
         }
-        assert!(tight_max > 0 && all_valid_seen > 0, "{tight_max} {all_valid_seen}");
+        assert!(
+            tight_max > 0 && all_valid_seen > 0,
+            "{tight_max} {all_valid_seen}"
+        );
     }
 }

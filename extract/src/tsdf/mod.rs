@@ -33,7 +33,8 @@
 //!
 //! Per block and frame, the depth range of the pixels the block projects onto (from a per-view
 //! table of the depth range of 4 x 4 pixel windows at every even pixel, a few windows that
-//! reach at most a pixel past the block's rectangle; with front depths, pixel by pixel when the
+//! reach at most a pixel past the block's rectangle
+//! when it is 3 pixels wide or more; with front depths, pixel by pixel when the
 //! block covers at most `frame::RECT_SCAN_MAX` of them; else from 16-pixel tiles)
 //! decides the work: nothing when the block is behind the camera, outside the image or
 //! `trunc` behind every depth; tsdf = 1 for all its voxels without projecting them when it
