@@ -198,10 +198,8 @@ impl CarriedMesh {
     /// into `out`. Each template triangle's frame is computed once (many key vertices share a
     /// triangle), then every vertex placed on it: the same values as [`place_on`] per vertex.
     pub fn place(&self, positions: &[DVec3], triangles: &[[u32; 3]], out: &mut Vec<DVec3>) {
-        let frames: Vec<(DVec3, [DVec3; 3])> = triangles
-            .par_iter()
-            .map(|&t| basis(positions, t))
-            .collect();
+        let frames: Vec<(DVec3, [DVec3; 3])> =
+            triangles.par_iter().map(|&t| basis(positions, t)).collect();
         out.clear();
         out.par_extend(self.triangle.par_iter().zip(&self.coords).map(|(&t, uvw)| {
             let (a, [e1, e2, m]) = frames[t as usize];
@@ -426,7 +424,10 @@ mod tests {
         for ((got, &t), uvw) in out.iter().zip(&carried.triangle).zip(&carried.coords) {
             let corners = triangles[t as usize].map(|i| bent[i as usize]);
             let want = place_on(corners, *uvw);
-            assert_eq!(got.to_array().map(f64::to_bits), want.to_array().map(f64::to_bits));
+            assert_eq!(
+                got.to_array().map(f64::to_bits),
+                want.to_array().map(f64::to_bits)
+            );
         }
     }
 

@@ -617,20 +617,33 @@ mod tests {
                 .map(|f| f.positions().iter().step_by(stride).copied().collect())
                 .collect();
             let n = frames.len();
-            let read = fit(path, &frames.as_slice(), 0..n, &grid, &base, Vec::new(), limits)
-                .expect("fit")
-                .expect("a basis");
-            let kept = fit(path, &frames.as_slice(), 0..n, &grid, &base, sampled, limits)
-                .expect("fit")
-                .expect("a basis");
+            let read = fit(
+                path,
+                &frames.as_slice(),
+                0..n,
+                &grid,
+                &base,
+                Vec::new(),
+                limits,
+            )
+            .expect("fit")
+            .expect("a basis");
+            let kept = fit(
+                path,
+                &frames.as_slice(),
+                0..n,
+                &grid,
+                &base,
+                sampled,
+                limits,
+            )
+            .expect("fit")
+            .expect("a basis");
             assert_eq!(read.vectors, kept.vectors, "stride {stride}");
             assert_eq!(read.weights, kept.weights);
             assert_eq!(read.errors, kept.errors);
         }
-        let mut short: Vec<Vec<DVec3>> = frames
-            .iter()
-            .map(|f| f.positions().to_vec())
-            .collect();
+        let mut short: Vec<Vec<DVec3>> = frames.iter().map(|f| f.positions().to_vec()).collect();
         short[7].pop();
         let n = frames.len();
         let err = fit(path, &frames.as_slice(), 0..n, &grid, &base, short, limits)
