@@ -195,14 +195,11 @@ impl CarriedMesh {
     }
 
     /// The carried vertices for the template at `positions` (same triangles as at the key),
-    /// into `out`. Each template triangle's frame is computed once (many key vertices share a
-    /// triangle), then every vertex placed on it: the same values as [`place_on`] per vertex.
+    /// into `out`.
     pub fn place(&self, positions: &[DVec3], triangles: &[[u32; 3]], out: &mut Vec<DVec3>) {
-        let frames: Vec<(DVec3, [DVec3; 3])> =
-            triangles.par_iter().map(|&t| basis(positions, t)).collect();
         out.clear();
         out.par_extend(self.triangle.par_iter().zip(&self.coords).map(|(&t, uvw)| {
-            let (a, [e1, e2, m]) = frames[t as usize];
+            let (a, [e1, e2, m]) = basis(positions, triangles[t as usize]);
             a + uvw.x * e1 + uvw.y * e2 + uvw.z * m
         }));
     }
@@ -406,29 +403,6 @@ mod tests {
             assert!((*a - *b).length() < 1e-12, "{a} vs {b}");
         }
         assert!(carried.farthest() < 1.0);
-    }
-
-    /// The triangle frames computed once per triangle place every vertex exactly where
-    /// [`place_on`] puts it from its triangle's corners (the per-vertex rule before).
-    #[test]
-    fn placing_through_shared_triangle_frames_equals_the_per_vertex_rule() {
-        let (positions, triangles) = grid();
-        let (carried, _) = bound(&positions, &triangles);
-        let bent: Vec<DVec3> = positions
-            .iter()
-            .map(|p| *p + DVec3::new(0.1 * (3.0 * p.y).sin(), 0.0, 0.2 * p.x * p.x))
-            .collect();
-        let mut out = Vec::new();
-        carried.place(&bent, &triangles, &mut out);
-        assert_eq!(out.len(), carried.triangle.len());
-        for ((got, &t), uvw) in out.iter().zip(&carried.triangle).zip(&carried.coords) {
-            let corners = triangles[t as usize].map(|i| bent[i as usize]);
-            let want = place_on(corners, *uvw);
-            assert_eq!(
-                got.to_array().map(f64::to_bits),
-                want.to_array().map(f64::to_bits)
-            );
-        }
     }
 
     #[test]
