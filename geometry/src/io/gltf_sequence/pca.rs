@@ -2,7 +2,9 @@
 //! over its frames (module `basis` holds the stored form and its evaluation):
 //!
 //! 1. **Sketch.** Frame `k`'s offsets from the run's base on the basis grid (`d_k`, grid steps)
-//!    are kept at every `s`-th vertex only (at most [`SKETCH_VERTICES`] vertices, `f32`), and
+//!    are kept at every `s`-th vertex only (at most [`SKETCH_VERTICES`] vertices, `f32`;
+//!    from the positions the survey kept of those vertices when it has them, so this pass
+//!    does not read the frames again), and
 //!    their frames × frames Gram matrix is formed (`f64` across chunks). Its leading
 //!    eigenpairs (`eigen`) give the principal directions in frame space, `y_i` with
 //!    eigenvalue `λ_i`. The smallest rank that puts every sketched vertex of every frame within
@@ -12,12 +14,16 @@
 //!    `u_i = Σ_k y_ik d_k / sqrt(λ_i)`, accumulated as the frames stream (blocks of frames,
 //!    chunks of coordinates in parallel), then each scaled to the `SHORT` range and rounded:
 //!    the vectors as stored.
-//! 3. **Check.** Every frame's least-squares weights on the first `r` stored vectors (`f32`)
+//! 3. **Check.** Every frame's least-squares weights on the first `r` stored vectors (`f32`;
+//!    after a residual vector is added, only its dot products with the block's frames are
+//!    computed, the others kept)
 //!    and its largest vertex error as stored, for a few candidate ranks `r₀ ≤ r ≤ R`; the
 //!    smallest rank at which every frame is within the tolerance is kept (a candidate is
 //!    dropped at its first frame over it). None: the run keeps one target per frame.
 //!
-//! Memory: the sketch (`frames × 3 × 4096` `f32`, 48 MB for 973 frames), the Gram matrix
+//! Memory: the survey's kept positions (`frames × 4096` `f64` points, 96 MB for 973 frames,
+//! freed frame by frame as the sketch is formed), the sketch (`frames × 3 × 4096` `f32`,
+//! 48 MB for 973 frames), the Gram matrix
 //! (`frames²` `f64`, 7.6 MB), a block of frames' offsets, and the `R` vectors (`f32` while
 //! accumulated, then `i16`). Every sum is formed in fixed chunks and then in order, so the
 //! basis does not depend on the number of threads.
