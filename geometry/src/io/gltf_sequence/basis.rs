@@ -18,6 +18,7 @@
 use std::ops::Range;
 use std::path::Path;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use super::quantize::Grid;
@@ -86,15 +87,52 @@ pub(super) fn offsets(
         let first = c * CHUNK / 3;
         for (i, o) in slab.chunks_exact_mut(3).enumerate() {
             let v = (first + i) * stride;
-            let s = (positions[v] - origin) / step;
-            for (x, (s, q)) in o.iter_mut().zip(s.to_array().into_iter().zip(base[v])) {
-                #[expect(clippy::cast_possible_truncation, reason = "f32 offsets")]
-                let d = (s - f64::from(q)) as f32;
-                *x = d;
-            }
+            o.copy_from_slice(&offset(positions[v], origin, step, base[v]));
         }
     });
     Ok(out)
+}
+
+/// [`offsets`] of a frame at every `stride`-th vertex from those vertices' positions
+/// (`sampled`, taken when the frame was surveyed): the same values.
+///
+/// # Errors
+/// `sampled` holds another number of vertices (the frame changed), named by `path` and `k`.
+pub(super) fn sampled_offsets(
+    path: &Path,
+    k: usize,
+    sampled: &[DVec3],
+    grid: &Grid,
+    base: &[[i16; 3]],
+    stride: usize,
+) -> Result<Vec<f32>, IoError> {
+    let stride = stride.max(1);
+    let expected = base.len().div_ceil(stride);
+    if sampled.len() != expected {
+        return Err(IoError::malformed(
+            path,
+            format!("frame {k}"),
+            format!(
+                "has {} sketched vertices, {expected} expected \
+                 (a frame changed while the sequence was written)",
+                sampled.len()
+            ),
+        ));
+    }
+    let (origin, step) = (grid.origin(), grid.step());
+    Ok(sampled
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &p)| offset(p, origin, step, base[i * stride]))
+        .collect())
+}
+
+/// The offset of a vertex at `p` from its base point `q` on the grid at `origin` with `step`,
+/// in grid steps.
+fn offset(p: DVec3, origin: DVec3, step: f64, q: [i16; 3]) -> [f32; 3] {
+    let s = ((p - origin) / step).to_array();
+    #[expect(clippy::cast_possible_truncation, reason = "f32 offsets")]
+    std::array::from_fn(|a| (s[a] - f64::from(q[a])) as f32)
 }
 
 /// The coordinates of chunk `c` of `m`.
@@ -120,32 +158,12 @@ pub(super) fn dot(a: &[f32], b: &[f32]) -> f64 {
     lanes.iter().map(|&x| f64::from(x)).sum::<f64>() + tail
 }
 
-/// `a · b_q` for `Q` slices `b_q` at once, each exactly as [`dot`] computes it (the same
-/// eight lanes, summed in the same order): one load of `a` serves `Q` products, and `Q × 8`
-/// independent sums keep the adder busy.
+/// `a · b_q` for `Q` slices `b_q`, each exactly as [`dot`] computes it. One [`dot`] after
+/// another: a loop over the `Q` slices within each group of eight lanes (one load of `a` for
+/// `Q` products) was measured 15% slower, the compiler vectorising it across the slices with
+/// shuffles instead of along the lanes (2026-11-28, issue #31).
 fn dot_many<const Q: usize>(a: &[f32], b: [&[f32]; Q]) -> [f64; Q] {
-    let whole = a.len() - a.len() % 8;
-    let mut lanes = [[0.0f32; 8]; Q];
-    let b8 = b.map(|s| &s[..whole]);
-    for (j, x) in a[..whole].chunks_exact(8).enumerate() {
-        let x: &[f32; 8] = x.try_into().unwrap_or(&[0.0; 8]);
-        for (lane, s) in lanes.iter_mut().zip(&b8) {
-            let y: &[f32; 8] = s[8 * j..8 * j + 8].try_into().unwrap_or(&[0.0; 8]);
-            for l in 0..8 {
-                lane[l] += x[l] * y[l];
-            }
-        }
-    }
-    let mut out = [0.0f64; Q];
-    for ((o, lane), s) in out.iter_mut().zip(&lanes).zip(&b) {
-        let tail: f64 = a[whole..]
-            .iter()
-            .zip(&s[whole..])
-            .map(|(x, y)| f64::from(*x) * f64::from(*y))
-            .sum();
-        *o = lane.iter().map(|&x| f64::from(x)).sum::<f64>() + tail;
-    }
-    out
+    b.map(|s| dot(a, s))
 }
 
 /// Coordinates a tiled kernel keeps in registers at once (a multiple of 8).
@@ -233,15 +251,18 @@ pub(super) fn chunked_dots4(a: &[f32], b: [&[f32]; 4]) -> [f64; 4] {
     std::array::from_fn(|q| parts.iter().map(|p| p[q]).sum())
 }
 
-/// The largest length of a vertex (3 coordinates) of `residual`.
+/// The largest length of a vertex (3 coordinates) of `residual`: the root of the largest
+/// squared length (the same value as the largest root, `sqrt` being correctly rounded and
+/// monotonic, with one root instead of one per vertex).
 pub(super) fn max_vertex_length(residual: &[f32]) -> f64 {
     residual
         .chunks_exact(3)
         .map(|v| {
             let (x, y, z) = (f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
-            (x * x + y * y + z * z).sqrt()
+            x * x + y * y + z * z
         })
         .fold(0.0, f64::max)
+        .sqrt()
 }
 
 /// `out -= w × v` (a chunk of the evaluation).
@@ -267,23 +288,55 @@ impl Basis {
 
     /// Chunk `c` (of `m` coordinates) of the first `r` vectors, as `f32`, one after another.
     fn chunk_f32(&self, c: usize, m: usize, r: usize, out: &mut Vec<f32>) {
+        self.chunk_f32_of(c, m, 0..r, out);
+    }
+
+    /// Chunk `c` (of `m` coordinates) of vectors `vectors`, as `f32`, one after another.
+    fn chunk_f32_of(&self, c: usize, m: usize, vectors: Range<usize>, out: &mut Vec<f32>) {
         out.clear();
         let range = chunk(c, m);
-        for v in &self.vectors[..r] {
+        for v in &self.vectors[vectors] {
             out.extend(v[range.clone()].iter().map(|&x| f32::from(x)));
         }
     }
 
     /// Each frame of `block` dotted with every vector: `block.len() × len()`, frame-major.
     pub(super) fn dots(&self, block: &[Vec<f32>]) -> Vec<f64> {
+        self.dots_with(block, 0..self.len())
+    }
+
+    /// [`Self::dots`] of frames whose dot products with the first `known` vectors are
+    /// already `old` (frame-major, `known` per frame): only the later vectors' are computed,
+    /// each exactly as [`Self::dots`] computes it (the same chunks, summed in the same
+    /// order), so the result equals `self.dots(block)` bit for bit.
+    pub(super) fn extend_dots(&self, old: &[f64], known: usize, block: &[Vec<f32>]) -> Vec<f64> {
         let (r, n) = (self.len(), block.len());
+        if known == 0 || known >= r {
+            return if known == r {
+                old[..n * r].to_vec()
+            } else {
+                self.dots(block)
+            };
+        }
+        let new = self.dots_with(block, known..r);
+        old.chunks_exact(known)
+            .zip(new.chunks_exact(r - known))
+            .take(n)
+            .flat_map(|(a, b)| a.iter().chain(b).copied())
+            .collect()
+    }
+
+    /// Each frame of `block` dotted with vectors `vectors`: `block.len() × vectors.len()`,
+    /// frame-major.
+    fn dots_with(&self, block: &[Vec<f32>], vectors: Range<usize>) -> Vec<f64> {
+        let (r, n) = (vectors.len(), block.len());
         let Some(m) = block.first().map(Vec::len) else {
             return Vec::new();
         };
         let partial: Vec<Vec<f64>> = (0..m.div_ceil(CHUNK))
             .into_par_iter()
             .map_init(Vec::new, |scratch, c| {
-                self.chunk_f32(c, m, r, scratch);
+                self.chunk_f32_of(c, m, vectors.clone(), scratch);
                 let range = chunk(c, m);
                 let len = range.len();
                 let mut out = vec![0.0; n * r];
@@ -502,6 +555,55 @@ mod tests {
                 tiled.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
                 "add {len}"
             );
+        }
+    }
+
+    /// The dot products extended by a new vector's (the check's incremental rule) equal the
+    /// plain recomputation over every vector bit for bit, for frames dropped from the front
+    /// of the block too; and the one-root largest vertex length equals the largest root.
+    #[test]
+    fn extended_dots_equal_the_plain_recomputation() {
+        let value = |seed: usize, j: usize| {
+            ((j * 7919 + seed * 104_729) % 2003) as f32 / 61.0 - 16.0 + (j % 7) as f32 * 1e-3
+        };
+        // Lengths below, at and across chunks, with quads and a remainder of frames.
+        for (m, n) in [(3 * 11, 3), (CHUNK, 5), (2 * CHUNK + 3 * 37, 9)] {
+            let block: Vec<Vec<f32>> = (0..n)
+                .map(|f| (0..m).map(|j| value(f + 10, j)).collect())
+                .collect();
+            let mut basis = Basis::default();
+            for i in 0..3 {
+                let v: Vec<f32> = (0..m).map(|j| value(i + 1, j)).collect();
+                assert!(basis.add(&v, 1.0));
+            }
+            let old = basis.dots(&block);
+            for dropped in [0, 1, n - 1] {
+                let mut grown = Basis {
+                    vectors: basis.vectors.clone(),
+                    cholesky: basis.cholesky.clone(),
+                };
+                let extra: Vec<f32> = (0..m).map(|j| value(dropped + 40, j) * 0.5).collect();
+                assert!(grown.add(&extra, 1.0));
+                let rest = &block[dropped..];
+                let extended = grown.extend_dots(&old[dropped * 3..], 3, rest);
+                let plain = grown.dots(rest);
+                assert_eq!(
+                    extended.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    plain.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    "m {m}, n {n}, dropped {dropped}"
+                );
+                assert_eq!(grown.extend_dots(&plain, 4, rest), plain, "nothing new");
+            }
+            for f in &block {
+                let roots = f
+                    .chunks_exact(3)
+                    .map(|v| {
+                        let (x, y, z) = (f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+                        (x * x + y * y + z * z).sqrt()
+                    })
+                    .fold(0.0, f64::max);
+                assert_eq!(max_vertex_length(f).to_bits(), roots.to_bits());
+            }
         }
     }
 

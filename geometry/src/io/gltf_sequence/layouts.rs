@@ -3,6 +3,7 @@
 //! sits on a leaf node whose `translation`/`scale` undo its grid, under the node the
 //! visibility track animates.
 
+use std::cell::Cell;
 use std::ops::Range;
 use std::path::Path;
 
@@ -29,6 +30,9 @@ pub(super) struct Segment {
     pub(super) bounds: (DVec3, DVec3),
     /// The smallest bounding-box diagonal of one of its frames (the basis tolerance's unit).
     pub(super) diagonal: f64,
+    /// Its frames' positions at every sketched vertex, as the survey kept them, for the first
+    /// basis fit to take (empty: the fit reads the frames).
+    pub(super) sketch: Cell<Vec<Vec<DVec3>>>,
 }
 
 /// What every segment's mesh is built with: the frames and their keys, the sequence's
@@ -198,7 +202,8 @@ fn try_basis(
         tolerance,
         max_vectors: ctx.basis.max_components.min(run.len() - 2),
     };
-    Ok(fit(ctx.path, ctx.frames, run, &grid, &steps, limits)?.map(|f| (grid, f)))
+    let sampled = segment.sketch.take();
+    Ok(fit(ctx.path, ctx.frames, run, &grid, &steps, sampled, limits)?.map(|f| (grid, f)))
 }
 
 /// The mesh of `segment` (its first frame; morph targets for the others when it has more

@@ -229,8 +229,8 @@ pub fn write_sequence_with(
         });
     }
     let keys = key_times(path, frames.frame_count(), frame_times)?;
-    let survey = Survey::of(path, frames, options.layout)?;
-    let segments = segments(&survey, 0..frames.frame_count());
+    let mut survey = survey(path, frames, options)?;
+    let segments = segments(&mut survey, 0..frames.frame_count());
     let job = Job {
         path,
         frames,
@@ -245,15 +245,41 @@ pub fn write_sequence_with(
     }
 }
 
-/// The segments of `survey` within frames `run`, counted from its first frame.
-fn segments(survey: &Survey, run: std::ops::Range<usize>) -> Vec<Segment> {
-    survey
-        .segments_in(&run)
+/// The survey of `frames` for `options`: with the morph basis's sketch when a basis is
+/// fitted (asked for, quantised, over its payload, no normal targets).
+fn survey(
+    path: &Path,
+    frames: &dyn FrameSource,
+    options: &SequenceOptions,
+) -> Result<Survey, IoError> {
+    let sketch = options.morph_basis.enabled()
+        && options.compression.quantizes()
+        && options.layout != SequenceLayout::NodePerFrame;
+    let mut survey = Survey::of(path, frames, options.layout, sketch)?;
+    if survey.normals || !options.morph_basis.applies_to(survey.target_payload) {
+        survey.sketch = Vec::new();
+    }
+    Ok(survey)
+}
+
+/// The segments of `survey` within frames `run`, counted from its first frame; they take the
+/// survey's sketch of their frames (left empty there).
+fn segments(survey: &mut Survey, run: std::ops::Range<usize>) -> Vec<Segment> {
+    let spans = survey.segments_in(&run);
+    spans
         .into_iter()
-        .map(|(frames, bounds, diagonal)| Segment {
-            frames,
-            bounds,
-            diagonal,
+        .map(|(frames, bounds, diagonal)| {
+            let sketch = survey
+                .sketch
+                .get_mut(frames.start + run.start..frames.end + run.start)
+                .map(|s| s.iter_mut().map(std::mem::take).collect())
+                .unwrap_or_default();
+            Segment {
+                frames,
+                bounds,
+                diagonal,
+                sketch: std::cell::Cell::new(sketch),
+            }
         })
         .collect()
 }
@@ -389,9 +415,9 @@ pub fn write_sequence_parts_summarised(
         });
     }
     let keys = key_times(path, frames.frame_count(), frame_times)?;
-    let survey = Survey::of(path, frames, options.layout)?;
+    let mut survey = survey(path, frames, options)?;
     let runs = split(path, &survey.sizes, max_bytes)?;
-    let whole = segments(&survey, 0..frames.frame_count());
+    let whole = segments(&mut survey, 0..frames.frame_count());
     let job = Job {
         path,
         frames,
@@ -422,7 +448,7 @@ pub fn write_sequence_parts_summarised(
     let mut summaries = Vec::new();
     for (i, run) in runs.into_iter().enumerate() {
         let part = path.with_file_name(format!("{stem}_part{:03}.glb", i + 1));
-        let part_segments = segments(&survey, run.clone());
+        let part_segments = segments(&mut survey, run.clone());
         let part_frames = FrameRun {
             frames,
             run: run.clone(),

@@ -2,7 +2,9 @@
 //! over its frames (module `basis` holds the stored form and its evaluation):
 //!
 //! 1. **Sketch.** Frame `k`'s offsets from the run's base on the basis grid (`d_k`, grid steps)
-//!    are kept at every `s`-th vertex only (at most [`SKETCH_VERTICES`] vertices, `f32`), and
+//!    are kept at every `s`-th vertex only (at most [`SKETCH_VERTICES`] vertices, `f32`;
+//!    from the positions the survey kept of those vertices when it has them, so this pass
+//!    does not read the frames again), and
 //!    their frames × frames Gram matrix is formed (`f64` across chunks). Its leading
 //!    eigenpairs (`eigen`) give the principal directions in frame space, `y_i` with
 //!    eigenvalue `λ_i`. The smallest rank that puts every sketched vertex of every frame within
@@ -12,12 +14,16 @@
 //!    `u_i = Σ_k y_ik d_k / sqrt(λ_i)`, accumulated as the frames stream (blocks of frames,
 //!    chunks of coordinates in parallel), then each scaled to the `SHORT` range and rounded:
 //!    the vectors as stored.
-//! 3. **Check.** Every frame's least-squares weights on the first `r` stored vectors (`f32`)
+//! 3. **Check.** Every frame's least-squares weights on the first `r` stored vectors (`f32`;
+//!    after a residual vector is added, only its dot products with the block's frames are
+//!    computed, the others kept)
 //!    and its largest vertex error as stored, for a few candidate ranks `r₀ ≤ r ≤ R`; the
 //!    smallest rank at which every frame is within the tolerance is kept (a candidate is
 //!    dropped at its first frame over it). None: the run keeps one target per frame.
 //!
-//! Memory: the sketch (`frames × 3 × 4096` `f32`, 48 MB for 973 frames), the Gram matrix
+//! Memory: the survey's kept positions (`frames × 4096` `f64` points, 96 MB for 973 frames,
+//! freed frame by frame as the sketch is formed), the sketch (`frames × 3 × 4096` `f32`,
+//! 48 MB for 973 frames), the Gram matrix
 //! (`frames²` `f64`, 7.6 MB), a block of frames' offsets, and the `R` vectors (`f32` while
 //! accumulated, then `i16`). Every sum is formed in fixed chunks and then in order, so the
 //! basis does not depend on the number of threads.
@@ -25,11 +31,12 @@
 use std::ops::Range;
 use std::path::Path;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use super::basis::{
     Basis, BasisFit, BasisLimits, CHUNK, add_scaled_all, chunk, chunked_dot, chunked_dots4,
-    max_vertex_length, offsets,
+    max_vertex_length, offsets, sampled_offsets,
 };
 use super::eigen::{Eigenpair, leading};
 use super::quantize::Grid;
@@ -55,9 +62,16 @@ const UNITS: f64 = 16.0;
 /// The most frames whose full offsets are held at once.
 const BLOCK: usize = 16;
 
+/// The sketch keeps every `sketch_stride(vertices)`-th vertex of a frame of `vertices`.
+pub(super) fn sketch_stride(vertices: usize) -> usize {
+    vertices.div_ceil(SKETCH_VERTICES).max(1)
+}
+
 /// Fits a principal basis to frames `run` of `frames`, whose base (the run's first frame) is
 /// `base` on `grid`; `None` when it does not meet `limits` (the caller keeps one target per
-/// frame).
+/// frame). `sampled` is every frame's positions at every [`sketch_stride`]-th vertex when the
+/// survey kept them (one per frame of the run), else empty (the frames are read for the
+/// sketch): the same basis either way.
 ///
 /// # Errors
 /// The source's errors; a frame whose vertex count differs from the base's.
@@ -67,17 +81,25 @@ pub(super) fn fit(
     run: Range<usize>,
     grid: &Grid,
     base: &[[i16; 3]],
+    sampled: Vec<Vec<DVec3>>,
     limits: BasisLimits,
 ) -> Result<Option<BasisFit>, IoError> {
     let n = run.len();
     if n == 0 || base.is_empty() || limits.max_vectors == 0 {
         return Ok(None);
     }
-    let stride = base.len().div_ceil(SKETCH_VERTICES);
-    let sketch = run
-        .clone()
-        .map(|k| offsets(path, frames, k, grid, base, stride))
-        .collect::<Result<Vec<_>, _>>()?;
+    let stride = sketch_stride(base.len());
+    let sketch = if sampled.len() == n {
+        sampled
+            .into_iter()
+            .zip(run.clone())
+            .map(|(p, k)| sampled_offsets(path, k, &p, grid, base, stride))
+            .collect::<Result<Vec<_>, _>>()?
+    } else {
+        run.clone()
+            .map(|k| offsets(path, frames, k, grid, base, stride))
+            .collect::<Result<Vec<_>, _>>()?
+    };
     let gram = gram(&sketch);
     let pairs = leading(&gram, n, (limits.max_vectors + OVERSAMPLING).min(n));
     let Some(needed) = sketch_rank(&sketch, &gram, &pairs, SKETCH_SHARE * limits.tolerance) else {
@@ -319,8 +341,8 @@ fn check(
             .map(|k| offsets(path, frames, k, grid, base, 1))
             .collect::<Result<Vec<_>, _>>()?;
         let mut first = true;
+        let mut dots = basis.dots(&block);
         while !block.is_empty() {
-            let dots = basis.dots(&block);
             let r_all = basis.len();
             if first {
                 for (rank, weights, errors) in &mut smaller {
@@ -355,8 +377,10 @@ fn check(
                 whole = None;
                 break;
             }
-            // The failing frame is evaluated again with its residual in the basis.
+            // The failing frame is evaluated again with its residual in the basis; the dot
+            // products with the vectors before it stay, only the new vector's are computed.
             block.drain(..passed);
+            dots = basis.extend_dots(&dots[passed * r_all..], r_all, &block);
         }
         next = end;
     }
@@ -464,6 +488,7 @@ mod tests {
             0..frames.len(),
             &grid,
             &base,
+            Vec::new(),
             limits,
         )
         .expect("fit")
@@ -556,11 +581,99 @@ mod tests {
             max_vectors: 2,
         };
         let path = Path::new("t.glb");
-        let got = fit(path, &on_grid.as_slice(), 0..4, &grid, &base, limits).expect("fit");
+        let got = fit(
+            path,
+            &on_grid.as_slice(),
+            0..4,
+            &grid,
+            &base,
+            Vec::new(),
+            limits,
+        )
+        .expect("fit");
         if let Some(got) = got {
             // Only rounding noise to fit: whatever it holds is within the tolerance.
             assert!(got.errors.iter().all(|e| *e <= 1e-3), "{:?}", got.errors);
         }
+    }
+
+    /// The sketch from the survey's positions (every sketched vertex kept when the frames
+    /// were first read) gives the same basis, bit for bit, as the frames read again; a
+    /// sampled frame of another length is an error naming the frame.
+    #[test]
+    fn the_surveyed_sketch_gives_the_same_basis_as_reading_the_frames() {
+        let frames = frames(20, 3, 1e-5, |k, i| ((k * (i + 2)) as f64 * 0.41).sin());
+        let (grid, base, tolerance) = setup(&frames, 8e-5);
+        let limits = BasisLimits {
+            tolerance,
+            max_vectors: 10,
+        };
+        let path = Path::new("t.glb");
+        // The fixture has 1,600 vertices, so force a stride above 1 through a larger mesh too.
+        for frames in [frames.clone(), widened(&frames, 3)] {
+            let (grid, base) = if frames[0].vertex_count() == base.len() {
+                (grid, base.clone())
+            } else {
+                let (g, b, _) = setup(&frames, 8e-5);
+                (g, b)
+            };
+            let stride = sketch_stride(base.len());
+            let sampled: Vec<Vec<DVec3>> = frames
+                .iter()
+                .map(|f| f.positions().iter().step_by(stride).copied().collect())
+                .collect();
+            let n = frames.len();
+            let read = fit(
+                path,
+                &frames.as_slice(),
+                0..n,
+                &grid,
+                &base,
+                Vec::new(),
+                limits,
+            )
+            .expect("fit")
+            .expect("a basis");
+            let kept = fit(
+                path,
+                &frames.as_slice(),
+                0..n,
+                &grid,
+                &base,
+                sampled,
+                limits,
+            )
+            .expect("fit")
+            .expect("a basis");
+            assert_eq!(read.vectors, kept.vectors, "stride {stride}");
+            assert_eq!(read.weights, kept.weights);
+            assert_eq!(read.errors, kept.errors);
+        }
+        let mut short: Vec<Vec<DVec3>> = frames.iter().map(|f| f.positions().to_vec()).collect();
+        short[7].pop();
+        let n = frames.len();
+        let err = fit(path, &frames.as_slice(), 0..n, &grid, &base, short, limits)
+            .err()
+            .expect("a short sketch is refused");
+        assert!(err.to_string().contains("frame 7"), "{err}");
+    }
+
+    /// `frames` with every vertex repeated `times` times (slightly moved), so that the sketch
+    /// keeps every few vertices only.
+    fn widened(frames: &[TriMesh], times: usize) -> Vec<TriMesh> {
+        frames
+            .iter()
+            .map(|f| {
+                let p: Vec<DVec3> = (0..times)
+                    .flat_map(|t| {
+                        f.positions()
+                            .iter()
+                            .map(move |&p| p + DVec3::splat(1e-3 * t as f64))
+                    })
+                    .collect();
+                TriMesh::new(p, f.triangles().to_vec())
+            })
+            .collect()
     }
 
     #[test]

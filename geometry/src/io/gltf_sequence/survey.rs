@@ -8,6 +8,7 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::options::SequenceLayout;
+use super::pca::sketch_stride;
 use super::source::FrameSource;
 use crate::io::error::IoError;
 use crate::mesh::TriMesh;
@@ -62,15 +63,21 @@ pub(super) struct Survey {
     /// The quantised position deltas of one morph target per frame after each segment's first
     /// (8 bytes per vertex), before compression: what a morph basis would replace.
     pub(super) target_payload: u64,
+    /// Per frame, its positions at every [`sketch_stride`]-th vertex, when asked for: the
+    /// morph basis's sketch taken in this reading (module `pca`), so that its fit reads every
+    /// frame once less. Empty when not asked for or taken.
+    pub(super) sketch: Vec<Vec<DVec3>>,
 }
 
 impl Survey {
     /// Checks every frame (finite positions; for morph targets the topology of frame 0) and
-    /// decides the layout.
+    /// decides the layout; with `sketch`, keeps every frame's positions at every
+    /// [`sketch_stride`]-th vertex ([`Self::sketch`]).
     pub(super) fn of(
         path: &Path,
         frames: &dyn FrameSource,
         layout: SequenceLayout,
+        sketch: bool,
     ) -> Result<Self, IoError> {
         let base = frames.frame(0)?;
         let mut same = base.triangle_count() > 0;
@@ -92,12 +99,18 @@ impl Survey {
         let mut all = empty;
         let mut sizes = Vec::with_capacity(frames.frame_count());
         let mut target_payload = 0u64;
+        let mut sketches = Vec::new();
         for k in 0..frames.frame_count() {
             let frame = if k == 0 {
                 Cow::Borrowed(base.as_ref())
             } else {
                 frames.frame(k)?
             };
+            if sketch {
+                let positions = frame.positions();
+                let stride = sketch_stride(positions.len());
+                sketches.push(positions.iter().step_by(stride).copied().collect());
+            }
             if let Some(v) = frame.positions().iter().position(|p| !p.is_finite()) {
                 return Err(IoError::malformed(
                     path,
@@ -173,6 +186,7 @@ impl Survey {
                 0.0
             },
             target_payload,
+            sketch: sketches,
         })
     }
 
