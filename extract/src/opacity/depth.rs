@@ -653,16 +653,18 @@ mod tests {
             .collect()
     }
 
+    /// `n` points drawn uniformly in the cube [-1.2, 1.2]^3.
+    fn random_points(state: &mut u64, n: usize) -> Vec<DVec3> {
+        (0..n)
+            .map(|_| DVec3::new(lcg(state), lcg(state), lcg(state)) * 2.4 - DVec3::splat(1.2))
+            .collect()
+    }
+
     #[test]
     fn field_equals_brute_force() {
         let views = random_views(7);
         let mut state = 99u64;
-        let points: Vec<DVec3> = (0..4000)
-            .map(|_| {
-                DVec3::new(lcg(&mut state), lcg(&mut state), lcg(&mut state)) * 2.4
-                    - DVec3::splat(1.2)
-            })
-            .collect();
+        let points = random_points(&mut state, 4000);
         let mut kinds = [0usize; 3];
         for k in [1u16, 2, 3] {
             let rules = DepthRules {
@@ -834,6 +836,15 @@ mod tests {
         );
     }
 
+    /// The views of an 80-view rig around the sphere whose direction has a z above `min_z`.
+    fn front_cams(min_z: f64) -> Vec<trisplat_geometry::Camera> {
+        sphere_rig(DVec3::ZERO, 0.4, 80, (96, 96), 40.0)
+            .expect("rig")
+            .into_iter()
+            .filter(|c| c.position().normalize().z > min_z)
+            .collect()
+    }
+
     /// Views of the sphere's front cap only (no silhouette carves its front): the margin's own
     /// level set (`surface` = `margin`, the rule before `surface`) lies ~`margin` footprints in
     /// front of the median depth; settled (`surface` 0, the default) the front vertices lie on
@@ -841,11 +852,7 @@ mod tests {
     #[test]
     fn settled_vertices_lie_on_the_median_depth() {
         let radius = 0.3;
-        let cams: Vec<_> = sphere_rig(DVec3::ZERO, 0.4, 80, (96, 96), 40.0)
-            .expect("rig")
-            .into_iter()
-            .filter(|c| c.position().normalize().z > 0.8)
-            .collect();
+        let cams = front_cams(0.8);
         assert!(cams.len() >= 6, "{} views", cams.len());
         let views = sphere_views(cams, radius);
         let options = OpacityOptions {
@@ -932,12 +939,7 @@ mod tests {
     fn early_stopping_queries_equal_the_plain_rule() {
         let views = random_views(3);
         let mut state = 17u64;
-        let points: Vec<DVec3> = (0..3000)
-            .map(|_| {
-                DVec3::new(lcg(&mut state), lcg(&mut state), lcg(&mut state)) * 2.4
-                    - DVec3::splat(1.2)
-            })
-            .collect();
+        let points = random_points(&mut state, 3000);
         let mut ties = [0usize; 2];
         let mut stopped = 0usize;
         for k in [1u16, 2, 3] {
@@ -1011,11 +1013,7 @@ mod tests {
     #[test]
     fn settling_equals_the_plain_rule() {
         let radius = 0.3;
-        let cams: Vec<_> = sphere_rig(DVec3::ZERO, 0.4, 80, (96, 96), 40.0)
-            .expect("rig")
-            .into_iter()
-            .filter(|c| c.position().normalize().z > 0.6)
-            .collect();
+        let cams = front_cams(0.6);
         let views = sphere_views(cams, radius);
         let rules = DepthRules::default();
         let maps = DepthViews::new(&views, rules).expect("views");
