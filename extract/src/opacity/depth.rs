@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use trisplat_geometry::Camera;
 
 use super::error::OpacityError;
+use super::order::z_order;
 use super::view::NEAR;
 
 /// Largest number of views that must carve a point ([`DepthRules::carve_views`]).
@@ -93,7 +94,7 @@ struct Prepared<'a> {
     focal: f64,
 }
 
-/// The checked views of [`depth_field`] and [`depth_colors`].
+/// The checked views of the field's queries ([`DepthViews::at_or_above`]) and [`depth_colors`].
 pub(crate) struct DepthViews<'a> {
     views: Vec<Prepared<'a>>,
     rules: DepthRules,
@@ -173,46 +174,69 @@ impl<'a> DepthViews<'a> {
     }
 
     /// The settling of [`DepthRules::surface`]: `vertices` (on the level set) moved along
-    /// `-normals` (unit, outward) as that rule says.
+    /// `-normals` (unit, outward) as that rule says. The vertices are visited in Z-order, each
+    /// one's queries starting from the views that carved its predecessor's last sample.
     pub fn settle(&self, vertices: &[DVec3], normals: &[DVec3]) -> Vec<DVec3> {
         let target = -f64::from(self.rules.surface);
         let reach = f64::from(self.rules.margin - self.rules.surface);
         if reach <= 0.0 {
             return vertices.to_vec();
         }
-        vertices
-            .par_iter()
-            .zip(normals)
-            .with_min_len(512)
-            .map(|(&x, &n)| self.settle_one(x, n, target, reach))
-            .collect()
+        let order = z_order(vertices);
+        let by_order: Vec<DVec3> = order
+            .par_chunks(SIDE_CHUNK)
+            .flat_map_iter(|chunk| {
+                let mut hint = CarveHint::default();
+                chunk.iter().map(move |&i| {
+                    let i = i as usize;
+                    self.settle_one(vertices[i], normals[i], target, reach, &mut hint)
+                })
+            })
+            .collect();
+        let mut out = vec![DVec3::ZERO; vertices.len()];
+        for (&i, &x) in order.iter().zip(&by_order) {
+            out[i as usize] = x;
+        }
+        out
     }
 
-    /// One vertex of [`Self::settle`].
-    fn settle_one(&self, x: DVec3, n: DVec3, target: f64, reach: f64) -> DVec3 {
+    /// One vertex of [`Self::settle`]; `hint` carries the views that carved the last sample
+    /// below the target from query to query.
+    fn settle_one(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        target: f64,
+        reach: f64,
+        hint: &mut CarveHint,
+    ) -> DVec3 {
         if n == DVec3::ZERO {
             return x;
         }
         let Some(fp) = self.footprint(x) else {
             return x;
         };
-        // Silhouette: just outside the vertex some view sees no median depth.
-        if field_at(self, x + n * (0.5 * fp)).0 == f64::NEG_INFINITY {
+        // Silhouette: just outside the vertex some view sees no median depth (the field is
+        // -inf there, below every finite level).
+        let mut rim_hint = CarveHint::default();
+        if !self
+            .at_or_above(x + n * (0.5 * fp), f64::MIN, &mut rim_hint)
+            .0
+        {
             return x;
         }
         let step = reach * fp / f64::from(SETTLE_SAMPLES);
-        let at = |t: f64| field_at(self, x - n * t).0;
-        if at(0.0) >= target {
+        let mut at = |t: f64| self.at_or_above(x - n * t, target, hint).0;
+        if at(0.0) {
             return x;
         }
         for i in 1..=SETTLE_SAMPLES {
             let t = step * f64::from(i);
-            let f = at(t);
-            if f >= target {
+            if at(t) {
                 let (mut lo, mut hi) = (t - step, t);
                 for _ in 0..SETTLE_BISECTIONS {
                     let mid = 0.5 * (lo + hi);
-                    if at(mid) >= target {
+                    if at(mid) {
                         hi = mid;
                     } else {
                         lo = mid;
@@ -221,7 +245,7 @@ impl<'a> DepthViews<'a> {
                 let t = 0.5 * (lo + hi);
                 // Only where the inside goes on behind the target (a thick part): a thin layer
                 // keeps the margin that gives it an inside, so it is not thinned away.
-                let thick = (1..=2).all(|k| at(t + f64::from(k) * 0.5 * reach * fp) >= target);
+                let thick = (1..=2).all(|k| at(t + f64::from(k) * 0.5 * reach * fp));
                 return if thick { x - n * t } else { x };
             }
         }
@@ -316,7 +340,9 @@ fn signed(v: &Prepared, x: DVec3) -> Option<f64> {
 }
 
 /// The field at `x`: the `carve_views`-th smallest signed depth over the views that see `x`
-/// (+∞ when fewer see it), and whether any view sees it.
+/// (+∞ when fewer see it), and whether any view sees it: the plain rule, which
+/// [`DepthViews::at_or_above`] answers without all the views.
+#[cfg(test)]
 pub(crate) fn field_at(views: &DepthViews, x: DVec3) -> (f64, bool) {
     let k = usize::from(views.rules.carve_views);
     let mut smallest = [f64::INFINITY; MAX_CARVE_VIEWS as usize];
@@ -338,12 +364,118 @@ pub(crate) fn field_at(views: &DepthViews, x: DVec3) -> (f64, bool) {
 }
 
 /// [`field_at`] at every point (values, seen).
+#[cfg(test)]
 pub(crate) fn depth_field(views: &DepthViews, points: &[DVec3]) -> (Vec<f64>, Vec<bool>) {
     points
         .par_iter()
         .with_min_len(1024)
         .map(|&x| field_at(views, x))
         .unzip()
+}
+
+/// The views a [`DepthViews::at_or_above`] query tries first: those that carved the last point
+/// it answered outside (consecutive queries lie close together, and a view that carved one
+/// point mostly carves its neighbour). Only the order in which the views are asked changes;
+/// every answer is the plain rule's. Views past `u16::MAX` are asked but never hinted.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct CarveHint {
+    views: [u16; MAX_CARVE_VIEWS as usize],
+    len: u8,
+}
+
+impl CarveHint {
+    fn as_slice(&self) -> &[u16] {
+        &self.views[..usize::from(self.len)]
+    }
+
+    fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// Queries of [`DepthViews::sides`] answered in a row by one task (so that each query's hint
+/// can start from its predecessor's); fixed, and no answer depends on it.
+const SIDE_CHUNK: usize = 256;
+
+impl DepthViews<'_> {
+    /// Whether [`field_at`]`(x)` is at least `t` (`t` finite or `f64::MIN`), and whether any
+    /// view sees `x`. The field is the `k`-th smallest signed depth, so it is at least `t`
+    /// exactly when fewer than `k` of the views that see `x` have a signed depth below `t`:
+    /// the views in `hint` are asked first and the query stops at the `k`-th such view
+    /// (`hint` then holds them). With `t = f64::MIN` it asks whether the field is above `-inf`
+    /// (only an uncovered pixel's signed depth lies below every finite value).
+    #[inline]
+    pub(crate) fn at_or_above(&self, x: DVec3, t: f64, hint: &mut CarveHint) -> (bool, bool) {
+        let k = usize::from(self.rules.carve_views);
+        let mut found = CarveHint::default();
+        let mut count = 0usize;
+        let mut seen = false;
+        let mut ask = |i: usize, found: &mut CarveHint| -> bool {
+            if let Some(s) = signed(&self.views[i], x) {
+                seen = true;
+                if s < t {
+                    if let Ok(id) = u16::try_from(i) {
+                        found.views[usize::from(found.len)] = id;
+                        found.len += 1;
+                    }
+                    count += 1;
+                    return count >= k;
+                }
+            }
+            false
+        };
+        let first = *hint;
+        let hinted = first.as_slice();
+        for &i in hinted {
+            if ask(usize::from(i), &mut found) {
+                *hint = found;
+                return (false, true);
+            }
+        }
+        for i in 0..self.views.len() {
+            let fresh = !u16::try_from(i).is_ok_and(|id| hinted.contains(&id));
+            if fresh && ask(i, &mut found) {
+                *hint = found;
+                return (false, true);
+            }
+        }
+        (true, seen)
+    }
+
+    /// [`Self::at_or_above`] at every point (at or above `t`; seen), evaluated in `order` (a
+    /// Z-order of `points`, so that neighbours share pixels and hints), with one hint per
+    /// position in `order` in `hints`, carried from call to call (an empty hint starts from
+    /// the previous query's).
+    pub(crate) fn sides(
+        &self,
+        points: &[DVec3],
+        t: f64,
+        order: &[u32],
+        hints: &mut [CarveHint],
+    ) -> (Vec<bool>, Vec<bool>) {
+        let by_order: Vec<(bool, bool)> = order
+            .par_chunks(SIDE_CHUNK)
+            .zip(hints.par_chunks_mut(SIDE_CHUNK))
+            .flat_map_iter(|(chunk, hints)| {
+                let mut last = CarveHint::default();
+                chunk.iter().zip(hints).map(move |(&i, hint)| {
+                    if hint.is_empty() {
+                        *hint = last;
+                    }
+                    let out = self.at_or_above(points[i as usize], t, hint);
+                    last = *hint;
+                    out
+                })
+            })
+            .collect();
+        let mut inside = vec![false; points.len()];
+        let mut seen = vec![false; points.len()];
+        for (&i, &(a, b)) in order.iter().zip(&by_order) {
+            inside[i as usize] = a;
+            seen[i as usize] = b;
+        }
+        (inside, seen)
+    }
 }
 
 /// The sample points of [`DepthRules::sample_stride`]: per view, per sampled covered pixel
@@ -521,16 +653,18 @@ mod tests {
             .collect()
     }
 
+    /// `n` points drawn uniformly in the cube [-1.2, 1.2]^3.
+    fn random_points(state: &mut u64, n: usize) -> Vec<DVec3> {
+        (0..n)
+            .map(|_| DVec3::new(lcg(state), lcg(state), lcg(state)) * 2.4 - DVec3::splat(1.2))
+            .collect()
+    }
+
     #[test]
     fn field_equals_brute_force() {
         let views = random_views(7);
         let mut state = 99u64;
-        let points: Vec<DVec3> = (0..4000)
-            .map(|_| {
-                DVec3::new(lcg(&mut state), lcg(&mut state), lcg(&mut state)) * 2.4
-                    - DVec3::splat(1.2)
-            })
-            .collect();
+        let points = random_points(&mut state, 4000);
         let mut kinds = [0usize; 3];
         for k in [1u16, 2, 3] {
             let rules = DepthRules {
@@ -702,6 +836,15 @@ mod tests {
         );
     }
 
+    /// The views of an 80-view rig around the sphere whose direction has a z above `min_z`.
+    fn front_cams(min_z: f64) -> Vec<trisplat_geometry::Camera> {
+        sphere_rig(DVec3::ZERO, 0.4, 80, (96, 96), 40.0)
+            .expect("rig")
+            .into_iter()
+            .filter(|c| c.position().normalize().z > min_z)
+            .collect()
+    }
+
     /// Views of the sphere's front cap only (no silhouette carves its front): the margin's own
     /// level set (`surface` = `margin`, the rule before `surface`) lies ~`margin` footprints in
     /// front of the median depth; settled (`surface` 0, the default) the front vertices lie on
@@ -709,11 +852,7 @@ mod tests {
     #[test]
     fn settled_vertices_lie_on_the_median_depth() {
         let radius = 0.3;
-        let cams: Vec<_> = sphere_rig(DVec3::ZERO, 0.4, 80, (96, 96), 40.0)
-            .expect("rig")
-            .into_iter()
-            .filter(|c| c.position().normalize().z > 0.8)
-            .collect();
+        let cams = front_cams(0.8);
         assert!(cams.len() >= 6, "{} views", cams.len());
         let views = sphere_views(cams, radius);
         let options = OpacityOptions {
@@ -743,5 +882,186 @@ mod tests {
             medians[0],
             medians[1]
         );
+    }
+
+    /// The settling as written before the queries stopped early: every sample through
+    /// [`field_at`] over all the views, in vertex order.
+    fn settle_plain(views: &DepthViews, vertices: &[DVec3], normals: &[DVec3]) -> Vec<DVec3> {
+        let target = -f64::from(views.rules.surface);
+        let reach = f64::from(views.rules.margin - views.rules.surface);
+        vertices
+            .iter()
+            .zip(normals)
+            .map(|(&x, &n)| {
+                if n == DVec3::ZERO || reach <= 0.0 {
+                    return x;
+                }
+                let Some(fp) = views.footprint(x) else {
+                    return x;
+                };
+                if field_at(views, x + n * (0.5 * fp)).0 == f64::NEG_INFINITY {
+                    return x;
+                }
+                let step = reach * fp / f64::from(SETTLE_SAMPLES);
+                let at = |t: f64| field_at(views, x - n * t).0;
+                if at(0.0) >= target {
+                    return x;
+                }
+                for i in 1..=SETTLE_SAMPLES {
+                    let t = step * f64::from(i);
+                    if at(t) >= target {
+                        let (mut lo, mut hi) = (t - step, t);
+                        for _ in 0..SETTLE_BISECTIONS {
+                            let mid = 0.5 * (lo + hi);
+                            if at(mid) >= target {
+                                hi = mid;
+                            } else {
+                                lo = mid;
+                            }
+                        }
+                        let t = 0.5 * (lo + hi);
+                        let thick =
+                            (1..=2).all(|k| at(t + f64::from(k) * 0.5 * reach * fp) >= target);
+                        return if thick { x - n * t } else { x };
+                    }
+                }
+                x
+            })
+            .collect()
+    }
+
+    /// The early-stopping query against the plain rule (all views, sorted, the k-th taken), at
+    /// levels equal to the field itself and just above it (so a `<` taken for `<=`, or a stop
+    /// one view early, fails), at `f64::MIN` (-inf or not), with hints carried from query to
+    /// query and hints of views that carve nothing; and [`DepthViews::sides`] (Z-order, one
+    /// hint per point) against [`depth_field`].
+    #[test]
+    fn early_stopping_queries_equal_the_plain_rule() {
+        let views = random_views(3);
+        let mut state = 17u64;
+        let points = random_points(&mut state, 3000);
+        let mut ties = [0usize; 2];
+        let mut stopped = 0usize;
+        for k in [1u16, 2, 3] {
+            let rules = DepthRules {
+                margin: 0.5,
+                carve_views: k,
+                sample_stride: 0,
+                surface: 0.5,
+            };
+            let maps = DepthViews::new(&views, rules).expect("views");
+            let mut hint = CarveHint::default();
+            for (i, &x) in points.iter().enumerate() {
+                let (value, seen) = field_at(&maps, x);
+                let mut levels = vec![-0.5, 0.0, 0.3, f64::MIN];
+                if value.is_finite() {
+                    levels.push(value);
+                    levels.push(value.next_up());
+                }
+                for t in levels {
+                    if i % 7 == 0 {
+                        // A hint of views chosen at random, carving or not.
+                        hint = CarveHint::default();
+                        for _ in 0..usize::from(k) {
+                            let v = (lcg(&mut state) * views.len() as f64) as u16;
+                            if !hint.as_slice().contains(&v) {
+                                hint.views[usize::from(hint.len)] = v;
+                                hint.len += 1;
+                            }
+                        }
+                    }
+                    let (above, got_seen) = maps.at_or_above(x, t, &mut hint);
+                    assert_eq!(
+                        above,
+                        value >= t,
+                        "point {i}, k {k}, level {t}: field {value}"
+                    );
+                    if above {
+                        assert_eq!(got_seen, seen, "point {i}, k {k}");
+                    } else {
+                        assert!(seen);
+                        stopped += 1;
+                    }
+                    if value.is_finite() && t == value {
+                        ties[0] += 1;
+                    }
+                    if value.is_finite() && t == value.next_up() {
+                        ties[1] += usize::from(!above);
+                    }
+                }
+            }
+            let (value, seen) = depth_field(&maps, &points);
+            let order = z_order(&points);
+            let mut hints = vec![CarveHint::default(); points.len()];
+            for t in [-0.5, 0.2] {
+                let (inside, got_seen) = maps.sides(&points, t, &order, &mut hints);
+                for i in 0..points.len() {
+                    assert_eq!(inside[i], value[i] >= t, "point {i}, k {k}, level {t}");
+                    assert_eq!(got_seen[i], seen[i], "point {i}, k {k}");
+                }
+            }
+        }
+        assert!(
+            ties[0] > 1000 && ties[1] > 1000 && stopped > 1000,
+            "{ties:?} {stopped}"
+        );
+    }
+
+    /// The settling (Z-order, queries stopping early, hints) moves every vertex exactly where
+    /// the plain rule does, on the sphere's front cap where thick parts settle and the rim
+    /// stays; and the median-depth mesh is the same bit for bit on one thread and on three.
+    #[test]
+    fn settling_equals_the_plain_rule() {
+        let radius = 0.3;
+        let cams = front_cams(0.6);
+        let views = sphere_views(cams, radius);
+        let rules = DepthRules::default();
+        let maps = DepthViews::new(&views, rules).expect("views");
+        // Vertices around the sphere (front, rim and back), a few footprints off it, with
+        // normals near the radial direction.
+        let mut state = 5u64;
+        let mut vertices = Vec::new();
+        let mut normals = Vec::new();
+        for _ in 0..30000 {
+            let d =
+                DVec3::new(lcg(&mut state), lcg(&mut state), lcg(&mut state)) * 2.0 - DVec3::ONE;
+            let Some(dir) = d.try_normalize().filter(|d| d.z > 0.85) else {
+                continue;
+            };
+            let off = 0.025 * lcg(&mut state);
+            vertices.push(dir * (radius + off));
+            let wobble = DVec3::new(lcg(&mut state), lcg(&mut state), lcg(&mut state)) - 0.5;
+            normals.push((dir + wobble * 0.3).normalize());
+        }
+        normals[0] = DVec3::ZERO;
+        let got = maps.settle(&vertices, &normals);
+        let want = settle_plain(&maps, &vertices, &normals);
+        let moved = got.iter().zip(&vertices).filter(|(a, b)| a != b).count();
+
+        assert!(
+            moved > 300 && moved + 300 < vertices.len(),
+            "{moved} of {} moved",
+            vertices.len()
+        );
+        for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+            assert_eq!(a.to_array(), b.to_array(), "vertex {i}");
+        }
+
+        let options = OpacityOptions {
+            colors: false,
+            ..OpacityOptions::default()
+        };
+        let g = sphere_gaussians(radius);
+        let run = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool")
+                .install(|| median_depth_mesh(&g, &views, rules, &options, None).expect("mesh"))
+        };
+        let (a, b) = (run(1), run(3));
+        assert!(a.mesh.triangle_count() > 100);
+        assert_eq!(a.mesh.positions(), b.mesh.positions());
+        assert_eq!(a.mesh.triangles(), b.mesh.triangles());
     }
 }

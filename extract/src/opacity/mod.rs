@@ -34,7 +34,7 @@ use trisplat_geometry::{Camera, Rgba, TriMesh};
 
 use crate::delaunay3d::Delaunay3d;
 use carry::CarriedTets;
-use depth::{DepthViews, depth_colors, depth_field, depth_samples};
+use depth::{CarveHint, DepthViews, depth_colors, depth_samples};
 use field::{Mode, NO_VIEW, evaluate};
 use order::z_order;
 use view::CertifyAt;
@@ -409,15 +409,26 @@ pub fn median_depth_mesh(
     let track = track.filter(|_| samples.is_empty());
     all.extend(samples);
     stats.points = all.len();
-    let (value, seen) = depth_field(&maps, &all);
+    let all_order = z_order(&all);
+    let mut all_hints = vec![CarveHint::default(); all.len()];
+    let (all_inside, seen) = maps.sides(&all, level, &all_order, &mut all_hints);
+    // Each point's hint: the views that carved it (when outside), by point.
+    let mut point_hint = vec![CarveHint::default(); all.len()];
+    for (&i, h) in all_order.iter().zip(&all_hints) {
+        point_hint[i as usize] = *h;
+    }
+    drop(all_hints);
     let mut points = Vec::with_capacity(all.len());
     let mut inside = Vec::with_capacity(all.len());
+    let mut hint_of = Vec::with_capacity(all.len());
     for (k, &x) in all.iter().enumerate() {
         if seen[k] {
             points.push(x);
-            inside.push(value[k] >= level);
+            inside.push(all_inside[k]);
+            hint_of.push(point_hint[k]);
         }
     }
+    drop(point_hint);
     stats.points_seen = points.len();
     if points.is_empty() {
         return Err(OpacityError::NotSeen { points: all.len() });
@@ -425,6 +436,7 @@ pub fn median_depth_mesh(
     drop(all);
     stats.ms[0] = ms(clock);
     let all_seen = points.len() == stats.points;
+    let mut edge_hints: Vec<CarveHint> = Vec::new();
     let Surface {
         vertices,
         triangles,
@@ -437,12 +449,15 @@ pub fn median_depth_mesh(
         track,
         options,
         &mut stats,
-        |_, mid, _| {
-            depth_field(&maps, mid)
-                .0
-                .iter()
-                .map(|&v| v >= level)
-                .collect()
+        |edges, mid, order| {
+            // Each edge's first hint: the views that carved its outer end.
+            if edge_hints.is_empty() {
+                edge_hints = order
+                    .iter()
+                    .map(|&e| hint_of[edges[e as usize][1] as usize])
+                    .collect();
+            }
+            maps.sides(mid, level, order, &mut edge_hints).0
         },
     )?;
     let vertices = maps.settle(&vertices, &vertex_normals(&vertices, &triangles));
