@@ -60,7 +60,7 @@ use crate::config::{
     DEFAULT_ALPHA_CEILING_SPACINGS, DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_SPACINGS,
     DEFAULT_FOV_DEG, DEFAULT_FRONT_ALPHA, DEFAULT_VOXELS_PER_RADIUS, DepthKind, ExtractOptions,
     Method, OpacityField, OpacityPieces, RENDERED_ALPHA_MIN, SimplifyBorder, SplatDepthRule,
-    TsdfAnchor, VertexColors,
+    TEMPLATE_DEPTH_SAMPLES, TEMPLATE_SMOOTHING, TsdfAnchor, VertexColors,
 };
 use crate::error::PipelineError;
 use crate::opacity::{median_depth_views, opacity_gaussians, opacity_rig};
@@ -173,10 +173,16 @@ pub fn parameters(
                 "bisection_steps".to_owned(),
                 f64::from(OPACITY_BISECTION_STEPS),
             );
-            let median = o.opacity.field == OpacityField::Median;
+            let median = o.opacity.field != OpacityField::Gof;
             parameters.insert("median_field".to_owned(), f64::from(u8::from(median)));
             if median {
-                let rules = MedianRules::default();
+                let (rules, options) = median_rules(o.opacity.field, OpacityOptions::default());
+                parameters.insert("depth_samples".to_owned(), f64::from(rules.sample_stride));
+                parameters.insert(
+                    "settle_rims".to_owned(),
+                    f64::from(u8::from(options.settle_rims)),
+                );
+                parameters.insert("smoothing".to_owned(), f64::from(options.smoothing));
                 parameters.insert("margin".to_owned(), f64::from(rules.margin));
                 parameters.insert("carve_views".to_owned(), f64::from(rules.carve_views));
                 parameters.insert("surface".to_owned(), f64::from(rules.surface));
@@ -752,16 +758,12 @@ impl Mesher {
                         opacity_mesh_tracked(&gaussians, &cameras, &options, track),
                         None,
                     ),
-                    OpacityField::Median => {
+                    OpacityField::Median | OpacityField::Template => {
                         let maps = median_depth_views(world, &cameras, *colors, frame)?;
                         let render_ms = start.elapsed().as_secs_f64() * 1e3;
-                        let meshed = median_depth_mesh(
-                            &gaussians,
-                            &maps,
-                            MedianRules::default(),
-                            &options,
-                            Some(track),
-                        );
+                        let (rules, options) = median_rules(*field, options);
+                        let meshed =
+                            median_depth_mesh(&gaussians, &maps, rules, &options, Some(track));
                         (meshed, Some(render_ms))
                     }
                 };
@@ -775,6 +777,25 @@ impl Mesher {
                 })
             }
         }
+    }
+}
+
+/// The median field's rules and options for `field` (`median` or `template`, config/opacity.rs).
+fn median_rules(field: OpacityField, options: OpacityOptions) -> (MedianRules, OpacityOptions) {
+    if field == OpacityField::Template {
+        (
+            MedianRules {
+                sample_stride: TEMPLATE_DEPTH_SAMPLES,
+                ..MedianRules::default()
+            },
+            OpacityOptions {
+                settle_rims: true,
+                smoothing: TEMPLATE_SMOOTHING,
+                ..options
+            },
+        )
+    } else {
+        (MedianRules::default(), options)
     }
 }
 

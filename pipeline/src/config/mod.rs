@@ -37,7 +37,9 @@ pub use input::{
     DEFAULT_PER_TRIANGLE, GaussianLayout, Mode,
 };
 pub use method::Method;
-pub use opacity::{OpacityField, OpacityMethodOptions, OpacityPieces};
+pub use opacity::{
+    OpacityField, OpacityMethodOptions, OpacityPieces, TEMPLATE_DEPTH_SAMPLES, TEMPLATE_SMOOTHING,
+};
 pub use points::{
     ALPHA_STEPS_PER_DOUBLING, AlphaOptions, AlphaRule, DEFAULT_ALPHA_CEILING_SPACINGS,
     DEFAULT_ALPHA_FLOOR_SPACINGS, DEFAULT_ALPHA_PIECES, DEFAULT_ALPHA_SPACINGS,
