@@ -530,7 +530,7 @@ mod tests {
                 .collect()
         };
         let mut points = sphere(6000, 1.0);
-        points.extend_from_slice(&points[..300].to_vec());
+        points.extend_from_within(..300);
         let index = PointIndex::new(&points).expect("valid points");
         let mut near = sphere(3000, 1.0);
         near.extend(sphere(1500, 1.5));
