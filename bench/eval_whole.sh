@@ -6,7 +6,9 @@
 # /usr/bin/time (wall and CPU seconds: the whole process, both files read) and
 # bench/python/eval_scipy.py (its compute alone: both cKDTree(workers=-1) builds and queries
 # and the metric arithmetic, the PLYs read before the timer; wall and CPU seconds). Prints one
-# line per run, the load average, and each binary's chamfer_l1 beside scipy's.
+# line per run, the load average, and each binary's chamfer_l1 beside scipy's. A MESH given as
+# PRED_MESH:GT_MESH samples the two meshes themselves instead (e.g. ICT FaceKit
+# mouthSmile_L.obj:eyeBlink_L.obj, or the FLAME scan against the FLAME template).
 #
 #     cargo build --release -p trisplat-cli
 #     bash bench/eval_whole.sh OUT_DIR PYTHON ROUNDS BINARY [BINARY ...] -- MESH [MESH ...]
@@ -32,12 +34,22 @@ gen="${binaries[0]}"
 seed=100
 names=()
 for mesh in "$@"; do
-  name="$(basename "${mesh%.*}")"
-  names+=("$name")
   seed=$((seed + 2))
+  if [[ "$mesh" == *:* ]]; then
+    pred_mesh="${mesh%%:*}"
+    mesh="${mesh#*:}"
+    name="$(basename "${pred_mesh%.*}")_vs_$(basename "${mesh%.*}")"
+  else
+    pred_mesh=""
+    name="$(basename "${mesh%.*}")"
+  fi
+  names+=("$name")
   if [ ! -f "$out/${name}_gt.ply" ]; then
-    "$gen" smooth "$mesh" -o "$out/${name}_taubin.ply" --method taubin --iterations 10 -q
-    "$gen" sample "$out/${name}_taubin.ply" -n 1000000 --seed "$seed" -o "$out/${name}_pred.ply" -q
+    if [ -z "$pred_mesh" ]; then
+      pred_mesh="$out/${name}_taubin.ply"
+      "$gen" smooth "$mesh" -o "$pred_mesh" --method taubin --iterations 10 -q
+    fi
+    "$gen" sample "$pred_mesh" -n 1000000 --seed "$seed" -o "$out/${name}_pred.ply" -q
     "$gen" sample "$mesh" -n 1000000 --seed $((seed + 1)) -o "$out/${name}_gt.ply" -q
   fi
 done

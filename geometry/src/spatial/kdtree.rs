@@ -283,34 +283,22 @@ impl PointIndex {
     }
 
     /// [`PointIndex::nearest`] for every point of `other`, the set another index was built
-    /// over: `result[i]` answers `other.points()[i]`. The queries go in `other`'s tree order
-    /// (spatially coherent, no sorting needed), each starting from the previous answer, and
-    /// each distinct position of `other` is searched once for all its copies. Equal to
-    /// `self.nearest_batch(other.points())`.
+    /// over: `result[i]` answers `other.points()[i]`. The queries go a leaf of `other`'s tree
+    /// at a time (at most 16 nearby points in a tight box, no sorting needed), the leaves of
+    /// this tree within reach listed once per leaf of queries (see `PointTree::nearest_to_tree`),
+    /// and each distinct position of `other` is searched once for all its copies. Equal to
+    /// `self.nearest_batch(other.points())`, ties included.
     #[must_use]
     pub fn nearest_to_points_of(&self, other: &Self) -> Vec<Nearest> {
-        let slots = other.tree.len();
-        let mut by_slot = vec![
-            Nearest {
-                index: 0,
-                distance: 0.0
-            };
-            slots
-        ];
-        by_slot
-            .par_chunks_mut(QUERY_CHUNK)
-            .enumerate()
-            .for_each(|(c, out)| {
-                let mut cursor = Cursor::default();
-                for (j, o) in out.iter_mut().enumerate() {
-                    let q = other.tree.point(c * QUERY_CHUNK + j).as_dvec3();
-                    let best = self.tree.nearest_after(q, &mut cursor);
-                    *o = Nearest {
-                        index: best.id,
-                        distance: best.dist_sq.sqrt(),
-                    };
-                }
-            });
+        let by_slot: Vec<Nearest> = self
+            .tree
+            .nearest_to_tree(&other.tree)
+            .into_par_iter()
+            .map(|best| Nearest {
+                index: best.id,
+                distance: best.dist_sq.sqrt(),
+            })
+            .collect();
         let mut out = vec![
             Nearest {
                 index: 0,
@@ -519,6 +507,48 @@ mod tests {
             }
             let as_index = PointIndex::new(&queries).expect("valid queries");
             assert_eq!(index.nearest_to_points_of(&as_index), batch, "{name}");
+        }
+    }
+
+    /// `nearest_to_points_of` against a scan on a surface-like set: queries sampled on the
+    /// same sphere (each leaf of them answered from one list of nearby leaves), on spheres
+    /// 1.5 and 4 times as large (far: more leaves within reach than a list holds, so query
+    /// by query), and lattice points with exact ties, with the set queried holding copies.
+    #[test]
+    fn sweeps_near_and_far_match_brute_force() {
+        let mut rng = Rng::new(31);
+        let mut sphere = |n: usize, radius: f32| -> Vec<Vec3> {
+            (0..n)
+                .map(|_| {
+                    let v = Vec3::new(
+                        rng.uniform_f32() - 0.5,
+                        rng.uniform_f32() - 0.5,
+                        rng.uniform_f32() - 0.5,
+                    );
+                    radius * v.normalize_or(Vec3::X)
+                })
+                .collect()
+        };
+        let mut points = sphere(6000, 1.0);
+        points.extend_from_within(..300);
+        let index = PointIndex::new(&points).expect("valid points");
+        let mut near = sphere(3000, 1.0);
+        near.extend(sphere(1500, 1.5));
+        near.extend(sphere(1500, 4.0));
+        near.extend(
+            (0..512).map(|i| {
+                Vec3::new((i % 8) as f32, (i / 8 % 8) as f32, (i / 64) as f32) * 0.25 - 1.0
+            }),
+        );
+        near.extend_from_slice(&points[..200]);
+        let queries = PointIndex::new(&near).expect("valid queries");
+        let got = index.nearest_to_points_of(&queries);
+        for (q, g) in near.iter().zip(&got) {
+            assert_eq!(
+                (g.distance, g.index),
+                brute_with_index(&points, *q),
+                "query {q}"
+            );
         }
     }
 

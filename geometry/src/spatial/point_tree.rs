@@ -32,6 +32,31 @@ const _: () = assert!(
 /// Subtrees of more points than this are built in parallel.
 const PARALLEL_BUILD: usize = 1 << 15;
 
+/// Queries answered in one task by [`PointTree::nearest_to_tree`] (more are split in two).
+const PARALLEL_SWEEP: usize = 1 << 12;
+
+/// Most leaves listed for one group of queries by [`PointTree::nearest_to_tree`]; a group
+/// that would need more (its points far apart, around a gap) searches query by query.
+const MAX_GROUP_LEAVES: usize = 64;
+
+/// What one task of [`PointTree::nearest_to_tree`] reuses from group to group: the list of
+/// leaves, and the cursor of the groups searched query by query.
+#[derive(Debug, Default)]
+struct Scratch {
+    leaves: Vec<LeafRef>,
+    cursor: Cursor,
+}
+
+/// A leaf of the tree listed for a group of queries: its squared distance to the group's box
+/// ([`Node::gap_sq`]), its node and its slots `lo..hi`.
+#[derive(Clone, Copy, Debug)]
+struct LeafRef {
+    gap_sq: f64,
+    node: u32,
+    lo: u32,
+    hi: u32,
+}
+
 /// A node: the bounding box of its points.
 #[derive(Clone, Copy, Debug, Default)]
 struct Node {
@@ -50,6 +75,21 @@ impl Node {
             if out > 0.0 { out } else { 0.0 }
         };
         let (x, y, z) = (o(0, q.x), o(1, q.y), o(2, q.z));
+        x * x + y * y + z * z
+    }
+
+    /// Squared distance between this box and `other`, rounded no higher than that of any
+    /// point of one to any point of the other (each gap is the difference of two f32 bounds
+    /// in f64, and rounding is monotone).
+    #[inline(always)]
+    fn gap_sq(&self, other: &Node) -> f64 {
+        let o = |a: usize| {
+            let below = f64::from(self.lo[a]) - f64::from(other.hi[a]);
+            let above = f64::from(other.lo[a]) - f64::from(self.hi[a]);
+            let out = if below > above { below } else { above };
+            if out > 0.0 { out } else { 0.0 }
+        };
+        let (x, y, z) = (o(0), o(1), o(2));
         x * x + y * y + z * z
     }
 }
@@ -344,6 +384,171 @@ impl PointTree {
                 }
             }
         }
+    }
+
+    /// The nearest point of `self` to every point of `queries` (another tree), by the
+    /// queries' slots: `result[s]` answers `queries.point(s)`. The queries go a leaf of
+    /// `queries` at a time (at most [`LEAF`] points in a tight box): the leaf of `self` holding
+    /// the box's centre is scanned for each, which bounds every answer by the largest `bound`
+    /// of those distances; the other leaves of `self` within `sqrt(bound)` of the box are
+    /// listed once, nearest to the box first, and each query scans those of them whose box is
+    /// within its best so far, stopping at the first listed leaf farther from the group's box
+    /// than that. Every point nearer than a query's answer lies in a listed leaf (the box
+    /// distances are rounded no higher than a point's), so the answer is
+    /// [`PointTree::nearest`]'s, ties included. A group whose list would pass
+    /// [`MAX_GROUP_LEAVES`] searches query by query instead ([`PointTree::nearest_after`],
+    /// one cursor per task).
+    pub(crate) fn nearest_to_tree(&self, queries: &PointTree) -> Vec<Best> {
+        let mut out = vec![Best::NONE; queries.len()];
+        self.sweep(
+            queries,
+            0,
+            queries.depth,
+            0,
+            &mut out,
+            &mut Scratch::default(),
+        );
+        out
+    }
+
+    /// [`PointTree::nearest_to_tree`] for the subtree of `queries` at `node` (of `height`
+    /// levels, slots from `lo`), answers into `out` (its slots' length); in parallel above
+    /// [`PARALLEL_SWEEP`] queries. `leaves` is the scratch list of one group's leaves.
+    fn sweep(
+        &self,
+        queries: &PointTree,
+        node: usize,
+        height: u32,
+        lo: usize,
+        out: &mut [Best],
+        scratch: &mut Scratch,
+    ) {
+        if height == 0 {
+            self.answer_group(queries, node, lo, out, scratch);
+            return;
+        }
+        let half = out.len() / 2;
+        let (left, right) = out.split_at_mut(half);
+        let (l, r) = (node + 1, node + (1 << height));
+        if left.len() + right.len() > PARALLEL_SWEEP {
+            rayon::join(
+                || self.sweep(queries, l, height - 1, lo, left, &mut Scratch::default()),
+                || {
+                    let mut scratch = Scratch::default();
+                    self.sweep(queries, r, height - 1, lo + half, right, &mut scratch);
+                },
+            );
+        } else {
+            self.sweep(queries, l, height - 1, lo, left, scratch);
+            self.sweep(queries, r, height - 1, lo + half, right, scratch);
+        }
+    }
+
+    /// Answers the queries of one leaf of `queries` (`node`, slots `lo..lo + out.len()`).
+    fn answer_group(
+        &self,
+        queries: &PointTree,
+        node: usize,
+        lo: usize,
+        out: &mut [Best],
+        scratch: &mut Scratch,
+    ) {
+        let leaves = &mut scratch.leaves;
+        let group = queries.nodes[node];
+        let centre = DVec3::from_array(
+            [0, 1, 2].map(|a| 0.5 * (f64::from(group.lo[a]) + f64::from(group.hi[a]))),
+        );
+        // The leaf of `self` whose cell holds the centre.
+        let (mut at, mut height, mut a, mut b) = (0usize, self.depth, 0usize, self.len());
+        while height > 0 {
+            let split = self.splits[at];
+            let mid = a + (b - a) / 2;
+            if centre[split.axis as usize] <= f64::from(split.value) {
+                at += 1;
+                b = mid;
+            } else {
+                at += 1 << height;
+                a = mid;
+            }
+            height -= 1;
+        }
+        let home = at;
+        let mut bound = 0.0f64;
+        for (k, best) in out.iter_mut().enumerate() {
+            *best = Best::NONE;
+            self.scan_leaf(a, b, queries.point(lo + k).as_dvec3(), best);
+            bound = bound.max(best.dist_sq);
+        }
+        leaves.clear();
+        let listed = self.collect_leaves(0, self.depth, 0, self.len(), &group, bound, home, leaves);
+        // Nearest to the group first: a query stops at the first leaf farther from the group
+        // than its best so far (no point of it or of the rest can be nearer).
+        leaves.sort_unstable_by(|x, y| x.gap_sq.total_cmp(&y.gap_sq).then(x.node.cmp(&y.node)));
+        for (k, best) in out.iter_mut().enumerate() {
+            let q = queries.point(lo + k).as_dvec3();
+            if listed {
+                for leaf in leaves.iter() {
+                    if leaf.gap_sq > best.dist_sq {
+                        break;
+                    }
+                    if self.nodes[leaf.node as usize].dist_sq(q) <= best.dist_sq {
+                        self.scan_leaf(leaf.lo as usize, leaf.hi as usize, q, best);
+                    }
+                }
+            } else {
+                *best = self.nearest_after(q, &mut scratch.cursor);
+            }
+        }
+    }
+
+    /// Lists into `leaves` the leaves under `node` (of `height` levels, slots `lo..hi`) other
+    /// than `home` whose box's squared distance to `group`'s box is at most `bound`; false
+    /// (the list abandoned) when there are more than [`MAX_GROUP_LEAVES`].
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the recursion's state: node, height, range, group box, bound, home, list"
+    )]
+    fn collect_leaves(
+        &self,
+        node: usize,
+        height: u32,
+        lo: usize,
+        hi: usize,
+        group: &Node,
+        bound: f64,
+        home: usize,
+        leaves: &mut Vec<LeafRef>,
+    ) -> bool {
+        let gap_sq = self.nodes[node].gap_sq(group);
+        if gap_sq > bound {
+            return true;
+        }
+        if height == 0 {
+            if node != home {
+                if leaves.len() == MAX_GROUP_LEAVES {
+                    return false;
+                }
+                leaves.push(LeafRef {
+                    gap_sq,
+                    node: node as u32,
+                    lo: lo as u32,
+                    hi: hi as u32,
+                });
+            }
+            return true;
+        }
+        let mid = lo + (hi - lo) / 2;
+        self.collect_leaves(node + 1, height - 1, lo, mid, group, bound, home, leaves)
+            && self.collect_leaves(
+                node + (1 << height),
+                height - 1,
+                mid,
+                hi,
+                group,
+                bound,
+                home,
+                leaves,
+            )
     }
 
     /// The `k` nearest points to `q` (fewer when the tree has fewer), ascending by
