@@ -17,7 +17,8 @@ use trisplat_geometry::sampling::sample_uniform;
 use trisplat_geometry::spatial::SurfaceIndex;
 use trisplat_pipeline::avatar::AvatarFolder;
 use trisplat_pipeline::config::{GaussianLayout, GroundTruth};
-use trisplat_pipeline::metrics::{GtSamples, measure_with};
+use trisplat_pipeline::metrics::{GtSamples, ScoreCache, measure_cached, measure_with};
+use trisplat_pipeline::records::FrameMetrics;
 use trisplat_pipeline::{ExtractConfig, ExtractOptions, Method, Session};
 
 use crate::harness::time_best;
@@ -45,6 +46,12 @@ pub struct ScoreArgs {
     /// extraction: quick to repeat, and the same input every time); `--avatar` is then unused.
     #[arg(long)]
     pub from: Option<PathBuf>,
+    /// With `--from`: score the dumped frames one after another as the session does (each
+    /// method's `ScoreCache` and the ground truth's index carried from frame to frame), on one
+    /// thread, and print its CPU seconds per frame; the metrics are checked against fresh
+    /// ones (`measure_with`), bit for bit.
+    #[arg(long, requires = "from")]
+    pub track: bool,
 }
 
 /// Runs the benchmark.
@@ -186,27 +193,109 @@ fn run_from(
             name.strip_suffix("_gt.ply").map(str::to_owned)
         })
         .collect();
-    frames.sort();
+    // Numerically (frame 10 after frame 9): `--track` scores them in this order.
+    frames.sort_by_key(|f| (f.parse::<u64>().unwrap_or(u64::MAX), f.clone()));
     if frames.is_empty() {
         anyhow::bail!("{}: no <frame>_gt.ply", dir.display());
+    }
+    if args.track {
+        return run_track(dir, &frames, one, samples, tau);
     }
     println!(
         "{:<10} {:<28} {:>10} {:>10}",
         "frame", "stage", "1 thread", "pool"
     );
     for f in frames {
-        let read =
-            |name: &str| trisplat_geometry::io::read_mesh(&dir.join(format!("{f}_{name}.ply")));
-        let Some(gt) = GtSamples::new(read("gt")?, samples) else {
+        let (gt_mesh, meshes) = read_frame(dir, &f)?;
+        let Some(gt) = GtSamples::new(gt_mesh, samples) else {
             anyhow::bail!("frame {f}: the ground truth has no area");
         };
-        let meshes = ["tsdf", "delaunay", "alpha"]
-            .into_iter()
-            .filter(|m| dir.join(format!("{f}_{m}.ply")).exists())
-            .map(|m| Ok((m, read(m)?)))
-            .collect::<anyhow::Result<Vec<_>>>()?;
         let methods: Vec<(&str, &TriMesh)> = meshes.iter().map(|(m, mesh)| (*m, mesh)).collect();
         score_frame(args, one, &f, &gt, &methods, samples, tau)?;
     }
+    Ok(())
+}
+
+/// A dumped frame: its ground truth and its methods' meshes.
+type DumpedFrame = (TriMesh, Vec<(&'static str, TriMesh)>);
+
+/// Reads frame `f` of a `--dump` folder.
+fn read_frame(dir: &std::path::Path, f: &str) -> anyhow::Result<DumpedFrame> {
+    let read = |name: &str| trisplat_geometry::io::read_mesh(&dir.join(format!("{f}_{name}.ply")));
+    let meshes = ["tsdf", "delaunay", "alpha"]
+        .into_iter()
+        .filter(|m| dir.join(format!("{f}_{m}.ply")).exists())
+        .map(|m| Ok((m, read(m)?)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok((read("gt")?, meshes))
+}
+
+/// CPU time of the calling thread so far, in seconds (`/proc/thread-self/schedstat`).
+fn thread_cpu_seconds() -> anyhow::Result<f64> {
+    let stat = std::fs::read_to_string("/proc/thread-self/schedstat")?;
+    let ns: f64 = stat
+        .split_whitespace()
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("empty schedstat"))?
+        .parse()?;
+    Ok(ns * 1e-9)
+}
+
+/// `--from DIR --track`: the frames in order, scored as the session scores them (ground truth
+/// refitted from the previous frame's, each method through its [`ScoreCache`]) on one thread;
+/// prints each frame's CPU seconds and the mean, then checks every metric against a fresh
+/// `measure_with` of the same meshes.
+fn run_track(
+    dir: &std::path::Path,
+    frames: &[String],
+    one: &rayon::ThreadPool,
+    samples: usize,
+    tau: Tau,
+) -> anyhow::Result<()> {
+    let mut dumped: Vec<DumpedFrame> = Vec::new();
+    for f in frames {
+        dumped.push(read_frame(dir, f)?);
+    }
+    let carried: Vec<(f64, Vec<Option<FrameMetrics>>)> = one.install(|| {
+        let mut previous: Option<GtSamples> = None;
+        let mut caches: Vec<ScoreCache> = Vec::new();
+        let mut out = Vec::new();
+        for (gt_mesh, methods) in &dumped {
+            let start = thread_cpu_seconds()?;
+            let gt = GtSamples::reusing(gt_mesh.clone(), samples, previous.take())
+                .ok_or_else(|| anyhow::anyhow!("a ground truth without area"))?;
+            caches.resize_with(methods.len(), ScoreCache::default);
+            let metrics = methods
+                .iter()
+                .zip(&mut caches)
+                .map(|((_, mesh), cache)| measure_cached(mesh, &gt, samples, tau, cache))
+                .collect::<Result<Vec<_>, _>>()?;
+            out.push((thread_cpu_seconds()? - start, metrics));
+            previous = Some(gt);
+        }
+        anyhow::Ok(out)
+    })?;
+    println!("{:<10} {:>12}", "frame", "CPU-s (1 thread)");
+    for (f, (seconds, _)) in frames.iter().zip(&carried) {
+        println!("{f:<10} {seconds:>12.4}");
+    }
+    let later: Vec<f64> = carried.iter().skip(1).map(|(s, _)| *s).collect();
+    println!(
+        "mean of frames after the first: {:.4} CPU-s ({} frames)",
+        later.iter().sum::<f64>() / later.len().max(1) as f64,
+        later.len()
+    );
+    for ((f, (gt_mesh, methods)), (_, metrics)) in frames.iter().zip(&dumped).zip(&carried) {
+        let gt = GtSamples::new(gt_mesh.clone(), samples)
+            .ok_or_else(|| anyhow::anyhow!("a ground truth without area"))?;
+        for ((name, mesh), got) in methods.iter().zip(metrics) {
+            let fresh = measure_with(mesh, &gt, samples, tau)?;
+            anyhow::ensure!(
+                &fresh == got,
+                "frame {f} {name}: carried metrics differ from fresh ones"
+            );
+        }
+    }
+    println!("every metric equals a fresh measure_with's, bit for bit");
     Ok(())
 }

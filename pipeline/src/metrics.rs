@@ -350,6 +350,54 @@ pub(crate) mod tests {
         assert!(other.normal_angle_deg.is_some());
     }
 
+    /// The Spot fixture with its vertices moved by a smooth field of phase `s` and size
+    /// `amount` (the same triangles always).
+    fn spot_moved(s: f64, amount: f64) -> TriMesh {
+        let spot = trisplat_fixtures::spot().expect("the Spot fixture");
+        let moved = spot
+            .positions()
+            .iter()
+            .map(|p| {
+                *p + DVec3::new((3.0 * p.y + s).sin(), (2.0 * p.x).cos(), (p.z - s).sin()) * amount
+            })
+            .collect();
+        TriMesh::new_unchecked(moved, spot.triangles().to_vec())
+    }
+
+    #[test]
+    fn carried_scores_equal_fresh_ones_over_frames() {
+        // A prediction and a ground truth that keep their triangles while their vertices
+        // move, frame after frame: scored through one cache (the prediction's index refitted,
+        // its structure's topology kept; the ground truth's index refitted) they score as
+        // fresh, bit for bit.
+        let mut cache = ScoreCache::default();
+        let mut previous: Option<GtSamples> = None;
+        for frame in 0..6 {
+            let s = f64::from(frame) * 0.07;
+            let gt_mesh = spot_moved(s, 0.02);
+            let pred = spot_moved(1.3 * s + 0.5, 0.03);
+            let gt = GtSamples::reusing(gt_mesh.clone(), 3000, previous.take()).expect("area");
+            let carried = measure_cached(&pred, &gt, 3000, Tau::Fraction(0.01), &mut cache)
+                .expect("ok")
+                .expect("non-empty");
+            let fresh_gt = GtSamples::new(gt_mesh, 3000).expect("area");
+            let fresh = measure_with(&pred, &fresh_gt, 3000, Tau::Fraction(0.01))
+                .expect("ok")
+                .expect("non-empty");
+            assert_eq!(carried, fresh, "frame {frame}");
+            assert!(carried.chamfer_l1 > 0.0);
+            assert!(cache.index.is_some() && cache.stats.is_some());
+            previous = Some(gt);
+        }
+        // Another mesh (other triangles) through the same cache: still the fresh scores.
+        let other = tetra(1.0);
+        let gt = GtSamples::new(tetra(1.1), 3000).expect("area");
+        assert_eq!(
+            measure_cached(&other, &gt, 3000, Tau::Fraction(0.01), &mut cache),
+            measure_with(&other, &gt, 3000, Tau::Fraction(0.01))
+        );
+    }
+
     #[test]
     fn watertight_flags() {
         let closed = tetra(1.0);
