@@ -663,6 +663,16 @@ mod tests {
             .collect()
     }
 
+    /// The rules of the field tests: margin and surface 1/2, `k` carving views, no samples.
+    fn carving(k: u16) -> DepthRules {
+        DepthRules {
+            margin: 0.5,
+            carve_views: k,
+            sample_stride: 0,
+            surface: 0.5,
+        }
+    }
+
     /// `n` points drawn uniformly in the cube [-1.2, 1.2]^3.
     fn random_points(state: &mut u64, n: usize) -> Vec<DVec3> {
         (0..n)
@@ -677,12 +687,7 @@ mod tests {
         let points = random_points(&mut state, 4000);
         let mut kinds = [0usize; 3];
         for k in [1u16, 2, 3] {
-            let rules = DepthRules {
-                margin: 0.5,
-                carve_views: k,
-                sample_stride: 0,
-                surface: 0.5,
-            };
+            let rules = carving(k);
             let prepared = DepthViews::new(&views, rules).expect("views");
             let (value, seen) = depth_field(&prepared, &points);
             for (i, &x) in points.iter().enumerate() {
@@ -1034,12 +1039,7 @@ mod tests {
         let mut ties = [0usize; 2];
         let mut stopped = 0usize;
         for k in [1u16, 2, 3] {
-            let rules = DepthRules {
-                margin: 0.5,
-                carve_views: k,
-                sample_stride: 0,
-                surface: 0.5,
-            };
+            let rules = carving(k);
             let maps = DepthViews::new(&views, rules).expect("views");
             let mut hint = CarveHint::default();
             for (i, &x) in points.iter().enumerate() {
