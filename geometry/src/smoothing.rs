@@ -215,6 +215,42 @@ pub fn smooth_positions(
     Ok(prev)
 }
 
+/// Taubin smoothing by Open3D's rule (as [`smooth_positions`] with [`SmoothMethod::Taubin`]:
+/// inverse-distance weights over the 1-rings of `triangles`, a λ then a μ Jacobi step per
+/// iteration) that moves only the vertices whose `free` is true; the others are held and still
+/// pull their neighbours. A step whose result is not finite leaves that vertex where it was,
+/// so the output is finite wherever the input is. Same bits as [`smooth_positions`] for the
+/// vertices it moves when every vertex is free.
+#[must_use]
+pub fn taubin_held(
+    positions: Vec<DVec3>,
+    triangles: &[[u32; 3]],
+    free: &[bool],
+    iterations: u32,
+    lambda: f64,
+    mu: f64,
+) -> Vec<DVec3> {
+    if iterations == 0 || !free.iter().any(|&f| f) {
+        return positions;
+    }
+    let adjacency = OneRing::new(positions.len(), triangles);
+    let mut prev = positions;
+    let mut next = vec![DVec3::ZERO; prev.len()];
+    for _ in 0..iterations {
+        for step in [lambda, mu] {
+            jacobi_pass(&prev, &mut next, |v, x, prev| {
+                if !free[v] {
+                    return x;
+                }
+                let moved = inverse_distance_update(&adjacency, v, x, prev, step);
+                if moved.is_finite() { moved } else { x }
+            });
+            std::mem::swap(&mut prev, &mut next);
+        }
+    }
+    prev
+}
+
 fn check_finite(name: &'static str, value: f64) -> Result<(), SmoothError> {
     if value.is_finite() {
         Ok(())
@@ -499,6 +535,40 @@ mod tests {
             Vec3::splat(7.0), // isolated
         ];
         TriMesh::new(p, crate::test_meshes::OCTAHEDRON_TRIANGLES.to_vec())
+    }
+
+    #[test]
+    fn held_taubin_moves_only_free_vertices_and_equals_taubin_when_all_are_free() {
+        let m = octahedron();
+        let opts = SmoothOptions {
+            method: SmoothMethod::Taubin,
+            iterations: 3,
+            ..SmoothOptions::default()
+        };
+        let want = smooth_positions(&m, &opts).expect("taubin");
+        let start = m.positions().to_vec();
+        let all = vec![true; start.len()];
+        let got = taubin_held(
+            start.clone(),
+            m.triangles(),
+            &all,
+            3,
+            DEFAULT_LAMBDA,
+            DEFAULT_MU,
+        );
+        assert_eq!(got, want);
+        let mut free = all;
+        free[0] = false;
+        let held = taubin_held(
+            start.clone(),
+            m.triangles(),
+            &free,
+            3,
+            DEFAULT_LAMBDA,
+            DEFAULT_MU,
+        );
+        assert_eq!(held[0], start[0]);
+        assert_ne!(held[1], want[1], "a held vertex still pulls its neighbours");
     }
 
     #[test]
